@@ -1,0 +1,1 @@
+"""Wheatstone bridge, amplifier and ADC models; the torque → counts → torque sensor chain."""

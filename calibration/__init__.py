@@ -1,0 +1,1 @@
+"""Static-loading calibration: data, Bayesian fit (emcee), coefficient store, serial acquisition."""

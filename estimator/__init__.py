@@ -1,0 +1,1 @@
+"""Planar rigid-body dynamics, momentum observer, contact detection, isolation and localization."""

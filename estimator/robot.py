@@ -1,0 +1,128 @@
+"""Robot descriptions: a planar serial chain on a floating or fixed base, read from TOML.
+
+Conventions (DESIGN.md): link i runs from p_i to p_{i+1} = p_i + l_i (sin φ_i, −cos φ_i),
+φ_i = θ + q_1 + … + q_i; its centre of mass lies on the axis at r_i from p_i; I_i is about that
+centre of mass. The base's centre of mass is the base origin p_1 (the hip).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from estimator.errors import InputError
+
+
+@dataclass(frozen=True)
+class Robot:
+    """A planar serial chain. Arrays have one entry per link (N = ``n_links``)."""
+
+    lengths_m: np.ndarray
+    com_m: np.ndarray
+    masses_kg: np.ndarray
+    inertias_kgm2: np.ndarray
+    base_mass_kg: float
+    base_inertia_kgm2: float
+    floating: bool = True
+    gravity_m_per_s2: float = 9.81
+    base_stiffness: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    base_damping: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    friction_coefficient: float = 0.3
+    name: str = "robot"
+
+    @property
+    def n_links(self) -> int:
+        return len(self.lengths_m)
+
+    @property
+    def n_coords(self) -> int:
+        """Generalized coordinates: [x, z, θ, q_1…q_N] floating, [q_1…q_N] fixed."""
+        return self.n_links + (3 if self.floating else 0)
+
+    def with_base(self, floating: bool) -> "Robot":
+        """The same chain on the other kind of base."""
+        from dataclasses import replace
+
+        return replace(self, floating=floating)
+
+
+def _number(table: dict, key: str, where: str, *, positive=False, nonneg=False) -> float:
+    if key not in table:
+        raise InputError(f"{where}: missing field '{key}'")
+    value = table[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise InputError(f"{where}.{key}: expected a finite number, got {value!r}")
+    if positive and value <= 0:
+        raise InputError(f"{where}.{key}: must be > 0, got {value}")
+    if nonneg and value < 0:
+        raise InputError(f"{where}.{key}: must be ≥ 0, got {value}")
+    return float(value)
+
+
+def _triple(table: dict, key: str, where: str) -> np.ndarray:
+    value = table.get(key, [0.0, 0.0, 0.0])
+    if (not isinstance(value, list) or len(value) != 3
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+        raise InputError(f"{where}.{key}: expected three numbers [x, z, θ], got {value!r}")
+    arr = np.asarray(value, dtype=float)
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+        raise InputError(f"{where}.{key}: values must be finite and ≥ 0, got {value}")
+    return arr
+
+
+def robot_from_dict(data: dict, source: str = "robot") -> Robot:
+    """Validate a robot description (the TOML schema of ``robots/paper_leg.toml``)."""
+    base = data.get("base", "floating")
+    if base not in ("floating", "fixed"):
+        raise InputError(f"{source}: field 'base' must be \"floating\" or \"fixed\", got {base!r}")
+    links = data.get("link")
+    if not isinstance(links, list) or not links:
+        raise InputError(f"{source}: missing [[link]] tables (at least one link is needed)")
+    rows = []
+    for i, link in enumerate(links, start=1):
+        where = f"{source}: link[{i}]"
+        length = _number(link, "length_m", where, positive=True)
+        com = _number(link, "com_m", where)
+        rows.append((length, com, _number(link, "mass_kg", where, positive=True),
+                     _number(link, "inertia_kgm2", where, positive=True)))
+    lengths, coms, masses, inertias = (np.array(c) for c in zip(*rows))
+    body = data.get("base_body")
+    if not isinstance(body, dict):
+        raise InputError(f"{source}: missing [base_body] table (mass_kg, inertia_kgm2)")
+    mount = data.get("base_mount", {})
+    return Robot(
+        lengths_m=lengths, com_m=coms, masses_kg=masses, inertias_kgm2=inertias,
+        base_mass_kg=_number(body, "mass_kg", f"{source}: base_body", positive=True),
+        base_inertia_kgm2=_number(body, "inertia_kgm2", f"{source}: base_body", positive=True),
+        floating=(base == "floating"),
+        gravity_m_per_s2=_number(data, "gravity_m_per_s2", source, nonneg=True)
+        if "gravity_m_per_s2" in data else 9.81,
+        base_stiffness=_triple(mount, "stiffness", f"{source}: base_mount"),
+        base_damping=_triple(mount, "damping", f"{source}: base_mount"),
+        friction_coefficient=_number(data, "friction_coefficient", source, nonneg=True)
+        if "friction_coefficient" in data else 0.3,
+        name=str(data.get("name", Path(source).stem)),
+    )
+
+
+def load_robot(path: str | Path) -> Robot:
+    """Read and validate a robot TOML file; errors name the file and field."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{path}: invalid TOML: {exc}") from None
+    return robot_from_dict(data, source=str(path))
+
+
+PAPER_LEG_TOML = Path(__file__).resolve().parents[1] / "robots" / "paper_leg.toml"
+
+
+def paper_leg(floating: bool = True) -> Robot:
+    """The paper's leg (Table I, I_base = 0.002 kg·m², Table II base mount)."""
+    return load_robot(PAPER_LEG_TOML).with_base(floating)

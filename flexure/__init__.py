@@ -1,0 +1,1 @@
+"""Flexure geometry, tetrahedral meshing, linear-elastic FEM and gauge read-out."""

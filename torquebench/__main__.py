@@ -1,0 +1,5 @@
+import sys
+
+from torquebench.cli import main
+
+sys.exit(main())

@@ -1,0 +1,1 @@
+"""Subcommands of the ``torquebench`` CLI, one module each (see ``torquebench.cli``)."""
