@@ -1,0 +1,60 @@
+"""Robot descriptions: the paper's leg loads as Table I says; bad files name the field."""
+
+import numpy as np
+import pytest
+
+from estimator.errors import InputError
+from estimator.robot import PAPER_LEG_TOML, load_robot, paper_leg, robot_from_dict
+from torquebench.io import read_toml
+
+
+def test_paper_leg_matches_table_one():
+    robot = paper_leg()
+    np.testing.assert_array_equal(robot.lengths_m, [0.205, 0.215])
+    np.testing.assert_array_equal(robot.com_m, [0.171, 0.031])
+    np.testing.assert_array_equal(robot.masses_kg, [0.351, 0.080])
+    np.testing.assert_array_equal(robot.inertias_kgm2, [0.00207, 0.00030])
+    assert robot.base_mass_kg == 0.738 and robot.base_inertia_kgm2 == 0.002
+    np.testing.assert_array_equal(robot.base_stiffness, [5000, 5000, 500])
+    np.testing.assert_array_equal(robot.base_damping, [50, 50, 20])
+    assert robot.floating and robot.n_coords == 5
+    assert not paper_leg(floating=False).floating and paper_leg(floating=False).n_coords == 2
+
+
+def _paper_dict():
+    return read_toml(PAPER_LEG_TOML)
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda d: d["link"][1].__setitem__("mass_kg", -0.08), "link[2].mass_kg: must be > 0"),
+    (lambda d: d["link"][0].__setitem__("inertia_kgm2", 0.0), "link[1].inertia_kgm2: must be > 0"),
+    (lambda d: d["link"][0].pop("length_m"), "link[1]: missing field 'length_m'"),
+    (lambda d: d["base_body"].__setitem__("mass_kg", "heavy"), "base_body.mass_kg: expected a finite number"),
+    (lambda d: d.__setitem__("base", "wobbly"), "field 'base' must be"),
+    (lambda d: d.pop("link"), "missing [[link]] tables"),
+    (lambda d: d["base_mount"].__setitem__("stiffness", [1.0, 2.0]), "base_mount.stiffness: expected three numbers"),
+    (lambda d: d["base_mount"].__setitem__("damping", [1.0, -2.0, 3.0]), "base_mount.damping: values must be finite and ≥ 0"),
+])
+def test_bad_robot_fields_are_named(mutate, message):
+    data = _paper_dict()
+    mutate(data)
+    with pytest.raises(InputError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        robot_from_dict(data, source="leg.toml")
+
+
+def test_any_number_of_links(tmp_path):
+    data = _paper_dict()
+    data["link"].append(dict(data["link"][1]))
+    path = tmp_path / "three.toml"
+    import tomllib  # noqa: F401  (the file is written by hand below, TOML has no stdlib writer)
+    text = PAPER_LEG_TOML.read_text() + "\n[[link]]\nlength_m = 0.1\ncom_m = 0.05\nmass_kg = 0.05\ninertia_kgm2 = 0.0001\n"
+    path.write_text(text)
+    robot = load_robot(path)
+    assert robot.n_links == 3 and robot.n_coords == 6
+
+
+def test_invalid_toml_names_file_and_line(tmp_path):
+    path = tmp_path / "broken.toml"
+    path.write_text("name = 'x'\n[[link]\n")
+    with pytest.raises(InputError, match=r"broken.toml: invalid TOML.*line 2"):
+        load_robot(path)

@@ -1,0 +1,63 @@
+"""`torquebench report`: regenerate reports/ (Markdown + PNG) from every report builder."""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+import sys
+import time
+from pathlib import Path
+
+import torquebench
+from torquebench.errors import InputError
+
+HELP = "regenerate the Markdown + PNG reports in reports/ (all areas, or --only AREA)"
+
+
+def builders() -> dict:
+    """{area: module} for every ``torquebench/report_<area>.py`` with a ``build(out_dir)``."""
+    found = {}
+    for info in pkgutil.iter_modules(torquebench.__path__):
+        if info.name.startswith("report_"):
+            found[info.name.removeprefix("report_")] = f"torquebench.{info.name}"
+    return dict(sorted(found.items()))
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--out-dir", type=Path, default=None,
+                        help="where to write (default: the repository's reports/)")
+    parser.add_argument("--only", action="append", metavar="AREA",
+                        help="build only this area (repeatable); see --list")
+    parser.add_argument("--list", action="store_true", help="list the report areas and exit")
+
+
+def run(args) -> int:
+    from torquebench.io import REPO_ROOT, print_json
+
+    areas = builders()
+    if args.list:
+        if args.json:
+            print_json({"areas": list(areas)})
+        else:
+            print("\n".join(areas))
+        return 0
+    chosen = args.only or list(areas)
+    unknown = sorted(set(chosen) - set(areas))
+    if unknown:
+        raise InputError(f"--only: unknown report area {unknown[0]!r}; known: {', '.join(areas)}")
+    out_dir = args.out_dir or REPO_ROOT / "reports"
+    if not out_dir.is_dir():
+        raise InputError(f"--out-dir: {out_dir} is not a directory")
+    written, timings = {}, {}
+    for area in chosen:
+        start = time.perf_counter()
+        print(f"report: building {area} ...", file=sys.stderr)
+        paths = importlib.import_module(areas[area]).build(out_dir)
+        timings[f"{area}_s"] = time.perf_counter() - start
+        written[area] = [str(p) for p in paths]
+    if args.json:
+        print_json({"written": written, "build_time_s": timings})
+    else:
+        for area, paths in written.items():
+            print(f"{area}: " + ", ".join(paths))
+    return 0
