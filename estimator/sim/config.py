@@ -1,0 +1,150 @@
+"""Simulation configuration: what a scene file describes once validated.
+
+Units are SI; angles follow DESIGN.md (from the downward vertical, counterclockwise-positive).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from estimator.robot import Robot
+
+INTEGRATORS = ("RK45", "DOP853", "Radau", "BDF", "LSODA", "RK4")
+ADAPTIVE = ("RK45", "DOP853", "Radau", "BDF", "LSODA")
+FIXED_STIFF_MOUNT = (np.array([1e6, 1e6, 1e4]), np.array([1e3, 1e3, 10.0]))
+"""Default spring-damper emulating a rigid FT mount (x, z, θ): ω ≈ 925 and 756 rad/s, ζ ≈ 0.4."""
+
+
+@dataclass(frozen=True)
+class Poke:
+    """A point force F(t) = magnitude · s(t) · (cos β, sin β) on (link, α), β = direction_rad.
+
+    s(t) rises linearly from 0 at t_on_s to 1 at t_on_s + ramp_s, and falls from 1 at t_off_s to
+    0 at t_off_s + ramp_s (ramp_s = 0: steps). t_on_s = t_off_s is a window of zero length.
+    """
+
+    link: int
+    alpha: float
+    magnitude_N: float
+    direction_rad: float
+    t_on_s: float
+    t_off_s: float
+    ramp_s: float = 0.0
+
+    @property
+    def force_N(self) -> np.ndarray:
+        return self.magnitude_N * np.array([math.cos(self.direction_rad), math.sin(self.direction_rad)])
+
+    def profile(self, t) -> np.ndarray:
+        """s(t) ∈ [0, 1], vectorized over t."""
+        t = np.asarray(t, dtype=float)
+        if self.t_off_s <= self.t_on_s:
+            return np.zeros_like(t)
+        if self.ramp_s > 0:
+            up = np.clip((t - self.t_on_s) / self.ramp_s, 0.0, 1.0)
+            down = np.clip(1.0 - (t - self.t_off_s) / self.ramp_s, 0.0, 1.0)
+            return np.minimum(up, down)
+        return ((t >= self.t_on_s) & (t < self.t_off_s)).astype(float)
+
+    def breakpoints(self) -> list[float]:
+        return [self.t_on_s, self.t_on_s + self.ramp_s, self.t_off_s, self.t_off_s + self.ramp_s]
+
+
+@dataclass(frozen=True)
+class Controller:
+    """Joint PD: τ = K_P (q_d(t) − q) + K_D (q̇_d(t) − q̇) [+ G_joint(q)].
+
+    q_d(t) = q0 + A sin(2π f t + φ) per joint (A = 0: hold q0). ``mode`` "continuous" evaluates
+    τ at every integrator stage; "zoh" holds it over 1/rate_Hz.
+    """
+
+    q0_rad: np.ndarray
+    kp: float = 500.0
+    kd: float = 10.0
+    mode: str = "continuous"
+    rate_Hz: float = 1000.0
+    amplitude_rad: np.ndarray | None = None
+    frequency_Hz: np.ndarray | None = None
+    phase_rad: np.ndarray | None = None
+    gravity_compensation: bool = False
+
+    def reference(self, t):
+        """(q_d, q̇_d) at times t: shapes (..., N)."""
+        t = np.asarray(t, dtype=float)[..., None]
+        q0 = np.asarray(self.q0_rad, float)
+        if self.amplitude_rad is None:
+            return np.broadcast_to(q0, t.shape[:-1] + q0.shape), np.zeros(t.shape[:-1] + q0.shape)
+        w = 2 * np.pi * np.asarray(self.frequency_Hz, float)
+        arg = w * t + np.asarray(self.phase_rad, float)
+        a = np.asarray(self.amplitude_rad, float)
+        return q0 + a * np.sin(arg), a * w * np.cos(arg)
+
+
+@dataclass(frozen=True)
+class Ground:
+    """Foot (last link, α = 1) on a flat floor z = height_m.
+
+    Normal: F_n = max(0, k δ − d ż), δ = height − z_foot > 0. Tangential: a bristle (Dahl-type)
+    state s with ṡ = v_t (1 − sgn(v_t) s / s_max), s_max = μ F_n / k_t, F_t = −k_t s, so
+    |F_t| ≤ μ F_n: the foot sticks (F_t elastic) until the bristle saturates, then slips at μ F_n.
+    """
+
+    height_m: float = 0.0
+    stiffness_N_per_m: float = 2e4
+    damping_Ns_per_m: float = 200.0
+    tangential_stiffness_N_per_m: float = 2e4
+    friction_coefficient: float = 0.3
+
+
+@dataclass(frozen=True)
+class Sensors:
+    """Sensor models applied to the sampled truth.
+
+    torque: "gaussian" (σ = torque_noise_Nm) or "bridge" (bridge.chain.paper_chain(), read
+    through the bridge/ADC chain); FT: Gaussian σ_FT per axis; encoders: quantization to
+    2π/encoder_counts (0 = off); sample_rate_Hz of the log.
+    """
+
+    sample_rate_Hz: float = 1000.0
+    torque_model: str = "gaussian"
+    torque_noise_Nm: float = 0.01
+    ft_noise: np.ndarray = field(default_factory=lambda: np.array([0.1, 0.1, 0.01]))
+    encoder_counts: int = 0
+    velocity_noise_rad_per_s: float = 0.0
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """One simulation. ``robot`` carries the mass data and, for a floating base, the mount springs.
+
+    base: "floating" (Table II springs, logged with x, z, θ), "fixed" (a stiff spring-damper mount
+    emulating the FT sensor, as the paper did, logged without base columns) or "rigid" (welded;
+    the FT reading is the exact constraint wrench).
+    """
+
+    robot: Robot
+    controller: Controller
+    base: str = "floating"
+    duration_s: float = 1.5
+    pokes: tuple[Poke, ...] = ()
+    ground: Ground | None = None
+    sensors: Sensors = field(default_factory=Sensors)
+    integrator: str = "BDF"       # stiff-capable, fastest here (see reports/paper_reproduction.md)
+    rtol: float = 1e-6
+    atol: float = 1e-8
+    fixed_step_s: float = 5e-5
+    mount_stiffness: np.ndarray | None = None
+    mount_damping: np.ndarray | None = None
+    name: str = "scene"
+
+    def mount(self) -> tuple[np.ndarray, np.ndarray]:
+        """(K_b, D_b) of the base mount in (x, z, θ)."""
+        if self.mount_stiffness is not None:
+            return np.asarray(self.mount_stiffness, float), np.asarray(self.mount_damping, float)
+        if self.base == "fixed":
+            return FIXED_STIFF_MOUNT
+        return np.asarray(self.robot.base_stiffness, float), np.asarray(self.robot.base_damping, float)

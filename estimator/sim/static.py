@@ -1,0 +1,38 @@
+"""Static equilibria, vectorized: the sensor readings of a leg held still under a point force.
+
+With q̇ = q̈ = 0 the equation of motion's rows give, in floating coordinates with the base at rest
+at the origin (fixed base / FT mount):
+
+    τ_joint = G_joint(q) − J_joint(q)ᵀ F,        W = G_base(q) − J_base(q)ᵀ F,
+
+τ the joint torques the servos hold and W the wrench the mount exerts ON the base. One call
+handles any batch of postures, contact points and forces (no loop over points).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from estimator import dynamics as dyn
+from estimator.robot import Robot
+
+
+def static_readings(robot: Robot, q_joint_rad, link, alpha, force_N):
+    """(τ (B, N), W (B, 3)) for postures q_joint (B, N), contacts (link (B,), α (B,)), F (B, 2)."""
+    full = robot.with_base(True)
+    q_joint = np.atleast_2d(np.asarray(q_joint_rad, float))
+    B = q_joint.shape[0]
+    link = np.broadcast_to(np.asarray(link, int), (B,))
+    alpha = np.broadcast_to(np.asarray(alpha, float), (B,))
+    force = np.broadcast_to(np.asarray(force_N, float), (B, 2))
+    q = np.concatenate([np.zeros((B, 3)), q_joint], axis=1)
+    G = dyn.gravity_vector(full, q)
+    tau_ext = np.zeros_like(G)
+    for c in np.unique(link):
+        if c == 0:
+            continue
+        rows = link == c
+        J = dyn.point_jacobian(full, q[rows], int(c), alpha[rows])
+        tau_ext[rows] = np.einsum("bak,ba->bk", J, force[rows])
+    gen = G - tau_ext
+    return gen[:, 3:], gen[:, :3]
