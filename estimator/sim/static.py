@@ -36,3 +36,40 @@ def static_readings(robot: Robot, q_joint_rad, link, alpha, force_N):
         tau_ext[rows] = np.einsum("bak,ba->bk", J, force[rows])
     gen = G - tau_ext
     return gen[:, 3:], gen[:, :3]
+
+
+def static_hold_log(robot: Robot, q_joint_rad, link, alpha, force_N, sensors, hold_s: float):
+    """A fixed-base log holding each point for ``hold_s`` (points one after the other).
+
+    Returns (SensorLog, truth dict t/link/alpha/Fx/Fz/px/pz, point index per sample (T,)).
+    """
+    from estimator.log import SensorLog
+    from estimator.sim.sensors import measure
+
+    q_joint = np.atleast_2d(np.asarray(q_joint_rad, float))
+    P, N = q_joint.shape
+    link = np.broadcast_to(np.asarray(link, int), (P,))
+    alpha = np.broadcast_to(np.asarray(alpha, float), (P,))
+    force = np.broadcast_to(np.asarray(force_N, float), (P, 2))
+    tau, W = static_readings(robot, q_joint, link, alpha, force)
+    per = max(1, int(round(hold_s * sensors.sample_rate_Hz)))
+    idx = np.repeat(np.arange(P), per)
+    T = idx.size
+    t = np.arange(T) / sensors.sample_rate_Hz
+    q = np.concatenate([np.zeros((T, 3)), q_joint[idx]], axis=1)
+    dq = np.zeros_like(q)
+    qm, dqm, taum, Wm = measure(sensors, q, dq, tau[idx], W[idx], 3)
+    qm[:, :3] = 0.0
+    log = SensorLog(t=t, q=qm, dq=dqm, tau_Nm=taum, wrench=Wm, floating=False)
+    full = robot.with_base(True)
+    px = np.full(T, np.nan)
+    pz = np.full(T, np.nan)
+    for c in np.unique(link):
+        if c == 0:
+            continue
+        rows = link[idx] == c
+        pt = dyn.contact_point(full, q[rows], int(c), alpha[idx][rows])
+        px[rows], pz[rows] = pt[:, 0], pt[:, 1]
+    truth = {"t": t, "link": link[idx].copy(), "alpha": np.where(link[idx] > 0, alpha[idx], np.nan),
+             "Fx": force[idx, 0].copy(), "Fz": force[idx, 1].copy(), "px": px, "pz": pz}
+    return log, truth, idx
