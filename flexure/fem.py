@@ -1,0 +1,141 @@
+"""Vectorized stiffness assembly for isotropic linear elasticity on P1/P2 (isoparametric) tetrahedra.
+
+Element stiffness, summed over quadrature points q with weight w_q·det J:
+    K_e[a i, b j] = Σ_q w_q detJ_q ( λ ∂_i N_a ∂_j N_b + μ ∂_j N_a ∂_i N_b + μ δ_ij ∇N_a·∇N_b ),
+which is ∫ Bᵀ D B dV with σ = λ tr(ε) I + 2μ ε. Global dof of node n, component i: 3n + i.
+All elements of a chunk at once (einsum); COO → CSR (int32 indices where they fit), chunked.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from flexure.errors import InputError
+from flexure.mesh import TET_EDGES, Mesh
+
+# 4-point, degree-2 rule on the reference tetrahedron (volume 1/6), barycentric (a,b,b,b) perms.
+_A, _B = 0.5854101966249685, 0.1381966011250105
+TET_QUAD = {
+    1: (np.array([[0.25, 0.25, 0.25]]), np.array([1.0 / 6.0])),
+    2: (np.array([[_B, _B, _B], [_A, _B, _B], [_B, _A, _B], [_B, _B, _A]]), np.full(4, 1.0 / 24.0)),
+}
+# 6-point, degree-4 Dunavant rule on the reference triangle (area 1/2), points (s, t).
+_TA, _TB, _TC, _TD = 0.445948490915965, 0.108103018168070, 0.091576213509771, 0.816847572980459
+TRI_QUAD = (
+    np.array([[_TA, _TA], [_TA, _TB], [_TB, _TA], [_TC, _TC], [_TC, _TD], [_TD, _TC]]),
+    0.5 * np.array([0.223381589678011] * 3 + [0.109951743655322] * 3),
+)
+
+
+def tet_shape(order: int, xi: np.ndarray):
+    """Shape functions N (k,nn) and reference gradients dN/dξ (k,nn,3) at ref points ξ (k,3).
+
+    Barycentric L0 = 1−ξ1−ξ2−ξ3, L_i = ξ_i. P1: N_a = L_a. P2 (VTK order): vertices L_a(2L_a−1),
+    edges (a,b) 4 L_a L_b.
+    """
+    xi = np.atleast_2d(np.asarray(xi, dtype=np.float64))
+    k = len(xi)
+    L = np.column_stack([1.0 - xi.sum(axis=1), xi])                 # (k,4)
+    dL = np.array([[-1.0, -1.0, -1.0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])  # dL_a/dξ (4,3)
+    if order == 1:
+        return L, np.broadcast_to(dL, (k, 4, 3)).copy()
+    a, b = TET_EDGES[:, 0], TET_EDGES[:, 1]
+    N = np.hstack([L * (2 * L - 1), 4 * L[:, a] * L[:, b]])
+    dNv = (4 * L - 1)[:, :, None] * dL[None]                          # (k,4,3)
+    dNe = 4 * (L[:, b, None] * dL[None, a] + L[:, a, None] * dL[None, b])  # (k,6,3)
+    return N, np.concatenate([dNv, dNe], axis=1)
+
+
+def tri_shape(order: int, st: np.ndarray):
+    """Triangle shape functions N (k,nn) and dN/d(s,t) (k,nn,2); P2 edges (0,1),(1,2),(2,0)."""
+    st = np.atleast_2d(np.asarray(st, dtype=np.float64))
+    k = len(st)
+    L = np.column_stack([1.0 - st.sum(axis=1), st])
+    dL = np.array([[-1.0, -1.0], [1, 0], [0, 1]])
+    if order == 1:
+        return L, np.broadcast_to(dL, (k, 3, 2)).copy()
+    a, b = np.array([0, 1, 2]), np.array([1, 2, 0])
+    N = np.hstack([L * (2 * L - 1), 4 * L[:, a] * L[:, b]])
+    dNv = (4 * L - 1)[:, :, None] * dL[None]
+    dNe = 4 * (L[:, b, None] * dL[None, a] + L[:, a, None] * dL[None, b])
+    return N, np.concatenate([dNv, dNe], axis=1)
+
+
+def physical_gradients(X: np.ndarray, dN_ref: np.ndarray, first_element: int = 0):
+    """∂N_a/∂x_i (e,q,nn,3) and det J (e,q) from node coords X (e,nn,3) and dN/dξ (q,nn,3).
+
+    J_ik = Σ_a X_ai ∂N_a/∂ξ_k;  ∇_x N = J⁻ᵀ ∇_ξ N. Raises InputError on det J ≤ 0 (inverted).
+    """
+    J = np.einsum("eai,qak->eqik", X, dN_ref)
+    det = np.linalg.det(J)
+    bad = ~(det > 0)
+    if np.any(bad):
+        e = int(np.flatnonzero(bad.any(axis=1))[0]) + first_element
+        raise InputError(f"mesh: element {e} is inverted or degenerate (det J = "
+                         f"{float(det[bad].ravel()[0]):.3e}); fix the mesh")
+    Jinv = np.linalg.inv(J)                                          # (e,q,k,i)
+    G = np.einsum("qak,eqki->eqai", dN_ref, Jinv)
+    return G, det
+
+
+def element_stiffness(mesh: Mesh, lam_Pa: float, mu_Pa: float, elements=slice(None)) -> np.ndarray:
+    """Element matrices (e, 3nn, 3nn), row index 3a + i (local node a, component i)."""
+    tets = mesh.tets[elements]
+    xi, w = TET_QUAD[mesh.order]
+    _, dN = tet_shape(mesh.order, xi)
+    start = elements.start or 0 if isinstance(elements, slice) else 0
+    G, det = physical_gradients(mesh.points[tets], dN, first_element=start)
+    Gw = G * (w[None, :] * det)[:, :, None, None]
+    A = np.einsum("eqai,eqbj->eaibj", Gw, G, optimize=True)        # Σ_q w detJ ∂_i N_a ∂_j N_b
+    tr = np.einsum("eakbk->eab", A)
+    K = lam_Pa * A + mu_Pa * A.transpose(0, 1, 4, 3, 2)
+    diag = np.arange(3)
+    K[:, :, diag, :, diag] += mu_Pa * tr[None]       # δ_ij term; fancy-index view is (3,e,a,b)
+    nn = tets.shape[1]
+    return K.reshape(len(tets), 3 * nn, 3 * nn)
+
+
+def element_dofs(tets: np.ndarray) -> np.ndarray:
+    """Global dofs (e, 3nn) of elements, ordered 3a + i → 3·node_a + i."""
+    t = tets.astype(np.int64)
+    return (3 * t[:, :, None] + np.arange(3)).reshape(len(t), -1)
+
+
+def stiffness_matrix(mesh: Mesh, material, chunk_elements: int | None = None) -> sp.csr_matrix:
+    """Global stiffness K (n_dofs × n_dofs, CSR, symmetric) for ``material`` (E, ν).
+
+    Chunks of elements bound the temporary memory (~(3nn)²·8 bytes·6 per element).
+    """
+    lam, mu = material.lame_lambda_Pa, material.shear_modulus_Pa
+    n = mesh.n_dofs
+    m = mesh.n_elements
+    nn = mesh.tets.shape[1]
+    if chunk_elements is None:
+        chunk_elements = max(1000, int(60e6 // ((3 * nn) ** 2 * 8)))
+    idx = np.int32 if n < 2**31 - 1 else np.int64
+    K = None
+    for s in range(0, m, chunk_elements):
+        sl = slice(s, min(m, s + chunk_elements))
+        Ke = element_stiffness(mesh, lam, mu, sl)
+        dofs = element_dofs(mesh.tets[sl]).astype(idx)
+        rows = np.repeat(dofs, 3 * nn, axis=1).ravel()
+        cols = np.tile(dofs, (1, 3 * nn)).ravel()
+        Kc = sp.coo_matrix((Ke.ravel(), (rows, cols)), shape=(n, n)).tocsr()
+        K = Kc if K is None else K + Kc
+    K.sum_duplicates()
+    K.sort_indices()
+    return K
+
+
+def rigid_body_modes(points: np.ndarray) -> np.ndarray:
+    """The 6 rigid-body modes (3n, 6): translations x, y, z and rotations about x, y, z (ω × x)."""
+    n = len(points)
+    c = points - points.mean(axis=0)
+    B = np.zeros((n, 3, 6))
+    B[:, 0, 0] = B[:, 1, 1] = B[:, 2, 2] = 1.0
+    x, y, z = c[:, 0], c[:, 1], c[:, 2]
+    B[:, 1, 3], B[:, 2, 3] = -z, y          # ω = e_x: (0, −z, y)
+    B[:, 0, 4], B[:, 2, 4] = z, -x          # ω = e_y: (z, 0, −x)
+    B[:, 0, 5], B[:, 1, 5] = -y, x          # ω = e_z: (−y, x, 0)
+    return B.reshape(3 * n, 6)
