@@ -8,9 +8,11 @@ padded with a zero base, and the base wrench enters on the base rows (DESIGN.md)
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+
+from estimator.errors import InputError
 
 
 @dataclass
@@ -23,6 +25,14 @@ class SensorLog:
     tau_Nm: np.ndarray
     wrench: np.ndarray          # [Fx, Fz, My] exerted by the mount ON the base (world frame)
     floating: bool = True       # False: the log had no base columns (fixed base)
+    source: str = "log"         # file name, for messages
+    valid_mask: np.ndarray | None = None      # over the file's data rows: False = skipped (NaN/inf)
+    skipped_lines: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+
+    @property
+    def n_skipped(self) -> int:
+        """Rows of the file skipped for a NaN/inf field."""
+        return int(len(self.skipped_lines))
 
     @property
     def n_links(self) -> int:
@@ -40,3 +50,149 @@ def log_columns(n_links: int, floating: bool = True) -> list[str]:
     qs = [f"q{i}" for i in range(1, n_links + 1)]
     rates = (["dx", "dz", "dtheta"] if floating else []) + [f"d{c}" for c in qs]
     return ["t", *base, *qs, *rates, *[f"tau{i}" for i in range(1, n_links + 1)], "Fx", "Fz", "My"]
+
+
+# ----------------------------------------------------------------------------- reading / writing
+def _line(row_index: int) -> int:
+    """1-based file line of data row ``row_index`` (the header is line 1)."""
+    return int(row_index) + 2
+
+
+def _layout(columns: list[str], source: str, n_links: int | None):
+    """(n_links, floating) from a header, or an InputError naming the missing/misspelled column."""
+    import difflib
+    import re
+
+    taus = sorted(int(m.group(1)) for c in columns if (m := re.fullmatch(r"tau(\d+)", c)))
+    qs = sorted(int(m.group(1)) for c in columns if (m := re.fullmatch(r"q(\d+)", c)))
+    n_log = max(taus + qs, default=0)
+    floating = any(c in columns for c in ("x", "z", "theta", "dx", "dz", "dtheta"))
+    n = n_log if n_log else (n_links or 0)
+    if n == 0:
+        raise InputError(f"{source}: header has no joint columns (q1…, dq1…, tau1…); "
+                         f"expected {','.join(log_columns(n_links or 2, True))}")
+    if n_links is not None and n_log and n_log != n_links:
+        raise InputError(f"{source}: the log has {n_log} joint column set(s) (up to q{n_log}/tau{n_log}) "
+                         f"but the robot has {n_links} links; expected columns "
+                         f"{','.join(log_columns(n_links, floating))}")
+    expected = log_columns(n, floating)
+    extra = [c for c in columns if c not in expected]
+    for col in expected:
+        if col not in columns:
+            hint = difflib.get_close_matches(col, extra, n=1, cutoff=0.6)
+            did = f" (found '{hint[0]}': misspelled?)" if hint else ""
+            raise InputError(f"{source}: line 1: missing column '{col}'{did}; expected header "
+                             f"{','.join(expected)}")
+    return n, floating
+
+
+def read_log(path, robot=None, *, max_jitter: float = 0.01) -> SensorLog:
+    """Read and validate a CSV sensor log (DESIGN.md format).
+
+    Rows with a NaN/inf (or empty) field are skipped and counted (``skipped_lines``, ``valid_mask``);
+    a non-numeric field, a non-increasing time or a step that is not a whole number of sample
+    periods (±``max_jitter``) raises InputError naming the file, line and column. With ``robot``,
+    the number of joints must match its links.
+    """
+    import pandas as pd
+    from pathlib import Path
+
+    path = Path(path)
+    source = str(path)
+    if not path.exists():
+        raise InputError(f"{source}: no such file")
+    if path.is_dir():
+        raise InputError(f"{source}: is a directory, expected a CSV log")
+    try:
+        frame = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
+    except pd.errors.EmptyDataError:
+        raise InputError(f"{source}: empty file (expected a CSV header and samples)") from None
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+        raise InputError(f"{source}: not a readable CSV log: {msg}") from None
+    frame.columns = [str(c).strip() for c in frame.columns]
+    dup = frame.columns[frame.columns.duplicated()]
+    if len(dup):
+        raise InputError(f"{source}: line 1: column '{dup[0]}' appears twice")
+    n, floating = _layout(list(frame.columns), source, None if robot is None else robot.n_links)
+    cols = log_columns(n, floating)
+    if len(frame) == 0:
+        raise InputError(f"{source}: no samples after the header")
+    values = np.empty((len(frame), len(cols)))
+    for j, col in enumerate(cols):
+        text = frame[col].str.strip()
+        num = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
+        bad = np.isnan(num) & ~text.str.lower().isin(["", "nan", "-nan", "+nan", "na", "null"]).to_numpy()
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise InputError(f"{source}: line {_line(i)}, column '{col}': "
+                             f"{frame[col].iloc[i]!r} is not a number")
+        values[:, j] = num
+    valid = np.all(np.isfinite(values), axis=1)
+    if not valid.any():
+        raise InputError(f"{source}: every sample has a NaN/inf field; nothing to estimate")
+    data = values[valid]
+    rows = np.flatnonzero(valid)
+    t = data[:, 0]
+    steps = np.diff(t)
+    if np.any(steps <= 0):
+        k = int(np.flatnonzero(steps <= 0)[0])
+        raise InputError(f"{source}: line {_line(rows[k + 1])}, column 't': time {t[k + 1]:g} s does not "
+                         f"increase (previous sample {t[k]:g} s at line {_line(rows[k])})")
+    if len(t) > 2:
+        dt = float(np.median(steps))
+        # a step may span skipped rows: it must then be a whole number of periods
+        skipped = np.diff(rows) - 1
+        ratio = steps / dt
+        off = np.abs(ratio - np.maximum(np.round(ratio), 1)) > max_jitter
+        off |= np.round(ratio) != skipped + 1
+        if off.any():
+            k = int(np.flatnonzero(off)[0])
+            raise InputError(f"{source}: line {_line(rows[k + 1])}, column 't': irregular sampling, step "
+                             f"{steps[k]:.6g} s where the log's period is {dt:.6g} s "
+                             f"(±{100 * max_jitter:g}%)")
+    base = 3 if floating else 0
+    T = len(t)
+    q = np.zeros((T, n + 3))
+    dq = np.zeros((T, n + 3))
+    q[:, 3 - base:] = data[:, 1:1 + base + n]
+    dq[:, 3 - base:] = data[:, 1 + base + n:1 + 2 * (base + n)]
+    i0 = 1 + 2 * (base + n)
+    log = SensorLog(t=t, q=q, dq=dq, tau_Nm=data[:, i0:i0 + n], wrench=data[:, i0 + n:i0 + n + 3],
+                    floating=floating)
+    log.source = source
+    log.valid_mask = valid
+    log.skipped_lines = rows_to_lines(np.flatnonzero(~valid))
+    return log
+
+
+def rows_to_lines(rows: np.ndarray) -> np.ndarray:
+    return np.asarray(rows, dtype=int) + 2
+
+
+def log_to_frame(log: SensorLog):
+    """A pandas DataFrame with DESIGN.md's columns in order (a fixed base omits the base columns)."""
+    import pandas as pd
+
+    n = log.n_links
+    base = slice(0, 3) if log.floating else slice(3, 3)
+    parts = [log.t[:, None], log.q[:, base], log.q[:, 3:], log.dq[:, base], log.dq[:, 3:],
+             log.tau_Nm, log.wrench]
+    return pd.DataFrame(np.concatenate(parts, axis=1), columns=log_columns(n, log.floating))
+
+
+def write_log(log: SensorLog, path) -> None:
+    """Write a log as CSV (full precision) atomically: temp file beside ``path`` + rename."""
+    import os
+    import tempfile
+    from pathlib import Path
+
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".csv", dir=path.parent)
+    os.close(fd)
+    try:
+        log_to_frame(log).to_csv(tmp, index=False, float_format="%.17g")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

@@ -1,0 +1,55 @@
+"""Collision detection (‖r‖ > ε_res) and isolation (paper eq. 5, generalized to N links).
+
+Isolation: a force on link c moves only the joints upstream of it, so the joint rows r_{q_1…q_c}
+carry it and r_{q_{c+1}…q_N} stay at zero (eq. 5). The collided link is the LAST joint row whose
+magnitude exceeds its threshold; thresholds are noise-aware, max(floor, n_σ · σ_i), with σ_i a
+robust (MAD) noise estimate of row i over samples with no detected contact.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from estimator.errors import InputError
+
+
+def detect(rnorm: np.ndarray, threshold: float = 0.06, debounce: int = 0) -> np.ndarray:
+    """contact[k] = ‖r_k‖ > ε for the ``debounce`` + 1 samples k−debounce…k (all of them)."""
+    if not (np.isfinite(threshold) and threshold > 0):
+        raise InputError(f"threshold: must be a finite number > 0, got {threshold}")
+    if int(debounce) != debounce or debounce < 0:
+        raise InputError(f"debounce: must be a whole number of samples ≥ 0, got {debounce}")
+    raw = np.asarray(rnorm) > threshold
+    d = int(debounce)
+    if d == 0:
+        return raw
+    run = np.concatenate([[0], np.cumsum(raw)])
+    k = np.arange(len(raw))
+    window = run[k + 1] - run[np.maximum(k - d, 0)]
+    return (window == d + 1) & (k >= d)
+
+
+def robust_sigma(x: np.ndarray, axis=0) -> np.ndarray:
+    """1.4826 · median(|x − median x|): a standard deviation that ignores outliers."""
+    med = np.median(x, axis=axis, keepdims=True)
+    return 1.4826 * np.median(np.abs(x - med), axis=axis)
+
+
+def noise_thresholds(joint_residual: np.ndarray, quiet: np.ndarray | None = None,
+                     floor: float = 0.01, n_sigma: float = 5.0) -> np.ndarray:
+    """Per joint row: max(floor, n_σ σ_i), σ_i robust over the ``quiet`` (no-contact) samples."""
+    r = np.asarray(joint_residual, float)
+    if quiet is not None and np.count_nonzero(quiet) >= 10:
+        r = r[quiet]
+    if len(r) < 10:
+        return np.full(r.shape[1], floor)
+    return np.maximum(floor, n_sigma * robust_sigma(r, axis=0))
+
+
+def isolate(joint_residual: np.ndarray, thresholds) -> np.ndarray:
+    """Eq. 5: the collided link (1-based) = last joint row above its threshold; 0 if none, (T,)."""
+    r = np.abs(np.asarray(joint_residual, float))
+    above = r > np.asarray(thresholds, float)
+    N = r.shape[-1]
+    last = N - np.argmax(above[..., ::-1], axis=-1)
+    return np.where(above.any(axis=-1), last, 0)
