@@ -1,0 +1,168 @@
+"""Post-processing: strains, stresses, von Mises; point location and strain at arbitrary points.
+
+Displacement gradient H_ij = Σ_a u_ai ∂N_a/∂x_j; small strain ε = (H + Hᵀ)/2 (tensor, not
+engineering shear); stress σ = λ tr(ε) I + 2μ ε; von Mises σ_vm = √(3/2 s:s), s = σ − tr(σ)/3 I.
+Strain along a unit direction d (a gauge axis): ε_d = dᵀ ε d.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from flexure.errors import InputError
+from flexure.fem import TET_QUAD, physical_gradients, tet_shape
+from flexure.mesh import Mesh
+
+#: reference coordinates ξ of the 10 local nodes (vertices then VTK edge midpoints).
+_REF_VERTS = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+REF_NODES = np.vstack([_REF_VERTS, 0.5 * (_REF_VERTS[[0, 1, 0, 0, 1, 2]] + _REF_VERTS[[1, 2, 2, 3, 3, 3]])])
+
+
+def _as_u(mesh: Mesh, u) -> np.ndarray:
+    u = np.asarray(u, dtype=np.float64)
+    if u.shape == (mesh.n_dofs,):
+        u = u.reshape(-1, 3)
+    if u.shape != (mesh.n_nodes, 3):
+        raise InputError(f"post: displacement must have shape ({mesh.n_nodes}, 3), got {u.shape}")
+    return u
+
+
+def gradient_at(mesh: Mesh, u, elements: np.ndarray, xi: np.ndarray) -> np.ndarray:
+    """Displacement gradients (k,3,3) at reference points ξ (k,3) of ``elements`` (k,)."""
+    u = _as_u(mesh, u)
+    elements = np.asarray(elements, dtype=np.int64)
+    xi = np.asarray(xi, dtype=np.float64).reshape(-1, 3)
+    _, dN = tet_shape(mesh.order, xi)                        # (k,nn,3) — one point per element
+    X = mesh.points[mesh.tets[elements]]                     # (k,nn,3)
+    J = np.einsum("kai,kaj->kij", X, dN)
+    G = np.einsum("kaj,kji->kai", dN, np.linalg.inv(J))      # ∂N_a/∂x_i
+    return np.einsum("kac,kaj->kcj", u[mesh.tets[elements]], G)
+
+
+def strain_from_gradient(H: np.ndarray) -> np.ndarray:
+    """ε = (H + Hᵀ)/2."""
+    return 0.5 * (H + np.swapaxes(H, -1, -2))
+
+
+def stress_from_strain(strain: np.ndarray, material) -> np.ndarray:
+    """σ = λ tr(ε) I + 2μ ε (Pa)."""
+    tr = np.trace(strain, axis1=-2, axis2=-1)
+    return material.lame_lambda_Pa * tr[..., None, None] * np.eye(3) + 2 * material.shear_modulus_Pa * strain
+
+
+def von_mises(stress: np.ndarray) -> np.ndarray:
+    """σ_vm = √(3/2 s:s), s the deviatoric stress (Pa)."""
+    s = stress - np.trace(stress, axis1=-2, axis2=-1)[..., None, None] / 3.0 * np.eye(3)
+    return np.sqrt(1.5 * np.einsum("...ij,...ij->...", s, s))
+
+
+def directional_strain(strain: np.ndarray, direction) -> np.ndarray:
+    """ε_d = dᵀ ε d for unit vectors d ((3,) or (k,3))."""
+    d = np.asarray(direction, dtype=np.float64)
+    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    return np.einsum("...i,...ij,...j->...", d, strain, d)
+
+
+def element_strains(mesh: Mesh, u, at: str = "quadrature") -> np.ndarray:
+    """Strains at quadrature points (m,q,3,3) or element centroids (m,3,3) (``at="centroid"``)."""
+    u = _as_u(mesh, u)
+    xi = TET_QUAD[mesh.order][0] if at == "quadrature" else np.array([[0.25, 0.25, 0.25]])
+    _, dN = tet_shape(mesh.order, xi)
+    G, _ = physical_gradients(mesh.points[mesh.tets], dN)
+    H = np.einsum("eac,eqaj->eqcj", u[mesh.tets], G)
+    eps = strain_from_gradient(H)
+    return eps[:, 0] if at == "centroid" else eps
+
+
+def element_stresses(mesh: Mesh, u, material, at: str = "quadrature") -> np.ndarray:
+    """Stresses (Pa) at quadrature points or centroids."""
+    return stress_from_strain(element_strains(mesh, u, at), material)
+
+
+def nodal_strains(mesh: Mesh, u) -> np.ndarray:
+    """Nodal strains (n,3,3): each element's strain evaluated at its own nodes, volume-weighted mean."""
+    u = _as_u(mesh, u)
+    nn = mesh.tets.shape[1]
+    _, dN = tet_shape(mesh.order, REF_NODES[:nn])
+    G, det = physical_gradients(mesh.points[mesh.tets], dN)
+    eps = strain_from_gradient(np.einsum("eac,eqaj->eqcj", u[mesh.tets], G))   # (m,nn,3,3)
+    w = np.broadcast_to(np.abs(mesh.signed_volumes())[:, None], (mesh.n_elements, nn))
+    idx = mesh.tets.ravel()
+    out = np.zeros((mesh.n_nodes, 9))
+    wsum = np.bincount(idx, weights=w.ravel(), minlength=mesh.n_nodes)
+    flat = eps.reshape(-1, 9) * w.reshape(-1, 1)
+    for k in range(9):
+        out[:, k] = np.bincount(idx, weights=flat[:, k], minlength=mesh.n_nodes)
+    out /= np.maximum(wsum, 1e-300)[:, None]
+    return out.reshape(-1, 3, 3)
+
+
+def nodal_stresses(mesh: Mesh, u, material) -> np.ndarray:
+    """Nodal stresses (n,3,3) from averaged nodal strains (Pa)."""
+    return stress_from_strain(nodal_strains(mesh, u), material)
+
+
+def locate(mesh: Mesh, points, tol: float = 1e-6, n_candidates: int = 24):
+    """Containing element (k,) and reference coordinates ξ (k,3) of each point.
+
+    Candidates: elements with the nearest centroids (KD-tree); the one maximising the smallest
+    barycentric coordinate wins. For curved (isoparametric) P2 elements ξ is refined by Newton on
+    x(ξ) = Σ N_a(ξ) X_a. Points outside the mesh by more than ``tol`` (relative) are an InputError.
+    """
+    from scipy.spatial import cKDTree
+
+    pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise InputError(f"locate: points must have shape (k, 3), got {pts.shape}")
+    V = mesh.points[mesh.corner_tets]                          # (m,4,3)
+    if "kdtree" not in mesh._cache:
+        mesh._cache["kdtree"] = cKDTree(V.mean(axis=1))
+        mesh._cache["Tinv"] = np.linalg.inv(np.transpose(V[:, 1:] - V[:, :1], (0, 2, 1)))
+    tree, Tinv = mesh._cache["kdtree"], mesh._cache["Tinv"]
+    kc = min(n_candidates, mesh.n_elements)
+    _, cand = tree.query(pts, k=kc)
+    cand = cand.reshape(len(pts), kc)
+    lam = np.einsum("kcij,kcj->kci", Tinv[cand], pts[:, None, :] - V[cand, 0])   # (k,c,3) = ξ
+    minbary = np.minimum(lam.min(axis=2), 1.0 - lam.sum(axis=2))
+    best = np.argmax(minbary, axis=1)
+    rows = np.arange(len(pts))
+    elem = cand[rows, best]
+    xi = lam[rows, best]
+    score = minbary[rows, best]
+    miss = np.flatnonzero(score < -tol)
+    for i in miss:          # rare fallback: brute force over all elements, vectorized
+        l_all = np.einsum("mij,mj->mi", Tinv, pts[i] - V[:, 0])
+        mb = np.minimum(l_all.min(axis=1), 1.0 - l_all.sum(axis=1))
+        j = int(np.argmax(mb))
+        elem[i], xi[i], score[i] = j, l_all[j], mb[j]
+    if mesh.order == 2:
+        xi = _newton_xi(mesh, elem, xi, pts)
+        score = np.minimum(xi.min(axis=1), 1.0 - xi.sum(axis=1))
+    bad = np.flatnonzero(score < -max(tol, 1e-3) if mesh.order == 2 else score < -tol)
+    if len(bad):
+        raise InputError(f"locate: point {int(bad[0])} {pts[bad[0]].tolist()} lies outside the mesh")
+    return elem, xi
+
+
+def _newton_xi(mesh: Mesh, elem, xi, pts, iters: int = 4):
+    X = mesh.points[mesh.tets[elem]]
+    for _ in range(iters):
+        N, dN = tet_shape(2, xi)
+        r = np.einsum("ka,kai->ki", N, X) - pts
+        J = np.einsum("kai,kaj->kij", X, dN)
+        xi = xi - np.linalg.solve(J, r[..., None])[..., 0]
+    return xi
+
+
+def strain_at(mesh: Mesh, u, points) -> np.ndarray:
+    """Strain tensors (k,3,3) at arbitrary points inside (or on the surface of) the mesh."""
+    elem, xi = locate(mesh, points)
+    return strain_from_gradient(gradient_at(mesh, u, elem, xi))
+
+
+def displacement_at(mesh: Mesh, u, points) -> np.ndarray:
+    """Interpolated displacements (k,3) at arbitrary points."""
+    u = _as_u(mesh, u)
+    elem, xi = locate(mesh, points)
+    N, _ = tet_shape(mesh.order, xi)
+    return np.einsum("ka,kai->ki", N, u[mesh.tets[elem]])
