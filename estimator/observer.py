@@ -158,6 +158,16 @@ def residual_offline(robot: Robot, t, q, dq, tau_meas, gain_per_s=100.0, method:
     return r
 
 
+def lag_s(K: np.ndarray, dt_s: float, method: str = "exact") -> np.ndarray:
+    """Delay of r behind τ_ext for a slowly varying τ_ext, per channel: Δt/(1 − a) − Δt/2 (→ 1/K).
+
+    The recurrence r_{k+1} = a r_k + (1 − a) d_k has DC group delay 1/(1 − a) samples, and d_k is the
+    mean of τ_ext over [t_k, t_{k+1}], centred half a step later.
+    """
+    a, b = coefficients(np.asarray(K, float), dt_s, method)
+    return dt_s / b - 0.5 * dt_s
+
+
 class MomentumObserver:
     """Streaming observer: ``step(q, dq, tau_meas)`` → r (n,), one sample at a time.
 

@@ -99,11 +99,16 @@ def _expected(robot: Robot, expected_contacts):
 def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=100.0,
              threshold: float = 0.06, debounce: int = 0, expected_contacts=None, *,
              discretization: str = "exact", row_weights=None, min_force_N: float = 0.05,
-             max_condition: float = 20.0, isolation_floor: float = 0.01) -> ContactEstimate:
+             max_condition: float = 20.0, isolation_floor: float = 0.01,
+             lag_compensation: bool = True) -> ContactEstimate:
     """Run observer, detection and localization on a whole log (offline, vectorized).
 
     expected_contacts: None, ``"foot"`` (last link, α = 1) or [(link, α), …]: contacts the robot
     expects; their forces are estimated jointly and never reported as a collision.
+
+    lag_compensation (``dynamic`` only): r lags τ_ext by ≈ 1/K (``observer.lag_s``), so r_k is
+    paired with the posture q(t_k − lag) (linear interpolation) to solve for (F, α); α is a body
+    coordinate, so the reported point is p_c + α Δ_c at the CURRENT posture.
     """
     if method not in METHODS:
         raise InputError(f"method: unknown {method!r}; use one of {', '.join(METHODS)}")
@@ -131,8 +136,16 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     expected_force = None
     info = {}
     if method == "dynamic":
+        if lag_compensation and T > 1:
+            dt = observer.regular_period(log.t)
+            lag = float(np.mean(observer.lag_s(observer.gains(robot, gain_per_s), dt, discretization)))
+            info["lag_compensation_s"] = lag
+            q_loc = np.stack([np.interp(log.t[sel] - lag, log.t, log.q[:, k])
+                              for k in range(log.q.shape[1])], axis=-1) if sel.size else log.q[sel]
+        else:
+            q_loc = log.q[sel]
         if sel.size:
-            res = loc_mod.localize_dynamic(robot, log.q[sel], r[sel], expected=expected,
+            res = loc_mod.localize_dynamic(robot, q_loc, r[sel], expected=expected,
                                            row_weights=row_weights, min_force_N=min_force_N,
                                            max_condition=max_condition)
         if expected:
@@ -151,6 +164,13 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
             res = loc_mod.localize_paper(robot, log.q[sel], log.dq[sel], log.tau_meas[sel], iso,
                                          min_force_N=min_force_N, max_condition=max_condition)
     if sel.size:
+        if method == "dynamic":       # the point at the current posture from the body coordinate α
+            from estimator import dynamics as dyn
+
+            joints, _ = dyn.forward_kinematics(observer.full_robot(robot), log.q[sel])
+            c0 = np.clip(res.link - 1, 0, robot.n_links - 1)
+            i = np.arange(sel.size)
+            res.point_m = joints[i, c0] + res.alpha[:, None] * (joints[i, c0 + 1] - joints[i, c0])
         link[sel] = res.link
         alpha[sel] = res.alpha
         force[sel] = res.force_N
