@@ -107,7 +107,7 @@ class SensorChain:
         c = self.config
         y = np.multiply(np.atleast_1d(torque_Nm), self._y_per_Nm, dtype=float)
         if y.size:
-            y_lim = c.strain_limit * self._y_per_Nm / abs(self.strain_per_Nm)
+            y_lim = c.strain_limit * abs(self._y_per_Nm / self.strain_per_Nm)   # limit · GF_eff
             if y.max() > y_lim or y.min() < -y_lim:
                 warnings.warn(f"gauge strain beyond ±{c.strain_limit:g} (|τ| up to "
                               f"{float(np.max(np.abs(torque_Nm))):.4g} N·m)", StrainRangeWarning,

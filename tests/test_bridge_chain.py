@@ -103,6 +103,19 @@ def test_saturation_is_flagged_never_silent():
         chain.measure(np.array([0.5, -0.5]), np.random.default_rng(0))   # in range: no warning
 
 
+def test_negative_strain_per_Nm_flips_sign_and_round_trips():
+    chain = SensorChain(SensorConfig(arrangement="quarter"), -PAPER_STRAIN_PER_NM)
+    tau = np.linspace(-3, 3, 7)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                 # no spurious strain-range warning
+        v = chain.volts(tau)
+        assert np.all(np.sign(v[tau != 0]) == -np.sign(tau[tau != 0]))
+        codes = np.rint(v / chain.config.lsb_V).astype(np.int64)
+        np.testing.assert_allclose(chain.torque_from_counts(codes), tau,
+                                   atol=0.5 / abs(chain.counts_per_Nm) * 1.01)
+    assert chain.noise_std_Nm > 0
+
+
 def test_strain_beyond_range_warns():
     chain = paper_chain()
     with pytest.warns(StrainRangeWarning):
