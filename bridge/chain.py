@@ -187,8 +187,8 @@ class SensorChain:
         v = codes * (c.lsb_V / c.gain)
         v -= c.offset_V
         lo, hi = self.code_limits
-        rail = (codes <= lo) | (codes >= hi)
-        if rail.any():
+        if codes.size and (codes.min() <= lo or codes.max() >= hi):
+            rail = (codes <= lo) | (codes >= hi)
             warnings.warn(f"{int(np.count_nonzero(rail))} sample(s) at the ADC rails "
                           "(saturated): torque set to NaN", ADCSaturationWarning, stacklevel=3)
             v[rail] = np.nan
@@ -197,7 +197,7 @@ class SensorChain:
     def torque_from_counts(self, counts) -> np.ndarray:
         """Nominal inverse τ̂ = strain_from_ratio(V_br/V_ex) / strain_per_Nm; saturated → NaN."""
         c = self.config
-        ratio = np.array(self.bridge_volts_from_counts(counts), dtype=float)
+        ratio = np.asarray(self.bridge_volts_from_counts(counts), dtype=float)
         ratio /= c.excitation_V
         if c.arrangement in ("full_bending", "half_bending", "full_poisson"):
             # exactly linear patterns: V/V_ex = s · y
