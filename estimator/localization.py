@@ -150,7 +150,8 @@ def _flag(force, delta, reason, min_force_N, max_condition):
         condition = fn * np.hypot(delta[:, 0], delta[:, 1]) / cr
     condition = np.where(np.isnan(condition), np.inf, condition)
     reason[(reason == OK) & (condition > max_condition)] = PARALLEL
-    reason[(reason == OK) & ~(fn >= min_force_N)] = SMALL_FORCE
+    # below the noise floor nothing else about the answer means anything: that flag wins
+    reason[(reason != NOT_IDENTIFIABLE) & ~(fn >= min_force_N)] = SMALL_FORCE
     return condition
 
 
@@ -309,6 +310,9 @@ def _localize_with_expected(rob, q, r, w, expected, min_force_N, max_condition, 
         close = costs[idx, second] - costs[idx, best] < ambiguity_tol
         far = np.hypot(*(p2 - point).T) > position_tol_m
         reason[(reason == OK) & close & far] = AMBIGUOUS
+        # a rank-deficient candidate that fits as well: the data cannot tell them apart
+        def2 = np.stack([res[4] for res in results], axis=1)[idx, second]
+        reason[(reason == OK) & close & def2] = NOT_IDENTIFIABLE
     condition = _flag(force, delta, reason, min_force_N, max_condition)
     bad = reason != OK
     nid = reason == NOT_IDENTIFIABLE
