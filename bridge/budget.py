@@ -135,11 +135,13 @@ def min_detectable_strain(config: SensorConfig | None = None, *, method: str = "
     if arrangement is not None:
         cfg = cfg.replace(arrangement=arrangement)
     if method == "resolution":
+        if bandwidth_Hz is not None or averaging != 1:
+            raise InputError("min_detectable_strain: bandwidth_Hz/averaging act on noise; "
+                             "use method='noise' (a noiseless resolution step does not average)")
         n = cfg.bits if n_bits is None else float(n_bits)
         if n <= 0:
             raise InputError(f"n_bits: must be > 0, got {n_bits}")
         v_res = cfg.v_ref_V / 2.0 ** n / cfg.gain
-        # averaging/bandwidth act on noise, not on a noiseless resolution step: only for "noise"
         return v_res / cfg.bridge_sensitivity_V_per_strain
     if method == "noise":
         if k_sigma <= 0:

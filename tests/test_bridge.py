@@ -164,6 +164,10 @@ def test_eq11_paper_numbers():
     assert min_detectable_strain(cfg) == pytest.approx(2 ** -26)
     assert min_detectable_strain(cfg.replace(gain=10.0)) == pytest.approx(2 ** -26 / 10)
     assert min_detectable_torque_Nm(1e-4, cfg) == pytest.approx(2 ** -26 / 1e-4)
+    with pytest.raises(InputError, match="method='noise'"):
+        min_detectable_strain(cfg, averaging=4)
+    with pytest.raises(InputError, match="method"):
+        min_detectable_strain(cfg, method="magic")
 
 
 def test_johnson_noise_1k_300K():
