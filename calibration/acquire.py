@@ -1,0 +1,199 @@
+"""Live acquisition over serial (pyserial): raw capture first, then parsing; guided sessions.
+
+Every chunk read from the port is appended to ``RAW.part`` and flushed *before* it is parsed, so
+a parser failure loses nothing; on success the file is fsynced and renamed to ``RAW``.
+A guided static-loading session prompts for each mass, drains what arrived while the user was
+placing it, discards a settling period, then averages a window of samples that passes the
+settling test |mean(2nd half) − mean(1st half)| ≤ max(4·2σ/√W, tol) (white noise: 4σ of the
+difference), sliding forward until it does or ``max_wait`` samples have passed.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from calibration.errors import InputError
+from calibration.frames import FrameParser
+
+
+def open_port(port: str, baud: int = 2_000_000, timeout_s: float = 0.05):
+    """Open ``port`` (a device path or a pyserial URL such as ``loop://``)."""
+    import serial
+
+    try:
+        return serial.serial_for_url(port, baudrate=baud, timeout=timeout_s)
+    except (serial.SerialException, ValueError) as exc:
+        raise InputError(f"--port: cannot open {port!r}: {exc}") from None
+
+
+class RawCapture:
+    """Append-only raw byte log ``path.part`` → renamed to ``path`` on :meth:`close`."""
+
+    def __init__(self, path, *, force: bool = False):
+        self.path = Path(path)
+        if self.path.exists() and not force:
+            raise InputError(f"--out: {self.path} exists; refusing to overwrite it (use --force)")
+        if not self.path.parent.is_dir():
+            raise InputError(f"--out: directory {self.path.parent} does not exist")
+        self.part = self.path.with_name(self.path.name + ".part")
+        self.fh = open(self.part, "wb")
+        self.n_bytes = 0
+
+    def write(self, data: bytes) -> None:
+        self.fh.write(data)
+        self.fh.flush()
+        self.n_bytes += len(data)
+
+    def close(self) -> Path:
+        self.fh.flush()
+        os.fsync(self.fh.fileno())
+        self.fh.close()
+        os.replace(self.part, self.path)
+        return self.path
+
+    def abort(self) -> None:
+        """Close but keep ``.part`` (the bytes captured so far are never lost)."""
+        if not self.fh.closed:
+            self.fh.flush()
+            self.fh.close()
+
+
+@dataclass
+class Reader:
+    """Port + raw log + parser; ``read()`` returns newly parsed (seq, samples)."""
+
+    port: object
+    raw: RawCapture
+    parser: FrameParser
+    chunk: int = 4096
+    seq_log: list = field(default_factory=list)
+    sample_log: list = field(default_factory=list)
+    keep: bool = False
+
+    def drain(self) -> None:
+        """Read (log and parse, discard samples) what is waiting now, without blocking on more."""
+        waiting = getattr(self.port, "in_waiting", 0) or 0
+        if waiting:
+            self.read(waiting)
+
+    def read(self, n_bytes: int | None = None):
+        data = self.port.read(n_bytes if n_bytes is not None
+                              else max(self.chunk, getattr(self.port, "in_waiting", 0) or 0))
+        if not data:
+            return None
+        self.raw.write(data)                      # on disk before parsing
+        seq, samples = self.parser.feed(data)
+        if self.keep and seq.size:
+            self.seq_log.append(seq)
+            self.sample_log.append(samples)
+        return seq, samples
+
+
+def capture(reader: Reader, *, n_frames: int | None = None, duration_s: float | None = None,
+            idle_timeout_s: float = 2.0, clock=time.monotonic) -> None:
+    """Read until ``n_frames`` frames, ``duration_s`` seconds, or no bytes for ``idle_timeout_s``."""
+    start = last = clock()
+    target = reader.parser.stats.frames + n_frames if n_frames else None
+    while True:
+        got = reader.read()
+        now = clock()
+        if got is not None:
+            last = now
+        elif now - last > idle_timeout_s:
+            break
+        if target is not None and reader.parser.stats.frames >= target:
+            break
+        if duration_s is not None and now - start >= duration_s:
+            break
+
+
+def _collect(reader: Reader, n: int, channel: int, idle_timeout_s: float, clock) -> np.ndarray:
+    """Next ``n`` samples of ``channel`` (InputError if the stream stops)."""
+    out, have, last = [], 0, clock()
+    while have < n:
+        got = reader.read()
+        if got is None or got[0].size == 0:
+            if clock() - last > idle_timeout_s:
+                raise InputError(f"--port: no valid frames for {idle_timeout_s:g} s "
+                                 f"(got {have} of {n} samples)")
+            continue
+        last = clock()
+        out.append(got[1][:, channel])
+        have += got[0].size
+    return np.concatenate(out)[:n] if out else np.zeros(0)
+
+
+def settled_mean(x: np.ndarray, tol: float = 0.0) -> tuple[bool, float, float]:
+    """(settled, mean, std) of a window; settled per the module docstring."""
+    w = x.size
+    h = w // 2
+    sd = float(np.std(x, ddof=1))
+    step = abs(float(x[h:].mean() - x[:h].mean()))
+    return step <= max(8.0 * sd / np.sqrt(w), tol), float(x.mean()), sd
+
+
+def guided_session(reader: Reader, masses_g, *, settle_samples: int, window_samples: int,
+                   max_wait_samples: int | None = None, repeats: int = 1, unload: bool = False,
+                   channel: int = 0, tol_counts: float = 0.0, prompt=input, out=sys.stderr,
+                   idle_timeout_s: float = 2.0, clock=time.monotonic) -> list[dict]:
+    """Prompt for each mass and average a settled window; returns one row per reading.
+
+    At the prompt: Enter accepts the listed mass, a number is the mass actually placed (g),
+    ``q`` aborts (InputError; the raw capture is kept).
+    """
+    masses = [float(m) for m in masses_g]
+    order = [(m, "load") for m in masses]
+    if unload:
+        order += [(m, "unload") for m in masses[::-1][1:]]
+    max_wait = max_wait_samples or 10 * window_samples
+    rows = []
+    t0 = clock()
+    for rep in range(repeats):
+        for mass, direction in order:
+            answer = prompt(f"[repeat {rep + 1}/{repeats}] place {mass:g} g ({direction}), "
+                            "then press Enter (or type the actual mass in g, q to quit): ").strip()
+            if answer.lower() in ("q", "quit"):
+                raise InputError("guided session aborted by the user")
+            if answer:
+                try:
+                    mass = float(answer)
+                except ValueError:
+                    raise InputError(f"guided session: {answer!r} is not a mass in g") from None
+                if mass < 0:
+                    raise InputError(f"guided session: negative mass {mass:g} g")
+            reader.drain()                            # what arrived during the prompt
+            _collect(reader, settle_samples, channel, idle_timeout_s, clock)
+            x = _collect(reader, window_samples, channel, idle_timeout_s, clock)
+            waited = 0
+            ok, mean, sd = settled_mean(x, tol_counts)
+            while not ok and waited < max_wait:
+                step = max(window_samples // 4, 1)
+                x = np.concatenate([x[step:], _collect(reader, step, channel, idle_timeout_s, clock)])
+                waited += step
+                ok, mean, sd = settled_mean(x, tol_counts)
+            print(f"  {mass:g} g {direction}: mean {mean:.1f} counts, std {sd:.1f}"
+                  + ("" if ok else "  (NOT settled; recorded with settled=0)"), file=out)
+            rows.append({"mass_g": mass, "reading": mean, "direction": direction, "repeat": rep,
+                         "timestamp": clock() - t0, "settled": int(ok), "std": sd,
+                         "n_samples": int(x.size)})
+    return rows
+
+
+def session_csv(rows: list[dict], *, sensor_id: str, lever_arm_m: float | None,
+                reading_unit: str = "counts", source: str = "") -> str:
+    """Session CSV text (the format of :mod:`calibration.session`) for guided rows."""
+    cols = ["mass_g", "reading", "direction", "repeat", "timestamp", "sensor_id", "settled",
+            "std", "n_samples"] + (["lever_arm_m"] if lever_arm_m is not None else [])
+    lines = [f"# reading_unit={reading_unit}; acquired={source}", ",".join(cols)]
+    for r in rows:
+        vals = [f"{r['mass_g']:.6g}", f"{r['reading']:.6f}", r["direction"], str(r["repeat"]),
+                f"{r['timestamp']:.3f}", sensor_id, str(r["settled"]), f"{r['std']:.4f}",
+                str(r["n_samples"])] + ([f"{lever_arm_m:.9g}"] if lever_arm_m is not None else [])
+        lines.append(",".join(vals))
+    return "\n".join(lines) + "\n"
