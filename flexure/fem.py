@@ -65,35 +65,66 @@ def tri_shape(order: int, st: np.ndarray):
 def physical_gradients(X: np.ndarray, dN_ref: np.ndarray, first_element: int = 0):
     """∂N_a/∂x_i (e,q,nn,3) and det J (e,q) from node coords X (e,nn,3) and dN/dξ (q,nn,3).
 
-    J_ik = Σ_a X_ai ∂N_a/∂ξ_k;  ∇_x N = J⁻ᵀ ∇_ξ N. Raises InputError on det J ≤ 0 (inverted).
+    J_ik = Σ_a X_ai ∂N_a/∂ξ_k;  ∇_x N = J⁻ᵀ ∇_ξ N. Straight-sided (affine) elements use one J per
+    element; curved (isoparametric) P2 elements one per point. InputError on det J ≤ 0 (inverted).
     """
-    J = np.einsum("eai,qak->eqik", X, dN_ref)
-    det = np.linalg.det(J)
+    e, nn = X.shape[:2]
+    nq = dN_ref.shape[0]
+    affine = nn == 4 or _is_affine(X)
+    if affine:
+        V = X[:, :4]
+        J = np.stack([V[:, 1] - V[:, 0], V[:, 2] - V[:, 0], V[:, 3] - V[:, 0]], axis=2)  # (e,i,k)
+        det = np.linalg.det(J)
+    else:
+        J = np.einsum("eai,qak->eqik", X, dN_ref)
+        det = np.linalg.det(J)
     bad = ~(det > 0)
     if np.any(bad):
-        e = int(np.flatnonzero(bad.any(axis=1))[0]) + first_element
-        raise InputError(f"mesh: element {e} is inverted or degenerate (det J = "
-                         f"{float(det[bad].ravel()[0]):.3e}); fix the mesh")
-    Jinv = np.linalg.inv(J)                                          # (e,q,k,i)
-    G = np.einsum("qak,eqki->eqai", dN_ref, Jinv)
-    return G, det
+        idx = np.flatnonzero(bad.reshape(e, -1).any(axis=1))[0]
+        raise InputError(f"mesh: element {int(idx) + first_element} is inverted or degenerate "
+                         f"(det J = {float(det.reshape(e, -1)[idx].min()):.3e}); fix the mesh")
+    Jinv = np.linalg.inv(J)
+    if affine:
+        G = np.matmul(dN_ref.reshape(1, nq * nn, 3), Jinv).reshape(e, nq, nn, 3)
+        return G, np.repeat(det[:, None], nq, axis=1)
+    return np.einsum("qak,eqki->eqai", dN_ref, Jinv), det
+
+
+def _is_affine(X: np.ndarray, rtol: float = 1e-10) -> bool:
+    """True when every P2 mid-edge node sits at its edge midpoint (straight-sided elements)."""
+    mid = 0.5 * (X[:, TET_EDGES[:, 0]] + X[:, TET_EDGES[:, 1]])
+    h = np.abs(X[:, 1:4] - X[:, :1]).max()
+    return bool(np.abs(X[:, 4:10] - mid).max() <= rtol * h)
+
+
+def _element_P(mesh: Mesh, elements: slice):
+    """P_ab = Σ_q w_q detJ_q ∇N_a ∇N_bᵀ, shape (e, nn, nn, 3, 3)."""
+    xi, w = TET_QUAD[mesh.order]
+    _, dN = tet_shape(mesh.order, xi)
+    G, det = physical_gradients(mesh.points[mesh.tets[elements]], dN, first_element=elements.start or 0)
+    Gw = G * (w[None, :] * det)[:, :, None, None]
+    return np.einsum("eqai,eqbj->eabij", Gw, G, optimize=True)
+
+
+def _block(P: np.ndarray, lam: float, mu: float, i: int, j: int) -> np.ndarray:
+    """Component (i,j) of every 3×3 node block: λ P_ij + μ P_ji + μ δ_ij tr P."""
+    v = lam * P[..., i, j] + mu * P[..., j, i]
+    if i == j:
+        v += mu * (P[..., 0, 0] + P[..., 1, 1] + P[..., 2, 2])
+    return v
 
 
 def element_stiffness(mesh: Mesh, lam_Pa: float, mu_Pa: float, elements=slice(None)) -> np.ndarray:
     """Element matrices (e, 3nn, 3nn), row index 3a + i (local node a, component i)."""
-    tets = mesh.tets[elements]
-    xi, w = TET_QUAD[mesh.order]
-    _, dN = tet_shape(mesh.order, xi)
-    start = elements.start or 0 if isinstance(elements, slice) else 0
-    G, det = physical_gradients(mesh.points[tets], dN, first_element=start)
-    Gw = G * (w[None, :] * det)[:, :, None, None]
-    A = np.einsum("eqai,eqbj->eaibj", Gw, G, optimize=True)        # Σ_q w detJ ∂_i N_a ∂_j N_b
-    tr = np.einsum("eakbk->eab", A)
-    K = lam_Pa * A + mu_Pa * A.transpose(0, 1, 4, 3, 2)
-    diag = np.arange(3)
-    K[:, :, diag, :, diag] += mu_Pa * tr[None]       # δ_ij term; fancy-index view is (3,e,a,b)
-    nn = tets.shape[1]
-    return K.reshape(len(tets), 3 * nn, 3 * nn)
+    if not isinstance(elements, slice):
+        raise InputError("element_stiffness: elements must be a slice")
+    P = _element_P(mesh, elements)
+    K = lam_Pa * P + mu_Pa * P.swapaxes(-1, -2)
+    tr = P[..., 0, 0] + P[..., 1, 1] + P[..., 2, 2]
+    for d in range(3):
+        K[..., d, d] += mu_Pa * tr
+    e, nn = K.shape[:2]
+    return K.transpose(0, 1, 3, 2, 4).reshape(e, 3 * nn, 3 * nn)
 
 
 def element_dofs(tets: np.ndarray) -> np.ndarray:
@@ -102,29 +133,53 @@ def element_dofs(tets: np.ndarray) -> np.ndarray:
     return (3 * t[:, :, None] + np.arange(3)).reshape(len(t), -1)
 
 
-def stiffness_matrix(mesh: Mesh, material, chunk_elements: int | None = None) -> sp.csr_matrix:
-    """Global stiffness K (n_dofs × n_dofs, CSR, symmetric) for ``material`` (E, ν).
+def block_pattern(mesh: Mesh):
+    """Node-pair sparsity: sorted unique codes r·n + c, and the (e·nn·nn,) element-pair → block map."""
+    if "block_pattern" not in mesh._cache:
+        t = mesh.tets.astype(np.int64)
+        n = np.int64(mesh.n_nodes)
+        code = (t[:, :, None] * n + t[:, None, :]).ravel()
+        uniq, inv = np.unique(code, return_inverse=True)
+        mesh._cache["block_pattern"] = (uniq, inv.astype(np.int32 if len(uniq) < 2**31 else np.int64))
+    return mesh._cache["block_pattern"]
 
-    Chunks of elements bound the temporary memory (~(3nn)²·8 bytes·6 per element).
+
+def stiffness_matrix(mesh: Mesh, material, chunk_elements: int | None = None,
+                     fmt: str = "csr") -> sp.spmatrix:
+    """Global stiffness K (n_dofs × n_dofs, symmetric), CSR (or BSR 3×3 with ``fmt="bsr"``).
+
+    Node-block assembly: the 9 components of every element's 3×3 node-pair blocks are summed into
+    the unique node-pair pattern with bincount; chunks of elements bound temporary memory.
     """
     lam, mu = material.lame_lambda_Pa, material.shear_modulus_Pa
-    n = mesh.n_dofs
+    n = mesh.n_nodes
     m = mesh.n_elements
     nn = mesh.tets.shape[1]
     if chunk_elements is None:
-        chunk_elements = max(1000, int(60e6 // ((3 * nn) ** 2 * 8)))
-    idx = np.int32 if n < 2**31 - 1 else np.int64
-    K = None
+        chunk_elements = max(1000, int(80e6 // (nn * nn * 9 * 8)))
+    uniq, inv = block_pattern(mesh)
+    nb = len(uniq)
+    data = np.zeros((3, 3, nb))
     for s in range(0, m, chunk_elements):
         sl = slice(s, min(m, s + chunk_elements))
-        Ke = element_stiffness(mesh, lam, mu, sl)
-        dofs = element_dofs(mesh.tets[sl]).astype(idx)
-        rows = np.repeat(dofs, 3 * nn, axis=1).ravel()
-        cols = np.tile(dofs, (1, 3 * nn)).ravel()
-        Kc = sp.coo_matrix((Ke.ravel(), (rows, cols)), shape=(n, n)).tocsr()
-        K = Kc if K is None else K + Kc
-    K.sum_duplicates()
-    K.sort_indices()
+        P = _element_P(mesh, sl)
+        idx = inv[s * nn * nn: sl.stop * nn * nn]
+        for i in range(3):
+            for j in range(3):
+                data[i, j] += np.bincount(idx, weights=_block(P, lam, mu, i, j).ravel(), minlength=nb)
+        del P
+    rows = uniq // n
+    cols = (uniq % n).astype(np.int32 if n < 2**31 - 1 else np.int64)
+    indptr = np.zeros(n + 1, dtype=cols.dtype)
+    np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
+    K = sp.bsr_matrix((np.ascontiguousarray(data.transpose(2, 0, 1)), cols, indptr),
+                      shape=(3 * n, 3 * n))
+    if fmt == "bsr":
+        return K
+    K = K.tocsr()
+    if K.shape[0] < 2**31 and K.nnz < 2**31 and K.indices.dtype != np.int32:
+        K.indices = K.indices.astype(np.int32)
+        K.indptr = K.indptr.astype(np.int32)
     return K
 
 
