@@ -34,9 +34,13 @@ def test_paper_default_strain_per_Nm_from_eq12():
     {"bits": 16, "enob": 16.0},                                 # quantization is a visible part
     {"gain": 200.0, "noise_V_per_rtHz": 20e-9, "corner_Hz": 10.0},   # amplifier dominates
     {"arrangement": "quarter", "enob": 14.0, "enob_definition": "ieee"},
+    {"gain": 250.0, "enob": 21.0},                              # bridge Johnson noise dominates
 ])
 def test_sample_noise_matches_prediction(overrides):
     chain = paper_chain(**overrides)
+    if overrides.get("gain") == 250.0:
+        from bridge.budget import noise_budget
+        assert noise_budget(chain.config).dominant == "johnson"
     rng = np.random.default_rng(42)
     tau = 0.7
     m = chain.measure(np.full(N, tau), rng)
