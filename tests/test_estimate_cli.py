@@ -1,0 +1,184 @@
+"""`torquebench estimate`: outputs, --json, and bad input (exit 2, one line naming file/line/column)."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from estimator.log import log_to_frame, read_log, write_log
+from estimator.robot import paper_leg
+from estimator.synthetic import inverse_dynamics_log
+from torquebench.cli import main
+
+LEG_POKE = Path(__file__).resolve().parents[2] / "shared" / "samples" / "leg_poke.csv"
+
+
+@pytest.fixture(scope="module")
+def good_log(tmp_path_factory):
+    """A short static poke on link 1 (α = 0.3) from t = 0.1 s, floating base, 1 kHz."""
+    robot = paper_leg()
+    t = np.arange(300) * 1e-3
+    q = np.tile([0.0, 0.0, 0.0, 0.8, -1.2], (300, 1))
+    z = np.zeros_like(q)
+    log, _ = inverse_dynamics_log(robot, t, q, z, z, 1, 0.3, [2.0, 1.0], active=t >= 0.1)
+    path = tmp_path_factory.mktemp("logs") / "poke.csv"
+    write_log(log, path)
+    return path
+
+
+def run(capsys, *argv):
+    try:
+        code = main(["estimate", *map(str, argv)])
+    except SystemExit as exc:        # argparse errors
+        code = exc.code
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _bad(capsys, path, *extra):
+    code, out, err = run(capsys, path, *extra)
+    assert code == 2, (out, err)
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    return err
+
+
+def test_csv_and_json(capsys, tmp_path, good_log):
+    out_csv = tmp_path / "est.csv"
+    code, out, err = run(capsys, good_log, "--out", out_csv, "--json")
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["samples"] == 300 and summary["skipped_samples"] == 0
+    (iv,) = summary["intervals"]
+    assert iv["link"] == 1 and abs(iv["alpha"] - 0.3) < 1e-6
+    frame = pd.read_csv(out_csv)
+    assert list(frame.columns) == ["t", "contact", "link", "alpha", "Fx", "Fz", "px", "pz", "rnorm"]
+    assert len(frame) == 300
+    assert (frame.contact[frame.t < 0.1] == 0).all() and frame.alpha[frame.t < 0.1].isna().all()
+    late = frame[frame.t > 0.25]                # step transient 2.2 N · e^{-K·0.15 s} < 1e-6 N
+    assert (late.link == 1).all()
+    np.testing.assert_allclose(late[["Fx", "Fz"]], np.tile([2.0, 1.0], (len(late), 1)), atol=1e-6)
+    assert not list(tmp_path.glob(".est.csv*"))          # no temp file left behind
+
+
+def test_text_output_and_paper_method(capsys, good_log):
+    code, out, _ = run(capsys, good_log, "--method", "paper", "--gain", "50", "--threshold", "0.1")
+    assert code == 0 and "link 1" in out and "alpha 0.300" in out
+
+
+def test_fixed_base_log(capsys, tmp_path):
+    """No x, z, theta columns: base held at zero, the FT wrench still enters on the base rows."""
+    robot = paper_leg(False)
+    t = np.arange(200) * 1e-3
+    q = np.tile([0.0, 0.0, 0.0, -0.5, 1.0], (200, 1))
+    z = np.zeros_like(q)
+    log, _ = inverse_dynamics_log(robot, t, q, z, z, 2, 0.7, [-1.5, 2.0])
+    assert list(log_to_frame(log).columns)[:4] == ["t", "q1", "q2", "dq1"]
+    path = tmp_path / "fixed.csv"
+    write_log(log, path)
+    code, out, _ = run(capsys, path, "--json")
+    (iv,) = json.loads(out)["intervals"]
+    assert code == 0 and iv["link"] == 2 and abs(iv["alpha"] - 0.7) < 1e-3
+
+
+def test_nan_rows_are_skipped_and_counted(capsys, tmp_path, good_log):
+    lines = good_log.read_text().splitlines()
+    lines[51] = ",".join(["nan" if i == 13 else v for i, v in enumerate(lines[51].split(","))])
+    lines[52] = ",".join(["inf" if i == 12 else v for i, v in enumerate(lines[52].split(","))])
+    bad = tmp_path / "nan.csv"
+    bad.write_text("\n".join(lines) + "\n")
+    log = read_log(bad)
+    assert log.n_skipped == 2 and log.skipped_lines.tolist() == [52, 53]
+    assert log.valid_mask.sum() == 298 and np.all(np.isfinite(log.q))
+    code, out, _ = run(capsys, bad, "--json")
+    summary = json.loads(out)
+    assert code == 0 and summary["samples"] == 298 and summary["skipped_samples"] == 2
+    assert summary["skipped_lines"] == [52, 53]
+    assert summary["intervals"][0]["link"] == 1
+
+
+def _edit(tmp_path, src, name, fn):
+    frame = pd.read_csv(src)
+    frame = fn(frame)
+    path = tmp_path / name
+    frame.to_csv(path, index=False)
+    return path
+
+
+def test_misspelled_column(capsys, tmp_path, good_log):
+    path = _edit(tmp_path, good_log, "typo.csv", lambda f: f.rename(columns={"tau2": "tua2"}))
+    err = _bad(capsys, path)
+    assert "typo.csv" in err and "'tau2'" in err and "tua2" in err
+
+
+def test_missing_column(capsys, tmp_path, good_log):
+    err = _bad(capsys, _edit(tmp_path, good_log, "miss.csv", lambda f: f.drop(columns=["My"])))
+    assert "miss.csv" in err and "'My'" in err
+
+
+def test_non_increasing_time(capsys, tmp_path, good_log):
+    def swap(f):
+        f.loc[10, "t"] = f.loc[9, "t"]
+        return f
+    err = _bad(capsys, _edit(tmp_path, good_log, "time.csv", swap))
+    assert "time.csv" in err and "line 12" in err and "'t'" in err
+
+
+def test_irregular_sampling(capsys, tmp_path, good_log):
+    def jitter(f):
+        f.loc[100:, "t"] += 0.0004
+        return f
+    err = _bad(capsys, _edit(tmp_path, good_log, "jit.csv", jitter))
+    assert "jit.csv" in err and "line 102" in err and "irregular" in err
+
+
+def test_non_numeric_field(capsys, tmp_path, good_log):
+    def text(f):
+        f["q1"] = f["q1"].astype(object)
+        f.loc[5, "q1"] = "abc"
+        return f
+    err = _bad(capsys, _edit(tmp_path, good_log, "txt.csv", text))
+    assert "line 7" in err and "'q1'" in err
+
+
+def test_log_with_more_joints_than_the_robot(capsys, tmp_path, good_log):
+    def third(f):
+        for c in ("q3", "dq3", "tau3"):
+            f[c] = 0.0
+        return f
+    err = _bad(capsys, _edit(tmp_path, good_log, "three.csv", third))
+    assert "three.csv" in err and "3 joint" in err and "2 links" in err
+
+
+def test_bad_robot_file(capsys, tmp_path, good_log):
+    robot = tmp_path / "neg.toml"
+    text = Path(paper_leg.__globals__["PAPER_LEG_TOML"]).read_text().replace("mass_kg = 0.351",
+                                                                           "mass_kg = -0.351")
+    robot.write_text(text)
+    err = _bad(capsys, good_log, "--robot", robot)
+    assert "neg.toml" in err and "mass_kg" in err
+
+
+def test_missing_file_empty_file_and_bad_options(capsys, tmp_path, good_log):
+    assert "nope.csv" in _bad(capsys, tmp_path / "nope.csv")
+    empty = tmp_path / "empty.csv"
+    empty.write_text("")
+    assert "empty.csv" in _bad(capsys, empty)
+    assert "--gain" in _bad(capsys, good_log, "--gain", "-3")
+    assert "--method" in _bad(capsys, good_log, "--method", "magic")
+
+
+def test_never_overwrites_the_input(capsys, tmp_path, good_log):
+    copy = tmp_path / "in.csv"
+    copy.write_bytes(good_log.read_bytes())
+    before = copy.read_bytes()
+    assert "refusing" in _bad(capsys, copy, "--out", copy)
+    assert copy.read_bytes() == before
+
+
+@pytest.mark.skipif(not LEG_POKE.exists(), reason="shared sample log not present")
+def test_leg_poke_summary(capsys):
+    code, out, _ = run(capsys, LEG_POKE, "--json")
+    (iv,) = json.loads(out)["intervals"]
+    assert code == 0 and iv["link"] == 2 and abs(iv["alpha"] - 0.4) < 1e-3
