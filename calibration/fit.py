@@ -6,7 +6,9 @@ reading = slope·m + offset [+ quad·m²] [+ hysteresis·1{unloading}] + ε, m i
 Priors: flat on slope, offset, quad, hysteresis; p(σ) ∝ 1/σ, i.e. flat on log σ in [−30, 30].
 With σ_m = 0 the posterior is exactly the Student-t of :mod:`calibration.posterior`.
 
-Sampling: ``emcee.EnsembleSampler(vectorize=True)`` started in a small ball around least squares,
+Sampling: ``emcee.EnsembleSampler(vectorize=True)`` with the differential-evolution move
+(ter Braak 2006; τ ≈ 10 steps here vs ≈ 35 for the default stretch move, so 3–4× less work to
+reach 50 τ; ``moves="stretch"`` selects the default), started in a small ball around least squares,
 run in chunks until the chain is ≥ 50 τ long (τ = max integrated autocorrelation time over the
 parameters), then 2τ of burn-in is discarded. Not converged within ``max_steps`` → ``converged``
 is False and the store refuses the fit.
@@ -109,8 +111,9 @@ def make_log_prob(X: np.ndarray, y: np.ndarray, model: str, mass_std_g: float = 
 
 
 def fit_session(session: Session, model: str = "linear", *, mass_std_g: float = 0.0,
-                n_walkers: int = 32, seed: int | None = 0, tau_multiple: float = 50.0,
-                max_steps: int = 50_000, min_steps: int = 500, progress: bool = False) -> FitResult:
+                n_walkers: int = 64, seed: int | None = 0, tau_multiple: float = 50.0,
+                max_steps: int = 50_000, min_steps: int = 300, moves: str = "de",
+                progress: bool = False) -> FitResult:
     """Fit ``session`` with emcee until converged (≥ ``tau_multiple`` τ) or ``max_steps``."""
     import time
 
@@ -135,7 +138,10 @@ def fit_session(session: Session, model: str = "linear", *, mass_std_g: float = 
     width = np.concatenate([exact.std, [ls_std]])
     p0 = center + 0.1 * width * rng.standard_normal((n_walkers, ndim))
     log_prob = make_log_prob(X, y, model, mass_std_g)
-    sampler = emcee.EnsembleSampler(n_walkers, ndim, log_prob, vectorize=True)
+    if moves not in ("de", "stretch"):
+        raise InputError(f"moves: {moves!r} is not 'de' or 'stretch'")
+    move = emcee.moves.DEMove() if moves == "de" else emcee.moves.StretchMove()
+    sampler = emcee.EnsembleSampler(n_walkers, ndim, log_prob, vectorize=True, moves=move)
     sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
     start = time.perf_counter()
     chunk = min_steps
@@ -162,4 +168,4 @@ def fit_session(session: Session, model: str = "linear", *, mass_std_g: float = 
                      autocorr_time=tau, acceptance_fraction=float(np.mean(sampler.acceptance_fraction)),
                      n_steps=n, n_walkers=n_walkers, burn_in=burn, converged=converged,
                      reason=reason, exact=exact, mass_std_g=mass_std_g,
-                     elapsed_s=time.perf_counter() - start, seed=seed)
+                     elapsed_s=time.perf_counter() - start, seed=seed, extra={"moves": moves})

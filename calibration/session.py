@@ -5,7 +5,8 @@ CSV: optional leading ``# key=value; key=value`` metadata lines (``reading_unit=
 ``direction`` (``load``/``unload``), ``repeat``, ``lever_arm_m``, ``timestamp`` (s),
 ``sensor_id``. Units are in the column names (g, m, s); the reading's unit is the
 ``reading_unit`` metadata (mV for the paper's eqs. 12–13, or ``counts``).
-Torque of a dead weight on a horizontal lever: τ = m g L (m in kg, g = 9.80665 m/s²).
+Torque of a dead weight on a horizontal lever: τ = m g L (m in kg, g = 9.81 m/s², DESIGN.md's
+gravity, as ``bridge.chain`` uses).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 
 from calibration.errors import InputError
 
-G_STANDARD_M_PER_S2 = 9.80665
+G_STANDARD_M_PER_S2 = 9.81
 REQUIRED = ("mass_g", "reading")
 OPTIONAL = ("direction", "repeat", "lever_arm_m", "timestamp", "sensor_id")
 

@@ -3,12 +3,14 @@
 Reading of one load level (bridge differential output referred to the bridge, in mV):
 
     τ_eff  = m g L (1 + k_span ΔT) + h·[unloading] + c_creep Δτ_step (1 − e^(−t_s/τ_c))
-    V      = chain.volts(chain.torque_from_counts(chain.counts(τ_eff, rng)))  (n_avg samples, averaged)
+    V      = chain.bridge_volts(chain.torque_from_counts(chain.counts(τ_eff, rng)))  (mean of n_avg)
     r_mV   = polarity · 1e3 · V + offset_mV + k_zero ΔT + q m² + ε,   ε ~ N(0, σ_rep²)
 
 ``chain`` is ``bridge.chain.paper_chain(strain_per_Nm=...)`` with the strain per N·m set so that
 the sensitivity is ``slope_mV_per_g`` at lever arm L. ``polarity`` = sign(slope) (gauge leads
-swapped gives the paper's negative eq. 13). ΔT = ramp·t (temperature drift). σ_rep is the
+swapped gives the paper's negative eq. 13). The lever arm defaults to l_1 = 0.205 m (masses
+hung at the end of the thigh: 1 kg → 2.0 N·m, the 0–2 N·m range of Fig. 3), the same
+assumption as ``bridge.chain``; the paper does not state it. ΔT = ramp·t (temperature drift). σ_rep is the
 repeatability noise of placing a dead weight (set from the paper's R² by :func:`paper_session`).
 """
 
@@ -33,7 +35,7 @@ class SessionSpec:
 
     slope_mV_per_g: float = 0.0115
     offset_mV: float = 5.0069
-    lever_arm_m: float = 0.1
+    lever_arm_m: float = 0.205
     masses_g: tuple = PAPER_MASSES_G
     repeats: int = 5
     unload: bool = False                 # each repeat also walks down the levels
@@ -88,7 +90,7 @@ def sensor_chain(sensitivity_V_per_Nm: float, **overrides):
         return _StandInChain(S)
     probe_strain = 1e-4
     probe = paper_chain(strain_per_Nm=probe_strain, **overrides)
-    dv = float(np.asarray(probe.volts(np.array([1e-3])))[0] - np.asarray(probe.volts(np.array([0.0])))[0]) / 1e-3
+    dv = float(np.diff(np.asarray(probe.bridge_volts(np.array([0.0, 1e-3]))))[0]) / 1e-3
     return paper_chain(strain_per_Nm=probe_strain * S / abs(dv), **overrides)
 
 
@@ -104,25 +106,36 @@ def simulate_session(spec: SessionSpec, rng: np.random.Generator) -> Session:
     n = mass_g.size
     dwell_s = spec.settle_s + spec.n_avg / spec.sample_rate_Hz
     t_s = np.arange(n) * (dwell_s + 2.0)                       # 2 s to change the weight
-    dT = spec.temp_ramp_C_per_s * t_s
-    L = spec.lever_arm_m
-    S_V_per_Nm = spec.slope_mV_per_g * 1e-3 / (1e-3 * G_STANDARD_M_PER_S2 * L)
-    chain = sensor_chain(S_V_per_Nm, **spec.chain_overrides)
-    tau = mass_g * 1e-3 * G_STANDARD_M_PER_S2 * L
+    tau = mass_g * 1e-3 * G_STANDARD_M_PER_S2 * spec.lever_arm_m
     step = np.diff(np.concatenate([[0.0], tau]))
-    tau_eff = (tau * (1.0 + spec.span_tc_per_C * dT)
-               + spec.hysteresis_Nm * (direction == "unload")
-               + spec.creep_frac * step * (1.0 - np.exp(-spec.settle_s / spec.creep_tau_s)))
-    samples = np.broadcast_to(tau_eff[:, None], (n, spec.n_avg))
-    tau_meas = np.asarray(chain.torque_from_counts(chain.counts(samples, rng)), float)
-    v = np.asarray(chain.volts(tau_meas), float).mean(axis=1)
-    reading = (np.sign(spec.slope_mV_per_g) * 1e3 * v + spec.offset_mV
-               + spec.zero_tc_mV_per_C * dT + spec.quad_mV_per_g2 * mass_g**2
-               + rng.normal(0.0, spec.repeat_noise_mV, n))
+    creep = spec.creep_frac * step * (1.0 - np.exp(-spec.settle_s / spec.creep_tau_s))
+    reading, chain = sensor_readings(spec, tau, rng, unloading=direction == "unload", t_s=t_s,
+                                     extra_Nm=creep, n_avg=spec.n_avg)
+    reading = reading + spec.quad_mV_per_g2 * mass_g**2 + rng.normal(0.0, spec.repeat_noise_mV, n)
+    L = spec.lever_arm_m
     chain_name = type(chain).__module__ + "." + type(chain).__name__
     return Session(mass_g=mass_g, reading=reading, direction=direction, repeat=repeat,
                    timestamp_s=t_s, lever_arm_m=L, sensor_id=spec.sensor_id, reading_unit="mV",
                    meta={"simulated": f"calibration.simulate via {chain_name}"})
+
+
+def sensor_readings(spec: SessionSpec, tau_Nm, rng, *, unloading=None, t_s=None, extra_Nm=0.0,
+                    n_avg: int = 1):
+    """Readings (mV) of the simulated sensor for true torques ``tau_Nm`` (any shape), each the
+    mean of ``n_avg`` ADC samples; hysteresis on ``unloading``, temperature drift at ``t_s``.
+    Returns (reading_mV, chain). Excludes the dead-weight repeatability noise."""
+    tau = np.asarray(tau_Nm, float)
+    dT = spec.temp_ramp_C_per_s * (np.zeros_like(tau) if t_s is None else np.asarray(t_s, float))
+    unl = np.zeros(tau.shape, bool) if unloading is None else np.asarray(unloading, bool)
+    S_V_per_Nm = spec.slope_mV_per_g * 1e-3 / (1e-3 * G_STANDARD_M_PER_S2 * spec.lever_arm_m)
+    chain = sensor_chain(S_V_per_Nm, **spec.chain_overrides)
+    tau_eff = tau * (1.0 + spec.span_tc_per_C * dT) + spec.hysteresis_Nm * unl + extra_Nm
+    samples = np.broadcast_to(tau_eff[..., None], tau.shape + (int(n_avg),))
+    tau_meas = np.asarray(chain.torque_from_counts(chain.counts(samples, rng)), float)
+    to_volts = getattr(chain, "bridge_volts", chain.volts)     # bridge output, before gain/offset
+    v = np.asarray(to_volts(tau_meas), float).mean(axis=-1)
+    reading = np.sign(spec.slope_mV_per_g) * 1e3 * v + spec.offset_mV + spec.zero_tc_mV_per_C * dT
+    return reading, chain
 
 
 def chain_noise_mV(spec: SessionSpec) -> float:

@@ -1,0 +1,101 @@
+"""`torquebench acquire`: record the ADC stream over serial (raw bytes first), optionally guided."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+HELP = "record the ADC frame stream from a serial port (or guided static-loading session)"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--port", required=True,
+                        help="serial device (/dev/ttyACM0) or pyserial URL (loop://, rfc2217://...)")
+    parser.add_argument("--baud", type=int, default=2_000_000)
+    parser.add_argument("--out", type=Path, required=True, help="raw byte capture file")
+    parser.add_argument("--channels", type=int, default=1, help="channels per frame (1–8)")
+    parser.add_argument("--duration-s", type=float, default=None, help="stop after this long")
+    parser.add_argument("--frames", type=int, default=None, help="stop after this many frames")
+    parser.add_argument("--idle-timeout-s", type=float, default=2.0,
+                        help="stop when no bytes arrive for this long")
+    parser.add_argument("--csv", type=Path, default=None, help="also write decoded samples here")
+    parser.add_argument("--guided", default=None, metavar="MASSES_G",
+                        help="guided session: comma-separated masses in g, e.g. 0,10,20,50,100")
+    parser.add_argument("--session", type=Path, default=None,
+                        help="guided: session CSV to write (default: RAW with .csv)")
+    parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--unload", action="store_true", help="guided: also walk back down")
+    parser.add_argument("--rate-hz", type=float, default=4000.0, help="nominal sample rate")
+    parser.add_argument("--settle-s", type=float, default=2.0)
+    parser.add_argument("--window-s", type=float, default=1.0)
+    parser.add_argument("--channel", type=int, default=0, help="guided: channel to average")
+    parser.add_argument("--sensor-id", default="sensor")
+    parser.add_argument("--lever-arm-m", type=float, default=None)
+    parser.add_argument("--force", action="store_true", help="replace existing output files")
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from calibration.acquire import (RawCapture, Reader, capture, guided_session, open_port,
+                                     session_csv)
+    from calibration.errors import InputError
+    from calibration.frames import MAX_CHANNELS, FrameParser
+    from torquebench.io import print_json, write_text_atomic
+
+    if not 1 <= args.channels <= MAX_CHANNELS:
+        raise InputError(f"--channels: must be 1..{MAX_CHANNELS}, got {args.channels}")
+    if not 0 <= args.channel < args.channels:
+        raise InputError(f"--channel: must be 0..{args.channels - 1}")
+    masses = None
+    if args.guided is not None:
+        try:
+            masses = [float(m) for m in args.guided.split(",") if m.strip()]
+        except ValueError:
+            raise InputError(f"--guided: {args.guided!r} is not a comma-separated list of masses") from None
+        if len(set(masses)) < 2 or min(masses) < 0:
+            raise InputError("--guided: need at least two distinct non-negative masses (g)")
+    port = open_port(args.port, args.baud)
+    raw = RawCapture(args.out, force=args.force)
+    reader = Reader(port, raw, FrameParser(args.channels), keep=args.csv is not None)
+    rows = None
+    try:
+        if masses is None:
+            capture(reader, n_frames=args.frames, duration_s=args.duration_s,
+                    idle_timeout_s=args.idle_timeout_s)
+        else:
+            out = sys.stderr
+            rows = guided_session(reader, masses, settle_samples=int(args.settle_s * args.rate_hz),
+                                  window_samples=max(int(args.window_s * args.rate_hz), 4),
+                                  repeats=args.repeats, unload=args.unload, channel=args.channel,
+                                  idle_timeout_s=args.idle_timeout_s,
+                                  prompt=lambda msg: (print(msg, end="", file=out, flush=True),
+                                                      sys.stdin.readline())[1], out=out)
+    except BaseException:
+        raw.abort()
+        print(f"acquire: raw bytes so far kept in {raw.part}", file=sys.stderr)
+        raise
+    finally:
+        port.close()
+    raw_path = raw.close()
+    written = [str(raw_path)]
+    if args.csv is not None and reader.seq_log:
+        seq = np.concatenate(reader.seq_log)
+        s = np.concatenate(reader.sample_log)
+        text = "seq," + ",".join(f"ch{i}_counts" for i in range(args.channels)) + "\n"
+        text += "\n".join(",".join(map(str, r)) for r in np.column_stack([seq, s]).tolist()) + "\n"
+        write_text_atomic(args.csv, text, overwrite=args.force)
+        written.append(str(args.csv))
+    if rows is not None:
+        spath = args.session or raw_path.with_suffix(".csv")
+        write_text_atomic(spath, session_csv(rows, sensor_id=args.sensor_id,
+                                             lever_arm_m=args.lever_arm_m, source=str(raw_path)),
+                          overwrite=args.force)
+        written.append(str(spath))
+    st = reader.parser.stats.as_dict()
+    if args.json:
+        print_json({**st, "written": written, "readings": len(rows) if rows else 0})
+    else:
+        print(f"{st['frames']} frames, {st['corrupted']} corrupted, {st['lost']} lost, "
+              f"{st['garbage_bytes']} garbage bytes of {st['bytes']}; wrote {', '.join(written)}")
+    return 0

@@ -1,0 +1,77 @@
+"""`torquebench apply`: convert raw readings to torque with a stored calibration."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+HELP = "apply a calibration file to a CSV of readings: torque (N·m) with its uncertainty"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("calibration", type=Path, help="calibration JSON (from `calibrate`)")
+    parser.add_argument("readings", type=Path, help="CSV with a `reading` column (optional `direction`)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="write the readings with torque_Nm, torque_std_Nm columns here")
+    parser.add_argument("--column", default="reading", help="name of the reading column")
+    parser.add_argument("--data", type=Path, default=None,
+                        help="verify that the calibration was fitted to this session CSV (hash)")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out")
+
+
+def run(args) -> int:
+    import io
+
+    import numpy as np
+    import pandas as pd
+
+    import calibration
+    from calibration.errors import InputError
+    from torquebench.io import print_json, write_text_atomic
+
+    model = calibration.load(args.calibration, data_path=args.data)
+    try:
+        df = pd.read_csv(args.readings, dtype=str, keep_default_na=False, comment="#")
+    except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+        raise InputError(f"{args.readings}: not a valid CSV: {str(exc).splitlines()[0]}") from None
+    df.columns = [c.strip() for c in df.columns]
+    if args.column not in df.columns:
+        raise InputError(f"{args.readings}: line 1: missing column {args.column!r}")
+    vals = pd.to_numeric(df[args.column].str.strip(), errors="coerce").to_numpy(float)
+    bad = ~np.isfinite(vals)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise InputError(f"{args.readings}: line {i + 2}: column {args.column!r}: "
+                         f"{df[args.column].iloc[i]!r} is not a finite number")
+    direction = None
+    if "direction" in df.columns and model.model == "hysteresis":
+        direction = df["direction"].str.strip().str.lower().to_numpy()
+        badd = ~np.isin(direction, ["load", "unload"])
+        if badd.any():
+            i = int(np.argmax(badd))
+            raise InputError(f"{args.readings}: line {i + 2}: column 'direction': "
+                             f"{direction[i]!r} is not 'load' or 'unload'")
+    out = df.copy()
+    out["mass_g"] = model.mass_g(vals, direction)
+    out["mass_std_g"] = model.mass_std_g(vals, direction)
+    if model.lever_arm_m is not None:
+        out["torque_Nm"] = model.torque(vals, direction)
+        out["torque_std_Nm"] = model.torque_std(vals, direction)
+    n_nan = int(np.count_nonzero(~np.isfinite(out["mass_g"].to_numpy(float))))
+    buf = io.StringIO()
+    out.to_csv(buf, index=False, float_format="%.9g")
+    if args.out is not None:
+        write_text_atomic(args.out, buf.getvalue(), overwrite=args.force)
+    if args.json:
+        res = {"n": int(vals.size), "sensor_id": model.sensor_id, "model": model.model,
+               "out_of_range": n_nan, "written": str(args.out) if args.out else None,
+               "mass_g": out["mass_g"].to_numpy(float), "mass_std_g": out["mass_std_g"].to_numpy(float)}
+        if "torque_Nm" in out:
+            res["torque_Nm"] = out["torque_Nm"].to_numpy(float)
+            res["torque_std_Nm"] = out["torque_std_Nm"].to_numpy(float)
+        print_json(res)
+    elif args.out is None:
+        print(buf.getvalue(), end="")
+    else:
+        print(f"wrote {args.out} ({vals.size} readings" +
+              (f", {n_nan} outside the calibrated model's range (NaN)" if n_nan else "") + ")")
+    return 0
