@@ -1,0 +1,181 @@
+"""Sensor uncertainty → contact-localization error, before the robot exists (DESIGN.md, job 3).
+
+A static contact (link c, α, F) on a leg held at posture q loads the sensors with
+
+    τ_true = G_joint − J_jointᵀ F,     W_true = G_base − J_baseᵀ F          (estimator.sim.static)
+
+and the estimator sees r = G − τ_meas on all rows (the observer residual once settled). Each
+sensor reads τ_meas,k = (1 + g_k) τ_true,k + n_k:
+
+- n_k: white noise of std σ_k per sample (bridge/ADC chain, FT sensor). The exact observer
+  r_{j+1} = a r_j + (1 − a) d_j (a = e^{−KΔt}) drives with ū_j = (u_j + u_{j+1})/2, so the noise
+  input is (n_j + n_{j+1})/2 and its impulse response c = [1, (1 + a), (1 + a) a, …]·(1 − a)/2
+  gives  Var r = σ² (1 − a)²/4 · Σ c_k² = σ² (1 − a)/2  ≈ σ² KΔt/2.
+  The ``paper`` method uses the raw readings: no filtering (factor 1).
+- g_k: a calibration gain error (relative slope uncertainty, systematic): it scales the whole
+  reading, gravity load included, and is not filtered.
+
+Two independent propagations of (g, n) into (α, F) and the contact point p = p_c + α Δ_c:
+
+- ``first_order``: Σ_out = J Σ_in Jᵀ, J = ∂(α, F_x, F_z)/∂r by central differences through the
+  localizer itself (one vectorized call for every posture and perturbation);
+- ``monte_carlo``: D draws of (g, n) per posture, localized in one vectorized call.
+Both are vectorized over postures. They agree where the localizer is smooth (α inside (0, 1),
+force well off the link axis); near the flagged singularities only Monte Carlo is meaningful.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimator import dynamics as dyn
+from estimator import localization as loc
+from estimator.errors import InputError
+from estimator.observer import coefficients
+from estimator.robot import Robot
+from estimator.sim.static import static_readings
+
+METHODS = ("dynamic", "paper")
+
+
+@dataclass(frozen=True)
+class SensorNoise:
+    """The sensors' errors. Arrays: per joint (N,) or per base axis (3,)."""
+
+    torque_std_Nm: np.ndarray            # white noise per sample of each joint torque sensor
+    wrench_std: np.ndarray               # [σ_Fx N, σ_Fz N, σ_My N·m] per sample (Table II: 0.1, 0.1, 0.01)
+    torque_gain_rel_std: np.ndarray      # calibration slope uncertainty, relative (systematic)
+    sample_rate_Hz: float = 1000.0
+    gain_per_s: float = 100.0            # observer gain K (dynamic method)
+
+    def __post_init__(self):
+        for name in ("torque_std_Nm", "wrench_std", "torque_gain_rel_std"):
+            value = np.atleast_1d(np.asarray(getattr(self, name), float))
+            if not np.all(np.isfinite(value)) or np.any(value < 0):
+                raise InputError(f"sensor noise: {name} must be finite and ≥ 0, got {value.tolist()}")
+            object.__setattr__(self, name, value)
+        if self.wrench_std.shape != (3,):
+            raise InputError(f"sensor noise: wrench_std needs 3 values [Fx, Fz, My], got {self.wrench_std.size}")
+        if not (self.sample_rate_Hz > 0 and self.gain_per_s > 0):
+            raise InputError("sensor noise: sample_rate_Hz and gain_per_s must be > 0")
+
+    def filter_factor(self, method: str) -> float:
+        """Residual-noise std per unit reading-noise std: √((1 − a)/2) for the observer, 1 raw."""
+        if method == "paper":
+            return 1.0
+        a, _ = coefficients(np.array([self.gain_per_s]), 1.0 / self.sample_rate_Hz, "exact")
+        return float(np.sqrt((1.0 - a[0]) / 2.0))
+
+    def per_row(self, n_links: int):
+        """(σ_noise (n,), σ_gain (n,)) on the rows [x, z, θ, q_1…q_N]."""
+        tau = np.broadcast_to(self.torque_std_Nm, (n_links,))
+        gain = np.broadcast_to(self.torque_gain_rel_std, (n_links,))
+        return np.concatenate([self.wrench_std, tau]), np.concatenate([np.zeros(3), gain])
+
+
+@dataclass
+class Propagation:
+    """Per-posture error figures (arrays of shape (B,)); lengths in m, forces in N."""
+
+    alpha_std: np.ndarray
+    position_rms_m: np.ndarray
+    force_rms_N: np.ndarray
+    flagged_fraction: np.ndarray       # share of draws the localizer refused (NaN α); 0 for first order
+    position_p95_m: np.ndarray | None = None
+
+
+def _check(robot: Robot, q_joint, link, alpha, force_N):
+    q_joint = np.atleast_2d(np.asarray(q_joint, float))
+    B, N = q_joint.shape
+    if N != robot.n_links:
+        raise InputError(f"posture: {N} joint angles for a robot with {robot.n_links} links")
+    link = np.broadcast_to(np.asarray(link, int), (B,))
+    if np.any((link < 1) | (link > N)):
+        raise InputError(f"contact link must be in 1…{N}")
+    alpha = np.broadcast_to(np.asarray(alpha, float), (B,))
+    force = np.broadcast_to(np.asarray(force_N, float), (B, 2))
+    return q_joint, link, alpha, force
+
+
+def _localize(robot, method, q, r, link):
+    """(α, F) from residual-form readings r = G − τ_meas (rows [x, z, θ, q…])."""
+    if method == "dynamic":
+        out = loc.localize_dynamic(robot, q, r)
+    else:
+        G = dyn.gravity_vector(robot.with_base(True), q)
+        out = loc.localize_paper(robot, q, np.zeros_like(q), G - r, link, bias=G)
+    return out.alpha, out.force_N
+
+
+def _truth(robot, q_joint, link, alpha, force):
+    tau, W = static_readings(robot, q_joint, link, alpha, force)
+    q = np.concatenate([np.zeros((len(q_joint), 3)), q_joint], axis=1)
+    readings = np.concatenate([W, tau], axis=1)                     # τ_meas,true on every row
+    r_true = dyn.gravity_vector(robot.with_base(True), q) - readings  # = Jᵀ F
+    return q, readings, r_true
+
+
+def _link_length(robot, q, link):
+    joints, _ = dyn.forward_kinematics(robot.with_base(True), q)
+    idx = np.arange(len(q))
+    return np.hypot(*(joints[idx, link] - joints[idx, link - 1]).T)
+
+
+def first_order(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise,
+                method: str = "dynamic", step: float = 1e-6) -> Propagation:
+    """Linearized error: Σ_(α,F) = J Σ_r Jᵀ, Σ_r = diag(f² σ_n² + g² τ_true²) (f: filter factor)."""
+    if method not in METHODS:
+        raise InputError(f"method: unknown {method!r}; use one of {', '.join(METHODS)}")
+    q_joint, link, alpha, force = _check(robot, q_joint, link, alpha, force_N)
+    q, readings, r_true = _truth(robot, q_joint, link, alpha, force)
+    B, n = r_true.shape
+    sig_n, sig_g = noise.per_row(robot.n_links)
+    var_r = (noise.filter_factor(method) * sig_n) ** 2 + (sig_g * readings) ** 2     # (B, n)
+    eye = np.eye(n) * step
+    r_pert = np.concatenate([r_true[:, None, :] + eye, r_true[:, None, :] - eye], axis=1)   # (B, 2n, n)
+    a_out, f_out = _localize(robot, method, np.repeat(q, 2 * n, axis=0), r_pert.reshape(-1, n),
+                             np.repeat(link, 2 * n))
+    y = np.concatenate([a_out[:, None], f_out], axis=1).reshape(B, 2 * n, 3)
+    jac = (y[:, :n] - y[:, n:]) / (2 * step)                        # (B, n, 3): ∂(α, Fx, Fz)/∂r_k
+    cov = np.einsum("bki,bk,bkj->bij", jac, var_r, jac)
+    alpha_std = np.sqrt(cov[:, 0, 0])
+    return Propagation(alpha_std=alpha_std,
+                       position_rms_m=alpha_std * _link_length(robot, q, link),
+                       force_rms_N=np.sqrt(cov[:, 1, 1] + cov[:, 2, 2]),
+                       flagged_fraction=np.where(np.isfinite(alpha_std), 0.0, 1.0))
+
+
+def monte_carlo(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise,
+                draws: int = 1000, rng: np.random.Generator | int = 0,
+                method: str = "dynamic") -> Propagation:
+    """Sampled error over ``draws`` realizations of (g, n) per posture; flagged draws counted."""
+    if method not in METHODS:
+        raise InputError(f"method: unknown {method!r}; use one of {', '.join(METHODS)}")
+    if draws < 2:
+        raise InputError(f"draws must be ≥ 2, got {draws}")
+    rng = np.random.default_rng(rng)
+    q_joint, link, alpha, force = _check(robot, q_joint, link, alpha, force_N)
+    q, readings, r_true = _truth(robot, q_joint, link, alpha, force)
+    B, n = r_true.shape
+    sig_n, sig_g = noise.per_row(robot.n_links)
+    f = noise.filter_factor(method)
+    e = (f * sig_n * rng.standard_normal((B, draws, n))
+         + sig_g * readings[:, None, :] * rng.standard_normal((B, draws, n)))
+    r = (r_true[:, None, :] - e).reshape(-1, n)
+    a_out, f_out = _localize(robot, method, np.repeat(q, draws, axis=0), r, np.repeat(link, draws))
+    a_err = a_out.reshape(B, draws) - alpha[:, None]
+    f_err = np.hypot(*(f_out.reshape(B, draws, 2) - force[:, None, :]).transpose(2, 0, 1))
+    length = _link_length(robot, q, link)
+    flagged = ~np.isfinite(a_err)                                  # refused draws carry NaN α
+    pos = np.abs(a_err) * length[:, None]
+    with warnings.catch_warnings():                                # all-refused postures → NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        pos_rms = np.sqrt(np.nanmean(pos ** 2, axis=1))
+        p95 = np.nanpercentile(pos, 95, axis=1)
+        a_std = np.nanstd(a_err, axis=1)
+    return Propagation(alpha_std=a_std, position_rms_m=pos_rms,
+                       force_rms_N=np.sqrt(np.mean(f_err ** 2, axis=1)),
+                       flagged_fraction=flagged.mean(axis=1), position_p95_m=p95)

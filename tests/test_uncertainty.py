@@ -1,0 +1,115 @@
+"""Sensor uncertainty → localization error: two propagations checked against each other and
+against the real observer + pipeline on noisy logs."""
+
+import numpy as np
+import pytest
+
+from estimator.errors import InputError
+from estimator.log import SensorLog
+from estimator.observer import residual_offline
+from estimator.pipeline import estimate
+from estimator.robot import paper_leg
+from estimator.sim.static import static_readings
+from estimator.uncertainty import SensorNoise, first_order, monte_carlo
+
+ROBOT = paper_leg()
+F7 = 7.0 * np.array([np.cos(-np.pi / 3), np.sin(-np.pi / 3)])
+POSTURES = np.array([[-0.4, -0.8], [0.9, -1.6], [0.5, -1.0], [-0.2, -1.4]])
+NOISE = SensorNoise(torque_std_Nm=0.0133, wrench_std=[0.1, 0.1, 0.01], torque_gain_rel_std=0.0)
+
+
+def _noisy_static_log(q_joint, link, alpha, force, noise, T, seed):
+    """A fixed-base log holding one posture under one force, white noise on every reading."""
+    rng = np.random.default_rng(seed)
+    tau, W = static_readings(ROBOT, q_joint[None], link, alpha, force)
+    q = np.concatenate([np.zeros(3), q_joint])
+    sig_tau = np.broadcast_to(noise.torque_std_Nm, (ROBOT.n_links,))
+    return SensorLog(t=np.arange(T) / noise.sample_rate_Hz, q=np.tile(q, (T, 1)),
+                     dq=np.zeros((T, 5)), tau_Nm=tau + sig_tau * rng.standard_normal((T, 2)),
+                     wrench=W + noise.wrench_std * rng.standard_normal((T, 3)), floating=False)
+
+
+def test_filter_factor_matches_the_real_observer():
+    """White noise σ through the exact observer leaves σ √((1 − a)/2), a = e^{−KΔt}."""
+    log = _noisy_static_log(POSTURES[0], 2, 0.8, F7, NOISE, T=60000, seed=3)
+    r = residual_offline(ROBOT.with_base(True), log.t, log.q, log.dq, log.tau_meas, 100.0)
+    measured = r[1000:].std(axis=0)                      # settled (10/K)
+    predicted = NOISE.filter_factor("dynamic") * NOISE.per_row(2)[0]
+    np.testing.assert_allclose(measured, predicted, rtol=0.04)
+    assert NOISE.filter_factor("paper") == 1.0
+
+
+@pytest.mark.parametrize("method", ["dynamic", "paper"])
+def test_first_order_agrees_with_monte_carlo(method):
+    noise = SensorNoise(torque_std_Nm=0.0133, wrench_std=[0.1, 0.1, 0.01], torque_gain_rel_std=0.01)
+    fo = first_order(ROBOT, POSTURES, 2, 0.6, F7, noise, method=method)
+    mc = monte_carlo(ROBOT, POSTURES, 2, 0.6, F7, noise, draws=4000, rng=5, method=method)
+    assert np.all(mc.flagged_fraction == 0)
+    # 4000 draws: the sampled std has ≈ 1.1 % relative error; 5 % leaves room for non-linearity
+    np.testing.assert_allclose(mc.alpha_std, fo.alpha_std, rtol=0.05)
+    np.testing.assert_allclose(mc.position_rms_m, fo.position_rms_m, rtol=0.05)
+    np.testing.assert_allclose(mc.force_rms_N, fo.force_rms_N, rtol=0.05)
+
+
+def test_noise_free_sensors_give_exact_answers():
+    quiet = SensorNoise(torque_std_Nm=0.0, wrench_std=[0, 0, 0], torque_gain_rel_std=0.0)
+    mc = monte_carlo(ROBOT, POSTURES, 1, 0.5, np.array([5.0, 0.0]), quiet, draws=8)
+    assert np.all(mc.position_rms_m < 1e-9) and np.all(mc.force_rms_N < 1e-9)
+
+
+def test_monte_carlo_predicts_the_pipeline_on_a_noisy_log():
+    """End to end: per-sample position error of `estimate` on a noisy hold ≈ the Monte Carlo figure."""
+    q_joint, alpha = POSTURES[1], 0.8
+    log = _noisy_static_log(q_joint, 2, alpha, F7, NOISE, T=30000, seed=11)
+    est = estimate(ROBOT.with_base(False), log, method="dynamic", gain_per_s=100.0)
+    settled = slice(1000, None)
+    assert np.all(est.link[settled] == 2)
+    tau, W = static_readings(ROBOT, q_joint[None], 2, alpha, F7)
+    from estimator.dynamics import contact_point
+    p_true = contact_point(ROBOT, np.r_[0, 0, 0, q_joint], 2, alpha)
+    err = np.hypot(est.px[settled] - p_true[0], est.pz[settled] - p_true[1])
+    predicted = monte_carlo(ROBOT, q_joint, 2, alpha, F7, NOISE, draws=4000, rng=2)
+    rms = np.sqrt(np.mean(err ** 2))
+    print(f"pipeline RMS position error {rms * 1e3:.3f} mm, predicted {predicted.position_rms_m[0] * 1e3:.3f} mm")
+    np.testing.assert_allclose(rms, predicted.position_rms_m[0], rtol=0.10)
+
+
+def test_force_along_the_link_is_flagged_not_guessed():
+    """A force along link 2's axis passes through the knee: it is indistinguishable from a knee
+    contact on link 1, and from any point of link 2. The answer must be refused, not a guess."""
+    from estimator.dynamics import forward_kinematics
+    q_joint = POSTURES[1]
+    joints, _ = forward_kinematics(ROBOT, np.r_[0, 0, 0, q_joint])
+    axis = (joints[2] - joints[1]) / np.linalg.norm(joints[2] - joints[1])
+    mc = monte_carlo(ROBOT, q_joint, 2, 0.5, 5.0 * axis, NOISE, draws=200)
+    assert mc.flagged_fraction[0] > 0.95
+
+
+def test_bad_noise_and_contact_are_input_errors():
+    with pytest.raises(InputError, match="wrench_std"):
+        SensorNoise(torque_std_Nm=0.01, wrench_std=[0.1, 0.1], torque_gain_rel_std=0)
+    with pytest.raises(InputError, match="torque_std_Nm"):
+        SensorNoise(torque_std_Nm=-1, wrench_std=[0.1, 0.1, 0.01], torque_gain_rel_std=0)
+    with pytest.raises(InputError, match="link"):
+        monte_carlo(ROBOT, POSTURES, 3, 0.5, F7, NOISE, draws=10)
+
+
+def test_propagate_cli_json(capsys):
+    import json
+
+    from torquebench.cli import main
+
+    assert main(["propagate", "--grid", "3", "--draws", "50", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    dyn_, paper = out["methods"]["dynamic"], out["methods"]["paper"]
+    assert out["postures"] == 9 and out["torque_noise_std_Nm"] > 0
+    # filtering + all rows beat the raw quasi-static paper method on the median posture
+    assert dyn_["position_rms_median_m"] < paper["position_rms_median_m"]
+
+
+def test_propagate_cli_bad_input_exits_2(capsys):
+    from torquebench.cli import main
+
+    assert main(["propagate", "--force", "7"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--force" in err

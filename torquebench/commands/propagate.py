@@ -1,0 +1,170 @@
+"""`torquebench propagate`: what contact-localization error will this sensor design give on the leg?
+
+Composes the packages: a sensor configuration (bridge/ADC, ``scenes/paper_sensor.toml``) and a
+strain per N·m (given, or from the bridge default) give the joint-torque noise σ_τ; a calibration
+file gives the slope uncertainty (a systematic gain error); the FT sensor noise is Table II's.
+``estimator.uncertainty`` then propagates them through the localizer over a grid of postures
+(the paper's sweep: q ∈ [0, π]²), by Monte Carlo and to first order.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from torquebench.errors import InputError
+
+HELP = "propagate sensor noise and calibration uncertainty into contact-localization error"
+
+
+def _floats(text: str, count: int, name: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise InputError(f"{name}: expected {count} comma-separated numbers, got {text!r}") from None
+    if len(values) != count or not all(math.isfinite(v) for v in values):
+        raise InputError(f"{name}: expected {count} finite comma-separated numbers, got {text!r}")
+    return values
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--robot", type=Path, help="robot TOML (default: robots/paper_leg.toml)")
+    parser.add_argument("--sensor", type=Path, help="sensor TOML (default: scenes/paper_sensor.toml)")
+    parser.add_argument("--strain-per-Nm", type=float, dest="strain_per_Nm",
+                        help="gauge strain per N·m of the flexure (default: the sensor file's, or the paper's)")
+    parser.add_argument("--torque-noise-Nm", type=float, dest="torque_noise_Nm",
+                        help="override: joint-torque noise std per sample [N·m]")
+    parser.add_argument("--calibration", type=Path, help="calibration JSON: its slope uncertainty becomes a gain error")
+    parser.add_argument("--gain-error", type=float, default=None,
+                        help="relative calibration gain error std (default: from --calibration, else 0)")
+    parser.add_argument("--ft-noise", default="0.1,0.1,0.01", help="σ of Fx [N], Fz [N], My [N·m] (Table II)")
+    parser.add_argument("--contact", default="2,0.8", help="LINK,ALPHA of the contact (default: Table III test 2)")
+    parser.add_argument("--force", default=f"7,{-math.pi / 3}", help="MAGNITUDE_N,DIRECTION_RAD (default 7 N at −π/3)")
+    parser.add_argument("--grid", type=int, default=10, help="postures per joint over [0, π] (default 10)")
+    parser.add_argument("--rate", type=float, default=1000.0, help="sample rate [Hz]")
+    parser.add_argument("--gain", type=float, default=100.0, help="observer gain K [1/s]")
+    parser.add_argument("--draws", type=int, default=500, help="Monte Carlo draws per posture")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--png", type=Path, help="write a heat map of the position error over the grid")
+
+
+def sensor_noise_from_args(args, n_links: int):
+    """(SensorNoise, provenance dict) from the command line."""
+    from bridge.chain import SensorChain, paper_chain
+    from bridge.config import load_sensor_config
+    from estimator.uncertainty import SensorNoise
+
+    provenance = {}
+    if args.torque_noise_Nm is not None:
+        sigma_tau = args.torque_noise_Nm
+        provenance["torque_noise_source"] = "--torque-noise-Nm"
+    else:
+        if args.sensor is not None:
+            config, spn = load_sensor_config(args.sensor)
+            spn = args.strain_per_Nm or spn
+            chain = SensorChain(config, spn) if spn else SensorChain(config)
+            provenance["torque_noise_source"] = f"bridge chain of {args.sensor}"
+        else:
+            chain = paper_chain(args.strain_per_Nm)
+            provenance["torque_noise_source"] = "bridge chain of the paper's sensor"
+        sigma_tau = chain.noise_std_Nm
+        provenance["strain_per_Nm"] = chain.strain_per_Nm
+    gain_error = args.gain_error
+    if gain_error is None and args.calibration is not None:
+        import calibration
+
+        model = calibration.load(args.calibration)
+        i = list(model.coef_names).index("slope")
+        gain_error = math.sqrt(model.coef_cov[i, i]) / abs(model.coef_mean[i])
+        provenance["gain_error_source"] = str(args.calibration)
+    noise = SensorNoise(torque_std_Nm=sigma_tau, wrench_std=_floats(args.ft_noise, 3, "--ft-noise"),
+                        torque_gain_rel_std=gain_error or 0.0, sample_rate_Hz=args.rate,
+                        gain_per_s=args.gain)
+    return noise, provenance
+
+
+def run(args) -> int:
+    from estimator.robot import load_robot, paper_leg
+    from estimator.uncertainty import first_order, monte_carlo
+    from torquebench.io import print_json
+
+    robot = load_robot(args.robot) if args.robot else paper_leg()
+    link_text, alpha_text = (args.contact.split(",") + [""])[:2]
+    try:
+        link, alpha = int(link_text), float(alpha_text)
+    except ValueError:
+        raise InputError(f"--contact: expected LINK,ALPHA (e.g. 2,0.8), got {args.contact!r}") from None
+    if not (1 <= link <= robot.n_links and 0.0 <= alpha <= 1.0):
+        raise InputError(f"--contact: link must be 1…{robot.n_links} and α in [0, 1], got {args.contact!r}")
+    magnitude, direction = _floats(args.force, 2, "--force")
+    if args.grid < 1 or args.draws < 2:
+        raise InputError("--grid must be ≥ 1 and --draws ≥ 2")
+    noise, provenance = sensor_noise_from_args(args, robot.n_links)
+    force = magnitude * np.array([math.cos(direction), math.sin(direction)])
+    axes = [np.linspace(0.0, math.pi, args.grid)] * robot.n_links
+    postures = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, robot.n_links)
+
+    results = {"torque_noise_std_Nm": float(noise.torque_std_Nm[0]),
+               "gain_error_rel_std": float(noise.torque_gain_rel_std[0]),
+               "ft_noise": noise.wrench_std.tolist(), "postures": len(postures),
+               "contact": {"link": link, "alpha": alpha, "force_N": magnitude, "direction_rad": direction},
+               **provenance, "methods": {}}
+    maps = {}
+    for method in ("dynamic", "paper"):
+        mc = monte_carlo(robot, postures, link, alpha, force, noise, draws=args.draws,
+                         rng=args.seed, method=method)
+        fo = first_order(robot, postures, link, alpha, force, noise, method=method)
+        usable = mc.flagged_fraction < 0.05
+        pos = mc.position_rms_m[usable]
+        ratio = mc.position_rms_m[usable] / fo.position_rms_m[usable]
+        results["methods"][method] = {
+            "position_rms_median_m": float(np.median(pos)) if pos.size else None,
+            "position_rms_max_m": float(np.max(pos)) if pos.size else None,
+            "position_p95_max_m": float(np.max(mc.position_p95_m[usable])) if pos.size else None,
+            "force_rms_median_N": float(np.median(mc.force_rms_N[usable])) if pos.size else None,
+            "flagged_postures": int((~usable).sum()),
+            "monte_carlo_over_first_order_median": float(np.median(ratio)) if pos.size else None,
+        }
+        maps[method] = np.where(usable, mc.position_rms_m, np.nan)
+    if args.png:
+        _heat_map(args.png, maps, axes, robot.n_links)
+        results["png"] = str(args.png)
+    if args.json:
+        print_json(results)
+        return 0
+    print(f"σ_τ = {results['torque_noise_std_Nm']:.4g} N·m ({provenance.get('torque_noise_source')}), "
+          f"gain error {results['gain_error_rel_std']:.3g}, σ_FT = {results['ft_noise']}")
+    print(f"contact: link {link}, α = {alpha}, |F| = {magnitude} N at {direction:.3f} rad; "
+          f"{len(postures)} postures × {args.draws} draws")
+    print(f"{'method':8s} {'median |p| RMS':>15s} {'max |p| RMS':>12s} {'max p95':>9s} "
+          f"{'median |F| RMS':>15s} {'flagged':>8s} {'MC/1st-order':>13s}")
+    for method, m in results["methods"].items():
+        def mm(v):
+            return f"{v * 1e3:.2f} mm" if v is not None else "—"
+        print(f"{method:8s} {mm(m['position_rms_median_m']):>15s} {mm(m['position_rms_max_m']):>12s} "
+              f"{mm(m['position_p95_max_m']):>9s} {m['force_rms_median_N'] or float('nan'):>13.3f} N "
+              f"{m['flagged_postures']:>8d} {m['monte_carlo_over_first_order_median'] or float('nan'):>13.3f}")
+    return 0
+
+
+def _heat_map(path: Path, maps: dict, axes, n_links: int) -> None:
+    if n_links != 2:
+        raise InputError("--png: the heat map is drawn for two-link robots only")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from torquebench.io import atomic_path
+
+    fig, axs = plt.subplots(1, len(maps), figsize=(5 * len(maps), 4), constrained_layout=True)
+    for ax, (method, values) in zip(np.atleast_1d(axs), maps.items()):
+        grid = values.reshape(len(axes[0]), len(axes[1])) * 1e3
+        im = ax.imshow(grid.T, origin="lower", extent=[0, math.pi, 0, math.pi], aspect="auto")
+        ax.set(title=f"{method}: contact position RMS error", xlabel="q1 [rad]", ylabel="q2 [rad]")
+        fig.colorbar(im, ax=ax, label="mm (blank: flagged)")
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
