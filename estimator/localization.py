@@ -176,9 +176,19 @@ def localize_dynamic(robot: Robot, q: np.ndarray, residual: np.ndarray, *, expec
     if q.shape[-1] != n or r.shape != q.shape:
         raise InputError(f"localize: q and residual must both be (T, {n}), got {q.shape}, {r.shape}")
     w = _weights(n, row_weights)
+    args = (min_force_N, max_condition, ambiguity_tol, position_tol_m, bound_tol)
+    chunk = 8192 if not expected else 4096          # cache-sized blocks (a loop over blocks)
+    if len(q) > chunk:
+        parts = [localize_dynamic(rob, q[s:s + chunk], r[s:s + chunk], expected=expected,
+                                  row_weights=w, min_force_N=min_force_N,
+                                  max_condition=max_condition, ambiguity_tol=ambiguity_tol,
+                                  position_tol_m=position_tol_m, bound_tol=bound_tol)
+                 for s in range(0, len(q), chunk)]
+        return Localization(**{f: (None if getattr(parts[0], f) is None else
+                                   np.concatenate([getattr(p, f) for p in parts]))
+                               for f in Localization.__dataclass_fields__})
     if expected:
-        return _localize_with_expected(rob, q, r, w, list(expected), min_force_N, max_condition,
-                                       ambiguity_tol, position_tol_m, bound_tol)
+        return _localize_with_expected(rob, q, r, w, list(expected), *args)
     joints, _ = dyn.forward_kinematics(rob, q)
     T = len(q)
     fits = [_fit_link(r, w, joints, c, N) for c in range(1, N + 1)]

@@ -69,13 +69,98 @@ def coefficients(K: np.ndarray, dt_s: float, method: str = "exact"):
     return 1.0 - kdt, kdt
 
 
-def momentum_terms(robot: Robot, q: np.ndarray, dq: np.ndarray, tau_meas: np.ndarray,
-                   chunk: int = 32768):
-    """P = M q̇ and u = τ_meas + Cᵀ q̇ − G for every sample, shapes (T, n) each (floating coords).
+def _irot(rob: Robot) -> np.ndarray:
+    """Constant part of M: base mass/inertia and the links' rotational inertias, (n, n)."""
+    a_rows = dyn._angular_rows(rob)
+    Irot = np.einsum("i,ik,il->kl", rob.inertias_kgm2, a_rows, a_rows)
+    Irot[0, 0] += rob.base_mass_kg
+    Irot[1, 1] += rob.base_mass_kg
+    Irot[2, 2] += rob.base_inertia_kgm2
+    return Irot
 
-    Cᵀ q̇ = Σ_i m_i J̇_iᵀ (J_i q̇) (from C = Σ m_i J_iᵀ J̇_i, estimator.dynamics). Chunked for memory.
+
+def chain_terms(robot: Robot, q: np.ndarray, dq: np.ndarray, want=("P", "CTdq", "G")) -> dict:
+    """P = M q̇, Cᵀq̇, C q̇ and G of a planar chain in O(N) vector operations per batch.
+
+    With link CoMs c_i (velocity v_i, velocity-product acceleration a_i = J̇_i q̇), angle column k
+    (o_0 = o_1 = p_1, o_k = p_k) moving the links i ≥ k − 1 (0-based), and suffix sums over those
+    links S_k: Σ m_i (c_i − o_k) × w_i = Σ m_i c_i × w_i − o_k × Σ m_i w_i:
+
+        P_k    = Σ_{S_k} m_i (c_i − o_k) × v_i + (I_rot q̇)_k,   P_xz = Σ m_i v_i + m_b v_b (in I_rot)
+        (Cᵀq̇)_k = Σ_{S_k} m_i (v_i − ȯ_k) × v_i = −ȯ_k × Σ_{S_k} m_i v_i,  translational rows 0
+        (C q̇)_k = Σ_{S_k} m_i (c_i − o_k) × a_i,  (C q̇)_xz = Σ m_i a_i
+        G_k    = g Σ_{S_k} m_i (c_i − o_k)_x,  G_z = g (m_b + Σ m_i)
+
+    Positions are taken relative to the base origin p_1 (no cancellation for large x, z).
+    Same numbers as estimator.dynamics (M, C, G) to rounding; tested against it and pinocchio.
     """
     rob = full_robot(robot)
+    N = rob.n_links
+    shape = np.shape(q)
+    qT = np.ascontiguousarray(np.reshape(q, (-1, shape[-1])).T)      # (n, T): link-major layout
+    dqT = np.ascontiguousarray(np.reshape(dq, (-1, shape[-1])).T)
+    T = qT.shape[1]
+    m = rob.masses_kg[:, None]
+    l, rc = rob.lengths_m[:, None], rob.com_m[:, None]
+    phi = qT[2] + np.cumsum(qT[3:], axis=0)
+    dphi = dqT[2] + np.cumsum(dqT[3:], axis=0)
+    sn, cs = np.sin(phi), np.cos(phi)
+    ex, ez = sn, -cs                          # e_i = (sin φ, −cos φ), ė_i = φ̇ (cos φ, sin φ)
+    dex, dez = dphi * cs, dphi * sn
+    zero = np.zeros((1, T))
+
+    def prefix(a):                            # [0, a_0, a_0 + a_1, …] over links, (N+1, T)
+        return np.concatenate([zero, np.cumsum(a, axis=0)], axis=0)
+
+    def suffix(a):                            # Σ_{i ≥ j} a_i for j = 0 … N−1
+        return np.cumsum(a[::-1], axis=0)[::-1]
+
+    jx, jz = prefix(l * ex), prefix(l * ez)   # joints relative to p_1 (index 0 … N)
+    vjx, vjz = dqT[0] + prefix(l * dex), dqT[1] + prefix(l * dez)
+    cx, cz = jx[:-1] + rc * ex, jz[:-1] + rc * ez
+    vx, vz = vjx[:-1] + rc * dex, vjz[:-1] + rc * dez
+    # angle columns θ, q_1 … q_N: origins p_1, p_1, p_2 … p_N; link set S_k starts at max(k−1, 0)
+    sel = np.r_[0, 0:N]
+    ox, oz = jx[sel], jz[sel]
+    out = {}
+    Bx, Bz = suffix(m * vx)[sel], suffix(m * vz)[sel]
+    if "P" in want:
+        A = suffix(m * (cx * vz - cz * vx))[sel]
+        P = _irot(rob) @ dqT
+        P[0] += Bx[0]
+        P[1] += Bz[0]
+        P[2:] += A - (ox * Bz - oz * Bx)
+        out["P"] = P
+    if "CTdq" in want:
+        CT = np.zeros((N + 3, T))
+        CT[2:] = -(vjx[sel] * Bz - vjz[sel] * Bx)
+        out["CTdq"] = CT
+    if "Cdq" in want:
+        # a_i = J̇_i q̇ = −Σ_{j<i} φ̇_j² l_j e_j − φ̇_i² r_i e_i  (the base's translation adds nothing)
+        w2 = dphi * dphi
+        ax = -prefix(w2 * l * ex)[:-1] - w2 * rc * ex
+        az = -prefix(w2 * l * ez)[:-1] - w2 * rc * ez
+        Ax, Az = suffix(m * ax)[sel], suffix(m * az)[sel]
+        Ac = suffix(m * (cx * az - cz * ax))[sel]
+        Cq = np.empty((N + 3, T))
+        Cq[0], Cq[1] = Ax[0], Az[0]
+        Cq[2:] = Ac - (ox * Az - oz * Ax)
+        out["Cdq"] = Cq
+    if "G" in want:
+        g = rob.gravity_m_per_s2
+        G = np.zeros((N + 3, T))
+        G[1] = g * (rob.base_mass_kg + m.sum())
+        G[2:] = g * (suffix(m * cx)[sel] - ox * np.cumsum(m[::-1, 0])[::-1][sel, None])
+        out["G"] = G
+    return {k: v.T.reshape(shape) for k, v in out.items()}
+
+
+def momentum_terms(robot: Robot, q: np.ndarray, dq: np.ndarray, tau_meas: np.ndarray,
+                   chunk: int = 8192):
+    """P = M q̇ and u = τ_meas + Cᵀ q̇ − G for every sample, shapes (T, n) each (floating coords).
+
+    Uses ``chain_terms`` (suffix sums over the chain), in chunks that stay in cache.
+    """
     q = np.asarray(q, float)
     dq = np.asarray(dq, float)
     tau_meas = np.asarray(tau_meas, float)
@@ -85,24 +170,11 @@ def momentum_terms(robot: Robot, q: np.ndarray, dq: np.ndarray, tau_meas: np.nda
     T, n = q.shape
     P = np.empty((T, n))
     u = np.empty((T, n))
-    m = rob.masses_kg
-    g = rob.gravity_m_per_s2
-    a_rows = dyn._angular_rows(rob)
-    Irot = np.einsum("i,ik,il->kl", rob.inertias_kgm2, a_rows, a_rows)
-    Irot[0, 0] += rob.base_mass_kg
-    Irot[1, 1] += rob.base_mass_kg
-    Irot[2, 2] += rob.base_inertia_kgm2
     for s in range(0, T, chunk):
         sl = slice(s, min(T, s + chunk))
-        qc, dqc = q[sl], dq[sl]
-        J, joints, coms = dyn.com_jacobians_full(rob, qc)
-        v = np.einsum("...iak,...k->...ia", J, dqc)                    # CoM velocities
-        P[sl] = np.einsum("i,...iak,...ia->...k", m, J, v) + dqc @ Irot
-        Jdot = dyn._com_jacobian_rates(rob, qc, dqc, J, joints, coms)
-        CTdq = np.einsum("i,...iak,...ia->...k", m, Jdot, v)
-        G = g * np.einsum("i,...ik->...k", m, J[..., 1, :])
-        G[..., 1] += g * rob.base_mass_kg
-        u[sl] = tau_meas[sl] + CTdq - G
+        terms = chain_terms(robot, q[sl], dq[sl])
+        P[sl] = terms["P"]
+        u[sl] = tau_meas[sl] + terms["CTdq"] - terms["G"]
     if single:
         return P[0], u[0]
     return P, u
@@ -206,58 +278,58 @@ class MomentumObserver:
 
 
 class _FastTerms:
-    """P = M q̇ and u = τ + Cᵀq̇ − G for ONE sample, with scalar-friendly numpy (low latency).
+    """P = M q̇ and u = τ + Cᵀq̇ − G for ONE sample in plain Python floats (low latency).
 
-    Same formulas as ``momentum_terms``: each link's CoM velocity v_i = J_i q̇ and
-    J̇_i q̇-rows give P = Σ m_i J_iᵀ v_i + I_rot q̇, Cᵀq̇ = Σ m_i J̇_iᵀ v_i, G = g Σ m_i J_{i,z}ᵀ.
+    The formulas of ``chain_terms`` (suffix sums over the links), evaluated with ``math``.
     """
 
     def __init__(self, robot: Robot):
-        self.robot = robot
-        N = robot.n_links
-        self.N = N
-        a_rows = dyn._angular_rows(robot)
-        Irot = np.einsum("i,ik,il->kl", robot.inertias_kgm2, a_rows, a_rows)
-        Irot[0, 0] += robot.base_mass_kg
-        Irot[1, 1] += robot.base_mass_kg
-        Irot[2, 2] += robot.base_inertia_kgm2
-        self.Irot = Irot
-        self.mask = dyn._upstream_mask(N)                       # (N, N+1)
-        self.m = robot.masses_kg
-        self.l = robot.lengths_m
-        self.rc = robot.com_m
-        self.g = robot.gravity_m_per_s2
-        self.mb = robot.base_mass_kg
+        self.N = robot.n_links
+        self.m = [float(v) for v in robot.masses_kg]
+        self.l = [float(v) for v in robot.lengths_m]
+        self.rc = [float(v) for v in robot.com_m]
+        self.Irot = _irot(robot)
+        self.g = float(robot.gravity_m_per_s2)
+        self.Gz = self.g * (float(robot.base_mass_kg) + sum(self.m))
+        self.msuf = [sum(self.m[j:]) for j in range(self.N)]
 
     def __call__(self, q, dq, tau):
-        N = self.N
-        phi = q[2] + np.cumsum(q[3:])
-        dphi = dq[2] + np.cumsum(dq[3:])
-        s, c = np.sin(phi), np.cos(phi)
-        e = np.stack([s, -c], axis=-1)                          # (N, 2) link directions
-        de = dphi[:, None] * np.stack([c, s], axis=-1)          # ė
-        joints = np.empty((N + 1, 2))
-        joints[0] = q[:2]
-        joints[1:] = q[:2] + np.cumsum(self.l[:, None] * e, axis=0)
-        vj = np.empty((N + 1, 2))
-        vj[0] = dq[:2]
-        vj[1:] = dq[:2] + np.cumsum(self.l[:, None] * de, axis=0)
-        coms = joints[:-1] + self.rc[:, None] * e
-        vcom = vj[:-1] + self.rc[:, None] * de
-        origins = np.concatenate([joints[:1], joints[:-1]], axis=0)   # (N+1, 2) o_θ, o_q1…o_qN
-        vorig = np.concatenate([vj[:1], vj[:-1]], axis=0)
-        rel = coms[:, None, :] - origins[None, :, :]                  # (N, N+1, 2)
-        drel = vcom[:, None, :] - vorig[None, :, :]
-        mk = self.mask * self.m[:, None]                              # m_i on upstream angles
-        # angular columns: J[:, :, k] = ⊥(rel) = (−rel_z, rel_x); J̇ = ⊥(drel)
-        # P_k = Σ m_i J_ik · v_i ; (Cᵀq̇)_k = Σ m_i J̇_ik · v_i ; G_k = g Σ m_i J_ik,z
-        pv = vcom                                                      # (N, 2)
-        P = dq @ self.Irot
-        P[:2] += self.m @ pv
-        P[2:] += np.einsum("ik,ik->k", mk, -rel[..., 1] * pv[:, None, 0] + rel[..., 0] * pv[:, None, 1])
-        CT = np.zeros(N + 3)
-        CT[2:] = np.einsum("ik,ik->k", mk, -drel[..., 1] * pv[:, None, 0] + drel[..., 0] * pv[:, None, 1])
-        G = np.zeros(N + 3)
-        G[1] = self.g * (self.mb + self.m.sum())
-        G[2:] = self.g * np.einsum("ik,ik->k", mk, rel[..., 0])
-        return P, tau + CT - G
+        import math
+
+        N, m, l, rc = self.N, self.m, self.l, self.rc
+        ql, dql = q.tolist(), dq.tolist()
+        phi, dphi = ql[2], dql[2]
+        jx = jz = 0.0
+        vjx, vjz = dql[0], dql[1]
+        cx, cz, vx, vz, ox, oz, vox, voz = ([0.0] * N for _ in range(8))
+        for i in range(N):
+            phi += ql[3 + i]
+            dphi += dql[3 + i]
+            s, c = math.sin(phi), math.cos(phi)
+            ox[i], oz[i], vox[i], voz[i] = jx, jz, vjx, vjz
+            cx[i], cz[i] = jx + rc[i] * s, jz - rc[i] * c
+            vx[i], vz[i] = vjx + rc[i] * dphi * c, vjz + rc[i] * dphi * s
+            jx, jz = jx + l[i] * s, jz - l[i] * c
+            vjx, vjz = vjx + l[i] * dphi * c, vjz + l[i] * dphi * s
+        P = (self.Irot @ dq)
+        u = np.array(tau, dtype=float)
+        u[1] -= self.Gz
+        A = Bx = Bz = Gs = 0.0
+        Pang = [0.0] * N
+        Cang = [0.0] * N
+        Gang = [0.0] * N
+        for i in range(N - 1, -1, -1):                 # suffix sums over links i … N−1
+            A += m[i] * (cx[i] * vz[i] - cz[i] * vx[i])
+            Bx += m[i] * vx[i]
+            Bz += m[i] * vz[i]
+            Gs += m[i] * cx[i]
+            Pang[i] = A - (ox[i] * Bz - oz[i] * Bx)
+            Cang[i] = -(vox[i] * Bz - voz[i] * Bx)
+            Gang[i] = self.g * (Gs - ox[i] * self.msuf[i])
+        P[0] += Bx
+        P[1] += Bz
+        P[2] += Pang[0]
+        u[2] += Cang[0] - Gang[0]
+        P[3:] += Pang
+        u[3:] += np.subtract(Cang, Gang)
+        return P, u
