@@ -335,21 +335,16 @@ def _localize_with_expected(rob, q, r, w, expected, min_force_N, max_condition, 
 
 
 # ----------------------------------------------------------------------------- paper (eqs. 6–9)
-def bias_forces(robot: Robot, q: np.ndarray, dq: np.ndarray, chunk: int = 32768) -> np.ndarray:
-    """C(q, q̇) q̇ + G(q) in floating coordinates, (T, n): C q̇ = Σ m_i J_iᵀ (J̇_i q̇)."""
-    rob = _full(robot)
+def bias_forces(robot: Robot, q: np.ndarray, dq: np.ndarray, chunk: int = 8192) -> np.ndarray:
+    """C(q, q̇) q̇ + G(q) in floating coordinates, (T, n) (``observer.chain_terms``, chunked)."""
+    from estimator.observer import chain_terms
+
     q = np.atleast_2d(np.asarray(q, float))
     dq = np.atleast_2d(np.asarray(dq, float))
     out = np.empty(q.shape)
-    m = rob.masses_kg
-    g = rob.gravity_m_per_s2
     for s in range(0, len(q), chunk):
-        sl = slice(s, s + chunk)
-        J, joints, coms = dyn.com_jacobians_full(rob, q[sl])
-        Jdot = dyn._com_jacobian_rates(rob, q[sl], dq[sl], J, joints, coms)
-        acc = np.einsum("...iak,...k->...ia", Jdot, dq[sl])
-        out[sl] = np.einsum("i,...iak,...ia->...k", m, J, acc) + g * np.einsum("i,...ik->...k", m, J[..., 1, :])
-        out[sl, 1] += g * rob.base_mass_kg
+        terms = chain_terms(robot, q[s:s + chunk], dq[s:s + chunk], want=("Cdq", "G"))
+        out[s:s + chunk] = terms["Cdq"] + terms["G"]
     return out
 
 

@@ -128,3 +128,20 @@ def test_agrees_with_pinocchio(robot):
     last = data.oMi[model.njoints - 1]
     tip = last.act(np.array([0.0, 0.0, -robot.lengths_m[-1]]))
     np.testing.assert_allclose(tip[[0, 2]], joints[-1], atol=1e-12)
+
+
+@pytest.mark.parametrize("robot", ROBOTS, ids=IDS)
+def test_fast_chain_terms_match_matrices(robot):
+    """observer.chain_terms (O(N) suffix sums, used on the hot path) = M q̇, Cᵀq̇, C q̇, G."""
+    from estimator.observer import chain_terms
+
+    full = robot.with_base(True)
+    q, dq = _states(full, 30, seed=5)
+    if not robot.floating:
+        q[:, :3] = dq[:, :3] = 0.0
+    t = chain_terms(robot, q, dq, want=("P", "CTdq", "Cdq", "G"))
+    M, C = D.mass_matrix(full, q), D.coriolis_matrix(full, q, dq)
+    np.testing.assert_allclose(t["P"], np.einsum("tkl,tl->tk", M, dq), atol=1e-12)
+    np.testing.assert_allclose(t["CTdq"], np.einsum("tlk,tl->tk", C, dq), atol=1e-12)
+    np.testing.assert_allclose(t["Cdq"], np.einsum("tkl,tl->tk", C, dq), atol=1e-12)
+    np.testing.assert_allclose(t["G"], D.gravity_vector(full, q), atol=1e-12)
