@@ -92,7 +92,7 @@ def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, m
         Ab = A.tobsr(blocksize=(3, 3)) if n % 3 == 0 else A
         ml = pyamg.smoothed_aggregation_solver(
             Ab, B=B, symmetry="hermitian", strength=("symmetric", {"theta": 0.0}),
-            smooth=("energy", {"krylov": "cg", "maxiter": 2}), max_coarse=500,
+            smooth=("energy", {"krylov": "cg", "maxiter": 2}), max_coarse=500, coarse_solver="splu",
             presmoother=("block_gauss_seidel", {"sweep": "symmetric"}),
             postsmoother=("block_gauss_seidel", {"sweep": "symmetric"}))
         info["setup_s"] = time.perf_counter() - t0
