@@ -87,13 +87,20 @@ class _Device(threading.Thread):
     def run(self):
         from calibration.frames import encode_frames
         rng = np.random.default_rng(0)
+        os.set_blocking(self.fd, False)
+        pending = b""
         while not self.stop.is_set():
-            x = np.round(self.level + rng.normal(0, 20, (100, 2)))
+            if not pending:
+                x = np.round(self.level + rng.normal(0, 20, (100, 2)))
+                pending = b"\xa5junk" + encode_frames(np.arange(self.seq, self.seq + 100), x)
+                self.seq += 100
             try:
-                os.write(self.fd, b"\xa5junk" + encode_frames(np.arange(self.seq, self.seq + 100), x))
+                pending = pending[os.write(self.fd, pending):]    # partial writes continue
+            except BlockingIOError:           # reader not keeping up: the pty buffer is full
+                time.sleep(0.005)
+                continue
             except OSError:
                 return
-            self.seq += 100
             time.sleep(0.005)
 
 
