@@ -81,27 +81,30 @@ def _moment_arms(joints: np.ndarray, c: int) -> np.ndarray:
     return joints[:, c - 1:c] - origins
 
 
-def _fit_link(r, w, joints, c, N):
-    """Weighted LS of (F, μ) on link c, then α clipped to [0, 1] and F re-fitted there.
+def _fit_link(rT, w, jx, jz, c, N):
+    """Weighted LS of (F, μ) on link c (1-based), then α clipped to [0, 1] and F re-fitted there.
 
-    Returns alpha_free, alpha, F (T, 2), cost (T,) = sqrt(Σ w e²) over all rows.
+    Link-major layout: rT (n, T), joints jx, jz (N+1, T) relative to the base origin.
+    Returns alpha_free, alpha, Fx, Fz, cost (each (T,)), cost = sqrt(Σ w e²) over all rows.
     """
-    a = _moment_arms(joints, c)                        # (T, m, 2), m = c + 1 rows θ, q1…qc
+    sel = np.r_[0, 0:c]                                  # origins of rows θ, q_1…q_c
+    ax = jx[c - 1] - jx[sel]                             # a_k = p_c − o_k, (c+1, T)
+    az = jz[c - 1] - jz[sel]
     rows = np.r_[2, 3:3 + c]
-    wk = w[rows]
-    rk = r[:, rows]
-    ax, az = a[..., 0], a[..., 1]
+    wk = w[rows][:, None]
+    rk = rT[rows]
     wx, wz = w[0], w[1]
+    wax, waz = wk * ax, wk * az
     # normal equations of rows x: (1,0,0), z: (0,1,0), k: (−a_z, a_x, 1)
-    A11 = wx + (wk * az * az).sum(-1)
-    A12 = -(wk * az * ax).sum(-1)
-    A13 = -(wk * az).sum(-1)
-    A22 = wz + (wk * ax * ax).sum(-1)
-    A23 = (wk * ax).sum(-1)
-    A33 = np.full_like(A11, wk.sum())
-    b1 = wx * r[:, 0] - (wk * rk * az).sum(-1)
-    b2 = wz * r[:, 1] + (wk * rk * ax).sum(-1)
-    b3 = (wk * rk).sum(-1)
+    A11 = wx + (waz * az).sum(0)
+    A12 = -(waz * ax).sum(0)
+    A13 = -waz.sum(0)
+    A22 = wz + (wax * ax).sum(0)
+    A23 = wax.sum(0)
+    A33 = float(wk.sum())
+    b1 = wx * rT[0] - (waz * rk).sum(0)
+    b2 = wz * rT[1] + (wax * rk).sum(0)
+    b3 = (wk * rk).sum(0)
     # symmetric 3×3 inverse by cofactors
     c11 = A22 * A33 - A23 * A23
     c12 = A13 * A23 - A12 * A33
@@ -109,37 +112,48 @@ def _fit_link(r, w, joints, c, N):
     c22 = A11 * A33 - A13 * A13
     c23 = A12 * A13 - A11 * A23
     c33 = A11 * A22 - A12 * A12
-    det = A11 * c11 + A12 * c12 + A13 * c13
-    Fx = (c11 * b1 + c12 * b2 + c13 * b3) / det
-    Fz = (c12 * b1 + c22 * b2 + c23 * b3) / det
-    mu = (c13 * b1 + c23 * b2 + c33 * b3) / det
-    delta = joints[:, c] - joints[:, c - 1]
-    cr = delta[:, 0] * Fz - delta[:, 1] * Fx
+    inv_det = 1.0 / (A11 * c11 + A12 * c12 + A13 * c13)
+    Fx = (c11 * b1 + c12 * b2 + c13 * b3) * inv_det
+    Fz = (c12 * b1 + c22 * b2 + c23 * b3) * inv_det
+    mu = (c13 * b1 + c23 * b2 + c33 * b3) * inv_det
+    dx, dz = jx[c] - jx[c - 1], jz[c] - jz[c - 1]
     with np.errstate(divide="ignore", invalid="ignore"):
-        alpha_free = mu / cr
+        alpha_free = mu / (dx * Fz - dz * Fx)
     alpha = np.clip(np.nan_to_num(alpha_free, nan=0.5), 0.0, 1.0)
-    clipped = alpha != alpha_free
-    if np.any(clipped):
-        # F with α fixed: rows k are (a_k + α Δ) × F → 2×2 normal equations
-        bx = ax + alpha[:, None] * delta[:, None, 0]
-        bz = az + alpha[:, None] * delta[:, None, 1]
-        B11 = wx + (wk * bz * bz).sum(-1)
-        B12 = -(wk * bz * bx).sum(-1)
-        B22 = wz + (wk * bx * bx).sum(-1)
-        d1 = wx * r[:, 0] - (wk * rk * bz).sum(-1)
-        d2 = wz * r[:, 1] + (wk * rk * bx).sum(-1)
+    clipped = np.flatnonzero(alpha != alpha_free)
+    if clipped.size:
+        # F with α fixed: rows k are (a_k + α Δ) × F → 2×2 normal equations, on those samples only
+        al = alpha[clipped]
+        bx = ax[:, clipped] + al * dx[clipped]
+        bz = az[:, clipped] + al * dz[clipped]
+        rc_ = rk[:, clipped]
+        B11 = wx + (wk * bz * bz).sum(0)
+        B12 = -(wk * bz * bx).sum(0)
+        B22 = wz + (wk * bx * bx).sum(0)
+        d1 = wx * rT[0, clipped] - (wk * rc_ * bz).sum(0)
+        d2 = wz * rT[1, clipped] + (wk * rc_ * bx).sum(0)
         detB = B11 * B22 - B12 * B12
-        Fx = np.where(clipped, (B22 * d1 - B12 * d2) / detB, Fx)
-        Fz = np.where(clipped, (B11 * d2 - B12 * d1) / detB, Fz)
-        mu = np.where(clipped, alpha * (delta[:, 0] * Fz - delta[:, 1] * Fx), mu)
-    ex = r[:, 0] - Fx
-    ez = r[:, 1] - Fz
-    ek = rk - (ax * Fz[:, None] - az * Fx[:, None] + mu[:, None])
-    cost2 = wx * ex * ex + wz * ez * ez + (wk * ek * ek).sum(-1)
+        Fx[clipped] = (B22 * d1 - B12 * d2) / detB
+        Fz[clipped] = (B11 * d2 - B12 * d1) / detB
+        mu[clipped] = al * (dx[clipped] * Fz[clipped] - dz[clipped] * Fx[clipped])
+    ex = rT[0] - Fx
+    ez = rT[1] - Fz
+    ek = rk - (ax * Fz - az * Fx + mu)
+    cost2 = wx * ex * ex + wz * ez * ez + (wk * ek * ek).sum(0)
     if c < N:
-        rest = np.arange(3 + c, 3 + N)
-        cost2 = cost2 + (w[rest] * r[:, rest] ** 2).sum(-1)
-    return alpha_free, alpha, np.stack([Fx, Fz], axis=-1), np.sqrt(np.maximum(cost2, 0.0))
+        cost2 += (w[3 + c:, None] * rT[3 + c:] ** 2).sum(0)
+    return alpha_free, alpha, Fx, Fz, np.sqrt(np.maximum(cost2, 0.0))
+
+
+def _joints_link_major(rob: Robot, q: np.ndarray):
+    """Joint positions relative to the base origin, jx, jz of shape (N+1, T)."""
+    qT = np.ascontiguousarray(q.T)
+    phi = qT[2] + np.cumsum(qT[3:], axis=0)
+    l = rob.lengths_m[:, None]
+    zero = np.zeros((1, q.shape[0]))
+    jx = np.concatenate([zero, np.cumsum(l * np.sin(phi), axis=0)], axis=0)
+    jz = np.concatenate([zero, np.cumsum(-l * np.cos(phi), axis=0)], axis=0)
+    return jx, jz
 
 
 def _flag(force, delta, reason, min_force_N, max_condition):
@@ -189,35 +203,44 @@ def localize_dynamic(robot: Robot, q: np.ndarray, residual: np.ndarray, *, expec
                                for f in Localization.__dataclass_fields__})
     if expected:
         return _localize_with_expected(rob, q, r, w, list(expected), *args)
-    joints, _ = dyn.forward_kinematics(rob, q)
     T = len(q)
-    fits = [_fit_link(r, w, joints, c, N) for c in range(1, N + 1)]
-    costs = np.stack([f[3] for f in fits], axis=-1)                 # (T, N)
-    order = np.argsort(costs, axis=-1, kind="stable")
-    best = order[:, 0]
-    idx = np.arange(T)
-    alpha_free = np.stack([f[0] for f in fits], axis=-1)[idx, best]
-    alpha = np.stack([f[1] for f in fits], axis=-1)[idx, best]
-    force = np.stack([f[2] for f in fits], axis=1)[idx, best]
+    jx, jz = _joints_link_major(rob, q)
+    rT = np.ascontiguousarray(r.T)
+    fits = [_fit_link(rT, w, jx, jz, c, N) for c in range(1, N + 1)]
+    costs = np.stack([f[4] for f in fits])                            # (N, T)
+    if N > 1:
+        order = np.argsort(costs, axis=0, kind="stable")
+        best, second = order[0], order[1]
+    else:
+        best = np.zeros(T, dtype=int)
+    take = lambda k, which: np.take_along_axis(np.stack([f[k] for f in fits]), which[None], 0)[0]  # noqa: E731
+    alpha_free, alpha = take(0, best), take(1, best)
+    force = np.stack([take(2, best), take(3, best)], axis=-1)
+    cost = take(4, best)
     link = best + 1
-    start = joints[idx, best]
-    delta = joints[idx, best + 1] - start
-    point = start + alpha[:, None] * delta
+    sx, sz = np.take_along_axis(jx, best[None], 0)[0], np.take_along_axis(jz, best[None], 0)[0]
+    delta = np.stack([np.take_along_axis(jx, link[None], 0)[0] - sx,
+                      np.take_along_axis(jz, link[None], 0)[0] - sz], axis=-1)
+    point = np.stack([q[:, 0] + sx, q[:, 1] + sz], axis=-1) + alpha[:, None] * delta
     reason = np.zeros(T, dtype=np.int8)
     reason[~((alpha_free >= -bound_tol) & (alpha_free <= 1 + bound_tol))] = OUT_OF_BOUNDS
     if N > 1:
-        second = order[:, 1]
-        alpha2 = np.stack([f[1] for f in fits], axis=-1)[idx, second]
-        p2 = joints[idx, second] + alpha2[:, None] * (joints[idx, second + 1] - joints[idx, second])
-        close = costs[idx, second] - costs[idx, best] < ambiguity_tol
-        far = np.hypot(*(p2 - point).T) > position_tol_m
-        reason[(reason == OK) & close & far] = AMBIGUOUS
+        close = take(4, second) - cost < ambiguity_tol
+        if close.any():
+            a2 = take(1, second)
+            s2x = np.take_along_axis(jx, second[None], 0)[0]
+            s2z = np.take_along_axis(jz, second[None], 0)[0]
+            e2x = np.take_along_axis(jx, second[None] + 1, 0)[0]
+            e2z = np.take_along_axis(jz, second[None] + 1, 0)[0]
+            p2 = np.stack([q[:, 0] + s2x + a2 * (e2x - s2x), q[:, 1] + s2z + a2 * (e2z - s2z)], -1)
+            far = np.hypot(*(p2 - point).T) > position_tol_m
+            reason[(reason == OK) & close & far] = AMBIGUOUS
     condition = _flag(force, delta, reason, min_force_N, max_condition)
     bad = reason != OK
     alpha = np.where(bad, np.nan, alpha)
     point = np.where(bad[:, None], np.nan, point)
     return Localization(link=link, alpha=alpha, force_N=force, point_m=point, condition=condition,
-                        reason=reason, cost=costs[idx, best])
+                        reason=reason, cost=cost)
 
 
 # ----------------------------------------------------------------------------- expected contacts

@@ -168,22 +168,16 @@ def momentum_terms(robot: Robot, q: np.ndarray, dq: np.ndarray, tau_meas: np.nda
     if single:
         q, dq, tau_meas = q[None], dq[None], tau_meas[None]
     T, n = q.shape
-    P = np.empty((T, n))
-    u = np.empty((T, n))
+    PT = np.empty((n, T))                  # link-major storage; returned as (T, n) views
+    uT = np.empty((n, T))
     for s in range(0, T, chunk):
         sl = slice(s, min(T, s + chunk))
         terms = chain_terms(robot, q[sl], dq[sl])
-        P[sl] = terms["P"]
-        u[sl] = tau_meas[sl] + terms["CTdq"] - terms["G"]
+        PT[:, sl] = terms["P"].T
+        uT[:, sl] = tau_meas[sl].T + terms["CTdq"].T - terms["G"].T
     if single:
-        return P[0], u[0]
-    return P, u
-
-
-def _drive(P, u, dt_steps, method):
-    """d_k = (P_{k+1} − P_k)/Δt_k − ū_k for k = 0…T−2, shape (T−1, n)."""
-    ubar = 0.5 * (u[1:] + u[:-1]) if method == "exact" else u[:-1]
-    return np.diff(P, axis=0) / dt_steps[:, None] - ubar
+        return PT[:, 0], uT[:, 0]
+    return PT.T, uT.T
 
 
 def regular_period(t: np.ndarray) -> float:
@@ -205,29 +199,32 @@ def residual_offline(robot: Robot, t, q, dq, tau_meas, gain_per_s=100.0, method:
     T = len(t)
     K = gains(robot, gain_per_s)
     n = K.size
-    r = np.zeros((T, n))
+    rT = np.zeros((n, T))                  # link-major: each channel contiguous for lfilter
     if T < 2:
-        return r
+        return rT.T
     dt_s = regular_period(t) if dt_s is None else float(dt_s)
     a, b = coefficients(K, dt_s, method)
     P, u = momentum_terms(robot, q, dq, tau_meas) if terms is None else terms
+    PT, uT = np.ascontiguousarray(P.T), np.ascontiguousarray(u.T)
     steps = np.diff(t)
     gap = np.abs(steps - dt_s) > 0.01 * dt_s
-    drive = _drive(P, u, np.where(gap, steps, dt_s), method)
+    ubar = 0.5 * (uT[:, 1:] + uT[:, :-1]) if method == "exact" else uT[:, :-1]
+    drive = np.diff(PT, axis=1)
+    drive /= np.where(gap, steps, dt_s)
+    drive -= ubar                          # d_k = (P_{k+1} − P_k)/Δt_k − ū_k, (n, T−1)
     # segment boundaries: indices k where step k (k → k+1) is irregular
     bounds = np.flatnonzero(gap)
-    start = 0                          # r[start] is known
-    for stop in [*bounds, T - 1]:      # regular steps start … stop−1, then the gap step stop
+    start = 0                              # r[start] is known
+    for stop in [*bounds, T - 1]:          # regular steps start … stop−1, then the gap step stop
         if stop > start:
             for j in range(n):
-                zi = np.array([a[j] * r[start, j]])
-                r[start + 1:stop + 1, j], _ = lfilter([b[j]], [1.0, -a[j]],
-                                                      drive[start:stop, j], zi=zi)
-        if stop < T - 1:               # the irregular step stop → stop+1
+                zi = np.array([a[j] * rT[j, start]])
+                rT[j, start + 1:stop + 1], _ = lfilter([b[j]], [1.0, -a[j]], drive[j, start:stop], zi=zi)
+        if stop < T - 1:                   # the irregular step stop → stop+1
             ag, bg = coefficients(K, steps[stop], method)
-            r[stop + 1] = ag * r[stop] + bg * drive[stop]
+            rT[:, stop + 1] = ag * rT[:, stop] + bg * drive[:, stop]
             start = stop + 1
-    return r
+    return rT.T
 
 
 def lag_s(K: np.ndarray, dt_s: float, method: str = "exact") -> np.ndarray:

@@ -165,12 +165,13 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
                                          min_force_N=min_force_N, max_condition=max_condition)
     if sel.size:
         if method == "dynamic":       # the point at the current posture from the body coordinate α
-            from estimator import dynamics as dyn
-
-            joints, _ = dyn.forward_kinematics(observer.full_robot(robot), log.q[sel])
-            c0 = np.clip(res.link - 1, 0, robot.n_links - 1)
-            i = np.arange(sel.size)
-            res.point_m = joints[i, c0] + res.alpha[:, None] * (joints[i, c0 + 1] - joints[i, c0])
+            qs = log.q[sel]
+            jx, jz = loc_mod._joints_link_major(observer.full_robot(robot), qs)
+            c0 = np.clip(res.link - 1, 0, robot.n_links - 1)[None]
+            sx, sz = np.take_along_axis(jx, c0, 0)[0], np.take_along_axis(jz, c0, 0)[0]
+            ex, ez = np.take_along_axis(jx, c0 + 1, 0)[0], np.take_along_axis(jz, c0 + 1, 0)[0]
+            res.point_m = np.stack([qs[:, 0] + sx + res.alpha * (ex - sx),
+                                    qs[:, 1] + sz + res.alpha * (ez - sz)], axis=-1)
         link[sel] = res.link
         alpha[sel] = res.alpha
         force[sel] = res.force_N

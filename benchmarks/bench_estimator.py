@@ -1,0 +1,170 @@
+"""Estimator speed: offline observer + dynamic localization, streaming step latency, and our
+batched M, C, G against looped pinocchio on the same states.
+
+Run: ``python benchmarks/bench_estimator.py [--samples 1000000]``. Prints figures and ratios
+against anchors measured in the same run (the machine may be shared: compare ratios).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+
+def _best(fn, repeat=3):
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def bench_offline(n_samples: int, repeat: int = 3) -> dict:
+    from scipy.signal import lfilter
+
+    from estimator import localization as L
+    from estimator import observer as O
+    from estimator.pipeline import estimate
+    from estimator.robot import paper_leg
+    from estimator.synthetic import moving_leg_poke
+
+    robot = paper_leg()
+    t0 = time.perf_counter()
+    log, truth = moving_leg_poke(robot, duration_s=n_samples / 1000.0, t_on_s=0.0,
+                                 frequency_Hz=1.0, base_amplitude=(0.01, 0.01, 0.05))
+    gen = time.perf_counter() - t0
+    estimate(robot, log, method="dynamic")                        # warm-up (imports, caches)
+    stages = {}
+    terms = {}
+
+    def observer_only():
+        terms["r"] = O.residual_offline(robot, log.t, log.q, log.dq, log.tau_meas, 100.0)
+
+    stages["observer_s"] = _best(observer_only, repeat)
+    stages["localize_dynamic_s"] = _best(lambda: L.localize_dynamic(robot, log.q, terms["r"]), repeat)
+    result = {}
+
+    def full():
+        result["est"] = estimate(robot, log, method="dynamic")
+
+    stages["estimate_dynamic_s"] = _best(full, repeat)
+    est = result["est"]
+    settled = log.t > 0.05
+    err = np.hypot(est.px - truth.point_m[:, 0], est.pz - truth.point_m[:, 1])[settled]
+    # anchor: one memory pass of the same size (lfilter of 5 channels over the log)
+    x = np.ascontiguousarray(log.tau_meas.T)
+    anchor = _best(lambda: [lfilter([0.1], [1.0, -0.9], x[j]) for j in range(5)], repeat)
+    return {"samples": n_samples, "log_generation_s": gen, **stages,
+            "samples_per_s": n_samples / stages["estimate_dynamic_s"],
+            "observer_plus_localize_samples_per_s":
+                n_samples / (stages["observer_s"] + stages["localize_dynamic_s"]),
+            "anchor_lfilter_5ch_s": anchor,
+            "ratio_estimate_to_lfilter_anchor": stages["estimate_dynamic_s"] / anchor,
+            "position_error_max_m": float(np.nanmax(err)),
+            "contact_fraction": float(est.contact[settled].mean())}
+
+
+def bench_streaming(n_steps: int = 20000) -> dict:
+    from estimator.observer import MomentumObserver
+    from estimator.robot import paper_leg
+    from estimator.synthetic import moving_leg_poke
+
+    robot = paper_leg()
+    log, _ = moving_leg_poke(robot, duration_s=n_steps / 1000.0, t_on_s=0.0)
+    obs = MomentumObserver(robot, 1e-3, 100.0)
+    q, dq, tau = log.q, log.dq, log.tau_meas
+    lat = np.empty(n_steps)
+    clock = time.perf_counter_ns
+    for k in range(n_steps):
+        t0 = clock()
+        obs.step(q[k], dq[k], tau[k])
+        lat[k] = clock() - t0
+    # anchor: one 5×5 matrix-vector product through numpy, per call
+    M = np.eye(5)
+    v = np.ones(5)
+    anchor = np.empty(2000)
+    for k in range(2000):
+        t0 = clock()
+        M @ v
+        anchor[k] = clock() - t0
+    return {"steps": n_steps, "median_us": float(np.median(lat) / 1e3),
+            "p99_us": float(np.percentile(lat, 99) / 1e3),
+            "anchor_numpy_matvec_median_us": float(np.median(anchor) / 1e3),
+            "ratio_step_to_matvec": float(np.median(lat) / np.median(anchor))}
+
+
+def bench_vs_pinocchio(n_states: int = 20000) -> dict:
+    from estimator import dynamics as D
+    from estimator.observer import chain_terms
+    from estimator.robot import paper_leg
+
+    try:
+        import pinocchio as pin
+    except ImportError:                      # test extra not installed
+        return {"skipped": "pinocchio not installed"}
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from test_dynamics import pinocchio_model
+
+    robot = paper_leg()
+    model = pinocchio_model(robot)
+    data = model.createData()
+    rng = np.random.default_rng(0)
+    q = rng.uniform(-np.pi, np.pi, (n_states, 5))
+    dq = rng.normal(0, 2, (n_states, 5))
+
+    def ours_matrices():
+        D.mass_matrix(robot, q), D.coriolis_matrix(robot, q, dq), D.gravity_vector(robot, q)
+
+    def ours_terms():
+        chain_terms(robot, q, dq, want=("P", "CTdq", "Cdq", "G"))
+
+    def pinocchio_loop():
+        for k in range(n_states):
+            pin.crba(model, data, q[k])
+            pin.computeCoriolisMatrix(model, data, q[k], dq[k])
+            pin.computeGeneralizedGravity(model, data, q[k])
+
+    t_ours = _best(ours_matrices)
+    t_terms = _best(ours_terms)
+    t_pin = _best(pinocchio_loop, 2)
+    return {"states": n_states, "ours_batched_MCG_s": t_ours, "ours_chain_terms_s": t_terms,
+            "pinocchio_looped_s": t_pin, "ratio_pinocchio_over_ours_MCG": t_pin / t_ours,
+            "ratio_pinocchio_over_ours_chain_terms": t_pin / t_terms}
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--samples", type=int, default=1_000_000)
+    parser.add_argument("--repeat", type=int, default=3)
+    args = parser.parse_args(argv)
+    out = {"offline": bench_offline(args.samples, args.repeat), "streaming": bench_streaming(),
+           "dynamics_vs_pinocchio": bench_vs_pinocchio()}
+    off, st, pv = out["offline"], out["streaming"], out["dynamics_vs_pinocchio"]
+    print(f"offline observer + dynamic localization, {off['samples']:,} samples (paper leg, moving, poked):")
+    print(f"  observer {off['observer_s']:.3f} s, localize {off['localize_dynamic_s']:.3f} s, "
+          f"whole estimate() {off['estimate_dynamic_s']:.3f} s -> {off['samples_per_s']:,.0f} samples/s "
+          f"(observer+localize only: {off['observer_plus_localize_samples_per_s']:,.0f}/s; target >= 1,000,000/s)")
+    print(f"  anchor: lfilter over 5 channels {off['anchor_lfilter_5ch_s']:.3f} s; estimate/anchor = "
+          f"{off['ratio_estimate_to_lfilter_anchor']:.1f}x; max position error after 50 ms "
+          f"{1e3 * off['position_error_max_m']:.3f} mm")
+    print(f"streaming step(): median {st['median_us']:.1f} us, p99 {st['p99_us']:.1f} us "
+          f"(target median <= 50 us); numpy 5x5 matvec anchor {st['anchor_numpy_matvec_median_us']:.2f} us "
+          f"-> {st['ratio_step_to_matvec']:.1f}x")
+    if "skipped" in pv:
+        print(f"M, C, G vs pinocchio: {pv['skipped']}")
+    else:
+        print(f"M, C, G on {pv['states']:,} states: ours batched {pv['ours_batched_MCG_s']:.3f} s "
+              f"(O(N) chain terms {pv['ours_chain_terms_s']:.3f} s), pinocchio looped "
+              f"{pv['pinocchio_looped_s']:.3f} s -> pinocchio/ours = {pv['ratio_pinocchio_over_ours_MCG']:.1f}x "
+              f"(matrices), {pv['ratio_pinocchio_over_ours_chain_terms']:.1f}x (chain terms)")
+    return out
+
+
+if __name__ == "__main__":
+    main()
