@@ -111,7 +111,7 @@ def make_log_prob(X: np.ndarray, y: np.ndarray, model: str, mass_std_g: float = 
 
 
 def fit_session(session: Session, model: str = "linear", *, mass_std_g: float = 0.0,
-                n_walkers: int = 64, seed: int | None = 0, tau_multiple: float = 50.0,
+                n_walkers: int = 256, seed: int | None = 0, tau_multiple: float = 50.0,
                 max_steps: int = 50_000, min_steps: int = 300, moves: str = "de",
                 progress: bool = False) -> FitResult:
     """Fit ``session`` with emcee until converged (≥ ``tau_multiple`` τ) or ``max_steps``."""

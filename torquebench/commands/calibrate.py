@@ -20,7 +20,8 @@ def add_arguments(parser) -> None:
                         help="standard uncertainty of the applied masses (g): errors-in-load term")
     parser.add_argument("--sensor-id", default=None, help="override the CSV's sensor_id")
     parser.add_argument("--seed", type=int, default=0, help="sampler seed (reproducible fits)")
-    parser.add_argument("--walkers", type=int, default=64)
+    parser.add_argument("--walkers", type=int, default=256,
+                        help="emcee walkers (vectorized: many walkers cost little per step)")
     parser.add_argument("--max-steps", type=int, default=50_000,
                         help="give up (and refuse to store) if not converged by then")
     parser.add_argument("--no-report", action="store_true",
