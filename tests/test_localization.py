@@ -173,3 +173,29 @@ def test_stance_foot_with_poke_on_a_longer_chain():
     assert np.abs(loc.alpha[ok] - alpha[ok]).max() < 1e-6
     assert np.abs(loc.force_N[ok] - F[ok]).max() < 1e-6
     assert np.abs(loc.expected_force_N[ok, 0] - F_foot[ok]).max() < 1e-6
+
+
+def test_pipeline_stance_foot_is_not_a_collision(capsys, tmp_path):
+    """A standing leg (foot force only): with the foot expected, no collision and the foot force
+    is estimated; without it, the foot is (rightly) reported as an unexpected contact."""
+    from estimator.log import write_log
+    from estimator.synthetic import inverse_dynamics_log
+    from torquebench.cli import main
+
+    robot = paper_leg()
+    t = np.arange(400) * 1e-3
+    q = np.tile([0.0, 0.0, 0.0, 0.6, -1.2], (400, 1))
+    z = np.zeros_like(q)
+    F_foot = np.array([1.0, 8.0])
+    log, _ = inverse_dynamics_log(robot, t, q, z, z, 2, 1.0, F_foot, active=t >= 0.05)
+    est = estimate(robot, log, expected_contacts="foot")
+    assert not est.contact.any()
+    np.testing.assert_allclose(est.expected_force_N[t > 0.3, 0], np.tile(F_foot, ((t > 0.3).sum(), 1)),
+                               atol=1e-6)
+    plain = estimate(robot, log)
+    assert plain.contact[t > 0.1].all() and np.all(plain.link[t > 0.1] == 2)
+    np.testing.assert_allclose(plain.alpha[t > 0.3], 1.0, atol=1e-6)
+    path = tmp_path / "stand.csv"
+    write_log(log, path)
+    assert main(["estimate", str(path), "--stance-foot", "--json"]) == 0
+    assert '"contact_samples": 0' in capsys.readouterr().out
