@@ -25,7 +25,7 @@ from flexure.fem import stiffness_matrix
 from flexure.mesh import SLIVER_DIHEDRAL_DEG, element_shape_metrics
 
 #: "auto" uses the direct solver up to this many unknowns, AMG-CG above.
-DIRECT_MAX_DOFS = 60_000
+DIRECT_MAX_DOFS = 30_000
 NU_LOCKING = 0.49
 COND_LIMIT = 1e12
 RESIDUAL_LIMIT = 1e-6
@@ -91,10 +91,11 @@ def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, m
 
         Ab = A.tobsr(blocksize=(3, 3)) if n % 3 == 0 else A
         ml = pyamg.smoothed_aggregation_solver(
-            Ab, B=B, symmetry="hermitian", strength=("symmetric", {"theta": 0.0}),
-            smooth=("energy", {"krylov": "cg", "maxiter": 2}), max_coarse=500, coarse_solver="splu",
-            presmoother=("block_gauss_seidel", {"sweep": "symmetric"}),
-            postsmoother=("block_gauss_seidel", {"sweep": "symmetric"}))
+            Ab, B=B, symmetry="hermitian", strength=("symmetric", {"theta": 0.1}),
+            smooth=("jacobi", {"omega": 4.0 / 3.0}), improve_candidates=None,
+            presmoother=("block_gauss_seidel", {"sweep": "forward"}),
+            postsmoother=("block_gauss_seidel", {"sweep": "backward"}),
+            max_coarse=1000, coarse_solver="splu")
         info["setup_s"] = time.perf_counter() - t0
         res: list = []
         q = ml.solve(b, tol=rtol, accel="cg", maxiter=maxiter, residuals=res)
