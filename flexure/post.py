@@ -102,12 +102,14 @@ def nodal_stresses(mesh: Mesh, u, material) -> np.ndarray:
     return stress_from_strain(nodal_strains(mesh, u), material)
 
 
-def locate(mesh: Mesh, points, tol: float = 1e-6, n_candidates: int = 24):
+def locate(mesh: Mesh, points, tol: float = 0.05, n_candidates: int = 24):
     """Containing element (k,) and reference coordinates ξ (k,3) of each point.
 
     Candidates: elements with the nearest centroids (KD-tree); the one maximising the smallest
     barycentric coordinate wins. For curved (isoparametric) P2 elements ξ is refined by Newton on
-    x(ξ) = Σ N_a(ξ) X_a. Points outside the mesh by more than ``tol`` (relative) are an InputError.
+    x(ξ) = Σ N_a(ξ) X_a. A point up to ``tol`` (in barycentric units, i.e. a fraction of the
+    element's size) outside its nearest element is evaluated there by extrapolation — a surface
+    gauge on a faceted (P1) model of a curved face; farther out is an InputError.
     """
     from scipy.spatial import cKDTree
 
@@ -129,16 +131,17 @@ def locate(mesh: Mesh, points, tol: float = 1e-6, n_candidates: int = 24):
     elem = cand[rows, best]
     xi = lam[rows, best]
     score = minbary[rows, best]
-    miss = np.flatnonzero(score < -tol)
+    miss = np.flatnonzero(score < -1e-9)
     for i in miss:          # rare fallback: brute force over all elements, vectorized
         l_all = np.einsum("mij,mj->mi", Tinv, pts[i] - V[:, 0])
         mb = np.minimum(l_all.min(axis=1), 1.0 - l_all.sum(axis=1))
         j = int(np.argmax(mb))
-        elem[i], xi[i], score[i] = j, l_all[j], mb[j]
+        if mb[j] > score[i]:
+            elem[i], xi[i], score[i] = j, l_all[j], mb[j]
     if mesh.order == 2:
         xi = _newton_xi(mesh, elem, xi, pts)
         score = np.minimum(xi.min(axis=1), 1.0 - xi.sum(axis=1))
-    bad = np.flatnonzero(score < -max(tol, 1e-3) if mesh.order == 2 else score < -tol)
+    bad = np.flatnonzero(score < -tol)
     if len(bad):
         raise InputError(f"locate: point {int(bad[0])} {pts[bad[0]].tolist()} lies outside the mesh")
     return elem, xi

@@ -1,0 +1,148 @@
+"""FEM convergence report: error against DOFs and run time, P1/P2 × mesh size × solver.
+
+Problem with a known answer: hollow circular shaft (r_i = 10 mm, r_o = 20 mm, L = 100 mm,
+6061-T6) fixed at z = 0, torque T = 10 N·m on the end face through a kinematic rigid coupling.
+Exact: stiffness k = GJ/L, J = π(r_o⁴ − r_i⁴)/2; surface strain along ±45° ε = ±T r_o/(2GJ).
+Writes reports/fem_convergence.md and reports/fem_convergence.png.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+RI, RO, LEN, TORQUE = 0.010, 0.020, 0.100, 10.0
+#: (order, k) → structured mesh (n_r, n_θ, n_z) = (k, 12k, 4k) (P1) / (k, 8k, 3k) (P2 curved)
+P1_LEVELS = (1, 2, 3, 4, 5)
+P2_LEVELS = (1, 2, 3, 4)
+DIRECT_LIMIT_DOFS = 40_000
+
+
+def torsion_case(order: int, k: int, method: str):
+    """Solve the shaft on refinement level k; returns a result row (dict)."""
+    from flexure.bc import Problem
+    from flexure.fem import stiffness_matrix
+    from flexure.material import ALUMINIUM_6061_T6 as MAT
+    from flexure.mesh import cylinder_mesh
+    from flexure.post import directional_strain, strain_at
+    from flexure.solve import solve
+
+    n = (k, 12 * k, 4 * k) if order == 1 else (k, 8 * k, 3 * k)
+    t0 = time.perf_counter()
+    m = cylinder_mesh(RI, RO, LEN, *n, order=order)
+    p = Problem(m, MAT).fix(m.select_nodes(lambda x: x[:, 2] < 1e-12))
+    p.couple_rigid(m.select_nodes(lambda x: x[:, 2] > LEN - 1e-12), (0, 0, LEN), moment_Nm=(0, 0, TORQUE))
+    t1 = time.perf_counter()
+    K = stiffness_matrix(m, MAT)
+    s = solve(p, method=method, K=K, rtol=1e-10, condition_estimate=False)
+    ang = np.linspace(0, 2 * np.pi, 16, endpoint=False) + 0.05
+    r_ev = RO * math.cos(math.pi / n[1])        # inside the outer facets of the P1 polygon
+    pts = np.stack([r_ev * np.cos(ang), r_ev * np.sin(ang), np.full_like(ang, LEN / 2 + 1e-4)], axis=1)
+    d45 = np.stack([-np.sin(ang), np.cos(ang), np.ones_like(ang)], axis=1)
+    e45 = directional_strain(strain_at(m, s.u, pts), d45)
+    total = time.perf_counter() - t1
+    G, J = MAT.shear_modulus_Pa, math.pi / 2 * (RO ** 4 - RI ** 4)
+    k_ex, e_ex = G * J / LEN, TORQUE * r_ev / (2 * G * J)
+    k_fe = TORQUE / s.reference[0]["theta_rad"][2]
+    return dict(order=order, level=k, mesh=f"{n[0]}×{n[1]}×{n[2]}", dofs=m.n_dofs,
+                solver="direct" if "direct" in s.info["solver"] else "amg-cg",
+                iterations=s.info["iterations"], residual=s.info["residual_norm"],
+                assemble_s=s.info["assemble_s"] if s.info["assemble_s"] > 0 else 0.0,
+                time_s=total, mesh_s=t1 - t0, stiffness_err=abs(k_fe / k_ex - 1),
+                strain_err=float(np.max(np.abs(e45 / e_ex - 1))), h_rel=1.0 / k)
+
+
+def study(p1_levels=P1_LEVELS, p2_levels=P2_LEVELS, progress=None) -> list[dict]:
+    rows = []
+    for order, levels in ((1, p1_levels), (2, p2_levels)):
+        for k in levels:
+            for method in ("direct", "amg"):
+                dofs = 3 * (k + 1) * 12 * k * (4 * k + 1) if order == 1 else 3 * (2 * k + 1) * 16 * k * (6 * k + 1)
+                if method == "direct" and dofs > DIRECT_LIMIT_DOFS:
+                    continue
+                rows.append(torsion_case(order, k, method))
+                if progress:
+                    progress(rows[-1])
+    return rows
+
+
+def observed_orders(rows: list[dict], key: str) -> dict:
+    """p = log(e₁/e₂)/log(h₁/h₂) between the two finest levels of each order (AMG rows)."""
+    out = {}
+    for order in (1, 2):
+        r = sorted([x for x in rows if x["order"] == order and x["solver"] == "amg-cg"], key=lambda x: x["level"])
+        if len(r) >= 2:
+            a, b = r[-2], r[-1]
+            out[order] = math.log(a[key] / b[key]) / math.log(a["h_rel"] / b["h_rel"])
+    return out
+
+
+def table(rows: list[dict]) -> str:
+    L = ["| order | mesh (n_r×n_θ×n_z) | DOFs | solver | iterations | residual | run time [s] | "
+         "stiffness error | ε₄₅ error (max of 16 points) |",
+         "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        L.append(f"| P{r['order']} | {r['mesh']} | {r['dofs']:,} | {r['solver']} | {r['iterations']} | "
+                 f"{r['residual']:.1e} | {r['time_s']:.2f} | {r['stiffness_err']:.2e} | {r['strain_err']:.2e} |")
+    return "\n".join(L)
+
+
+def plot(rows: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    style = {(1, "direct"): ("C0", "o", "--"), (1, "amg-cg"): ("C0", "s", "-"),
+             (2, "direct"): ("C3", "o", "--"), (2, "amg-cg"): ("C3", "s", "-")}
+    for (order, solver), (c, mk, ls) in style.items():
+        r = [x for x in rows if x["order"] == order and x["solver"] == solver]
+        if not r:
+            continue
+        lab = f"P{order} {solver}"
+        axes[0].loglog([x["dofs"] for x in r], [x["stiffness_err"] for x in r], ls, color=c, marker=mk, label=lab)
+        axes[0].loglog([x["dofs"] for x in r], [x["strain_err"] for x in r], ":", color=c, marker=mk, alpha=0.6)
+        axes[1].loglog([x["time_s"] for x in r], [x["stiffness_err"] for x in r], ls, color=c, marker=mk, label=lab)
+    axes[0].set_xlabel("DOFs"), axes[0].set_ylabel("relative error (solid: GJ/L stiffness, dotted: ε₄₅)")
+    axes[1].set_xlabel("assembly + solve + read-out time [s]"), axes[1].set_ylabel("stiffness relative error")
+    for ax in axes:
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle("Hollow shaft in torsion: error against DOFs and run time")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def build(out_dir: Path) -> list[Path]:
+    from torquebench.io import atomic_path, write_text_atomic
+
+    out_dir = Path(out_dir)
+    rows = study()
+    png = out_dir / "fem_convergence.png"
+    with atomic_path(png) as tmp:
+        plot(rows, Path(tmp))
+    ok = observed_orders(rows, "stiffness_err")
+    oe = observed_orders(rows, "strain_err")
+    L = ["# FEM convergence: hollow shaft in torsion\n",
+         "Generated by `torquebench report` (torquebench/report_fem.py). Hollow 6061-T6 shaft, "
+         f"r_i = {RI * 1e3:g} mm, r_o = {RO * 1e3:g} mm, L = {LEN * 1e3:g} mm, fixed at z = 0, "
+         f"T = {TORQUE:g} N·m through a kinematic rigid coupling of the end face. Exact: k = GJ/L, "
+         "ε₄₅ = T r/(2GJ), read with `strain_at` at 16 points at mid-length on r = r_o cos(π/n_θ) "
+         "(just inside the outer facets of the P1 polygon). "
+         "Structured meshes; P2 mid-edge nodes on the true circles (isoparametric), P1 polygonal. "
+         "Run time = assembly + constrained solve + read-out, on a shared 2-core machine.\n",
+         table(rows), "",
+         "Observed order of convergence in h (two finest levels, AMG rows): stiffness "
+         + ", ".join(f"P{o}: {p:.2f}" for o, p in ok.items()) + "; ε₄₅ "
+         + ", ".join(f"P{o}: {p:.2f}" for o, p in oe.items()) + ".\n",
+         "Expected: stiffness (an energy quantity) converges as h² for P1 and h⁴ for P2; point "
+         "strains as h for P1 and h² for P2 (plus isoparametric geometry error). At equal run time "
+         "P2 is orders of magnitude more accurate than P1, which is why the flexure pipeline uses P2.\n",
+         "![error against DOFs and time](fem_convergence.png)\n"]
+    md = write_text_atomic(out_dir / "fem_convergence.md", "\n".join(L))
+    return [md, png]
