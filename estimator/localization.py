@@ -57,6 +57,14 @@ class Localization:
         return np.asarray(REASONS, dtype=object)[self.reason]
 
 
+def _pick(arrays, index: np.ndarray) -> np.ndarray:
+    """arrays[index[t]][t] for a short list of (T,) arrays (a loop over links, not samples)."""
+    out = np.array(arrays[0], copy=True)
+    for c in range(1, len(arrays)):
+        np.copyto(out, arrays[c], where=index == c)
+    return out
+
+
 def _full(robot: Robot) -> Robot:
     return robot if robot.floating else robot.with_base(True)
 
@@ -147,12 +155,15 @@ def _fit_link(rT, w, jx, jz, c, N):
 
 def _joints_link_major(rob: Robot, q: np.ndarray):
     """Joint positions relative to the base origin, jx, jz of shape (N+1, T)."""
+    from estimator.observer import cumrows
+
     qT = np.ascontiguousarray(q.T)
-    phi = qT[2] + np.cumsum(qT[3:], axis=0)
+    phi = qT[2] + cumrows(qT[3:])
     l = rob.lengths_m[:, None]
-    zero = np.zeros((1, q.shape[0]))
-    jx = np.concatenate([zero, np.cumsum(l * np.sin(phi), axis=0)], axis=0)
-    jz = np.concatenate([zero, np.cumsum(-l * np.cos(phi), axis=0)], axis=0)
+    jx = np.zeros((rob.n_links + 1, q.shape[0]))
+    jz = np.zeros((rob.n_links + 1, q.shape[0]))
+    jx[1:] = cumrows(l * np.sin(phi))
+    jz[1:] = cumrows(-l * np.cos(phi))
     return jx, jz
 
 
@@ -213,14 +224,13 @@ def localize_dynamic(robot: Robot, q: np.ndarray, residual: np.ndarray, *, expec
         best, second = order[0], order[1]
     else:
         best = np.zeros(T, dtype=int)
-    take = lambda k, which: np.take_along_axis(np.stack([f[k] for f in fits]), which[None], 0)[0]  # noqa: E731
+    take = lambda k, which: _pick([f[k] for f in fits], which)   # noqa: E731  (N ≤ 32 links)
     alpha_free, alpha = take(0, best), take(1, best)
     force = np.stack([take(2, best), take(3, best)], axis=-1)
     cost = take(4, best)
     link = best + 1
-    sx, sz = np.take_along_axis(jx, best[None], 0)[0], np.take_along_axis(jz, best[None], 0)[0]
-    delta = np.stack([np.take_along_axis(jx, link[None], 0)[0] - sx,
-                      np.take_along_axis(jz, link[None], 0)[0] - sz], axis=-1)
+    sx, sz = _pick(jx[:-1], best), _pick(jz[:-1], best)
+    delta = np.stack([_pick(jx[1:], best) - sx, _pick(jz[1:], best) - sz], axis=-1)
     point = np.stack([q[:, 0] + sx, q[:, 1] + sz], axis=-1) + alpha[:, None] * delta
     reason = np.zeros(T, dtype=np.int8)
     reason[~((alpha_free >= -bound_tol) & (alpha_free <= 1 + bound_tol))] = OUT_OF_BOUNDS
@@ -228,10 +238,8 @@ def localize_dynamic(robot: Robot, q: np.ndarray, residual: np.ndarray, *, expec
         close = take(4, second) - cost < ambiguity_tol
         if close.any():
             a2 = take(1, second)
-            s2x = np.take_along_axis(jx, second[None], 0)[0]
-            s2z = np.take_along_axis(jz, second[None], 0)[0]
-            e2x = np.take_along_axis(jx, second[None] + 1, 0)[0]
-            e2z = np.take_along_axis(jz, second[None] + 1, 0)[0]
+            s2x, s2z = _pick(jx[:-1], second), _pick(jz[:-1], second)
+            e2x, e2z = _pick(jx[1:], second), _pick(jz[1:], second)
             p2 = np.stack([q[:, 0] + s2x + a2 * (e2x - s2x), q[:, 1] + s2z + a2 * (e2z - s2z)], -1)
             far = np.hypot(*(p2 - point).T) > position_tol_m
             reason[(reason == OK) & close & far] = AMBIGUOUS

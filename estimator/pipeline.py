@@ -96,6 +96,33 @@ def _expected(robot: Robot, expected_contacts):
     return tuple((int(k), float(a)) for k, a in expected_contacts)
 
 
+def _delayed(t: np.ndarray, q: np.ndarray, lag_s: float, dt_s: float) -> np.ndarray:
+    """q(t − lag) by linear interpolation (held at q(t_0) before the start), (T, n).
+
+    Uniform sampling: a shift by lag/Δt samples (two array passes); with gaps: ``np.interp``.
+    """
+    T = len(t)
+    steps = np.diff(t)
+    if np.all(np.abs(steps - dt_s) <= 0.01 * dt_s):
+        shift = lag_s / dt_s
+        i0 = int(np.floor(shift))
+        frac = shift - i0
+        def shifted(k):                               # q[max(i − k, 0)] by slicing
+            out = np.empty_like(q)
+            k = min(k, T)
+            out[:k] = q[0]
+            out[k:] = q[:T - k]
+            return out
+
+        a = shifted(i0)
+        b = shifted(i0 + 1)
+        b -= a
+        b *= frac
+        b += a
+        return b
+    return np.stack([np.interp(t - lag_s, t, q[:, k]) for k in range(q.shape[1])], axis=-1)
+
+
 def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=100.0,
              threshold: float = 0.06, debounce: int = 0, expected_contacts=None, *,
              discretization: str = "exact", row_weights=None, min_force_N: float = 0.05,
@@ -116,8 +143,9 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
         raise InputError(f"{getattr(log, 'source', 'log')}: {log.n_links} joints in the log but the "
                          f"robot '{robot.name}' has {robot.n_links} links")
     expected = _expected(robot, expected_contacts)
-    P, u = observer.momentum_terms(robot, log.q, log.dq, log.tau_meas)
-    r = observer.residual_offline(robot, log.t, log.q, log.dq, log.tau_meas, gain_per_s,
+    tau_meas = log.tau_meas                            # assembled once
+    P, u = observer.momentum_terms(robot, log.q, log.dq, tau_meas)
+    r = observer.residual_offline(robot, log.t, log.q, log.dq, tau_meas, gain_per_s,
                                   method=discretization, terms=(P, u))
     if expected:
         unexp, _ = loc_mod.explain_expected(robot, log.q, r, expected, row_weights)
@@ -127,6 +155,9 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     contact = detection.detect(rnorm, threshold, debounce)
     T = len(log.t)
     sel = np.flatnonzero(contact)
+    if sel.size == T:
+        sel = slice(None)                              # every sample: views, no copies
+    n_sel = T if isinstance(sel, slice) else sel.size
     link = np.zeros(T, dtype=int)
     alpha = np.full(T, np.nan)
     force = np.full((T, 2), np.nan)
@@ -140,11 +171,10 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
             dt = observer.regular_period(log.t)
             lag = float(np.mean(observer.lag_s(observer.gains(robot, gain_per_s), dt, discretization)))
             info["lag_compensation_s"] = lag
-            q_loc = np.stack([np.interp(log.t[sel] - lag, log.t, log.q[:, k])
-                              for k in range(log.q.shape[1])], axis=-1) if sel.size else log.q[sel]
+            q_loc = _delayed(log.t, log.q, lag, dt)[sel]
         else:
             q_loc = log.q[sel]
-        if sel.size:
+        if n_sel:
             res = loc_mod.localize_dynamic(robot, q_loc, r[sel], expected=expected,
                                            row_weights=row_weights, min_force_N=min_force_N,
                                            max_condition=max_condition)
@@ -154,22 +184,22 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
             if quiet.size:
                 expected_force[quiet] = loc_mod.explain_expected(robot, log.q[quiet], r[quiet],
                                                                  expected, row_weights)[1]
-            if sel.size:
+            if n_sel:
                 expected_force[sel] = res.expected_force_N
     else:
         thresholds = detection.noise_thresholds(r[:, 3:], ~contact, floor=isolation_floor)
         info["isolation_thresholds"] = thresholds.tolist()
-        if sel.size:
+        if n_sel:
             iso = detection.isolate(r[sel, 3:], thresholds)
-            res = loc_mod.localize_paper(robot, log.q[sel], log.dq[sel], log.tau_meas[sel], iso,
+            res = loc_mod.localize_paper(robot, log.q[sel], log.dq[sel], tau_meas[sel], iso,
                                          min_force_N=min_force_N, max_condition=max_condition)
-    if sel.size:
+    if n_sel:
         if method == "dynamic":       # the point at the current posture from the body coordinate α
             qs = log.q[sel]
             jx, jz = loc_mod._joints_link_major(observer.full_robot(robot), qs)
-            c0 = np.clip(res.link - 1, 0, robot.n_links - 1)[None]
-            sx, sz = np.take_along_axis(jx, c0, 0)[0], np.take_along_axis(jz, c0, 0)[0]
-            ex, ez = np.take_along_axis(jx, c0 + 1, 0)[0], np.take_along_axis(jz, c0 + 1, 0)[0]
+            c0 = np.clip(res.link - 1, 0, robot.n_links - 1)
+            sx, sz = loc_mod._pick(jx[:-1], c0), loc_mod._pick(jz[:-1], c0)
+            ex, ez = loc_mod._pick(jx[1:], c0), loc_mod._pick(jz[1:], c0)
             res.point_m = np.stack([qs[:, 0] + sx + res.alpha * (ex - sx),
                                     qs[:, 1] + sz + res.alpha * (ez - sz)], axis=-1)
         link[sel] = res.link
