@@ -120,3 +120,13 @@ def test_torque_without_lever_arm_is_an_input_error():
     assert np.allclose(m.mass_g([2.0]), 2.0)
     with pytest.raises(InputError, match="lever_arm_m"):
         m.torque([1.0])
+
+
+def test_shipped_calibration_verifies_against_its_session():
+    from torquebench.io import REPO_ROOT
+    d = REPO_ROOT / "calibration" / "data"
+    model = calibration.load(d / "paper_link1_cal.json", data_path=d / "paper_link1_session.csv")
+    assert model.sensor_id == "paper-link1" and model.info["diagnostics"]["converged"]
+    truth = np.loadtxt(d / "paper_link1_readings.csv", delimiter=",", skiprows=2)
+    tau = model.torque(truth[:, 1])
+    assert np.all(np.abs(tau - truth[:, 0]) < 4 * model.torque_std(truth[:, 1]))

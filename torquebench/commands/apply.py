@@ -16,6 +16,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--data", type=Path, default=None,
                         help="verify that the calibration was fitted to this session CSV (hash)")
     parser.add_argument("--force", action="store_true", help="replace an existing --out")
+    parser.add_argument("--coefficients-only", action="store_true",
+                        help="uncertainty from the coefficients alone (leave out the reading noise σ)")
 
 
 def run(args) -> int:
@@ -52,10 +54,11 @@ def run(args) -> int:
                              f"{direction[i]!r} is not 'load' or 'unload'")
     out = df.copy()
     out["mass_g"] = model.mass_g(vals, direction)
-    out["mass_std_g"] = model.mass_std_g(vals, direction)
+    noise = not args.coefficients_only
+    out["mass_std_g"] = model.mass_std_g(vals, direction, include_noise=noise)
     if model.lever_arm_m is not None:
         out["torque_Nm"] = model.torque(vals, direction)
-        out["torque_std_Nm"] = model.torque_std(vals, direction)
+        out["torque_std_Nm"] = model.torque_std(vals, direction, include_noise=noise)
     n_nan = int(np.count_nonzero(~np.isfinite(out["mass_g"].to_numpy(float))))
     buf = io.StringIO()
     out.to_csv(buf, index=False, float_format="%.9g")
