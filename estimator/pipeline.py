@@ -133,6 +133,10 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     expected_contacts: None, ``"foot"`` (last link, α = 1) or [(link, α), …]: contacts the robot
     expects; their forces are estimated jointly and never reported as a collision.
 
+    Flags (estimator.localization): |F| below max(min_force_N, 5 σ of the force rows without
+    contact) → small_force; two links fitting within max(1e-3, 2 · median ‖r‖ without contact)
+    at points > 5 mm apart → ambiguous_link; 1/|sin∠(F, link)| > max_condition → parallel_to_link.
+
     lag_compensation (``dynamic`` only): r lags τ_ext by ≈ 1/K (``observer.lag_s``), so r_k is
     paired with the posture q(t_k − lag) (linear interpolation) to solve for (F, α); α is a body
     coordinate, so the reported point is p_c + α Δ_c at the CURRENT posture.
@@ -166,6 +170,11 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     reason = np.full(T, loc_mod.NO_CONTACT, dtype=np.int8)
     expected_force = None
     info = {}
+    # noise-aware floors from the samples without contact (robust σ; noise-free logs keep the floors)
+    quiet = ~contact
+    force_floor = float(detection.noise_thresholds(r[:, :2], quiet, floor=min_force_N).max())
+    ambiguity_tol = max(1e-3, 2.0 * float(np.median(rnorm[quiet]))) if quiet.sum() >= 10 else 1e-3
+    info.update(min_force_N=force_floor, ambiguity_tol=ambiguity_tol)
     if method == "dynamic":
         if lag_compensation and T > 1:
             dt = observer.regular_period(log.t)
@@ -176,8 +185,8 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
             q_loc = log.q[sel]
         if n_sel:
             res = loc_mod.localize_dynamic(robot, q_loc, r[sel], expected=expected,
-                                           row_weights=row_weights, min_force_N=min_force_N,
-                                           max_condition=max_condition)
+                                           row_weights=row_weights, min_force_N=force_floor,
+                                           max_condition=max_condition, ambiguity_tol=ambiguity_tol)
         if expected:
             expected_force = np.full((T, len(expected), 2), np.nan)
             quiet = np.flatnonzero(~contact)
@@ -192,7 +201,7 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
         if n_sel:
             iso = detection.isolate(r[sel, 3:], thresholds)
             res = loc_mod.localize_paper(robot, log.q[sel], log.dq[sel], tau_meas[sel], iso,
-                                         min_force_N=min_force_N, max_condition=max_condition)
+                                         min_force_N=force_floor, max_condition=max_condition)
     if n_sel:
         if method == "dynamic":       # the point at the current posture from the body coordinate α
             qs = log.q[sel]
