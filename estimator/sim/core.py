@@ -50,6 +50,8 @@ def sample_times(config: SimConfig) -> np.ndarray:
 def _breakpoints(config: SimConfig) -> np.ndarray:
     pts = {0.0, config.duration_s}
     for p in config.pokes:
+        if p.t_off_s <= p.t_on_s:          # a zero-length window applies no force
+            continue
         pts.update(b for b in p.breakpoints() if 0.0 < b < config.duration_s)
     return np.array(sorted(pts))
 
@@ -75,28 +77,21 @@ def _adaptive(plant: Plant, config: SimConfig, ts: np.ndarray, zoh: bool):
         t_eval = ts[idx:hi]
 
         def f(t, yy, _h=tau_hold):
-            return plant.rhs(t, yy[None, :], tau_hold=_h)[0]
+            return plant.rhs1(t, yy, _h)
 
-        sol = solve_ivp(f, (a, b), y, method=config.integrator, t_eval=t_eval,
+        grid = np.append(t_eval[t_eval < b], b)
+        sol = solve_ivp(f, (a, b), y, method=config.integrator, t_eval=grid,
                         rtol=config.rtol, atol=config.atol)
-        if sol.status < 0:
-            raise InputError(f"scene '{config.name}': integrator {config.integrator} failed at "
-                             f"t = {sol.t[-1] if sol.t.size else a:.6g} s: {sol.message}")
+        if sol.status < 0 or not np.all(np.isfinite(sol.y)):
+            raise InputError(f"scene '{config.name}': integrator {config.integrator} failed between "
+                             f"t = {a:.6g} and {b:.6g} s: {sol.message}")
         if t_eval.size:
-            Y[idx:hi] = sol.y.T
+            Y[idx:hi] = sol.y[:, :t_eval.size].T
             if zoh:
                 held[idx:hi] = tau_hold
         idx = hi
-        y = _end_state(f, a, b, y, sol, config)
+        y = sol.y[:, -1]
     return Y, held
-
-
-def _end_state(f, a, b, y0, sol, config):
-    """State at b: the last t_eval point if it is b, otherwise one more dense solve."""
-    if sol.t.size and abs(sol.t[-1] - b) < 1e-12:
-        return sol.y[:, -1]
-    sol2 = solve_ivp(f, (a, b), y0, method=config.integrator, rtol=config.rtol, atol=config.atol)
-    return sol2.y[:, -1]
 
 
 def _rk4(plant: Plant, config: SimConfig, ts: np.ndarray, zoh: bool, y0=None):
@@ -116,6 +111,12 @@ def _rk4(plant: Plant, config: SimConfig, ts: np.ndarray, zoh: bool, y0=None):
     Y = np.empty((len(ts),) + y.shape)
     held = np.full((len(ts), y.shape[0], plant.n_links), np.nan)
     n_steps = (len(ts) - 1) * per_sample
+    eps = 1e-9 * h
+    if y.shape[0] == 1:                       # one state: the plain-float right-hand side
+        def rhs(t, yy, hold):
+            return plant.rhs1(t, yy[0], hold)[None, :]
+    else:
+        rhs = plant.rhs
     tau_hold = None
     Y[0] = y
     for k in range(n_steps):
@@ -125,10 +126,12 @@ def _rk4(plant: Plant, config: SimConfig, ts: np.ndarray, zoh: bool, y0=None):
             tau_hold = plant.control(t, q, dq)
         if zoh and k % per_sample == 0:
             held[k // per_sample] = tau_hold
-        k1 = plant.rhs(t, y, tau_hold)
-        k2 = plant.rhs(t + h / 2, y + h / 2 * k1, tau_hold)
-        k3 = plant.rhs(t + h / 2, y + h / 2 * k2, tau_hold)
-        k4 = plant.rhs(t + h, y + h * k3, tau_hold)
+        # end stages nudged inside the step by ε so that a force switching on the step grid is
+        # seen with its in-step value at every stage (else an O(h) error at each switch)
+        k1 = rhs(t + eps, y, tau_hold)
+        k2 = rhs(t + h / 2, y + h / 2 * k1, tau_hold)
+        k3 = rhs(t + h / 2, y + h / 2 * k2, tau_hold)
+        k4 = rhs(t + h - eps, y + h * k3, tau_hold)
         y = y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         if not np.all(np.isfinite(y)):
             raise InputError(f"scene '{config.name}': RK4 diverged at t = {t:.6g} s")

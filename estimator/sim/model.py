@@ -36,6 +36,8 @@ class Plant:
         self.pokes = tuple(p for p in config.pokes)
         self._a = dyn._angular_rows(self.full_robot)
         self.nfev = 0
+        from estimator.sim.fast import FastRHS
+        self.rhs1 = FastRHS(self)   # one state, plain floats: what the integrators call
 
     # ---------------------------------------------------------------- rigid-body terms
     def terms(self, q, dq):
