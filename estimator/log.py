@@ -28,6 +28,7 @@ class SensorLog:
     source: str = "log"         # file name, for messages
     valid_mask: np.ndarray | None = None      # over the file's data rows: False = skipped (NaN/inf)
     skipped_lines: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    expected_contacts: tuple = ()   # ((link, α), …) the robot expects, e.g. ((N, 1.0),) stance foot
 
     @property
     def n_skipped(self) -> int:

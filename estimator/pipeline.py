@@ -86,7 +86,7 @@ class ContactEstimate:
 
 
 def _expected(robot: Robot, expected_contacts):
-    if expected_contacts is None or expected_contacts is False:
+    if expected_contacts is None or expected_contacts is False or len(expected_contacts) == 0:
         return ()
     if isinstance(expected_contacts, str):
         if expected_contacts != "foot":
@@ -130,8 +130,9 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
              lag_compensation: bool = True) -> ContactEstimate:
     """Run observer, detection and localization on a whole log (offline, vectorized).
 
-    expected_contacts: None, ``"foot"`` (last link, α = 1) or [(link, α), …]: contacts the robot
-    expects; their forces are estimated jointly and never reported as a collision.
+    expected_contacts: None (→ ``log.expected_contacts``), ``"foot"`` (last link, α = 1) or
+    [(link, α), …]: contacts the robot expects; their forces are estimated jointly and never
+    reported as a collision. ``False`` or ``()`` forces none.
 
     Flags (estimator.localization): |F| below max(min_force_N, 5 σ of the force rows without
     contact) → small_force; two links fitting within max(1e-3, 2 · median ‖r‖ without contact)
@@ -146,6 +147,8 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     if log.n_links != robot.n_links:
         raise InputError(f"{getattr(log, 'source', 'log')}: {log.n_links} joints in the log but the "
                          f"robot '{robot.name}' has {robot.n_links} links")
+    if expected_contacts is None:
+        expected_contacts = getattr(log, "expected_contacts", ()) or None
     expected = _expected(robot, expected_contacts)
     tau_meas = log.tau_meas                            # assembled once
     P, u = observer.momentum_terms(robot, log.q, log.dq, tau_meas)
