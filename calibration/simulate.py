@@ -54,40 +54,12 @@ class SessionSpec:
     chain_overrides: dict = field(default_factory=dict)
 
 
-class _StandInChain:
-    """Linear bridge + ADC used only if ``bridge.chain`` is not importable.
-
-    volts = S τ; counts = clip(round((volts + n)/LSB)), n ~ N(0, σ_V), σ_V = FSR/2^ENOB
-    (TI effective resolution), FSR = 2 V_ref = 5 V, 24 bits, ENOB = 16.
-    """
-
-    def __init__(self, sensitivity_V_per_Nm: float, v_ref: float = 2.5, bits: int = 24,
-                 enob: float = 16.0):
-        self.S = sensitivity_V_per_Nm
-        self.lsb_V = 2 * v_ref / 2**bits
-        self.noise_V = 2 * v_ref / 2**enob
-        self.max_counts = 2 ** (bits - 1) - 1
-        self.noise_std_Nm = self.noise_V / abs(self.S)
-
-    def volts(self, torque_Nm):
-        return self.S * np.asarray(torque_Nm, float)
-
-    def counts(self, torque_Nm, rng):
-        v = self.volts(torque_Nm)
-        c = np.round((v + rng.normal(0.0, self.noise_V, np.shape(v))) / self.lsb_V)
-        return np.clip(c, -self.max_counts - 1, self.max_counts).astype(np.int64)
-
-    def torque_from_counts(self, counts):
-        return np.asarray(counts, float) * self.lsb_V / self.S
-
-
 def sensor_chain(sensitivity_V_per_Nm: float, **overrides):
-    """The bridge chain with |sensitivity| V per N·m (``bridge.chain.paper_chain`` if present)."""
+    """``bridge.chain.paper_chain`` with strain per N·m scaled to |sensitivity| V per N·m
+    (bridge output at zero torque, probed numerically so any bridge arrangement works)."""
+    from bridge.chain import paper_chain
+
     S = abs(sensitivity_V_per_Nm)
-    try:
-        from bridge.chain import paper_chain
-    except ImportError:
-        return _StandInChain(S)
     probe_strain = 1e-4
     probe = paper_chain(strain_per_Nm=probe_strain, **overrides)
     dv = float(np.diff(np.asarray(probe.bridge_volts(np.array([0.0, 1e-3]))))[0]) / 1e-3

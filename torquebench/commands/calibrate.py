@@ -89,7 +89,10 @@ def run(args) -> int:
         raise InputError(f"{args.data}: refusing to store an unconverged fit: {fit.reason} "
                          "(--max-steps)")
     payload = calibration_payload(fit, session, provenance={
-        "command": "torquebench calibrate " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else ""})
+        "command": "torquebench calibrate",
+        "args": {"data": str(args.data), "model": args.model, "mass_std_g": args.mass_std_g,
+                 "seed": args.seed, "walkers": args.walkers, "max_steps": args.max_steps,
+                 "lever_arm_m": args.lever_arm_m}})
     written = save(payload, args.out, force=args.force)
     versioned = written != args.out
     if versioned:
