@@ -70,7 +70,8 @@ class Session:
                    str(int(self.repeat[i]))]
             if self.lever_arm_m is not None:
                 row.append(f"{self.lever_arm_m:.9g}")
-            row += [f"{self.timestamp_s[i]:.6f}", self.sensor_id]
+            ts = self.timestamp_s[i]
+            row += [f"{ts:.6f}" if np.isfinite(ts) else "", self.sensor_id]
             lines.append(",".join(row))
         return "\n".join(lines) + "\n"
 
@@ -100,7 +101,7 @@ def read_session(path, *, reading_unit: str | None = None) -> Session:
         raw = path.read_bytes()
     except IsADirectoryError:
         raise InputError(f"{path}: is a directory, not a CSV file") from None
-    text = raw.decode("utf-8", errors="replace")
+    text = raw.decode("utf-8", errors="replace").lstrip("\ufeff")
     lines = text.splitlines()
     n_meta = 0
     while n_meta < len(lines) and lines[n_meta].startswith("#"):
@@ -127,15 +128,17 @@ def read_session(path, *, reading_unit: str | None = None) -> Session:
     if len(df) == 0:
         raise InputError(f"{path}: no data rows after the header")
 
-    def numeric(col, *, integer=False):
+    def numeric(col, *, integer=False, allow_empty=False):
         s = df[col].str.strip()
         vals = pd.to_numeric(s, errors="coerce").to_numpy(dtype=float)
         bad = ~np.isfinite(vals)
+        if allow_empty:
+            bad &= (s != "").to_numpy()
         if bad.any():
             i = int(np.argmax(bad))
             raise InputError(f"{path}: line {lineno[i]}: column {col!r}: "
                              f"{s.iloc[i]!r} is not a finite number")
-        if integer and np.any(vals != np.round(vals)):
+        if integer and np.any(vals[~bad] != np.round(vals[~bad])):
             i = int(np.argmax(vals != np.round(vals)))
             raise InputError(f"{path}: line {lineno[i]}: column {col!r}: "
                              f"{s.iloc[i]!r} is not an integer")
@@ -160,7 +163,8 @@ def read_session(path, *, reading_unit: str | None = None) -> Session:
         direction = np.full(n, "load")
     repeat = numeric("repeat", integer=True).astype(int) if "repeat" in df.columns \
         else np.zeros(n, int)
-    timestamp = numeric("timestamp") if "timestamp" in df.columns else np.full(n, np.nan)
+    timestamp = (numeric("timestamp", allow_empty=True) if "timestamp" in df.columns
+                 else np.full(n, np.nan))
     lever = None
     if "lever_arm_m" in df.columns:
         arm = numeric("lever_arm_m")

@@ -194,3 +194,12 @@ def test_sensor_beats_motor_current_on_loading_trajectory():
     assert s["r2"] > 0.999 and s["mae_Nm"] < 0.0286          # at least as good as the paper's
     assert m["r2"] < s["r2"] and m["mae_Nm"] > 5 * s["mae_Nm"]
     assert 0 < r["truth_Nm"].min() + 1e-9 and r["truth_Nm"].max() <= 2.0 + 1e-9
+
+
+def test_session_with_missing_timestamps_and_bom_round_trips(tmp_path):
+    p = tmp_path / "s.csv"
+    p.write_text("\ufeffmass_g,reading,timestamp\n0,1.0,\n100,2.0,3.5\n")
+    s = read_session(p)
+    assert np.isnan(s.timestamp_s[0]) and s.timestamp_s[1] == 3.5
+    r = read_session(write_session(s, tmp_path / "t.csv"))
+    assert np.isnan(r.timestamp_s[0]) and r.timestamp_s[1] == 3.5

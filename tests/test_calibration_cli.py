@@ -145,3 +145,10 @@ def test_acquire_guided_writes_a_loadable_session(device, tmp_path, capsys, monk
 def test_acquire_bad_port_exit_2(tmp_path):
     p = _run("acquire", "--port", str(tmp_path / "nope"), "--out", str(tmp_path / "x.raw"))
     assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1 and "--port" in p.stderr
+
+
+def test_apply_bad_reading_names_the_file_line(tmp_path):
+    cal = REPO_ROOT / "calibration" / "data" / "paper_link1_cal.json"
+    (tmp_path / "r.csv").write_text("# reading_unit=mV\nreading\n6\nseven\n")
+    p = _run("apply", str(cal), str(tmp_path / "r.csv"))
+    assert p.returncode == 2 and "line 4: column 'reading': 'seven'" in p.stderr, p.stderr

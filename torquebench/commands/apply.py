@@ -32,17 +32,23 @@ def run(args) -> int:
 
     model = calibration.load(args.calibration, data_path=args.data)
     try:
-        df = pd.read_csv(args.readings, dtype=str, keep_default_na=False, comment="#")
+        with open(args.readings, encoding="utf-8", errors="replace") as fh:
+            n_comment = 0
+            for line in fh:
+                if not line.startswith("#"):
+                    break
+                n_comment += 1
+        df = pd.read_csv(args.readings, dtype=str, keep_default_na=False, skiprows=n_comment)
     except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         raise InputError(f"{args.readings}: not a valid CSV: {str(exc).splitlines()[0]}") from None
     df.columns = [c.strip() for c in df.columns]
     if args.column not in df.columns:
-        raise InputError(f"{args.readings}: line 1: missing column {args.column!r}")
+        raise InputError(f"{args.readings}: line {n_comment + 1}: missing column {args.column!r}")
     vals = pd.to_numeric(df[args.column].str.strip(), errors="coerce").to_numpy(float)
     bad = ~np.isfinite(vals)
     if bad.any():
         i = int(np.argmax(bad))
-        raise InputError(f"{args.readings}: line {i + 2}: column {args.column!r}: "
+        raise InputError(f"{args.readings}: line {i + n_comment + 2}: column {args.column!r}: "
                          f"{df[args.column].iloc[i]!r} is not a finite number")
     direction = None
     if "direction" in df.columns and model.model == "hysteresis":
@@ -50,7 +56,7 @@ def run(args) -> int:
         badd = ~np.isin(direction, ["load", "unload"])
         if badd.any():
             i = int(np.argmax(badd))
-            raise InputError(f"{args.readings}: line {i + 2}: column 'direction': "
+            raise InputError(f"{args.readings}: line {i + n_comment + 2}: column 'direction': "
                              f"{direction[i]!r} is not 'load' or 'unload'")
     out = df.copy()
     out["mass_g"] = model.mass_g(vals, direction)
