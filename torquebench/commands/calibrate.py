@@ -124,9 +124,10 @@ def run(args) -> int:
         return 0
     unit = session.reading_unit
     print(f"{session.sensor_id}: {fit.model} fit of {len(session)} readings ({args.data})")
+    ref = "exact" if args.mass_std_g == 0 else "exact without errors-in-load"
     for n in fit.coef_names:
         print(f"  {n:<11s}= {post[n]['mean']:.6g} ± {post[n]['std']:.2g}  "
-              f"(exact {fit.exact.beta[list(fit.coef_names).index(n)]:.6g} ± "
+              f"({ref} {fit.exact.beta[list(fit.coef_names).index(n)]:.6g} ± "
               f"{fit.exact.std[list(fit.coef_names).index(n)]:.2g})")
     print(f"  sigma      = {post['sigma']['mean']:.4g} {unit};  R² = {fit.exact.r2:.5f}")
     print(f"  τ = {fit.tau_max:.1f} steps, {fit.n_steps} steps × {fit.n_walkers} walkers, "
