@@ -9,7 +9,8 @@ p = p_c + α Δ_c, Δ_c = p_{c+1} − p_c, and generalized force τ_ext = J(α)�
     rows q_k, k > c:     0                                        (o_θ = o_{q_1} = p_1, o_{q_k} = p_k)
 
 ``dynamic``: the observer residual r ≈ τ_ext on every row. For each link, (F_x, F_z, μ) is a
-weighted LINEAR least-squares problem (3 unknowns, closed-form 3×3 solve per sample); α =
+weighted LINEAR least-squares problem (3 unknowns, closed-form 3×3 solve per sample; the
+identical θ and q_1 rows are merged exactly first); α =
 μ/(Δ_c × F); if α ∉ [0, 1] it is clipped and F re-fitted. The link with the smallest residual wins.
 With expected contacts (a stance foot) their forces join the unknowns (batched SVD solve).
 
@@ -89,16 +90,30 @@ def _moment_arms(joints: np.ndarray, c: int) -> np.ndarray:
     return joints[:, c - 1:c] - origins
 
 
-def _fit_link(rT, w, jx, jz, c, N):
+def _merge_hip_rows(rT, w):
+    """Rows θ and q_1 share the origin p_1 (identical columns): merge them into one row with
+    weight w_θ + w_q1 and the weighted-mean target; the dropped part of the cost is the constant
+    κ = w_θ w_q1 / (w_θ + w_q1) (r_θ − r_q1)². Returns rows [x, z, hip, q_2…q_N], weights, κ."""
+    W0 = w[2] + w[3]
+    red = np.empty((rT.shape[0] - 1, rT.shape[1]))
+    red[:2] = rT[:2]
+    red[2] = (w[2] * rT[2] + w[3] * rT[3]) / W0
+    red[3:] = rT[4:]
+    kappa = (w[2] * w[3] / W0) * (rT[2] - rT[3]) ** 2
+    return red, np.r_[w[:2], W0, w[4:]], kappa
+
+
+def _fit_link(rT, w, jx, jz, c, N, kappa):
     """Weighted LS of (F, μ) on link c (1-based), then α clipped to [0, 1] and F re-fitted there.
 
-    Link-major layout: rT (n, T), joints jx, jz (N+1, T) relative to the base origin.
+    Link-major layout: rT (N+2, T) = rows [x, z, hip (θ and q_1 merged), q_2…q_N] with weights w
+    and merge constant κ (``_merge_hip_rows``); joints jx, jz (N+1, T) relative to the base origin.
     Returns alpha_free, alpha, Fx, Fz, cost (each (T,)), cost = sqrt(Σ w e²) over all rows.
     """
-    sel = np.r_[0, 0:c]                                  # origins of rows θ, q_1…q_c
-    ax = jx[c - 1] - jx[sel]                             # a_k = p_c − o_k, (c+1, T)
+    sel = np.r_[0:c]                                     # origins p_1 (hip), p_2 … p_c
+    ax = jx[c - 1] - jx[sel]                             # a_k = p_c − o_k, (c, T)
     az = jz[c - 1] - jz[sel]
-    rows = np.r_[2, 3:3 + c]
+    rows = np.r_[2:2 + c]
     wk = w[rows][:, None]
     rk = rT[rows]
     wx, wz = w[0], w[1]
@@ -147,9 +162,9 @@ def _fit_link(rT, w, jx, jz, c, N):
     ex = rT[0] - Fx
     ez = rT[1] - Fz
     ek = rk - (ax * Fz - az * Fx + mu)
-    cost2 = wx * ex * ex + wz * ez * ez + (wk * ek * ek).sum(0)
+    cost2 = wx * ex * ex + wz * ez * ez + (wk * ek * ek).sum(0) + kappa
     if c < N:
-        cost2 += (w[3 + c:, None] * rT[3 + c:] ** 2).sum(0)
+        cost2 += (w[2 + c:, None] * rT[2 + c:] ** 2).sum(0)
     return alpha_free, alpha, Fx, Fz, np.sqrt(np.maximum(cost2, 0.0))
 
 
@@ -216,8 +231,8 @@ def localize_dynamic(robot: Robot, q: np.ndarray, residual: np.ndarray, *, expec
         return _localize_with_expected(rob, q, r, w, list(expected), *args)
     T = len(q)
     jx, jz = _joints_link_major(rob, q)
-    rT = np.ascontiguousarray(r.T)
-    fits = [_fit_link(rT, w, jx, jz, c, N) for c in range(1, N + 1)]
+    rT, wr, kappa = _merge_hip_rows(np.ascontiguousarray(r.T), w)
+    fits = [_fit_link(rT, wr, jx, jz, c, N, kappa) for c in range(1, N + 1)]
     costs = np.stack([f[4] for f in fits])                            # (N, T)
     if N > 1:
         order = np.argsort(costs, axis=0, kind="stable")

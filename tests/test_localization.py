@@ -199,3 +199,34 @@ def test_pipeline_stance_foot_is_not_a_collision(capsys, tmp_path):
     write_log(log, path)
     assert main(["estimate", str(path), "--stance-foot", "--json"]) == 0
     assert '"contact_samples": 0' in capsys.readouterr().out
+
+
+def test_fast_least_squares_matches_generic_lstsq():
+    """The closed-form per-link fit (θ/q1 rows merged, cofactor solve) equals numpy lstsq of the
+    full weighted problem on noisy residuals, where α needs no clipping; costs agree too."""
+    robot = Robot(lengths_m=np.array([0.3, 0.25, 0.2]), com_m=np.array([0.12, 0.1, 0.15]),
+                  masses_kg=np.array([1.2, 0.7, 0.4]), inertias_kgm2=np.array([0.01, 0.005, 0.002]),
+                  base_mass_kg=2.0, base_inertia_kgm2=0.03)
+    rng = np.random.default_rng(9)
+    T, N = 40, 3
+    q = np.zeros((T, 6))
+    q[:, :3] = rng.normal(0, 0.05, (T, 3))
+    q[:, 3:] = rng.uniform(-2, 2, (T, 3))
+    r = rng.normal(0, 1, (T, 6))
+    w = rng.uniform(0.5, 3.0, 6)
+    jx, jz = L._joints_link_major(robot, q)
+    red, wr, kappa = L._merge_hip_rows(np.ascontiguousarray(r.T), w)
+    joints, _ = D.forward_kinematics(robot, q)
+    for c in range(1, N + 1):
+        alpha_free, alpha, Fx, Fz, cost = L._fit_link(red, wr, jx, jz, c, N, kappa)
+        A = L._link_columns(joints, c, N)
+        sw = np.sqrt(w)
+        for t in range(T):
+            x, *_ = np.linalg.lstsq(sw[:, None] * A[t], sw * r[t], rcond=None)
+            if 0 <= alpha_free[t] <= 1:
+                np.testing.assert_allclose([Fx[t], Fz[t]], x[:2], atol=1e-10)
+                e = sw * (r[t] - A[t] @ x)
+                np.testing.assert_allclose(cost[t], np.linalg.norm(e), atol=1e-10)
+            else:                              # clipped: cost can only be higher than the free one
+                e = sw * (r[t] - A[t] @ x)
+                assert cost[t] >= np.linalg.norm(e) - 1e-12
