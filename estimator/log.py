@@ -87,6 +87,29 @@ def _layout(columns: list[str], source: str, n_links: int | None):
     return n, floating
 
 
+def _read_text_values(path, source: str, names: list[str], cols: list[str]) -> np.ndarray:
+    """Slow path: parse as text to name the first non-numeric field (line, column)."""
+    import pandas as pd
+
+    try:
+        frame = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+        raise InputError(f"{source}: not a readable CSV log: {msg}") from None
+    frame.columns = names
+    values = np.empty((len(frame), len(cols)))
+    for j, col in enumerate(cols):
+        text = frame[col].str.strip()
+        num = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
+        bad = np.isnan(num) & ~text.str.lower().isin(["", "nan", "-nan", "+nan", "na", "null"]).to_numpy()
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise InputError(f"{source}: line {_line(i)}, column '{col}': "
+                             f"{frame[col].iloc[i]!r} is not a number")
+        values[:, j] = num
+    return values
+
+
 def read_log(path, robot=None, *, max_jitter: float = 0.01) -> SensorLog:
     """Read and validate a CSV sensor log (DESIGN.md format).
 
@@ -105,30 +128,27 @@ def read_log(path, robot=None, *, max_jitter: float = 0.01) -> SensorLog:
     if path.is_dir():
         raise InputError(f"{source}: is a directory, expected a CSV log")
     try:
-        frame = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
+        header = pd.read_csv(path, nrows=0, skipinitialspace=True)
     except pd.errors.EmptyDataError:
         raise InputError(f"{source}: empty file (expected a CSV header and samples)") from None
     except (pd.errors.ParserError, UnicodeDecodeError) as exc:
         msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
         raise InputError(f"{source}: not a readable CSV log: {msg}") from None
-    frame.columns = [str(c).strip() for c in frame.columns]
-    dup = frame.columns[frame.columns.duplicated()]
-    if len(dup):
+    names = [str(c).strip() for c in header.columns]
+    dup = [c for i, c in enumerate(names) if c in names[:i]]
+    if dup:
         raise InputError(f"{source}: line 1: column '{dup[0]}' appears twice")
-    n, floating = _layout(list(frame.columns), source, None if robot is None else robot.n_links)
+    n, floating = _layout(names, source, None if robot is None else robot.n_links)
     cols = log_columns(n, floating)
-    if len(frame) == 0:
+    try:                                        # fast path: every field numeric (or NaN/inf/empty)
+        frame = pd.read_csv(path, skipinitialspace=True, dtype=float, engine="c",
+                            na_values=["nan", "-nan", "+nan", "NaN", "NA", "null", ""])
+        frame.columns = names
+        values = frame[cols].to_numpy(dtype=float)
+    except (ValueError, TypeError, pd.errors.ParserError, UnicodeDecodeError):
+        values = _read_text_values(path, source, names, cols)
+    if len(values) == 0:
         raise InputError(f"{source}: no samples after the header")
-    values = np.empty((len(frame), len(cols)))
-    for j, col in enumerate(cols):
-        text = frame[col].str.strip()
-        num = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
-        bad = np.isnan(num) & ~text.str.lower().isin(["", "nan", "-nan", "+nan", "na", "null"]).to_numpy()
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            raise InputError(f"{source}: line {_line(i)}, column '{col}': "
-                             f"{frame[col].iloc[i]!r} is not a number")
-        values[:, j] = num
     valid = np.all(np.isfinite(values), axis=1)
     if not valid.any():
         raise InputError(f"{source}: every sample has a NaN/inf field; nothing to estimate")
@@ -193,6 +213,9 @@ def write_log(log: SensorLog, path) -> None:
     os.close(fd)
     try:
         log_to_frame(log).to_csv(tmp, index=False, float_format="%.17g")
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)          # mkstemp creates 0600; give the usual mode
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
