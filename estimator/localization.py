@@ -219,14 +219,20 @@ def localize_dynamic(robot: Robot, q: np.ndarray, residual: np.ndarray, *, expec
     args = (min_force_N, max_condition, ambiguity_tol, position_tol_m, bound_tol)
     chunk = 8192 if not expected else 4096          # cache-sized blocks (a loop over blocks)
     if len(q) > chunk:
-        parts = [localize_dynamic(rob, q[s:s + chunk], r[s:s + chunk], expected=expected,
-                                  row_weights=w, min_force_N=min_force_N,
-                                  max_condition=max_condition, ambiguity_tol=ambiguity_tol,
-                                  position_tol_m=position_tol_m, bound_tol=bound_tol)
-                 for s in range(0, len(q), chunk)]
-        return Localization(**{f: (None if getattr(parts[0], f) is None else
-                                   np.concatenate([getattr(p, f) for p in parts]))
-                               for f in Localization.__dataclass_fields__})
+        out = None
+        for s in range(0, len(q), chunk):
+            part = localize_dynamic(rob, q[s:s + chunk], r[s:s + chunk], expected=expected,
+                                    row_weights=w, min_force_N=min_force_N,
+                                    max_condition=max_condition, ambiguity_tol=ambiguity_tol,
+                                    position_tol_m=position_tol_m, bound_tol=bound_tol)
+            if out is None:                    # preallocate every field for the whole batch
+                out = {f: None if getattr(part, f) is None else
+                       np.empty((len(q),) + getattr(part, f).shape[1:], getattr(part, f).dtype)
+                       for f in Localization.__dataclass_fields__}
+            for f, arr in out.items():
+                if arr is not None:
+                    arr[s:s + chunk] = getattr(part, f)
+        return Localization(**out)
     if expected:
         return _localize_with_expected(rob, q, r, w, list(expected), *args)
     T = len(q)
