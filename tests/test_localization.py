@@ -230,3 +230,15 @@ def test_fast_least_squares_matches_generic_lstsq():
             else:                              # clipped: cost can only be higher than the free one
                 e = sw * (r[t] - A[t] @ x)
                 assert cost[t] >= np.linalg.norm(e) - 1e-12
+
+
+def test_chunked_batches_equal_single_batches():
+    """localize_dynamic splits long batches into cache-sized blocks: same answers as small calls."""
+    robot = paper_leg()
+    rng = np.random.default_rng(1)
+    q = rng.normal(size=(20000, 5))
+    r = rng.normal(size=(20000, 5))
+    whole = L.localize_dynamic(robot, q, r)
+    parts = [L.localize_dynamic(robot, q[s:s + 3000], r[s:s + 3000]) for s in range(0, 20000, 3000)]
+    for f in ("link", "alpha", "force_N", "point_m", "condition", "reason", "cost"):
+        np.testing.assert_array_equal(np.concatenate([getattr(p, f) for p in parts]), getattr(whole, f))
