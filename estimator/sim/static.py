@@ -38,10 +38,13 @@ def static_readings(robot: Robot, q_joint_rad, link, alpha, force_N):
     return gen[:, 3:], gen[:, :3]
 
 
-def static_hold_log(robot: Robot, q_joint_rad, link, alpha, force_N, sensors, hold_s: float):
+def static_hold_log(robot: Robot, q_joint_rad, link, alpha, force_N, sensors, hold_s: float,
+                    tare_s: float = 0.0):
     """A fixed-base log holding each point for ``hold_s`` (points one after the other).
 
-    Returns (SensorLog, truth dict t/link/alpha/Fx/Fz/px/pz, point index per sample (T,)).
+    ``tare_s`` > 0 prepends a no-load hold at the first posture (as on the bench: the estimator
+    learns its noise floors from contact-free samples). Returns (SensorLog, truth dict
+    t/link/alpha/Fx/Fz/px/pz, point index per sample (T,), −1 during the tare).
     """
     from estimator.log import SensorLog
     from estimator.sim.sensors import measure
@@ -51,9 +54,17 @@ def static_hold_log(robot: Robot, q_joint_rad, link, alpha, force_N, sensors, ho
     link = np.broadcast_to(np.asarray(link, int), (P,))
     alpha = np.broadcast_to(np.asarray(alpha, float), (P,))
     force = np.broadcast_to(np.asarray(force_N, float), (P, 2))
+    n_tare = int(round(tare_s * sensors.sample_rate_Hz))
+    if n_tare:
+        q_joint = np.concatenate([q_joint[:1], q_joint])
+        link = np.concatenate([[0], link])
+        alpha = np.concatenate([[np.nan], alpha])
+        force = np.concatenate([np.zeros((1, 2)), force])
     tau, W = static_readings(robot, q_joint, link, alpha, force)
     per = max(1, int(round(hold_s * sensors.sample_rate_Hz)))
-    idx = np.repeat(np.arange(P), per)
+    idx = np.repeat(np.arange(P), per) + (1 if n_tare else 0)
+    if n_tare:
+        idx = np.concatenate([np.zeros(n_tare, dtype=int), idx])
     T = idx.size
     t = np.arange(T) / sensors.sample_rate_Hz
     q = np.concatenate([np.zeros((T, 3)), q_joint[idx]], axis=1)
@@ -72,4 +83,4 @@ def static_hold_log(robot: Robot, q_joint_rad, link, alpha, force_N, sensors, ho
         px[rows], pz[rows] = pt[:, 0], pt[:, 1]
     truth = {"t": t, "link": link[idx].copy(), "alpha": np.where(link[idx] > 0, alpha[idx], np.nan),
              "Fx": force[idx, 0].copy(), "Fz": force[idx, 1].copy(), "px": px, "pz": pz}
-    return log, truth, idx
+    return log, truth, idx - (1 if n_tare else 0)

@@ -54,7 +54,8 @@ def run_scene(scene, seed=None, integrator=None, duration=None):
     pts = st.points
     log, truth, _ = static_hold_log(st.robot, np.array([p.q_rad for p in pts]),
                                     np.array([p.link for p in pts]), np.array([p.alpha for p in pts]),
-                                    np.array([p.force_N for p in pts]), sensors, st.hold_s)
+                                    np.array([p.force_N for p in pts]), sensors, st.hold_s,
+                                    tare_s=0.3)
     return log, truth, {"integrator": "static", "run_time_s": time.perf_counter() - start,
                         "points": len(pts)}
 

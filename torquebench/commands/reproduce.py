@@ -1,0 +1,51 @@
+"""`torquebench reproduce`: run the paper's scenes and write reports/paper_reproduction.md."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from torquebench.errors import InputError
+
+HELP = "reproduce the paper's Tables III-V, the posture sweep and Fig. 4 (writes reports/paper_reproduction.md)"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--scene", action="append", metavar="NAME",
+                        help="run only this shipped scene (repeatable), e.g. paper_fixed_link1")
+    parser.add_argument("--out-dir", type=Path, default=None,
+                        help="where to write the report (default: the repository's reports/)")
+    parser.add_argument("--no-stiffness", action="store_true",
+                        help="skip the integrator × scene stiffness table")
+    parser.add_argument("--quick", action="store_true",
+                        help="a reduced stiffness table (one scene, BDF and RK4, 0.2 s)")
+
+
+def run(args) -> int:
+    from torquebench.io import REPO_ROOT, print_json
+    from torquebench import report_reproduction as rr
+
+    names = args.scene or rr.ALL_SCENES
+    for n in names:
+        if n not in rr.ALL_SCENES:
+            raise InputError(f"--scene: unknown scene {n!r}; known: {', '.join(rr.ALL_SCENES)}")
+    out_dir = args.out_dir or REPO_ROOT / "reports"
+    if not Path(out_dir).is_dir():
+        raise InputError(f"--out-dir: {out_dir} is not a directory")
+    results = rr.run_reproduction(names, progress=True, quick=args.quick,
+                                  stiffness=not args.no_stiffness)
+    paths = rr.write(results, Path(out_dir))
+    summary = rr.summary(results)
+    summary["written"] = [str(p) for p in paths]
+    if args.json:
+        print_json(summary)
+    else:
+        print(f"wrote {paths[0]} (+ {len(paths) - 1} PNG)")
+        for name, tab in summary["tables"].items():
+            if "dynamic" in tab:
+                ours = 1e3 * tab["dynamic"]["mean"]["|p|"]
+                theirs = f"{1e3 * tab['paper']['mean'][5]:.1f} mm" if tab["paper"] else "–"
+                print(f"{name}: mean |p| error {ours:.2f} mm (ours, dynamic); paper: {theirs}")
+            elif isinstance(tab, dict) and "max_location_error_mm" in tab:
+                print(f"{name}: max location {tab['max_location_error_mm']:.2f} mm, "
+                      f"max force {tab['max_force_error_N']:.3f} N, {tab['flagged']} flagged")
+    return 0
