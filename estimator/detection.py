@@ -39,10 +39,10 @@ def noise_thresholds(joint_residual: np.ndarray, quiet: np.ndarray | None = None
                      floor: float = 0.01, n_sigma: float = 5.0) -> np.ndarray:
     """Per joint row: max(floor, n_σ σ_i), σ_i robust over the ``quiet`` (no-contact) samples."""
     r = np.asarray(joint_residual, float)
-    if quiet is not None and np.count_nonzero(quiet) >= 10:
-        r = r[quiet]
-    if len(r) < 10:
-        return np.full(r.shape[1], floor)
+    if quiet is not None:
+        r = r[np.asarray(quiet, bool)]
+    if len(r) < 10:                 # too few contact-free samples to say anything: the floor
+        return np.full(r.shape[1], float(floor))
     return np.maximum(floor, n_sigma * robust_sigma(r, axis=0))
 
 

@@ -140,3 +140,16 @@ def test_detection_debounce_and_isolation():
     r = np.array([[0.5, 0.0, 0.0], [0.5, 0.3, 0.0], [0.5, 0.3, 0.2], [0.0, 0.0, 0.0]])
     assert isolate(r, [0.1, 0.1, 0.1]).tolist() == [1, 2, 3, 0]
     assert isolate(r, [0.1, 0.1, 0.25]).tolist() == [1, 2, 2, 0]
+
+
+def test_noise_thresholds_use_only_contact_free_samples():
+    from estimator.detection import noise_thresholds
+
+    rng = np.random.default_rng(0)
+    r = rng.normal(0, 0.01, (1000, 2))
+    r[200:] += 5.0                                  # a contact on most samples
+    quiet = np.zeros(1000, bool)
+    quiet[:200] = True
+    thr = noise_thresholds(r, quiet, floor=0.001, n_sigma=5)
+    assert np.all(np.abs(thr - 0.05) < 0.01)        # 5 σ of the quiet part, not of the contact
+    assert noise_thresholds(r, np.zeros(1000, bool), floor=0.02).tolist() == [0.02, 0.02]
