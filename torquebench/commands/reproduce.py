@@ -43,7 +43,7 @@ def run(args) -> int:
         for name, tab in summary["tables"].items():
             if "dynamic" in tab:
                 ours = 1e3 * tab["dynamic"]["mean"]["|p|"]
-                theirs = f"{1e3 * tab['paper']['mean'][5]:.1f} mm" if tab["paper"] else "–"
+                theirs = f"{1e3 * tab['paper_table']['mean'][5]:.1f} mm" if tab["paper_table"] else "–"
                 print(f"{name}: mean |p| error {ours:.2f} mm (ours, dynamic); paper: {theirs}")
             elif isinstance(tab, dict) and "max_location_error_mm" in tab:
                 print(f"{name}: max location {tab['max_location_error_mm']:.2f} mm, "
