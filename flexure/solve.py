@@ -25,7 +25,7 @@ from flexure.fem import stiffness_matrix
 from flexure.mesh import SLIVER_DIHEDRAL_DEG, element_shape_metrics
 
 #: "auto" uses the direct solver up to this many unknowns, AMG-CG above.
-DIRECT_MAX_DOFS = 30_000
+DIRECT_MAX_DOFS = 12_000
 NU_LOCKING = 0.49
 COND_LIMIT = 1e12
 RESIDUAL_LIMIT = 1e-6
@@ -81,7 +81,7 @@ def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, m
     info: dict = dict(solver=method, dofs=int(n))
     t0 = time.perf_counter()
     if method == "direct":
-        lu = spla.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A")
+        lu = spla.splu(A.tocsc(), permc_spec="COLAMD")
         q = lu.solve(b)
         info["iterations"] = 1
         info["solver"] = "direct (SuperLU)"
