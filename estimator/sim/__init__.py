@@ -8,9 +8,9 @@ Entry points: :func:`simulate` (one scene, returns the sensor log and the truth)
 """
 
 from estimator.sim.config import Controller, Ground, Poke, Sensors, SimConfig
-from estimator.sim.core import SimResult, simulate
+from estimator.sim.core import SimResult, simulate, simulate_batch
 from estimator.sim.stability import StabilityReport, check_stability
 from estimator.sim.static import static_readings
 
-__all__ = ["Controller", "Ground", "Poke", "Sensors", "SimConfig", "SimResult", "simulate",
+__all__ = ["Controller", "Ground", "Poke", "Sensors", "SimConfig", "SimResult", "simulate", "simulate_batch",
            "StabilityReport", "check_stability", "static_readings"]
