@@ -130,6 +130,8 @@ class LinearSystem:
     B: np.ndarray
     n_nodes: int
     ref_slices: list
+    coarse: sp.csr_matrix | None = None     # P2 → P1-vertex interpolation in q-space (p-multigrid)
+    B_coarse: np.ndarray | None = None
 
 
 @dataclass
@@ -288,15 +290,71 @@ class Problem:
                 gq = np.zeros(A.shape[0]); gq[fixed_q] = g
                 b = b - A @ gq
             scale = float(np.mean(np.abs(A.diagonal()))) or 1.0
-            keep = np.ones(A.shape[0]); keep[fixed_q] = 0.0
-            Dk = sp.diags(keep)
-            A = (Dk @ A @ Dk).tocsr()
-            d = np.zeros(A.shape[0]); d[fixed_q] = scale
-            A = (A + sp.diags(d)).tocsr()
+            isfix = np.zeros(A.shape[0], dtype=bool); isfix[fixed_q] = True
+            rows_fixed = np.repeat(isfix, np.diff(A.indptr))
+            A.data[rows_fixed | isfix[A.indices]] = 0.0
+            A.setdiag(np.where(isfix, scale, A.diagonal()))
             A.eliminate_zeros()
             b = b.copy(); b[fixed_q] = scale * g
+        coarse, B_coarse = (None, None)
+        if mesh.order == 2:
+            coarse, B_coarse = self._coarse_interpolation(coupled, kin, B)
         return LinearSystem(A=A, b=np.asarray(b, dtype=np.float64), T=T, fixed_q=fixed_q,
-                            B=B, n_nodes=n, ref_slices=ref_slices)
+                            B=B, n_nodes=n, ref_slices=ref_slices, coarse=coarse, B_coarse=B_coarse)
+
+    def _coarse_interpolation(self, coupled: np.ndarray, kin: list, B: np.ndarray):
+        """q = I q₁: P2 unknowns from P1-vertex unknowns (mid-edge = mean of its two vertices).
+
+        Coarse unknowns: free (non-coupled) vertices' 3 dofs, then the 6 reference dofs of each
+        kinematic coupling (a coupled vertex moves as U − [d]× Θ). Used by the p-multigrid solver.
+        """
+        mesh = self.mesh
+        n = mesh.n_nodes
+        t = mesh.tets.astype(np.int64)
+        verts = np.unique(t[:, :4])
+        free = ~coupled
+        free_nodes = np.flatnonzero(free)
+        p = np.full(n, -1, dtype=np.int64); p[free_nodes] = np.arange(len(free_nodes))
+        cverts = verts[free[verts]]
+        c1 = np.full(n, -1, dtype=np.int64); c1[cverts] = np.arange(len(cverts))
+        n1 = 3 * len(cverts) + 6 * len(kin)
+        coupling_of = np.full(n, -1, dtype=np.int64)
+        for k, c in enumerate(kin):
+            coupling_of[c.nodes] = k
+        # parents: vertex → itself (weight 1); mid node → its edge's two vertices (½ each)
+        from flexure.mesh import TET_EDGES
+        mid = t[:, 4:].ravel()
+        ea = t[:, TET_EDGES[:, 0]].ravel(); eb = t[:, TET_EDGES[:, 1]].ravel()
+        mid, first = np.unique(mid, return_index=True)
+        child = np.concatenate([verts, mid, mid])
+        parent = np.concatenate([verts, ea[first], eb[first]])
+        w = np.concatenate([np.ones(len(verts)), np.full(2 * len(mid), 0.5)])
+        keep = free[child]
+        child, parent, w = child[keep], parent[keep], w[keep]
+        rows, cols, vals = [], [], []
+        fp = free[parent]
+        for i in range(3):      # free parent vertex: same component
+            rows.append(3 * p[child[fp]] + i); cols.append(3 * c1[parent[fp]] + i); vals.append(w[fp])
+        cp = ~fp                # coupled parent vertex: u = U − [d]× Θ of its coupling
+        if np.any(cp):
+            k = coupling_of[parent[cp]]
+            refs = np.array([c.ref_point_m for c in kin])
+            d = mesh.points[parent[cp]] - refs[k]
+            blk = np.zeros((cp.sum(), 3, 6)); blk[:, :, :3] = np.eye(3); blk[:, :, 3:] = -_skew(d)
+            blk *= w[cp][:, None, None]
+            base = 3 * len(cverts) + 6 * k
+            r = 3 * p[child[cp]][:, None, None] + np.arange(3)[None, :, None] + np.zeros((1, 1, 6), int)
+            cc = base[:, None, None] + np.arange(6)[None, None, :] + np.zeros((1, 3, 1), int)
+            nz = blk != 0
+            rows.append(r[nz]); cols.append(cc[nz]); vals.append(blk[nz])
+        nq = 3 * len(free_nodes) + 6 * len(kin)
+        for k in range(len(kin)):   # reference dofs map to themselves
+            rows.append(3 * len(free_nodes) + 6 * k + np.arange(6))
+            cols.append(3 * len(cverts) + 6 * k + np.arange(6)); vals.append(np.ones(6))
+        I = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(nq, n1))
+        sel = np.concatenate([(3 * p[cverts][:, None] + np.arange(3)).ravel(),
+                              3 * len(free_nodes) + np.arange(6 * len(kin))])
+        return I, B[sel]
 
     def expand(self, system: LinearSystem, q: np.ndarray) -> np.ndarray:
         """Nodal displacements (n,3) from the reduced solution q."""

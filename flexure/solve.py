@@ -1,6 +1,8 @@
 """Solve K u = f: sparse direct (SuperLU) for small models, PyAMG smoothed aggregation + CG for large.
 
-The AMG hierarchy uses the six rigid-body modes as near-nullspace (B) on 3×3 nodal blocks.
+AMG: on P1 systems PyAMG smoothed aggregation (six rigid-body modes as near-nullspace B, 3×3
+nodal blocks) preconditions CG; on P2 systems a two-level p-multigrid (block Gauss–Seidel on P2,
+Galerkin P1-vertex coarse system, one aggregation-AMG V-cycle) preconditions CG.
 ``info`` reports the solver, iterations, relative residual ‖b − A q‖/‖b‖, dofs, timings and named
 conditioning warnings:
 * ``near_incompressible``: ν ≥ 0.49 (λ/μ ≥ 49): low-order tetrahedra lock (displacements too small)
@@ -68,8 +70,48 @@ def _check_restrained(system) -> None:
                          "rigid-body motions (fix more dofs)")
 
 
+def _sa_hierarchy(A, B, smoothed: bool = True):
+    """PyAMG (smoothed) aggregation on 3×3 nodal blocks with the rigid-body near-nullspace B."""
+    import pyamg
+
+    Ab = A.tobsr(blocksize=(3, 3)) if A.shape[0] % 3 == 0 else A
+    return pyamg.smoothed_aggregation_solver(
+        Ab, B=B, symmetry="hermitian", strength=("symmetric", {"theta": 0.1}),
+        smooth=("jacobi", {"omega": 4.0 / 3.0}) if smoothed else None, improve_candidates=None,
+        presmoother=("block_gauss_seidel", {"sweep": "forward"}),
+        postsmoother=("block_gauss_seidel", {"sweep": "backward"}),
+        max_coarse=1000, coarse_solver="splu")
+
+
+def _pmg_preconditioner(A, coarse, B_coarse):
+    """Two-level p-multigrid for P2: block Gauss–Seidel (forward before, backward after) on the
+    P2 system, coarse correction on the Galerkin P1-vertex system A₁ = Iᵀ A I by one V-cycle of
+    (unsmoothed) aggregation AMG with the rigid-body modes. Symmetric, so it preconditions CG."""
+    from pyamg.relaxation.relaxation import block_gauss_seidel
+    from pyamg.util.utils import get_block_diag
+
+    Ab = A.tobsr(blocksize=(3, 3))
+    Dinv = get_block_diag(Ab, blocksize=3, inv_flag=True)
+    A1 = (coarse.T @ A @ coarse).tocsr()
+    ml = _sa_hierarchy(A1, B_coarse, smoothed=False)   # A₁ is wide-stencil: keep it sparse
+    M1 = ml.aspreconditioner(cycle="V")
+    It = coarse.T.tocsr()
+
+    def apply(r):
+        r = np.asarray(r).ravel()
+        x = np.zeros_like(r)
+        block_gauss_seidel(Ab, x, r, iterations=1, sweep="forward", blocksize=3, Dinv=Dinv)
+        x += coarse @ (M1 @ (It @ (r - Ab @ x)))
+        block_gauss_seidel(Ab, x, r, iterations=1, sweep="backward", blocksize=3, Dinv=Dinv)
+        return x
+
+    n = A.shape[0]
+    return spla.LinearOperator((n, n), matvec=apply, dtype=np.float64), ml
+
+
 def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, method: str = "auto",
-                 rtol: float = 1e-10, maxiter: int = 2000, condition_estimate: bool = True):
+                 rtol: float = 1e-10, maxiter: int = 2000, condition_estimate: bool = True,
+                 coarse: sp.csr_matrix | None = None, B_coarse: np.ndarray | None = None):
     """Solve A q = b (b (n,) or (n, k) for k load cases); returns (q, info).
 
     ``B`` near-nullspace (rigid modes) for AMG; the factorization / AMG hierarchy is built once
@@ -91,26 +133,32 @@ def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, m
             norm1 = abs(A).sum(axis=0).max()
             info["condition_estimate"] = float(norm1 * spla.onenormest(op))
     elif method == "amg":
-        import pyamg
-
-        Ab = A.tobsr(blocksize=(3, 3)) if n % 3 == 0 else A
-        ml = pyamg.smoothed_aggregation_solver(
-            Ab, B=B, symmetry="hermitian", strength=("symmetric", {"theta": 0.1}),
-            smooth=("jacobi", {"omega": 4.0 / 3.0}), improve_candidates=None,
-            presmoother=("block_gauss_seidel", {"sweep": "forward"}),
-            postsmoother=("block_gauss_seidel", {"sweep": "backward"}),
-            max_coarse=1000, coarse_solver="splu")
-        info["setup_s"] = time.perf_counter() - t0
         cols = b[:, None] if b.ndim == 1 else b          # several right-hand sides: one hierarchy
         q = np.empty_like(cols)
         its = []
-        for j in range(cols.shape[1]):
-            res: list = []
-            q[:, j] = ml.solve(cols[:, j], tol=rtol, accel="cg", maxiter=maxiter, residuals=res)
-            its.append(len(res) - 1)
+        if coarse is not None:
+            M, ml = _pmg_preconditioner(A, coarse, B_coarse)
+            info["setup_s"] = time.perf_counter() - t0
+            for j in range(cols.shape[1]):
+                it = [0]
+
+                def cb(_):
+                    it[0] += 1
+
+                q[:, j], _ = spla.cg(A, cols[:, j], rtol=rtol, atol=0.0, maxiter=maxiter, M=M, callback=cb)
+                its.append(it[0])
+            info["solver"] = ("amg-cg (p-multigrid: P2 block Gauss-Seidel + pyamg aggregation AMG "
+                              "on the P1 vertex system, 6 rigid-body modes)")
+        else:
+            ml = _sa_hierarchy(A, B)
+            info["setup_s"] = time.perf_counter() - t0
+            for j in range(cols.shape[1]):
+                res: list = []
+                q[:, j] = ml.solve(cols[:, j], tol=rtol, accel="cg", maxiter=maxiter, residuals=res)
+                its.append(len(res) - 1)
+            info["solver"] = "amg-cg (pyamg smoothed aggregation, 6 rigid-body modes)"
         q = q[:, 0] if b.ndim == 1 else q
         info["iterations"] = its[0] if b.ndim == 1 else its
-        info["solver"] = "amg-cg (pyamg smoothed aggregation, 6 rigid-body modes)"
         info["amg_levels"] = len(ml.levels)
         info["operator_complexity"] = float(ml.operator_complexity())
     elif method == "cg":
@@ -143,7 +191,8 @@ def solve(problem, method: str = "auto", rtol: float = 1e-10, K: sp.csr_matrix |
     system = problem.reduced_system(K)
     _check_restrained(system)
     q, info = solve_system(system.A, system.b, system.B, method, rtol,
-                           condition_estimate=condition_estimate)
+                           condition_estimate=condition_estimate, coarse=system.coarse,
+                           B_coarse=system.B_coarse)
     info["assemble_s"] = assemble_s
     info.update(metrics)
     if info.get("condition_estimate", 0.0) > COND_LIMIT:
