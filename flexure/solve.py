@@ -204,3 +204,17 @@ def solve(problem, method: str = "auto", rtol: float = 1e-10, K: sp.csr_matrix |
     reference = [dict(U_m=q[s][:3].copy(), theta_rad=q[s][3:].copy()) for s in system.ref_slices]
     info["total_s"] = time.perf_counter() - t0
     return Solution(u=u, info=info, reference=reference, K=K if keep_K else None)
+
+
+def solve_reduced(system, b: np.ndarray | None = None, method: str = "auto", rtol: float = 1e-10,
+                  condition_estimate: bool = True):
+    """Solve a ``Problem.reduced_system`` for its own b or for load cases ``b`` (n_q,) / (n_q, k).
+
+    One factorization / AMG hierarchy for all columns; passes the P2 → P1 coarse space so P2
+    systems get the p-multigrid preconditioner. Returns (q, info).
+    """
+    b = system.b if b is None else np.asarray(b, dtype=np.float64)
+    if b.shape[0] != system.A.shape[0]:
+        raise InputError(f"solve_reduced: b has {b.shape[0]} rows, the system {system.A.shape[0]}")
+    return solve_system(system.A, b, system.B, method, rtol, condition_estimate=condition_estimate,
+                        coarse=system.coarse, B_coarse=system.B_coarse)

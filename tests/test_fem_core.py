@@ -188,3 +188,21 @@ def test_material_default_and_von_mises():
     t = np.zeros((3, 3)); t[0, 1] = t[1, 0] = 50.0
     assert von_mises(t) == pytest.approx(50.0 * np.sqrt(3))
     assert von_mises(np.eye(3) * 7.0) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_several_load_cases_share_one_solver():
+    from flexure.solve import solve_reduced
+
+    m = to_quadratic(cylinder_mesh(0.005, 0.01, 0.03, 1, 12, 4))
+    p = Problem(m, MAT).fix(m.select_nodes(lambda x: x[:, 2] < 1e-9))
+    p.couple_rigid(m.select_nodes(lambda x: x[:, 2] > 0.03 - 1e-9), (0, 0, 0.03))
+    system = p.reduced_system(stiffness_matrix(m, MAT))
+    rhs = np.zeros((system.A.shape[0], 6))
+    rhs[system.ref_slices[0], :] = np.eye(6)        # unit F_x, F_y, F_z, M_x, M_y, M_z
+    qd, infod = solve_reduced(system, rhs, method="direct")
+    qa, infoa = solve_reduced(system, rhs, method="amg")
+    assert len(infoa["iterations"]) == 6 and "p-multigrid" in infoa["solver"]
+    np.testing.assert_allclose(qa, qd, atol=1e-8 * np.abs(qd).max())
+    # the reference-point compliance matrix is symmetric (Maxwell–Betti reciprocity)
+    C = qd[system.ref_slices[0], :]
+    np.testing.assert_allclose(C, C.T, rtol=1e-8, atol=1e-10 * np.abs(C).max())
