@@ -1,6 +1,6 @@
 """FEM benchmarks: our P2 assembly/solve beside scikit-fem, a ≥300k-DOF model, convergence table.
 
-Run from the repo root:  python benchmarks/bench_fem.py [--skip-skfem] [--skip-scale] [--skip-report]
+Run from the repo root:  python benchmarks/bench_fem.py [--quick] [--skip-skfem] [--skip-scale] [--skip-report]
 1. Same tetgen P2 mesh (hollow tube in torsion) in both codes: assembly time (ratio vs scikit-fem,
    the anchor measured in this run), direct solve time, gauge-point strains (relative difference).
 2. Scale (in a subprocess, for a clean peak memory): a 329k-DOF P2 annular disc end to end
@@ -45,7 +45,7 @@ def tube_mesh(ri, ro, h, hmax, sections=64):
     return m
 
 
-def skfem_side_by_side(hmax=1.5e-3):
+def skfem_side_by_side(hmax=1.5e-3, sections=40):
     import skfem
     from skfem.models.elasticity import lame_parameters, linear_elasticity
 
@@ -57,7 +57,7 @@ def skfem_side_by_side(hmax=1.5e-3):
     from flexure.solve import solve
 
     ri, ro, h = 0.004, 0.012, 0.016
-    m1 = tube_mesh(ri, ro, h, hmax, sections=40)
+    m1 = tube_mesh(ri, ro, h, hmax, sections=sections)
     m2 = to_quadratic(m1)
     q = quality(m1)
     print(f"[1] tube P2 mesh: {m2.n_elements} tets, {m2.n_dofs} DOFs, min dihedral "
@@ -103,7 +103,7 @@ def skfem_side_by_side(hmax=1.5e-3):
           f"{np.abs(u_o - u_sk).max() / np.abs(u_sk).max():.1e}")
     # gauge points: ±45° on the outer surface at mid-height (just inside the facets)
     ang = np.array([0.1, 1.7, 3.3, 4.9])
-    r = ro * np.cos(np.pi / 40) * 0.999
+    r = ro * np.cos(np.pi / sections) * 0.999
     pts = np.stack([r * np.cos(ang), r * np.sin(ang), np.full(4, 0.4 * h)], axis=1)
     d45 = np.stack([-np.sin(ang), np.cos(ang), np.ones(4)], axis=1) / np.sqrt(2)
     t0 = time.perf_counter()
@@ -197,10 +197,14 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-scale", action="store_true")
     ap.add_argument("--skip-report", action="store_true")
     ap.add_argument("--skip-skfem", action="store_true")
+    ap.add_argument("--quick", action="store_true", help="small scikit-fem comparison only (~10 s)")
     ap.add_argument("--scale-child", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.scale_child:
         print(json.dumps(scale_run()))
+        return 0
+    if a.quick:
+        skfem_side_by_side(hmax=3e-3, sections=16)
         return 0
     if not a.skip_skfem:
         skfem_side_by_side()
