@@ -1,0 +1,384 @@
+"""One design → the numbers a sensor designer needs; and a sweep over one or two parameters.
+
+Load cases (all solved with one factorization): a torque M_z on the hub bore and the off-axis
+loads F_x, F_y, F_z, M_x, M_y, each a unit wrench at the reference point (0, 0, t/2) carried by a
+kinematic rigid coupling of the bore surface; the rim is held (bolt-hole walls, or outer face).
+
+    sensitivity      S = (V_o/V_ex)(T_rated) / T_rated              (exact bridge, mV/V per N·m)
+    stiffness        k = T / Θ_z                                     (Θ_z: coupling rotation)
+    cross-talk       c_j = 100 · (V_o/V_ex)(unit load j) / (V_o/V_ex)(T_rated)   (% per N or N·m)
+    reference strain ε_ref = (ε1 − ε2 + ε3 − ε4)/4 per N·m  (V_o/V_ex ≈ GF ε_ref, full bending)
+    min torque       T_min = ε_min(bridge noise budget) / ε_ref
+    safety factor    σ_y / max σ_vM at T_rated (element-nodal stresses, not averaged)
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from flexure.design import Design, load_design
+from flexure.errors import InputError
+from flexure.gauges import bridge_strains, read, strain_at
+
+CASES = ("Mz", "Fx", "Fy", "Fz", "Mx", "My")
+CROSSTALK_KEYS = {"Fx": "Fx_per_N", "Fy": "Fy_per_N", "Fz": "Fz_per_N", "Mx": "Mx_per_Nm", "My": "My_per_Nm"}
+SEGMENTS = {"coarse": 3, "medium": 5, "fine": 8}
+
+
+@dataclass
+class Fields:
+    """What the renderer needs: mesh, rated-torque displacement and nodal fields."""
+
+    mesh: object
+    u_rated_m: np.ndarray
+    von_mises_Pa: np.ndarray        # nodal average (n,)
+    strain_eq: np.ndarray           # nodal max shear strain γ_max/2 (n,) — what ±45° gauges see
+    gauges: list
+    fixed_nodes: np.ndarray
+    load_nodes: np.ndarray
+
+
+def build_mesh(design: Design, size: str | None = None, order: int | None = None):
+    """Surface + tetgen mesh of the design (P1/P2) with gauge-local refinement."""
+    from flexure.geometry import load_stl, profile
+    from flexure.meshing import mesh_design_surface
+
+    size = size or design.size
+    order = order or design.order
+    centres = np.array([g.centre_m for g in design.gauges])
+    extent = 0.5 * max(g.length_m + g.width_m for g in design.gauges) / math.sqrt(2) * 1.3
+    gw = min(min(g.width_m, g.length_m) for g in design.gauges)
+    if design.kind == "spoke_disc":
+        qs = design.segments_per_quarter or SEGMENTS.get(size, 3)
+        poly = profile(design.disc, qs)
+        return mesh_design_surface(poly, design.disc.thickness, size, centres, extent, design.disc.thickness,
+                                   order, gauge_width=gw)
+    surf = load_stl(design.stl_path, design.stl_unit_m, where=f"{design.path}: geometry.file")
+    scale = float(np.ptp(surf.points, axis=0).min())
+    return mesh_design_surface(surf, None, size, centres, extent, scale, order, gauge_width=gw)
+
+
+def _selections(design: Design, mesh):
+    """(load node set, fixed node set) on the boundary."""
+    pts = mesh.points
+    r = np.hypot(pts[:, 0], pts[:, 1])
+    bnodes = np.zeros(len(pts), bool)
+    bnodes[mesh.boundary_nodes()] = True
+    tol = 1e-6 * max(float(np.ptp(pts, axis=0).max()), 1e-9)
+    load = np.flatnonzero(bnodes & (r <= design.load_radius_max_m + tol))
+    if design.fixed == "rim_bolts":
+        d = design.disc
+        n = d.rim_bolts
+        a = 2 * np.pi * np.arange(n) / n + np.pi / n + np.deg2rad(d.phase_deg)
+        c = d.rim_bolt_circle_radius * np.column_stack([np.cos(a), np.sin(a)])
+        dist = np.sqrt(((pts[:, None, :2] - c[None]) ** 2).sum(-1)).min(1)
+        fixed = np.flatnonzero(bnodes & (dist <= d.rim_bolt_diameter / 2 * 1.02 + tol))
+    else:
+        fixed = np.flatnonzero(bnodes & (r >= design.fixed_radius_min_m - tol))
+    if len(load) < 3:
+        raise InputError(f"{design.path}: loads.load_radius_max_mm: no surface nodes within "
+                         f"{design.load_radius_max_m * 1e3:g} mm of the axis to carry the load")
+    if len(fixed) < 3:
+        raise InputError(f"{design.path}: loads.fixed: no surface nodes selected to hold the flexure")
+    return load, fixed
+
+
+def element_nodal_strain(mesh, u: np.ndarray, chunk: int = 20000) -> np.ndarray:
+    """ε at every element's own nodes (m, nn, 3, 3) (discontinuous, for peak stresses)."""
+    from flexure.fem import tet_shape
+
+    nn = mesh.tets.shape[1]
+    ref = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    if nn == 10:
+        e = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])
+        ref = np.vstack([ref, 0.5 * (ref[e[:, 0]] + ref[e[:, 1]])])
+    _, dN = tet_shape(mesh.order, ref)                          # (nn_eval, nn, 3)
+    out = np.empty((len(mesh.tets), nn, 3, 3))
+    for s in range(0, len(mesh.tets), chunk):
+        t = mesh.tets[s:s + chunk]
+        x = mesh.points[t[:, :4]]
+        Jinv = np.linalg.inv(np.transpose(x[:, 1:] - x[:, :1], (0, 2, 1)))
+        G = np.einsum("paj,eji->epai", dN, Jinv)                   # (e, p, a, 3)
+        grad = np.einsum("eai,epaj->epij", u[t], G)
+        out[s:s + chunk] = 0.5 * (grad + np.swapaxes(grad, -1, -2))
+    return out
+
+
+def von_mises_from_strain(eps: np.ndarray, material) -> np.ndarray:
+    """σ = λ tr ε I + 2μ ε;  σ_vM = √(3/2 s:s), s = σ − tr σ/3 I."""
+    lam, mu = material.lame_lambda_Pa, material.shear_modulus_Pa
+    tr = np.trace(eps, axis1=-2, axis2=-1)
+    sig = 2 * mu * eps + (lam * tr)[..., None, None] * np.eye(3)
+    s = sig - (np.trace(sig, axis1=-2, axis2=-1) / 3)[..., None, None] * np.eye(3)
+    return np.sqrt(1.5 * np.einsum("...ij,...ij->...", s, s))
+
+
+def _nodal_average(mesh, values: np.ndarray) -> np.ndarray:
+    idx = mesh.tets.ravel()
+    tot = np.bincount(idx, weights=values.ravel(), minlength=len(mesh.points))
+    cnt = np.bincount(idx, minlength=len(mesh.points))
+    return tot / np.maximum(cnt, 1)
+
+
+def _solve_cases(problem, K, rhs_cases: np.ndarray):
+    """Reduced system once; q for every wrench column (6, n_q). Direct (one factorization, all
+    right-hand sides) below solve.DIRECT_MAX_DOFS, else PyAMG-CG column by column."""
+    from flexure import solve as fsolve
+
+    system = problem.reduced_system(K)
+    fsolve._check_restrained(system)
+    sl = system.ref_slices[0]
+    B = np.zeros((system.A.shape[0], len(rhs_cases)))
+    B[:] = system.b[:, None]
+    B[sl, :] = rhs_cases.T
+    n = system.A.shape[0]
+    if n <= fsolve.DIRECT_MAX_DOFS:
+        q, info = fsolve.solve_system(system.A, B, system.B, "direct")
+        info["residual_norm"] = float(np.max(np.linalg.norm(B - system.A @ q, axis=0)
+                                             / np.linalg.norm(B, axis=0)))
+    else:
+        cols, infos = [], []
+        for j in range(B.shape[1]):
+            qj, ij = fsolve.solve_system(system.A, B[:, j], system.B, "amg")
+            cols.append(qj)
+            infos.append(ij)
+        q = np.column_stack(cols)
+        info = dict(infos[0])
+        info["solve_s"] = sum(i["solve_s"] for i in infos)
+        info["iterations"] = [i["iterations"] for i in infos]
+        info["residual_norm"] = max(i["residual_norm"] for i in infos)
+    return system, q, info
+
+
+def _sensor_config(design: Design):
+    from bridge.config import SensorConfig, load_sensor_config
+
+    if design.sensor_path is not None:
+        cfg, _ = load_sensor_config(design.sensor_path)
+    else:
+        cfg = SensorConfig()
+    return cfg.replace(gauge_factor=design.gauge_factor, gauge_resistance_ohm=design.gauge_resistance_ohm,
+                       arrangement="full_bending")
+
+
+def analyze(design: Design, size: str | None = None, order: int | None = None, progress: bool = False):
+    """Mesh, solve the six load cases, read the gauges → (results dict, Fields)."""
+    from bridge.budget import min_detectable_strain
+    from bridge.wheatstone import output_ratio
+    from flexure import solve as fsolve
+    from flexure.bc import Problem
+    from flexure.fem import stiffness_matrix
+
+    def say(msg):
+        if progress:
+            print(f"flexure: {msg}", file=sys.stderr)
+
+    t_all = time.perf_counter()
+    t0 = time.perf_counter()
+    mres = build_mesh(design, size, order)
+    mesh = mres.mesh
+    mesh_s = time.perf_counter() - t0
+    say(f"mesh {mres.report['n_elements']} P{mesh.order} tetrahedra, {mesh.n_dofs} dofs ({mesh_s:.1f} s)")
+    load_nodes, fixed_nodes = _selections(design, mesh)
+    t_mid = 0.5 * (mesh.points[:, 2].min() + mesh.points[:, 2].max())
+    ref = np.array([0.0, 0.0, t_mid])
+    problem = Problem(mesh, design.material)
+    problem.fix(fixed_nodes)
+    problem.couple_rigid(load_nodes, ref, kind="kinematic")
+    t0 = time.perf_counter()
+    K = stiffness_matrix(mesh, design.material)
+    assemble_s = time.perf_counter() - t0
+    wrench = np.zeros((6, 6))                        # rows: cases; cols: (F, M)
+    for i, c in enumerate(CASES):
+        wrench[i, {"Fx": 0, "Fy": 1, "Fz": 2, "Mx": 3, "My": 4, "Mz": 5}[c]] = 1.0
+    t0 = time.perf_counter()
+    system, q, info = _solve_cases(problem, K, wrench)
+    solve_s = time.perf_counter() - t0
+    say(f"solved {len(CASES)} load cases ({info['solver']}, {solve_s:.1f} s, residual {info['residual_norm']:.1e})")
+    warnings, metrics = fsolve.conditioning_warnings(mesh, design.material)
+    if info.get("condition_estimate", 0.0) > fsolve.COND_LIMIT:
+        warnings.append("ill_conditioned")
+    if not np.isfinite(info["residual_norm"]) or info["residual_norm"] > fsolve.RESIDUAL_LIMIT:
+        warnings.append("large_residual")
+    U = np.stack([problem.expand(system, q[:, j]) for j in range(len(CASES))], axis=-1)   # (n,3,6)
+    theta = q[system.ref_slices[0]][3:, :]            # (3, cases) rotations of the hub
+
+    readings = read(design.gauges, lambda p: strain_at(mesh, U, p))        # (g, cases)
+    eps = bridge_strains(design.gauges, readings)                           # (cases, 4)
+    T = design.rated_torque_Nm
+    gf = design.gauge_factor
+    ratio_rated = float(output_ratio(eps[0] * T, "full_bending", gf, design.gauge_resistance_ohm))
+    ratio_unit = output_ratio(eps, "full_bending", gf, design.gauge_resistance_ohm)       # (cases,)
+    sens = ratio_rated / T * 1e3
+    eps_ref = float((eps[0, 0] - eps[0, 1] + eps[0, 2] - eps[0, 3]) / 4.0)
+    crosstalk = {CROSSTALK_KEYS[c]: float(100.0 * ratio_unit[i] / ratio_rated)
+                 for i, c in enumerate(CASES) if c != "Mz"}
+    stiffness = float(1.0 / theta[2, 0]) if theta[2, 0] != 0 else math.nan
+
+    u_rated = U[:, :, 0] * T
+    eps_nodes = element_nodal_strain(mesh, u_rated)
+    vm_elem = von_mises_from_strain(eps_nodes, design.material)
+    max_vm = float(vm_elem.max())
+    ev = np.linalg.eigvalsh(eps_nodes)
+    gmax = 0.5 * (ev[..., 2] - ev[..., 0])
+
+    cfg = _sensor_config(design)
+    eps_min_noise = min_detectable_strain(cfg, method="noise")
+    eps_min_enob = min_detectable_strain(cfg, method="resolution", n_bits=cfg.enob)
+    flagged = any(w in warnings for w in ("ill_conditioned", "large_residual", "near_incompressible"))
+    nan_if = (lambda v: math.nan if flagged else v)
+    good_ref = eps_ref > 0
+    results = {
+        "design": design.name,
+        "design_file": str(design.path),
+        "rated_torque_Nm": T,
+        "sensitivity_mV_per_V_per_Nm": nan_if(sens),
+        "output_mV_at_rated": nan_if(ratio_rated * cfg.excitation_V * 1e3),
+        "torsional_stiffness_Nm_per_rad": nan_if(stiffness),
+        "max_von_mises_Pa": nan_if(max_vm),
+        "safety_factor": nan_if(design.material.yield_Pa / max_vm),
+        "crosstalk_percent": {k: nan_if(v) for k, v in crosstalk.items()},
+        "min_detectable_torque_Nm": nan_if(eps_min_noise / eps_ref if good_ref else math.nan),
+        "min_detectable_torque_enob_Nm": nan_if(eps_min_enob / eps_ref if good_ref else math.nan),
+        "min_detectable_strain_noise": eps_min_noise,
+        "min_detectable_strain_enob": eps_min_enob,
+        "gauge_strain_per_Nm": nan_if(eps_ref),
+        "gauge_strains_per_Nm": {f"arm{i + 1}": nan_if(float(eps[0, i])) for i in range(4)},
+        "gauge_strain_at_0p4Nm": nan_if(eps_ref * 0.4),
+        "dofs": int(mesh.n_dofs),
+        "solve_s": float(solve_s),
+        "assemble_s": float(assemble_s),
+        "mesh_s": float(mesh_s),
+        "total_s": float(time.perf_counter() - t_all),
+        "order": int(mesh.order),
+        "size": mres.report["size"],
+        "mesh": {k: v for k, v in mres.report.items()},
+        "solver": {k: v for k, v in info.items() if k in ("solver", "residual_norm", "condition_estimate",
+                                                           "iterations", "dofs")},
+        "warnings": warnings,
+        "material": {"name": design.material.name, "E_Pa": design.material.E_Pa, "nu": design.material.nu,
+                     "yield_Pa": design.material.yield_Pa},
+        "excitation_V": cfg.excitation_V,
+        "gauge_factor": gf,
+        "load_nodes": int(len(load_nodes)),
+        "fixed_nodes": int(len(fixed_nodes)),
+    }
+    if flagged:
+        results["nan_reason"] = ", ".join(warnings)
+    if not good_ref and not flagged:
+        results["nan_reason"] = "bridge output not positive under positive torque (check gauge arms)"
+    fields = Fields(mesh, u_rated, _nodal_average(mesh, vm_elem), _nodal_average(mesh, gmax),
+                    design.gauges, fixed_nodes, load_nodes)
+    return results, fields
+
+
+def parse_sweep(specs: list[str]) -> list[tuple[str, list]]:
+    """["spoke_width_mm=4,5,6", ...] → [(key, [4.0, 5.0, 6.0]), ...] (one or two parameters)."""
+    out = []
+    for spec in specs or []:
+        if "=" not in spec:
+            raise InputError(f"--sweep: expected PARAM=v1,v2,..., got {spec!r}")
+        key, vals = spec.split("=", 1)
+        key = key.strip()
+        try:
+            values = [float(v) for v in vals.split(",") if v.strip()]
+        except ValueError:
+            raise InputError(f"--sweep {key}: values must be numbers, got {vals!r}") from None
+        if not values:
+            raise InputError(f"--sweep {key}: no values")
+        values = [int(v) if v.is_integer() and key in ("spokes", "hub_bolts", "rim_bolts") else v
+                  for v in values]
+        out.append((key, values))
+    if len(out) > 2:
+        raise InputError("--sweep: at most two parameters")
+    if len(out) == 2 and out[0][0] == out[1][0]:
+        raise InputError(f"--sweep: parameter {out[0][0]!r} given twice")
+    return out
+
+
+def sweep(path, params: list[tuple[str, list]], size: str | None = None, order: int | None = None,
+          progress: bool = True) -> list[dict]:
+    """Analyse every combination; each row: parameter values + the headline numbers (or the error)."""
+    from itertools import product
+
+    from flexure.design import load_design as _load
+
+    keys = [k for k, _ in params]
+    base = _load(path)
+    for k, _ in params:                               # validate names before the long run
+        from flexure.design import apply_override
+        apply_override(base.raw, k, 1.0)
+    combos = list(product(*[v for _, v in params]))
+    rows = []
+    try:
+        from tqdm import tqdm
+        it = tqdm(combos, desc="sweep", file=sys.stderr, disable=not progress)
+    except ImportError:  # pragma: no cover
+        it = combos
+    for combo in it:
+        overrides = dict(zip(keys, combo))
+        row = dict(overrides)
+        try:
+            d = _load(path, overrides)
+            res, _ = analyze(d, size, order)
+            row.update({k: res[k] for k in ("sensitivity_mV_per_V_per_Nm", "torsional_stiffness_Nm_per_rad",
+                                            "max_von_mises_Pa", "safety_factor", "min_detectable_torque_Nm",
+                                            "gauge_strain_per_Nm", "dofs", "solve_s")})
+            row["crosstalk_max_percent"] = max(abs(v) for v in res["crosstalk_percent"].values())
+            row["error"] = None
+        except InputError as exc:                     # an infeasible combination is a row, not a crash
+            row["error"] = str(exc)
+        rows.append(row)
+    return rows
+
+
+def sweep_table(rows: list[dict], keys: list[str]) -> str:
+    """Markdown table of a sweep."""
+    head = keys + ["mV/V per N·m", "k (N·m/rad)", "σ_vM max (MPa)", "SF", "T_min (mN·m)", "x-talk max (%)"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        vals = [f"{r[k]:g}" for k in keys]
+        if r.get("error"):
+            vals += ["infeasible: " + r["error"].split(": ")[-1]] + [""] * 5
+        else:
+            vals += [f"{r['sensitivity_mV_per_V_per_Nm']:.4f}", f"{r['torsional_stiffness_Nm_per_rad']:.4g}",
+                     f"{r['max_von_mises_Pa'] / 1e6:.1f}", f"{r['safety_factor']:.2f}",
+                     f"{r['min_detectable_torque_Nm'] * 1e3:.3g}", f"{r['crosstalk_max_percent']:.2g}"]
+        lines.append("| " + " | ".join(vals) + " |")
+    return "\n".join(lines)
+
+
+def sweep_plot(rows: list[dict], keys: list[str], out_png) -> None:
+    """Trade-off plot: sensitivity vs stiffness, colour = safety factor, labels = parameters."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ok = [r for r in rows if not r.get("error")]
+    fig, ax = plt.subplots(figsize=(7, 5))
+    if ok:
+        x = np.array([r["torsional_stiffness_Nm_per_rad"] for r in ok])
+        y = np.array([r["sensitivity_mV_per_V_per_Nm"] for r in ok])
+        sf = np.array([r["safety_factor"] for r in ok])
+        sc = ax.scatter(x, y, c=sf, cmap="RdYlGn", vmin=0.5, vmax=4, s=60, edgecolor="k")
+        fig.colorbar(sc, ax=ax, label="safety factor at rated torque")
+        for r, xi, yi in zip(ok, x, y):
+            ax.annotate(", ".join(f"{r[k]:g}" for k in keys), (xi, yi), textcoords="offset points",
+                        xytext=(4, 4), fontsize=7)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+    ax.set_xlabel("torsional stiffness (N·m/rad)")
+    ax.set_ylabel("sensitivity (mV/V per N·m)")
+    ax.set_title("flexure sweep: " + " × ".join(keys) + " (labels)")
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out_png, dpi=110)
+    plt.close(fig)
+
+
+__all__ = ["analyze", "build_mesh", "sweep", "parse_sweep", "sweep_table", "sweep_plot", "load_design"]

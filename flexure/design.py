@@ -1,0 +1,327 @@
+"""Design files (TOML) → a validated ``Design``; every error names the file and the field.
+
+Lengths in the file are in millimetres (keys end in ``_mm``), converted to metres here.
+Tables: ``[geometry]`` (kind = "spoke_disc" | "stl"), ``[material]``, ``[gauges]``, ``[loads]``,
+``[bridge]``, ``[mesh]``. See scenes/paper_disc.toml for every key with its meaning.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from flexure.errors import InputError
+from flexure.gauges import Gauge
+from flexure.geometry import SpokeDisc
+
+DISC_KEYS = {  # TOML key → (SpokeDisc field, scale to SI)
+    "outer_radius_mm": ("outer_radius", 1e-3), "rim_inner_radius_mm": ("rim_inner_radius", 1e-3),
+    "hub_radius_mm": ("hub_radius", 1e-3), "bore_radius_mm": ("bore_radius", 1e-3),
+    "thickness_mm": ("thickness", 1e-3), "spokes": ("spokes", None),
+    "spoke_width_mm": ("spoke_width", 1e-3), "fillet_radius_mm": ("fillet_radius", 1e-3),
+    "hub_bolts": ("hub_bolts", None), "hub_bolt_circle_radius_mm": ("hub_bolt_circle_radius", 1e-3),
+    "hub_bolt_diameter_mm": ("hub_bolt_diameter", 1e-3), "rim_bolts": ("rim_bolts", None),
+    "rim_bolt_circle_radius_mm": ("rim_bolt_circle_radius", 1e-3),
+    "rim_bolt_diameter_mm": ("rim_bolt_diameter", 1e-3), "pad_width_mm": ("pad_width", 1e-3),
+    "pad_length_mm": ("pad_length", 1e-3), "pad_position": ("pad_position", None),
+    "phase_deg": ("phase_deg", None),
+}
+MATERIAL_PRESETS = {"6061-T6": dict(E_Pa=68.9e9, nu=0.33, yield_Pa=276e6, name="aluminium 6061-T6"),
+                    "7075-T6": dict(E_Pa=71.7e9, nu=0.33, yield_Pa=503e6, name="aluminium 7075-T6"),
+                    "17-4PH-H900": dict(E_Pa=196e9, nu=0.272, yield_Pa=1170e6, name="steel 17-4PH H900")}
+SIZES = ("coarse", "medium", "fine")
+TABLES = {"name", "description", "geometry", "material", "gauges", "loads", "bridge", "mesh"}
+
+
+@dataclass
+class Design:
+    """Everything one analysis needs (SI units)."""
+
+    path: Path
+    name: str
+    kind: str                         # "spoke_disc" | "stl"
+    disc: SpokeDisc | None
+    stl_path: Path | None
+    stl_unit_m: float
+    material: object                  # flexure.material.Material
+    gauges: list[Gauge]
+    gauge_factor: float
+    gauge_resistance_ohm: float
+    rated_torque_Nm: float
+    load_radius_max_m: float          # surface nodes with r ≤ this carry the load (hub bore)
+    fixed: str                        # "rim_bolts" | "rim_outer" | "radius"
+    fixed_radius_min_m: float
+    sensor_path: Path | None
+    size: str
+    order: int
+    raw: dict = field(repr=False, default_factory=dict)
+    segments_per_quarter: int | None = None
+
+
+def _get(table: dict, key: str, where: str, kind=float, default=None, required=False):
+    if key not in table:
+        if required:
+            raise InputError(f"{where}.{key}: missing")
+        return default
+    v = table[key]
+    if kind is float:
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise InputError(f"{where}.{key}: must be a number, got {v!r}")
+        return float(v)
+    if kind is int:
+        if isinstance(v, bool) or not isinstance(v, int) and not (isinstance(v, float) and v.is_integer()):
+            raise InputError(f"{where}.{key}: must be an integer, got {v!r}")
+        return int(v)
+    if kind is str:
+        if not isinstance(v, str):
+            raise InputError(f"{where}.{key}: must be a string, got {v!r}")
+        return v
+    if kind is bool:
+        if not isinstance(v, bool):
+            raise InputError(f"{where}.{key}: must be true or false, got {v!r}")
+        return v
+    if kind == "vec3":
+        if not (isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                            for x in v)):
+            raise InputError(f"{where}.{key}: must be a list of 3 numbers, got {v!r}")
+        return np.asarray(v, float)
+    raise AssertionError(kind)
+
+
+def _unknown(table: dict, allowed, where: str):
+    extra = sorted(set(table) - set(allowed))
+    if extra:
+        raise InputError(f"{where}.{extra[0]}: unknown key (known: {', '.join(sorted(allowed))})")
+
+
+def load_design(path: str | Path, overrides: dict | None = None) -> Design:
+    """Read a design TOML; ``overrides`` {"spoke_width_mm": 5.0, "mesh.size": "fine", ...} apply on top."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: design file not found")
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{path}: invalid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a UTF-8 text file") from None
+    return design_from_dict(raw, path, overrides)
+
+
+def apply_override(raw: dict, key: str, value, where: str = "--sweep") -> dict:
+    """Set ``key`` (a geometry key like ``spoke_width_mm`` or ``table.key``) in a copy of ``raw``."""
+    raw = copy.deepcopy(raw)
+    if "." in key:
+        table, k = key.split(".", 1)
+    else:
+        table, k = "geometry", key
+        if k in ("rated_torque_Nm",):
+            table = "loads"
+    if table not in TABLES - {"name", "description"}:
+        raise InputError(f"{where}: unknown parameter {key!r}")
+    if table == "geometry" and k not in DISC_KEYS:
+        raise InputError(f"{where}: unknown geometry parameter {key!r} (known: {', '.join(DISC_KEYS)})")
+    raw.setdefault(table, {})[k] = value
+    return raw
+
+
+def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> Design:
+    for k, v in (overrides or {}).items():
+        raw = apply_override(raw, k, v)
+    f = str(path)
+    _unknown(raw, TABLES, f)
+    for t in TABLES - {"name", "description"}:
+        if t in raw and not isinstance(raw[t], dict):
+            raise InputError(f"{f}: [{t}] must be a table")
+    name = raw.get("name", path.stem)
+    geo = raw.get("geometry", {})
+    w = f"{f}: geometry"
+    kind = _get(geo, "kind", w, str, "spoke_disc")
+    disc, stl_path, unit = None, None, 1e-3
+    if kind == "spoke_disc":
+        _unknown(geo, set(DISC_KEYS) | {"kind", "segments_per_quarter"}, w)
+        kw = {}
+        for key, (fld, scale) in DISC_KEYS.items():
+            if key in geo:
+                if scale is None and fld in ("spokes", "hub_bolts", "rim_bolts"):
+                    kw[fld] = _get(geo, key, w, int)
+                else:
+                    kw[fld] = _get(geo, key, w) * (scale or 1.0)
+        disc = SpokeDisc(**kw)
+        try:
+            disc.check(where=w)
+        except InputError as exc:     # map SpokeDisc field names back to TOML keys
+            msg = str(exc)
+            for key, (fld, _) in sorted(DISC_KEYS.items(), key=lambda kv: -len(kv[1][0])):
+                msg = msg.replace(f"geometry.{fld}:", f"geometry.{key}:")
+            raise InputError(msg) from None
+    elif kind == "stl":
+        _unknown(geo, {"kind", "file", "unit_mm", "repair"}, w)
+        stl_path = (path.parent / _get(geo, "file", w, str, required=True))
+        unit = _get(geo, "unit_mm", w, float, 1.0) * 1e-3
+        if unit <= 0:
+            raise InputError(f"{w}.unit_mm: must be > 0")
+    else:
+        raise InputError(f"{w}.kind: must be 'spoke_disc' or 'stl', got {kind!r}")
+
+    # material
+    mat = raw.get("material", {})
+    w = f"{f}: material"
+    _unknown(mat, {"preset", "E_GPa", "nu", "yield_MPa", "name"}, w)
+    preset = _get(mat, "preset", w, str, "6061-T6")
+    if preset not in MATERIAL_PRESETS:
+        raise InputError(f"{w}.preset: unknown {preset!r} (known: {', '.join(MATERIAL_PRESETS)})")
+    from flexure.material import Material
+    base = dict(MATERIAL_PRESETS[preset])
+    if "E_GPa" in mat:
+        base["E_Pa"] = _get(mat, "E_GPa", w) * 1e9
+    if "nu" in mat:
+        base["nu"] = _get(mat, "nu", w)
+    if "yield_MPa" in mat:
+        base["yield_Pa"] = _get(mat, "yield_MPa", w) * 1e6
+    if "name" in mat:
+        base["name"] = _get(mat, "name", w, str)
+    if not base["E_Pa"] > 0:
+        raise InputError(f"{w}.E_GPa: must be > 0")
+    if not -1 < base["nu"] < 0.5:
+        raise InputError(f"{w}.nu: must lie in (-1, 0.5)")
+    if not base["yield_Pa"] > 0:
+        raise InputError(f"{w}.yield_MPa: must be > 0")
+    material = Material(**base)
+
+    # gauges
+    gt = raw.get("gauges", {})
+    w = f"{f}: gauges"
+    _unknown(gt, {"layout", "grid_length_mm", "grid_width_mm", "position", "gauge_factor",
+                  "resistance_ohm", "gauge"}, w)
+    L = _get(gt, "grid_length_mm", w, float, 3.0) * 1e-3
+    Wd = _get(gt, "grid_width_mm", w, float, 2.2) * 1e-3
+    if L <= 0:
+        raise InputError(f"{w}.grid_length_mm: must be > 0")
+    if Wd <= 0:
+        raise InputError(f"{w}.grid_width_mm: must be > 0")
+    gf = _get(gt, "gauge_factor", w, float, 2.0)
+    if gf <= 0:
+        raise InputError(f"{w}.gauge_factor: must be > 0")
+    r_ohm = _get(gt, "resistance_ohm", w, float, 1000.0)
+    if r_ohm <= 0:
+        raise InputError(f"{w}.resistance_ohm: must be > 0")
+    layout = _get(gt, "layout", w, str, "shear_45" if kind == "spoke_disc" else "explicit")
+    if layout == "shear_45":
+        if disc is None:
+            raise InputError(f"{w}.layout: 'shear_45' needs geometry.kind = 'spoke_disc'; "
+                             "declare [[gauges.gauge]] for an STL")
+        pos = _get(gt, "position", w, float, disc.pad_position if disc.pad_width else 0.5)
+        if not 0 < pos < 1:
+            raise InputError(f"{w}.position: must lie in (0, 1) along the free spoke length")
+        gauges = shear_45_layout(disc, L, Wd, pos, w)
+    elif layout == "explicit":
+        items = gt.get("gauge", [])
+        if not isinstance(items, list) or len(items) != 4:
+            raise InputError(f"{w}.gauge: need exactly four [[gauges.gauge]] entries (one per bridge arm)")
+        gauges = []
+        for i, item in enumerate(items):
+            wi = f"{w}.gauge[{i}]"
+            _unknown(item, {"centre_mm", "axis", "normal", "arm", "name"}, wi)
+            c = _get(item, "centre_mm", wi, "vec3", required=True) * 1e-3
+            a = _get(item, "axis", wi, "vec3", required=True)
+            n = _get(item, "normal", wi, "vec3", np.array([0.0, 0.0, 1.0]))
+            arm = _get(item, "arm", wi, int, required=True)
+            if arm not in (1, 2, 3, 4):
+                raise InputError(f"{wi}.arm: must be 1, 2, 3 or 4")
+            if np.linalg.norm(n) == 0 or np.linalg.norm(np.cross(a, n)) < 1e-6 * np.linalg.norm(a):
+                raise InputError(f"{wi}.axis: must be non-zero and not parallel to the normal")
+            gauges.append(Gauge(tuple(c), tuple(a), tuple(n), L, Wd, arm, item.get("name", f"g{arm}")))
+        if sorted(g.arm for g in gauges) != [1, 2, 3, 4]:
+            raise InputError(f"{w}.gauge: arms must be 1, 2, 3 and 4, each once")
+    else:
+        raise InputError(f"{w}.layout: must be 'shear_45' or 'explicit', got {layout!r}")
+
+    # loads
+    ld = raw.get("loads", {})
+    w = f"{f}: loads"
+    _unknown(ld, {"rated_torque_Nm", "fixed", "load_radius_max_mm", "fixed_radius_min_mm"}, w)
+    rated = _get(ld, "rated_torque_Nm", w, float, 2.0)
+    if rated <= 0:
+        raise InputError(f"{w}.rated_torque_Nm: must be > 0")
+    fixed = _get(ld, "fixed", w, str, ("rim_bolts" if disc is not None and disc.rim_bolts else
+                                        "rim_outer" if disc is not None else "radius"))
+    if fixed not in ("rim_bolts", "rim_outer", "radius"):
+        raise InputError(f"{w}.fixed: must be 'rim_bolts', 'rim_outer' or 'radius', got {fixed!r}")
+    if fixed == "rim_bolts" and (disc is None or not disc.rim_bolts):
+        raise InputError(f"{w}.fixed: 'rim_bolts' needs geometry.rim_bolts > 0")
+    if disc is not None:
+        load_r = _get(ld, "load_radius_max_mm", w, float, disc.bore_radius * 1e3 * 1.001) * 1e-3
+        fixed_r = _get(ld, "fixed_radius_min_mm", w, float, disc.outer_radius * 1e3 * 0.999) * 1e-3
+    else:
+        load_r = _get(ld, "load_radius_max_mm", w, float, required=True) * 1e-3
+        fixed_r = _get(ld, "fixed_radius_min_mm", w, float, required=True) * 1e-3
+        fixed = "radius"
+    if not 0 < load_r < fixed_r:
+        raise InputError(f"{w}.load_radius_max_mm: must be > 0 and below fixed_radius_min_mm")
+
+    # bridge
+    br = raw.get("bridge", {})
+    w = f"{f}: bridge"
+    _unknown(br, {"sensor"}, w)
+    sensor = None
+    if "sensor" in br:
+        sensor = path.parent / _get(br, "sensor", w, str)
+        if not sensor.is_file():
+            raise InputError(f"{w}.sensor: {sensor} not found")
+
+    # mesh
+    me = raw.get("mesh", {})
+    w = f"{f}: mesh"
+    _unknown(me, {"size", "order"}, w)
+    size = _get(me, "size", w, str, "coarse")
+    if size not in SIZES:
+        raise InputError(f"{w}.size: must be one of {', '.join(SIZES)}, got {size!r}")
+    order = _get(me, "order", w, int, 2)
+    if order not in (1, 2):
+        raise InputError(f"{w}.order: must be 1 or 2, got {order}")
+    return Design(path, str(name), kind, disc, stl_path, unit, material, gauges, gf, r_ohm, rated,
+                  load_r, fixed, fixed_r, sensor, size, order, raw=raw,
+                  segments_per_quarter=geo.get("segments_per_quarter"))
+
+
+def shear_45_layout(disc: SpokeDisc, length_m: float, width_m: float, position: float, where: str):
+    """Four ±45° gauges on the top face (z = thickness), centred on the spoke axis at ``position``.
+
+    N divisible by 4: one gauge on each of spokes 0, N/4, N/2, 3N/4 (arms 1–4); other even N:
+    a chevron pair side by side on spokes 0 (arms 1, 2) and N/2 (arms 3, 4). Angles from the
+    outward radial direction, counterclockwise seen from +z: arms 1, 3 at −45°, arms 2, 4 at +45°,
+    so that a positive torque on the hub (about +z, rim held) gives a positive bridge output.
+    """
+    N = disc.spokes
+    ang = disc.spoke_angles_rad()
+    rc = disc.hub_radius + position * disc.spoke_length
+    half = 0.5 * (length_m + width_m) / math.sqrt(2)   # half footprint of a 45° grid
+    if N % 4 == 0:
+        spokes, offsets = [0, N // 4, N // 2, 3 * N // 4], [0.0] * 4
+    elif N % 2 == 0:
+        spokes, offsets = [0, 0, N // 2, N // 2], [-1.05 * half, 1.05 * half] * 2
+    else:
+        raise InputError(f"{where}.layout: 'shear_45' needs an even number of spokes; "
+                         "declare [[gauges.gauge]] explicitly")
+    width_here = max(disc.spoke_width, disc.pad_width)
+    if 2 * half > width_here:
+        raise InputError(f"{where}.grid_length_mm: a 45° grid of {length_m * 1e3:g} × {width_m * 1e3:g} mm "
+                         f"does not fit on a {width_here * 1e3:g} mm spoke")
+    gauges = []
+    for arm, (k, off) in enumerate(zip(spokes, offsets), start=1):
+        r_hat = np.array([math.cos(ang[k]), math.sin(ang[k]), 0.0])
+        t_hat = np.array([-r_hat[1], r_hat[0], 0.0])
+        r = rc + off
+        if not (disc.hub_radius + half < r < disc.rim_inner_radius - half):
+            raise InputError(f"{where}.position: the gauges do not fit on the free spoke length")
+        sign = -1.0 if arm in (1, 3) else 1.0
+        axis = (r_hat + sign * t_hat) / math.sqrt(2)
+        gauges.append(Gauge(tuple(r * r_hat + np.array([0, 0, disc.thickness])), tuple(axis), (0.0, 0.0, 1.0),
+                            length_m, width_m, arm, f"g{arm}"))
+    return gauges

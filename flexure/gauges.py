@@ -1,0 +1,135 @@
+"""Strain gauges on the flexure surface and their read-out.
+
+A gauge is a grid of length L (along its axis a) and width W (along b = n × a) centred at c on a
+surface with outward normal n. Its reading is the axial strain averaged over the grid area,
+
+    ε_g = (1/LW) ∫∫ aᵀ ε(c + s a + t b) a ds dt,
+
+evaluated with a tensor Gauss–Legendre rule (points moved a hair inside the solid).
+Bridge arms follow bridge.wheatstone's "full_bending" convention:
+V_o/V_ex ≈ GF/4 (ε1 − ε2 + ε3 − ε4).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from flexure.errors import InputError
+
+
+@dataclass(frozen=True)
+class Gauge:
+    """One gauge: centre (m), unit axis, outward unit normal, grid length/width (m), bridge arm 1–4."""
+
+    centre_m: tuple
+    axis: tuple
+    normal: tuple
+    length_m: float
+    width_m: float
+    arm: int
+    name: str = ""
+
+    def frame(self):
+        """(c, a, b, n) with a ⟂ n re-orthogonalised, b = n × a."""
+        c = np.asarray(self.centre_m, float)
+        n = np.asarray(self.normal, float)
+        n = n / np.linalg.norm(n)
+        a = np.asarray(self.axis, float)
+        a = a - (a @ n) * n
+        norm = np.linalg.norm(a)
+        if norm < 1e-9:
+            raise InputError(f"gauge {self.name or self.arm}: axis is parallel to the surface normal")
+        a = a / norm
+        return c, a, np.cross(n, a), n
+
+
+def sample_points(gauge: Gauge, n_length: int = 6, n_width: int = 3, inset_m: float | None = None):
+    """Gauss–Legendre points (k,3) over the grid and their weights (k,) summing to 1."""
+    c, a, b, n = gauge.frame()
+    s, ws = np.polynomial.legendre.leggauss(n_length)
+    t, wt = np.polynomial.legendre.leggauss(n_width)
+    S, T = np.meshgrid(s * gauge.length_m / 2, t * gauge.width_m / 2, indexing="ij")
+    W = np.outer(ws, wt).ravel() / 4.0
+    inset = 1e-4 * min(gauge.length_m, gauge.width_m) if inset_m is None else inset_m
+    pts = c + S.ravel()[:, None] * a + T.ravel()[:, None] * b - inset * n
+    return pts, W
+
+
+def read(gauges: list[Gauge], strain_fn, n_length: int = 6, n_width: int = 3) -> np.ndarray:
+    """Average axial strain of each gauge, (g,) — or (g, cases) when strain_fn returns
+    (k, cases, 3, 3). ``strain_fn(points (k,3)) -> (k,3,3)`` or (k, cases, 3, 3)."""
+    pts, w, axes = [], [], []
+    for g in gauges:
+        p, wg = sample_points(g, n_length, n_width)
+        pts.append(p)
+        w.append(wg)
+        axes.append(np.repeat(g.frame()[1][None], len(p), axis=0))
+    pts, w, axes = np.vstack(pts), np.concatenate(w), np.vstack(axes)
+    eps = np.asarray(strain_fn(pts))
+    if eps.ndim == 3:
+        e_aa = np.einsum("ki,kij,kj->k", axes, eps, axes)
+    else:
+        e_aa = np.einsum("ki,kcij,kj->kc", axes, eps, axes)
+    k = n_length * n_width
+    e_aa = (e_aa * (w[:, None] if e_aa.ndim == 2 else w)).reshape(len(gauges), k, *e_aa.shape[1:])
+    return e_aa.sum(axis=1)
+
+
+def bridge_strains(gauges: list[Gauge], readings: np.ndarray) -> np.ndarray:
+    """Order readings (g, ...) by arm → (..., 4) for bridge.wheatstone (one gauge per arm)."""
+    arms = [g.arm for g in gauges]
+    if sorted(arms) != [1, 2, 3, 4]:
+        raise InputError(f"gauges: need exactly one gauge on each bridge arm 1–4, got arms {arms}")
+    order = np.argsort(arms)
+    return np.moveaxis(np.asarray(readings)[order], 0, -1)
+
+
+# ----------------------------------------------------------------------------- strain evaluation
+def locate(mesh, points: np.ndarray, k_candidates: int = 24):
+    """Element index (k,) and barycentric coordinates (k,4) of points; InputError if outside."""
+    from scipy.spatial import cKDTree
+
+    x = mesh.points[mesh.tets[:, :4]]
+    cen = x.mean(1)
+    tree = mesh._cache.get("centroid_tree")
+    if tree is None:
+        tree = mesh._cache["centroid_tree"] = cKDTree(cen)
+    kc = min(k_candidates, len(cen))
+    _, cand = tree.query(points, k=kc)
+    cand = cand.reshape(len(points), kc)
+    T = np.transpose(x[:, 1:] - x[:, :1], (0, 2, 1))            # (m,3,3) columns x_i − x_0
+    Tinv = mesh._cache.get("bary_inv")
+    if Tinv is None:
+        Tinv = mesh._cache["bary_inv"] = np.linalg.inv(T)
+    lam = np.einsum("kcij,kcj->kci", Tinv[cand], points[:, None, :] - x[cand, 0])
+    bary = np.concatenate([1 - lam.sum(-1, keepdims=True), lam], axis=-1)   # (k,c,4)
+    score = bary.min(-1)
+    best = score.argmax(1)
+    rows = np.arange(len(points))
+    if (score[rows, best] < -1e-6).any():
+        bad = points[score[rows, best] < -1e-6][0]
+        raise InputError(f"gauge: sample point {np.round(bad * 1e3, 3).tolist()} mm lies outside the "
+                         "mesh (is the gauge on the surface?)")
+    return cand[rows, best], bary[rows, best]
+
+
+def strain_at(mesh, u: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """ε(x) = sym(Σ_a u_a ⊗ ∇N_a(x)) at points (k,3) → (k,3,3); u (n,3) or (n,3,cases) → (k,cases,3,3).
+
+    Straight-sided tetrahedra: ξ = barycentric (L1, L2, L3); ∇_x N = J⁻ᵀ ∇_ξ N, J from the vertices.
+    """
+    from flexure.fem import tet_shape
+
+    elem, bary = locate(mesh, points)
+    _, dN = tet_shape(mesh.order, bary[:, 1:])                    # (k,nn,3)
+    x = mesh.points[mesh.tets[elem, :4]]
+    J = np.transpose(x[:, 1:] - x[:, :1], (0, 2, 1))              # J_ik = ∂x_i/∂ξ_k
+    G = np.einsum("kaj,kji->kai", dN, np.linalg.inv(J))            # ∂N_a/∂x_i = Σ_j ∂N_a/∂ξ_j (J⁻¹)_ji
+    ue = u[mesh.tets[elem]]                                       # (k,nn,3[,c])
+    if ue.ndim == 3:
+        grad = np.einsum("kai,kaj->kij", ue, G)
+        return 0.5 * (grad + np.swapaxes(grad, -1, -2))
+    grad = np.einsum("kaic,kaj->kcij", ue, G)
+    return 0.5 * (grad + np.swapaxes(grad, -1, -2))

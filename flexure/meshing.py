@@ -1,0 +1,215 @@
+"""Tetrahedral meshing with tetgen: quality switches, sizing finer at the gauges, P1 or P2.
+
+Sizing: tetgen grades its interior from the boundary triangulation, so the local size is set
+on the surface. For an extruded profile the caps are triangulated with a graded size field
+h(x, y) (``graded_triangulation``: nested hexagonal lattices + Delaunay with boundary-edge recovery)
+and the side walls are split into layers, giving h_gauge at the gauges and h_far elsewhere; tetgen
+then inserts interior points under the radius-edge bound q (``minratio``), the minimum dihedral
+angle (``mindihedral``) and the volume bound V ≤ h_far³/(6√2) (regular tetrahedron of edge h_far).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from flexure.errors import InputError
+from flexure.geometry import Surface, check_watertight
+
+SIZES = {  # h_far as a multiple of thickness, h_gauge as a multiple of the gauge grid width
+    "coarse": {"far": 1.0, "gauge": 0.6, "minratio": 2.0, "mindihedral": 10.0},
+    "medium": {"far": 0.7, "gauge": 0.4, "minratio": 1.8, "mindihedral": 12.0},
+    "fine": {"far": 0.5, "gauge": 0.25, "minratio": 1.6, "mindihedral": 14.0},
+}
+
+
+@dataclass
+class SizeField:
+    """h(x) = clip(h_gauge + grading·(d(x) − r_gauge), h_gauge, h_far), d = distance to the
+    nearest gauge centre (in the xy-plane for extrusions)."""
+
+    h_far: float
+    h_gauge: float
+    centres: np.ndarray          # (g, 2 or 3)
+    r_gauge: float
+    grading: float = 0.35
+
+    def __call__(self, xy: np.ndarray) -> np.ndarray:
+        xy = np.asarray(xy, float)
+        if len(self.centres) == 0:
+            return np.full(len(xy), self.h_far)
+        c = self.centres[:, : xy.shape[1]]
+        d = np.sqrt(((xy[:, None, :] - c[None]) ** 2).sum(-1)).min(1)
+        return np.clip(self.h_gauge + self.grading * (d - self.r_gauge), self.h_gauge, self.h_far)
+
+
+def _densify_ring(ring: np.ndarray, size_fn) -> np.ndarray:
+    nxt = np.roll(ring, -1, axis=0)
+    seg = np.linalg.norm(nxt - ring, axis=1)
+    n = np.maximum(1, np.ceil(seg / size_fn(0.5 * (ring + nxt)))).astype(int)
+    s = np.concatenate([np.arange(k) / k for k in n])
+    rep = np.repeat(np.arange(len(ring)), n)
+    return ring[rep] + s[:, None] * (nxt[rep] - ring[rep])
+
+
+def graded_triangulation(poly, size_fn, max_iter: int = 40):
+    """Triangulate a shapely polygon with spacing ≈ size_fn(xy); every boundary edge is kept.
+
+    Returns (points (n,2), triangles (m,3) CCW, rings): points start with the boundary rings.
+    Encroached boundary segments missing from the Delaunay triangulation are split (Ruppert).
+    """
+    import shapely
+    from scipy.spatial import Delaunay, cKDTree
+
+    poly = shapely.geometry.polygon.orient(poly, sign=1.0)
+    rings = [np.asarray(poly.exterior.coords)[:-1]] + [np.asarray(r.coords)[:-1] for r in poly.interiors]
+    rings = [_densify_ring(r, size_fn) for r in rings]
+    minx, miny, maxx, maxy = poly.bounds
+    gx, gy = np.meshgrid(np.linspace(minx, maxx, 120), np.linspace(miny, maxy, 120))
+    sample = size_fn(np.column_stack([gx.ravel(), gy.ravel()]))
+    hmin, hmax = float(sample.min()), float(sample.max())
+    inner, lv = [], hmax
+    while lv > 0.5 * hmin:                       # nested hexagonal lattices h, h/2, h/4 ...
+        ny = int(np.ceil((maxy - miny) / (lv * np.sqrt(3) / 2))) + 2
+        nx = int(np.ceil((maxx - minx) / lv)) + 2
+        j, i = np.mgrid[0:ny, 0:nx]
+        pts = np.column_stack([(minx + lv * (i + 0.5 * (j % 2))).ravel(),
+                               (miny + j * lv * np.sqrt(3) / 2).ravel()])
+        loc = size_fn(pts)
+        keep = loc > lv / 2 * 1.0001
+        if lv < hmax:
+            keep &= loc <= lv * 1.0001
+        inner.append(pts[keep])
+        lv /= 2
+    inner = np.vstack(inner)
+    inner = inner[shapely.contains_xy(poly, inner[:, 0], inner[:, 1])]
+    inner = inner[shapely.distance(poly.boundary, shapely.points(inner)) >= 0.6 * size_fn(inner)]
+    for _ in range(max_iter):
+        starts = np.cumsum([0] + [len(r) for r in rings])
+        i0 = np.arange(starts[-1])
+        i1 = np.concatenate([np.roll(np.arange(s, e), -1) for s, e in zip(starts[:-1], starts[1:])])
+        pts = np.vstack(rings + [inner])
+        tri = Delaunay(pts).simplices
+        p = pts[tri]
+        area2 = ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+                 - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0]))
+        c = p.mean(1)
+        tri = tri[shapely.contains_xy(poly, c[:, 0], c[:, 1]) & (np.abs(area2) > 1e-10 * hmin ** 2)]
+        e = np.sort(np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+        have = set(map(tuple, e))
+        missing = np.array([(min(a, b), max(a, b)) not in have for a, b in zip(i0, i1)])
+        if not missing.any():
+            p = pts[tri]
+            area2 = ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+                     - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0]))
+            tri[area2 < 0] = tri[area2 < 0][:, ::-1]
+            return pts, tri, rings
+        new = []
+        for r, (s, e_) in zip(rings, zip(starts[:-1], starts[1:])):
+            miss = missing[s:e_]
+            nxt = np.roll(r, -1, axis=0)
+            mids = 0.5 * (r + nxt)
+            if miss.any() and len(inner):
+                rad = 0.5 * np.linalg.norm(nxt[miss] - r[miss], axis=1)
+                near = cKDTree(mids[miss]).query(inner, k=1)
+                inner = inner[~(near[0] < 1.05 * rad[near[1]])]
+            out = np.insert(r, np.flatnonzero(miss) + 1, mids[miss], axis=0)
+            new.append(out)
+        rings = new
+    raise InputError("mesh: could not recover the profile boundary; use a coarser size or simpler profile")
+
+
+def extrude_graded(poly, height: float, size_fn, source: str = "parametric") -> Surface:
+    """Closed surface of ``poly`` × [0, height] with graded caps and layered side walls."""
+    pts2, tri, rings = graded_triangulation(poly, size_fn)
+    n = len(pts2)
+    nb = sum(len(r) for r in rings)
+    layers = max(1, int(np.ceil(height / np.median(size_fn(pts2[:nb])))))
+    z = np.linspace(0.0, height, layers + 1)
+    # node ids: caps at layer 0 / layers use all points; middle layers only boundary points
+    def node(idx, k):
+        idx = np.asarray(idx)
+        if k == 0:
+            return idx
+        if k == layers:
+            return idx + n
+        return 2 * n + (k - 1) * nb + idx
+    points = [np.column_stack([pts2, np.zeros(n)]), np.column_stack([pts2, np.full(n, height)])]
+    points += [np.column_stack([pts2[:nb], np.full(nb, zk)]) for zk in z[1:-1]]
+    starts = np.cumsum([0] + [len(r) for r in rings])
+    i0 = np.arange(nb)
+    i1 = np.concatenate([np.roll(np.arange(s, e), -1) for s, e in zip(starts[:-1], starts[1:])])
+    faces = [tri[:, ::-1], tri + n]
+    for k in range(layers):
+        a0, b0, a1, b1 = node(i0, k), node(i1, k), node(i0, k + 1), node(i1, k + 1)
+        faces += [np.column_stack([a0, b0, b1]), np.column_stack([a0, b1, a1])]
+    surf = Surface(np.vstack(points), np.vstack(faces).astype(np.int64), source=source,
+                   info={"profile_area_m2": float(poly.area), "thickness_m": float(height),
+                         "layers": layers})
+    check_watertight(surf, "mesh surface")
+    return surf
+
+
+@dataclass
+class MeshResult:
+    """``mesh`` (flexure.mesh.Mesh), the surface meshed, and the quality report."""
+
+    mesh: object
+    surface: Surface
+    report: dict
+
+
+def tetrahedralize(surface: Surface, h_far: float, minratio: float = 1.8, mindihedral: float = 10.0,
+                   order: int = 1):
+    """tetgen -pq{minratio}/{mindihedral}a{V}: returns flexure.mesh.Mesh (P1, or P2 via to_quadratic)."""
+    import tetgen
+
+    from flexure.mesh import Mesh, to_quadratic
+
+    tg = tetgen.TetGen(np.ascontiguousarray(surface.points, float),
+                       np.ascontiguousarray(surface.faces, np.int32))
+    maxvol = h_far ** 3 / (6 * np.sqrt(2))
+    try:
+        nodes, elems, *_ = tg.tetrahedralize(plc=True, quality=True, minratio=minratio,
+                                             mindihedral=mindihedral, maxvolume=maxvol, quiet=True)
+    except RuntimeError as exc:
+        raise InputError(f"mesh: tetgen failed on the surface ({exc}); check it is closed and "
+                         "not self-intersecting") from None
+    if len(elems) == 0:
+        raise InputError("mesh: tetgen produced no tetrahedra (self-intersecting surface?)")
+    used = np.unique(elems[:, :4])
+    remap = np.full(len(nodes), -1)
+    remap[used] = np.arange(len(used))
+    mesh = Mesh(np.asarray(nodes[used], float), remap[elems[:, :4]].astype(np.int64))
+    if order == 2:
+        mesh = to_quadratic(mesh)
+    elif order != 1:
+        raise InputError(f"mesh.order: must be 1 or 2, got {order!r}")
+    return mesh
+
+
+def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gauge_centres: np.ndarray,
+                        gauge_extent: float, h_scale: float, order: int = 1,
+                        gauge_width: float | None = None) -> MeshResult:
+    """Mesh an extruded profile (shapely polygon + thickness) or a closed Surface (user STL).
+
+    h_far = SIZES[size].far · h_scale (the thickness); h_gauge = SIZES[size].gauge · gauge width,
+    within ``gauge_extent`` of each gauge centre, graded outwards.
+    """
+    if size not in SIZES:
+        raise InputError(f"--size: must be one of {', '.join(SIZES)}, got {size!r}")
+    s = SIZES[size]
+    h_far = s["far"] * h_scale
+    h_gauge = min(s["gauge"] * (gauge_width or gauge_extent), h_far)
+    field = SizeField(h_far, h_gauge, np.asarray(gauge_centres, float).reshape(-1, 3),
+                      r_gauge=gauge_extent)
+    if isinstance(surface_or_poly, Surface):
+        surface = surface_or_poly
+    else:
+        surface = extrude_graded(surface_or_poly, thickness, field)
+    mesh = tetrahedralize(surface, h_far, s["minratio"], s["mindihedral"], order)
+    from flexure.mesh import quality
+    rep = quality(mesh)
+    rep.update({"size": size, "h_far_m": h_far, "h_gauge_m": h_gauge, "surface_triangles": int(len(surface.faces))})
+    return MeshResult(mesh, surface, rep)
