@@ -263,6 +263,14 @@ def localize_dynamic(robot: Robot, q: np.ndarray, residual: np.ndarray, *, expec
             e2x, e2z = _pick(jx[1:], second), _pick(jz[1:], second)
             p2 = np.stack([q[:, 0] + s2x + a2 * (e2x - s2x), q[:, 1] + s2z + a2 * (e2z - s2z)], -1)
             far = np.hypot(*(p2 - point).T) > position_tol_m
+            # a rival whose force runs along its own link fixes no α there: its point could be
+            # anywhere on that link (e.g. a force through the knee fits link 1 at α = 1 and link 2
+            # anywhere on its line of action), so it is as good as far
+            f2 = np.stack([take(2, second), take(3, second)], axis=-1)
+            d2 = np.stack([e2x - s2x, e2z - s2z], axis=-1)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                cond2 = np.hypot(*f2.T) * np.hypot(*d2.T) / np.abs(_cross(d2, f2))
+            far |= ~(cond2 <= max_condition)
             reason[(reason == OK) & close & far] = AMBIGUOUS
     condition = _flag(force, delta, reason, min_force_N, max_condition)
     bad = reason != OK

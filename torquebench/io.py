@@ -39,6 +39,9 @@ def atomic_path(path: str | os.PathLike, *, overwrite: bool = True):
     if not path.parent.exists():
         raise InputError(f"{path}: directory {path.parent} does not exist")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.fchmod(fd, 0o666 & ~umask)      # mkstemp makes 0600; written files get the usual mode
     os.close(fd)
     try:
         yield Path(tmp)
