@@ -35,6 +35,8 @@ def test_readme_example_runs(command, tmp_path):
     work.mkdir()
     for name in ("robots", "scenes", "calibration", "flexure", "bridge", "estimator"):
         (work / name).symlink_to(ROOT / name)          # shipped inputs, read-only by contract
+    if "../shared/" in command and not (ROOT.parent / "shared").is_dir():
+        pytest.skip("needs ../shared beside the checkout (CI and the developers' machines have it)")
     if (ROOT.parent / "shared").is_dir():
         (tmp_path / "shared").symlink_to(ROOT.parent / "shared")
     (work / "out").mkdir()                             # everything an example writes goes here
