@@ -50,7 +50,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--png", type=Path, help="write a heat map of the position error over the grid")
 
 
-def sensor_noise_from_args(args, n_links: int):
+def sensor_noise_from_args(args):
     """(SensorNoise, provenance dict) from the command line."""
     from bridge.chain import SensorChain, paper_chain
     from bridge.config import load_sensor_config
@@ -101,7 +101,9 @@ def run(args) -> int:
     magnitude, direction = _floats(args.force, 2, "--force")
     if args.grid < 1 or args.draws < 2:
         raise InputError("--grid must be ≥ 1 and --draws ≥ 2")
-    noise, provenance = sensor_noise_from_args(args, robot.n_links)
+    if args.png and robot.n_links != 2:
+        raise InputError("--png: the heat map is drawn for two-link robots only")
+    noise, provenance = sensor_noise_from_args(args)
     force = magnitude * np.array([math.cos(direction), math.sin(direction)])
     axes = [np.linspace(0.0, math.pi, args.grid)] * robot.n_links
     postures = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, robot.n_links)
@@ -129,7 +131,7 @@ def run(args) -> int:
         }
         maps[method] = np.where(usable, mc.position_rms_m, np.nan)
     if args.png:
-        _heat_map(args.png, maps, axes, robot.n_links)
+        _heat_map(args.png, maps, axes)
         results["png"] = str(args.png)
     if args.json:
         print_json(results)
@@ -149,9 +151,8 @@ def run(args) -> int:
     return 0
 
 
-def _heat_map(path: Path, maps: dict, axes, n_links: int) -> None:
-    if n_links != 2:
-        raise InputError("--png: the heat map is drawn for two-link robots only")
+def _heat_map(path: Path, maps: dict, axes) -> None:
+    """Position-error maps over the (q1, q2) grid, one panel per method (two-link robots)."""
     import matplotlib
 
     matplotlib.use("Agg")
