@@ -7,6 +7,10 @@ kinematic rigid coupling of the bore surface; the rim is held (bolt-hole walls, 
     sensitivity      S = (V_o/V_ex)(T_rated) / T_rated              (exact bridge, mV/V per N·m)
     stiffness        k = T / Θ_z                                     (Θ_z: coupling rotation)
     cross-talk       c_j = 100 · (V_o/V_ex)(unit load j) / (V_o/V_ex)(T_rated)   (% per N or N·m)
+    single-arm leak  a_j = 100 · max_i |ε_i(unit load j)| / |ε1 − ε2 + ε3 − ε4|(T_rated)
+                     (arms mismatched by δ leak up to ≈ δ · a_j: cross-talk's sensitivity to
+                     gauge tolerances; for a symmetric layout c_j → 0 and what remains of it is
+                     discretisation error of the order of the arm imbalance times a_j)
     reference strain ε_ref = (ε1 − ε2 + ε3 − ε4)/4 per N·m  (V_o/V_ex ≈ GF ε_ref, full bending)
     min torque       T_min = ε_min(bridge noise budget) / ε_ref
     safety factor    σ_y / max σ_vM at T_rated (element-nodal stresses, not averaged)
@@ -126,32 +130,15 @@ def _nodal_average(mesh, values: np.ndarray) -> np.ndarray:
 
 
 def _solve_cases(problem, K, rhs_cases: np.ndarray):
-    """Reduced system once; q for every wrench column (6, n_q). Direct (one factorization, all
-    right-hand sides) below solve.DIRECT_MAX_DOFS, else PyAMG-CG column by column."""
+    """Reduced system once; q for every wrench column (6, n_q) with one factorization (direct,
+    below solve.DIRECT_MAX_DOFS) or one AMG hierarchy (P2: the p-multigrid) for all columns."""
     from flexure import solve as fsolve
 
     system = problem.reduced_system(K)
     fsolve._check_restrained(system)
-    sl = system.ref_slices[0]
-    B = np.zeros((system.A.shape[0], len(rhs_cases)))
-    B[:] = system.b[:, None]
-    B[sl, :] = rhs_cases.T
-    n = system.A.shape[0]
-    if n <= fsolve.DIRECT_MAX_DOFS:
-        q, info = fsolve.solve_system(system.A, B, system.B, "direct")
-        info["residual_norm"] = float(np.max(np.linalg.norm(B - system.A @ q, axis=0)
-                                             / np.linalg.norm(B, axis=0)))
-    else:
-        cols, infos = [], []
-        for j in range(B.shape[1]):
-            qj, ij = fsolve.solve_system(system.A, B[:, j], system.B, "amg")
-            cols.append(qj)
-            infos.append(ij)
-        q = np.column_stack(cols)
-        info = dict(infos[0])
-        info["solve_s"] = sum(i["solve_s"] for i in infos)
-        info["iterations"] = [i["iterations"] for i in infos]
-        info["residual_norm"] = max(i["residual_norm"] for i in infos)
+    B = np.repeat(system.b[:, None], len(rhs_cases), axis=1)
+    B[system.ref_slices[0], :] = rhs_cases.T
+    q, info = fsolve.solve_reduced(system, B)
     return system, q, info
 
 
@@ -218,6 +205,13 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
     eps_ref = float((eps[0, 0] - eps[0, 1] + eps[0, 2] - eps[0, 3]) / 4.0)
     crosstalk = {CROSSTALK_KEYS[c]: float(100.0 * ratio_unit[i] / ratio_rated)
                  for i, c in enumerate(CASES) if c != "Mz"}
+    # what one arm alone sees of each off-axis load, as % of the rated bridge strain: a bridge
+    # whose arms differ by δ (gauge factor, placement) leaks up to δ × this into the output
+    rated_bridge_strain = abs(float(eps[0, 0] - eps[0, 1] + eps[0, 2] - eps[0, 3])) * T
+    arm_leak = {CROSSTALK_KEYS[c]: float(100.0 * np.abs(eps[i]).max() / rated_bridge_strain)
+                for i, c in enumerate(CASES) if c != "Mz"}
+    # a symmetric layout reads |ε| equal on all arms under Mz: the spread is discretisation error
+    imbalance = float(np.ptp(np.abs(eps[0])) / np.abs(eps[0]).mean())
     stiffness = float(1.0 / theta[2, 0]) if theta[2, 0] != 0 else math.nan
 
     u_rated = U[:, :, 0] * T
@@ -243,6 +237,8 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
         "max_von_mises_Pa": nan_if(max_vm),
         "safety_factor": nan_if(design.material.yield_Pa / max_vm),
         "crosstalk_percent": {k: nan_if(v) for k, v in crosstalk.items()},
+        "crosstalk_single_arm_percent": {k: nan_if(v) for k, v in arm_leak.items()},
+        "gauge_arm_imbalance": nan_if(imbalance),
         "min_detectable_torque_Nm": nan_if(eps_min_noise / eps_ref if good_ref else math.nan),
         "min_detectable_torque_enob_Nm": nan_if(eps_min_enob / eps_ref if good_ref else math.nan),
         "min_detectable_strain_noise": eps_min_noise,

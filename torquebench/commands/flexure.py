@@ -1,0 +1,127 @@
+"""`torquebench flexure DESIGN.toml`: judge a torque-sensor flexure before machining it.
+
+One design: mesh (tetgen, P2 by default), six load cases with one solver set-up, gauge read-out,
+bridge output, stiffness, stress, cross-talk and minimum detectable torque; optional VTU (ParaView)
+and off-screen PNG of the strain or von Mises field with the gauges drawn.
+``--sweep PARAM=v1,v2,...`` (once or twice): the sensitivity–stiffness–stress trade-off table,
+and with ``--png`` the trade-off plot instead of the field picture.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from torquebench.errors import InputError
+
+HELP = "flexure FEM: sensitivity (mV/V per N·m), stiffness, stress, cross-talk, min torque; sweeps"
+HEADLINE = ("sensitivity_mV_per_V_per_Nm", "torsional_stiffness_Nm_per_rad", "max_von_mises_Pa",
+            "safety_factor", "min_detectable_torque_Nm", "gauge_strain_per_Nm", "dofs", "solve_s")
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("design", nargs="?", type=Path, default=None, metavar="DESIGN.toml",
+                        help="design file (default: the shipped scenes/paper_disc.toml)")
+    parser.add_argument("--size", choices=("coarse", "medium", "fine"), default=None,
+                        help="mesh size (default: the file's [mesh] size)")
+    parser.add_argument("--order", type=int, choices=(1, 2), default=None,
+                        help="element order: 1 = 4-node, 2 = 10-node tetrahedra (default: the file's)")
+    parser.add_argument("--vtu", type=Path, default=None, metavar="OUT.vtu",
+                        help="write displacement, von Mises and strain fields at rated torque (ParaView)")
+    parser.add_argument("--png", type=Path, default=None, metavar="OUT.png",
+                        help="picture of the field with the gauges (a sweep: the trade-off plot)")
+    parser.add_argument("--field", choices=("strain", "von_mises"), default="strain",
+                        help="field drawn in --png (default: max shear strain, what ±45° gauges read)")
+    parser.add_argument("--sweep", action="append", metavar="PARAM=v1,v2,...",
+                        help="sweep a geometry parameter (e.g. spoke_width_mm=3,4,5); at most twice")
+
+
+def _check_outputs(args, design_path: Path) -> None:
+    """Refuse bad output paths before the (long) analysis runs."""
+    for flag, path, suffix in (("--vtu", args.vtu, ".vtu"), ("--png", args.png, ".png")):
+        if path is None:
+            continue
+        if path.suffix.lower() != suffix:
+            raise InputError(f"{flag}: {path} must end in {suffix}")
+        if not path.parent.exists():
+            raise InputError(f"{flag}: directory {path.parent} does not exist")
+        if path.resolve() == design_path.resolve():
+            raise InputError(f"{flag}: {path} is the design file; refusing to overwrite it")
+    if args.sweep and args.vtu is not None:
+        raise InputError("--vtu: one design at a time; drop --sweep to write fields")
+
+
+def _print_design(res: dict) -> None:
+    m, s = res["mesh"], res["solver"]
+    ct = res["crosstalk_percent"]
+    leak = res["crosstalk_single_arm_percent"]
+    print(f"design: {res['design']}  ({res['design_file']})")
+    print(f"material: {res['material']['name']} (E {res['material']['E_Pa'] / 1e9:g} GPa, "
+          f"ν {res['material']['nu']:g}, σ_y {res['material']['yield_Pa'] / 1e6:g} MPa)")
+    print(f"mesh: {m['n_elements']} P{res['order']} tetrahedra ({res['size']}), {res['dofs']} dofs, "
+          f"min dihedral {m['min_dihedral_deg']:.1f}°, worst aspect ratio {m['max_aspect_ratio']:.1f}")
+    print(f"solver: {s['solver']}; relative residual {s['residual_norm']:.1e}; "
+          f"mesh {res['mesh_s']:.1f} s, assembly {res['assemble_s']:.1f} s, solve {res['solve_s']:.1f} s")
+    if res["warnings"]:
+        print(f"WARNING: {', '.join(res['warnings'])}"
+              + (f": numbers withheld ({res['nan_reason']})" if "nan_reason" in res else ""))
+    if "nan_reason" in res:
+        print(f"results are not trustworthy: {res['nan_reason']}")
+        return
+    T = res["rated_torque_Nm"]
+    print(f"gauge strain: {res['gauge_strain_per_Nm'] * 1e6:.2f} µε per N·m "
+          f"({res['gauge_strain_at_0p4Nm'] * 1e6:.2f} µε at 0.4 N·m); arm imbalance "
+          f"{res['gauge_arm_imbalance'] * 100:.2f} %")
+    print(f"sensitivity: {res['sensitivity_mV_per_V_per_Nm']:.4g} mV/V per N·m "
+          f"({res['output_mV_at_rated']:.3g} mV at {T:g} N·m, {res['excitation_V']:g} V excitation)")
+    print(f"torsional stiffness: {res['torsional_stiffness_Nm_per_rad']:.4g} N·m/rad")
+    print(f"peak von Mises at {T:g} N·m: {res['max_von_mises_Pa'] / 1e6:.1f} MPa, "
+          f"safety factor {res['safety_factor']:.2f}")
+    print(f"minimum detectable torque: {res['min_detectable_torque_Nm'] * 1e3:.3g} mN·m (1σ noise), "
+          f"{res['min_detectable_torque_enob_Nm'] * 1e3:.3g} mN·m (ENOB resolution)")
+    print("cross-talk (% of rated output per N or N·m; single-arm leak in brackets):")
+    for k in ct:
+        print(f"  {k:<10}{ct[k]:>+10.3g}  [{leak[k]:.3g}]")
+
+
+def run(args) -> int:
+    from flexure.analysis import analyze, parse_sweep, sweep, sweep_plot, sweep_table
+    from flexure.design import load_design
+    from torquebench.io import print_json, shipped
+
+    path = args.design or shipped("scenes", "paper_disc.toml")
+    _check_outputs(args, path)
+    params = parse_sweep(args.sweep)
+    progress = sys.stderr.isatty() or not args.json
+    if params:
+        keys = [k for k, _ in params]
+        rows = sweep(path, params, args.size, args.order, progress=progress)
+        if args.png is not None:
+            sweep_plot(rows, keys, args.png)
+        if args.json:
+            print_json({"design_file": str(path), "parameters": keys, "rows": rows,
+                        "png": str(args.png) if args.png else None})
+        else:
+            print(sweep_table(rows, keys))
+            if args.png is not None:
+                print(f"trade-off plot: {args.png}")
+        return 0
+
+    design = load_design(path)
+    res, fields = analyze(design, args.size, args.order, progress=progress)
+    if args.vtu is not None:
+        from flexure.render import write_vtu
+        res["vtu"] = str(write_vtu(fields, args.vtu))
+    if args.png is not None:
+        from flexure.render import render_png
+        res["png"] = str(render_png(fields, args.png, field=args.field,
+                                    title=f"{design.name}: {args.field.replace('_', ' ')} at "
+                                          f"{design.rated_torque_Nm:g} N·m"))
+    if args.json:
+        print_json(res)
+    else:
+        _print_design(res)
+        for k in ("vtu", "png"):
+            if k in res:
+                print(f"{k}: {res[k]}")
+    return 0
