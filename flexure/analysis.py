@@ -61,7 +61,7 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
         qs = design.segments_per_quarter or SEGMENTS.get(size, 3)
         poly = profile(design.disc, qs)
         return mesh_design_surface(poly, design.disc.thickness, size, centres, extent, design.disc.thickness,
-                                   order, gauge_width=gw)
+                                   order, gauge_width=gw, mesher=design.mesher)
     surf = load_stl(design.stl_path, design.stl_unit_m, where=f"{design.path}: geometry.file")
     scale = float(np.ptp(surf.points, axis=0).min())
     return mesh_design_surface(surf, None, size, centres, extent, scale, order, gauge_width=gw)
@@ -373,8 +373,11 @@ def sweep_plot(rows: list[dict], keys: list[str], out_png) -> None:
     ax.set_title("flexure sweep: " + " × ".join(keys) + " (labels)")
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
-    fig.savefig(out_png, dpi=110)
-    plt.close(fig)
+    from flexure.render import _atomic_write
+    try:
+        _atomic_write(out_png, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    finally:
+        plt.close(fig)
 
 
 __all__ = ["analyze", "build_mesh", "sweep", "parse_sweep", "sweep_table", "sweep_plot", "load_design"]

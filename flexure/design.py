@@ -61,6 +61,7 @@ class Design:
     order: int
     raw: dict = field(repr=False, default_factory=dict)
     segments_per_quarter: int | None = None
+    mesher: str = "sweep"                 # "sweep" (layered extrusion) | "tetgen"
 
 
 def _get(table: dict, key: str, where: str, kind=float, default=None, required=False):
@@ -278,16 +279,21 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
     # mesh
     me = raw.get("mesh", {})
     w = f"{f}: mesh"
-    _unknown(me, {"size", "order"}, w)
+    _unknown(me, {"size", "order", "mesher"}, w)
     size = _get(me, "size", w, str, "coarse")
     if size not in SIZES:
         raise InputError(f"{w}.size: must be one of {', '.join(SIZES)}, got {size!r}")
     order = _get(me, "order", w, int, 2)
     if order not in (1, 2):
         raise InputError(f"{w}.order: must be 1 or 2, got {order}")
+    mesher = _get(me, "mesher", w, str, "sweep")
+    if mesher not in ("sweep", "tetgen"):
+        raise InputError(f"{w}.mesher: must be 'sweep' or 'tetgen', got {mesher!r}")
+    if mesher == "sweep" and kind == "stl":
+        mesher = "tetgen"                      # an STL is not an extrusion: tetgen meshes it
     return Design(path, str(name), kind, disc, stl_path, unit, material, gauges, gf, r_ohm, rated,
                   load_r, fixed, fixed_r, sensor, size, order, raw=raw,
-                  segments_per_quarter=geo.get("segments_per_quarter"))
+                  segments_per_quarter=geo.get("segments_per_quarter"), mesher=mesher)
 
 
 def shear_45_layout(disc: SpokeDisc, length_m: float, width_m: float, position: float, where: str):

@@ -151,6 +151,48 @@ def extrude_graded(poly, height: float, size_fn, source: str = "parametric") -> 
     return surf
 
 
+def sweep_tetrahedra(pts2: np.ndarray, tri: np.ndarray, z: np.ndarray):
+    """Tetrahedra of a triangulated profile swept through the levels ``z`` (3 per prism).
+
+    Nodes are numbered level by level (node = k·n + i), so every prism's smallest node lies in
+    its bottom triangle. Each prism (a, b, c | a', b', c'), rotated so that a is that smallest
+    node, is split as in Dompierre et al. (1999): every quad face is cut along the diagonal
+    through its smallest node, so neighbouring prisms share their diagonals (conforming mesh):
+    min(b, c') < min(c, b') → (a b c c') (a b c' b') (a b' c' a'); else (a b c b') (a b' c c')
+    (a b' c' a'). Returns points (n·levels, 3) and positively oriented tets (m, 4).
+    """
+    n, levels = len(pts2), len(z)
+    points = np.column_stack([np.tile(pts2, (levels, 1)), np.repeat(z, n)])
+    t = np.asarray(tri, dtype=np.int64)
+    shift = np.argmin(t, axis=1)                              # rotate: smallest index first
+    t = np.take_along_axis(t, (shift[:, None] + np.arange(3)) % 3, axis=1)
+    k = np.arange(levels - 1, dtype=np.int64)[:, None, None] * n
+    a, b, c = [(t[None, :, j] + k[..., 0])[..., None] for j in range(3)]
+    a1, b1, c1 = a + n, b + n, c + n
+    first = np.minimum(b, c1) < np.minimum(c, b1)
+    t1 = np.where(first, np.concatenate([a, b, c, c1], -1), np.concatenate([a, b, c, b1], -1))
+    t2 = np.where(first, np.concatenate([a, b, c1, b1], -1), np.concatenate([a, b1, c, c1], -1))
+    t3 = np.concatenate([a, b1, c1, a1], -1)
+    tets = np.stack([t1, t2, t3], axis=2).reshape(-1, 4)
+    x = points[tets]
+    vol = np.einsum("ij,ij->i", x[:, 1] - x[:, 0], np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 0]))
+    tets[vol < 0] = tets[vol < 0][:, [0, 2, 1, 3]]
+    return points, tets
+
+
+def sweep_mesh(poly, height: float, size_fn, n_layers: int, order: int = 1):
+    """Mesh an extruded profile: graded 2-D triangulation swept through ``n_layers`` equal layers.
+
+    Unlike tetgen on the closed surface, the layers resolve the through-thickness strain field
+    everywhere (bending and shear of thin spokes), and the in-plane size follows ``size_fn``."""
+    from flexure.mesh import Mesh, to_quadratic
+
+    pts2, tri, _ = graded_triangulation(poly, size_fn)
+    points, tets = sweep_tetrahedra(pts2, tri, np.linspace(0.0, height, int(n_layers) + 1))
+    mesh = Mesh(points, tets)
+    return to_quadratic(mesh) if order == 2 else mesh
+
+
 @dataclass
 class MeshResult:
     """``mesh`` (flexure.mesh.Mesh), the surface meshed, and the quality report."""
@@ -172,7 +214,8 @@ def tetrahedralize(surface: Surface, h_far: float, minratio: float = 1.8, mindih
     maxvol = h_far ** 3 / (6 * np.sqrt(2))
     try:
         nodes, elems, *_ = tg.tetrahedralize(plc=True, quality=True, minratio=minratio,
-                                             mindihedral=mindihedral, maxvolume=maxvol, quiet=True)
+                                             mindihedral=mindihedral, maxvolume=maxvol,
+                                             fixedvolume=True, quiet=True)
     except RuntimeError as exc:
         raise InputError(f"mesh: tetgen failed on the surface ({exc}); check it is closed and "
                          "not self-intersecting") from None
@@ -189,14 +232,21 @@ def tetrahedralize(surface: Surface, h_far: float, minratio: float = 1.8, mindih
     return mesh
 
 
+MESHERS = ("sweep", "tetgen")
+
+
 def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gauge_centres: np.ndarray,
                         gauge_extent: float, h_scale: float, order: int = 1,
-                        gauge_width: float | None = None) -> MeshResult:
+                        gauge_width: float | None = None, mesher: str = "sweep") -> MeshResult:
     """Mesh an extruded profile (shapely polygon + thickness) or a closed Surface (user STL).
 
     h_far = SIZES[size].far · h_scale (the thickness); h_gauge = SIZES[size].gauge · gauge width,
-    within ``gauge_extent`` of each gauge centre, graded outwards.
+    within ``gauge_extent`` of each gauge centre, graded outwards. A profile is swept through
+    ⌈thickness / h_gauge⌉ layers (``mesher="sweep"``) or its closed surface handed to tetgen
+    (``"tetgen"``, which grades only from the surface); a Surface always goes to tetgen.
     """
+    if mesher not in MESHERS:
+        raise InputError(f"mesh.mesher: must be one of {', '.join(MESHERS)}, got {mesher!r}")
     if size not in SIZES:
         raise InputError(f"--size: must be one of {', '.join(SIZES)}, got {size!r}")
     s = SIZES[size]
@@ -204,12 +254,19 @@ def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gau
     h_gauge = min(s["gauge"] * (gauge_width or gauge_extent), h_far)
     field = SizeField(h_far, h_gauge, np.asarray(gauge_centres, float).reshape(-1, 3),
                       r_gauge=gauge_extent)
+    layers = None
     if isinstance(surface_or_poly, Surface):
-        surface = surface_or_poly
-    else:
+        surface, mesher = surface_or_poly, "tetgen"
+        mesh = tetrahedralize(surface, h_far, s["minratio"], s["mindihedral"], order)
+    elif mesher == "tetgen":
         surface = extrude_graded(surface_or_poly, thickness, field)
-    mesh = tetrahedralize(surface, h_far, s["minratio"], s["mindihedral"], order)
+        mesh = tetrahedralize(surface, h_far, s["minratio"], s["mindihedral"], order)
+    else:
+        layers = max(2, int(np.ceil(thickness / h_gauge - 1e-9)))
+        mesh = sweep_mesh(surface_or_poly, thickness, field, layers, order)
+        surface = None
     from flexure.mesh import quality
     rep = quality(mesh)
-    rep.update({"size": size, "h_far_m": h_far, "h_gauge_m": h_gauge, "surface_triangles": int(len(surface.faces))})
+    rep.update({"size": size, "mesher": mesher, "layers": layers, "h_far_m": h_far, "h_gauge_m": h_gauge,
+                "surface_triangles": int(len(mesh.boundary_faces()))})
     return MeshResult(mesh, surface, rep)

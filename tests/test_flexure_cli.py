@@ -1,0 +1,92 @@
+"""`torquebench flexure`: the JSON contract, VTU/PNG outputs, sweeps, and one-line errors."""
+
+import json
+
+import pytest
+
+from flexure.analysis import parse_sweep
+from flexure.errors import InputError
+from torquebench.cli import main
+
+ISSUE_KEYS = ("sensitivity_mV_per_V_per_Nm", "torsional_stiffness_Nm_per_rad", "max_von_mises_Pa",
+              "safety_factor", "crosstalk_percent", "min_detectable_torque_Nm", "gauge_strain_per_Nm",
+              "dofs", "solve_s")
+
+
+def _run(capsys, *argv):
+    code = main(["flexure", *argv])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_json_keys_vtu_and_png(capsys, tmp_path):
+    vtu, png = tmp_path / "disc.vtu", tmp_path / "disc.png"
+    code, out, _ = _run(capsys, "--order", "1", "--json", "--vtu", str(vtu), "--png", str(png))
+    assert code == 0
+    data = json.loads(out)                                  # stdout is one JSON object
+    for k in ISSUE_KEYS:
+        assert k in data, k
+    assert set(data["crosstalk_percent"]) == {"Fx_per_N", "Fy_per_N", "Fz_per_N", "Mx_per_Nm", "My_per_Nm"}
+    assert data["order"] == 1 and data["dofs"] > 1000 and data["sensitivity_mV_per_V_per_Nm"] > 0
+    assert vtu.stat().st_size > 10_000 and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert data["vtu"] == str(vtu) and data["png"] == str(png)
+
+
+def test_text_output(capsys):
+    code, out, _ = _run(capsys, "--order", "1")
+    assert code == 0
+    for words in ("sensitivity:", "mV/V per N·m", "torsional stiffness", "safety factor",
+                  "minimum detectable torque", "Mx_per_Nm", "min dihedral"):
+        assert words in out, words
+
+
+def test_sweep_table_with_an_infeasible_row_and_plot(capsys, tmp_path):
+    png = tmp_path / "sweep.png"
+    code, out, _ = _run(capsys, "--order", "1", "--sweep", "spoke_width_mm=3.5,4.5,14", "--png", str(png),
+                        "--json")
+    assert code == 0
+    rows = json.loads(out)["rows"]
+    assert [r["spoke_width_mm"] for r in rows] == [3.5, 4.5, 14]
+    ok = [r for r in rows if r["error"] is None]
+    assert len(ok) == 2 and "spoke_width_mm" in rows[2]["error"]
+    # wider spokes: stiffer, less sensitive (the trade-off the sweep is for)
+    assert ok[1]["torsional_stiffness_Nm_per_rad"] > ok[0]["torsional_stiffness_Nm_per_rad"]
+    assert ok[1]["sensitivity_mV_per_V_per_Nm"] < ok[0]["sensitivity_mV_per_V_per_Nm"]
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_parse_sweep():
+    assert parse_sweep(["spoke_width_mm=3,4", "spokes=4,8"]) == [("spoke_width_mm", [3.0, 4.0]),
+                                                                ("spokes", [4, 8])]
+    for bad in (["spoke_width_mm"], ["spoke_width_mm=a,b"], ["a=1", "b=2", "c=3"], ["x=1", "x=2"]):
+        with pytest.raises(InputError):
+            parse_sweep(bad)
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--png", "out.jpg"], "--png"),
+    (["--vtu", "nowhere/x.vtu"], "does not exist"),
+    (["--sweep", "wheel_mm=1,2"], "wheel_mm"),
+    (["--sweep", "spoke_width_mm=3,4", "--vtu", "x.vtu"], "--vtu"),
+])
+def test_bad_arguments_exit_2_before_any_work(capsys, tmp_path, monkeypatch, argv, needle):
+    monkeypatch.chdir(tmp_path)
+    code, out, err = _run(capsys, *argv)
+    assert code == 2 and out == "" and needle in err and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []                   # nothing written
+
+
+def test_bad_design_file_exit_2_names_field(capsys, tmp_path):
+    p = tmp_path / "bad.toml"
+    p.write_text("[geometry]\nspoke_width_mm = -2\n")
+    before = p.read_bytes()
+    code, out, err = _run(capsys, str(p), "--json")
+    assert code == 2 and out == "" and "geometry.spoke_width_mm" in err and str(p) in err
+    assert err.count("\n") == 1 and p.read_bytes() == before
+
+
+def test_design_file_is_never_an_output(capsys, tmp_path):
+    p = tmp_path / "d.png"                                  # a design named like an output
+    p.write_text("name = 'x'\n")
+    code, _, err = _run(capsys, str(p), "--png", str(p))
+    assert code == 2 and "design file" in err and p.read_text() == "name = 'x'\n"
