@@ -6,6 +6,9 @@ Run from the repo root:  python benchmarks/bench_fem.py [--quick] [--skip-skfem]
 2. Scale (in a subprocess, for a clean peak memory): a 329k-DOF P2 annular disc end to end
    (mesh → assemble → rigid coupling + fixed rim → AMG-CG → strains), DOFs, time, peak RSS.
 3. Error against run time, P1/P2 × mesh × solver (torquebench/report_fem.py → reports/).
+4. The paper's disc (scenes/paper_disc.toml) at the fine size, ≥ 300k P2 DOFs, in a subprocess:
+   the whole design analysis (swept mesh → assembly → six load cases with one p-multigrid
+   set-up → gauges, stress, cross-talk), time per stage and per load case, peak RSS.
 """
 
 from __future__ import annotations
@@ -35,7 +38,8 @@ def tube_mesh(ri, ro, h, hmax, sections=64):
     surf.apply_translation((0, 0, h / 2))
     tg = tetgen.TetGen(np.asarray(surf.vertices, float), np.asarray(surf.faces, np.int32))
     nodes, elems, *_ = tg.tetrahedralize(plc=True, quality=True, minratio=1.6, mindihedral=14.0,
-                                         maxvolume=hmax ** 3 / (6 * np.sqrt(2)), quiet=True)
+                                         maxvolume=hmax ** 3 / (6 * np.sqrt(2)), fixedvolume=True,
+                                         quiet=True)
     elems = np.asarray(elems[:, :4], np.int64)
     m = Mesh(np.asarray(nodes, float), elems)
     neg = m.signed_volumes() < 0
@@ -192,16 +196,44 @@ def scale_run(n=(16, 128, 6)) -> dict:
                 warnings=s.info["warnings"], solver=s.info["solver"])
 
 
+def paper_disc_run(size: str = "fine") -> dict:
+    """`flexure.analysis.analyze` on the shipped paper disc; the numbers and the stage times."""
+    from flexure.analysis import analyze
+    from flexure.design import load_design
+
+    t0 = time.perf_counter()
+    res, _ = analyze(load_design(ROOT / "scenes" / "paper_disc.toml"), size)
+    total = time.perf_counter() - t0
+    return dict(dofs=res["dofs"], elements=res["mesh"]["n_elements"], layers=res["mesh"]["layers"],
+                mesh_s=res["mesh_s"], assemble_s=res["assemble_s"], solve_s=res["solve_s"],
+                iterations=res["solver"]["iterations"], residual=res["solver"]["residual_norm"],
+                total_s=total, peak_rss_GB=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024 ** 2,
+                sensitivity=res["sensitivity_mV_per_V_per_Nm"], warnings=res["warnings"])
+
+
+def _child(flag: str) -> dict | None:
+    out = subprocess.run([sys.executable, __file__, flag], capture_output=True, text=True, cwd=ROOT)
+    if out.returncode != 0:
+        print(out.stderr[-2000:])
+        return None
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--skip-scale", action="store_true")
     ap.add_argument("--skip-report", action="store_true")
     ap.add_argument("--skip-skfem", action="store_true")
     ap.add_argument("--quick", action="store_true", help="small scikit-fem comparison only (~10 s)")
+    ap.add_argument("--skip-paper-disc", action="store_true")
     ap.add_argument("--scale-child", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--paper-disc-child", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.scale_child:
         print(json.dumps(scale_run()))
+        return 0
+    if a.paper_disc_child:
+        print(json.dumps(paper_disc_run()))
         return 0
     if a.quick:
         skfem_side_by_side(hmax=3e-3, sections=16)
@@ -209,12 +241,9 @@ def main(argv=None) -> int:
     if not a.skip_skfem:
         skfem_side_by_side()
     if not a.skip_scale:
-        out = subprocess.run([sys.executable, __file__, "--scale-child"],
-                             capture_output=True, text=True, cwd=ROOT)
-        if out.returncode != 0:
-            print(out.stderr[-2000:])
+        r = _child("--scale-child")
+        if r is None:
             return 1
-        r = json.loads(out.stdout.strip().splitlines()[-1])
         print(f"[2] scale: {r['dofs']:,} DOFs P2 ({r['elements']:,} tets, structured annular disc, min "
               f"dihedral {r['min_dihedral']:.1f}°), {r['solver']}:\n    mesh {r['mesh_s']:.1f} s, "
               f"assemble {r['assemble_s']:.1f} s, AMG setup {r['setup_s']:.1f} s, CG {r['solve_s'] - r['setup_s']:.1f} s "
@@ -223,6 +252,18 @@ def main(argv=None) -> int:
               f"\n    k = {r['stiffness_Nm_per_rad']:.5g} N·m/rad (annulus plane-shear theory "
               f"{r['stiffness_exact']:.5g}), ε₄₅ at r = 15 mm {r['e45']:.5g} (theory {r['e45_exact']:.5g}) "
               f"per N·m; warnings {r['warnings']}")
+    if not a.skip_paper_disc:
+        r = _child("--paper-disc-child")
+        if r is None:
+            return 1
+        n_cases = len(r["iterations"]) if isinstance(r["iterations"], list) else 1
+        print(f"[4] paper disc (scenes/paper_disc.toml, fine): {r['dofs']:,} DOFs P2 ({r['elements']:,} tets, "
+              f"{r['layers']} layers): mesh {r['mesh_s']:.1f} s, assemble {r['assemble_s']:.1f} s, "
+              f"{n_cases} load cases {r['solve_s']:.1f} s ({r['solve_s'] / n_cases:.1f} s each, iterations "
+              f"{r['iterations']}, residual {r['residual']:.1e}); whole analysis {r['total_s']:.1f} s; "
+              f"one torque case end to end ≈ {r['total_s'] - r['solve_s'] * (n_cases - 1) / n_cases:.1f} s "
+              f"(target < 30 s); peak RSS {r['peak_rss_GB']:.2f} GB (target < 4 GB); "
+              f"{r['sensitivity']:.4f} mV/V per N·m; warnings {r['warnings']}")
     if not a.skip_report:
         from torquebench.report_fem import build, observed_orders, study  # noqa: F401
 
