@@ -9,15 +9,19 @@ set -euo pipefail
 cd "$(dirname "$0")"
 VENV=${TORQUEBENCH_VENV:-.venv}
 
+# shared library → Debian package: VTK's off-screen rendering (pyvista), and gmsh (STEP files)
+declare -A debian=([libGL.so.1]=libgl1 [libEGL.so.1]=libegl1 [libXrender.so.1]=libxrender1
+                   [libGLU.so.1]=libglu1-mesa [libXcursor.so.1]=libxcursor1 [libXft.so.2]=libxft2
+                   [libXinerama.so.1]=libxinerama1 [libfontconfig.so.1]=libfontconfig1)
 need_apt=()
-for lib in libGL.so.1 libEGL.so.1 libXrender.so.1; do
-    ldconfig -p 2>/dev/null | grep -q "$lib" || need_apt+=("$lib")
+for lib in "${!debian[@]}"; do
+    ldconfig -p 2>/dev/null | grep -q "$lib" || need_apt+=("${debian[$lib]}")
 done
 if [ ${#need_apt[@]} -gt 0 ] && command -v apt-get >/dev/null; then
-    echo "run.sh: installing Debian libraries for off-screen rendering (${need_apt[*]})" >&2
+    echo "run.sh: installing Debian libraries for rendering and gmsh (${need_apt[*]})" >&2
     SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
     $SUDO apt-get update -qq >&2
-    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq libgl1 libegl1 libxrender1 >&2
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need_apt[@]}" >&2
 fi
 
 if [ ! -x "$VENV/bin/python" ]; then

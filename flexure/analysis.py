@@ -48,7 +48,8 @@ class Fields:
 
 
 def build_mesh(design: Design, size: str | None = None, order: int | None = None):
-    """Surface + tetgen mesh of the design (P1/P2) with gauge-local refinement."""
+    """Mesh of the design (P1/P2), finer at the gauges: a swept or tetgen mesh of the parametric
+    profile, or tetgen on the surface of an STL (repaired if need be) or a STEP solid (gmsh)."""
     from flexure.geometry import load_stl, profile
     from flexure.meshing import mesh_design_surface
 
@@ -62,7 +63,14 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
         poly = profile(design.disc, qs)
         return mesh_design_surface(poly, design.disc.thickness, size, centres, extent, design.disc.thickness,
                                    order, gauge_width=gw, mesher=design.mesher)
-    surf = load_stl(design.stl_path, design.stl_unit_m, where=f"{design.path}: geometry.file")
+    where = f"{design.path}: geometry.file"
+    if design.kind == "step":
+        from flexure.cad import load_step
+        from flexure.meshing import size_field
+        surf = load_step(design.file_path, design.file_unit_m, where=where,
+                         size_for=lambda scale: size_field(size, scale, centres, extent, gw))
+    else:
+        surf = load_stl(design.file_path, design.file_unit_m, where=where)
     scale = float(np.ptp(surf.points, axis=0).min())
     return mesh_design_surface(surf, None, size, centres, extent, scale, order, gauge_width=gw)
 

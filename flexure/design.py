@@ -1,7 +1,7 @@
 """Design files (TOML) → a validated ``Design``; every error names the file and the field.
 
 Lengths in the file are in millimetres (keys end in ``_mm``), converted to metres here.
-Tables: ``[geometry]`` (kind = "spoke_disc" | "stl"), ``[material]``, ``[gauges]``, ``[loads]``,
+Tables: ``[geometry]`` (kind = "spoke_disc" | "stl" | "step"), ``[material]``, ``[gauges]``, ``[loads]``,
 ``[bridge]``, ``[mesh]``. See scenes/paper_disc.toml for every key with its meaning.
 """
 
@@ -44,10 +44,10 @@ class Design:
 
     path: Path
     name: str
-    kind: str                         # "spoke_disc" | "stl"
+    kind: str                         # "spoke_disc" | "stl" | "step"
     disc: SpokeDisc | None
-    stl_path: Path | None
-    stl_unit_m: float
+    file_path: Path | None            # the STL or STEP file
+    file_unit_m: float                # its length unit in metres
     material: object                  # flexure.material.Material
     gauges: list[Gauge]
     gauge_factor: float
@@ -143,7 +143,7 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
     geo = raw.get("geometry", {})
     w = f"{f}: geometry"
     kind = _get(geo, "kind", w, str, "spoke_disc")
-    disc, stl_path, unit = None, None, 1e-3
+    disc, file_path, unit = None, None, 1e-3
     if kind == "spoke_disc":
         _unknown(geo, set(DISC_KEYS) | {"kind", "segments_per_quarter"}, w)
         kw = {}
@@ -161,14 +161,14 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
             for key, (fld, _) in sorted(DISC_KEYS.items(), key=lambda kv: -len(kv[1][0])):
                 msg = msg.replace(f"geometry.{fld}:", f"geometry.{key}:")
             raise InputError(msg) from None
-    elif kind == "stl":
-        _unknown(geo, {"kind", "file", "unit_mm", "repair"}, w)
-        stl_path = (path.parent / _get(geo, "file", w, str, required=True))
+    elif kind in ("stl", "step"):
+        _unknown(geo, {"kind", "file", "unit_mm"}, w)
+        file_path = (path.parent / _get(geo, "file", w, str, required=True))
         unit = _get(geo, "unit_mm", w, float, 1.0) * 1e-3
         if unit <= 0:
             raise InputError(f"{w}.unit_mm: must be > 0")
     else:
-        raise InputError(f"{w}.kind: must be 'spoke_disc' or 'stl', got {kind!r}")
+        raise InputError(f"{w}.kind: must be 'spoke_disc', 'stl' or 'step', got {kind!r}")
 
     # material
     mat = raw.get("material", {})
@@ -289,9 +289,9 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
     mesher = _get(me, "mesher", w, str, "sweep")
     if mesher not in ("sweep", "tetgen"):
         raise InputError(f"{w}.mesher: must be 'sweep' or 'tetgen', got {mesher!r}")
-    if mesher == "sweep" and kind == "stl":
-        mesher = "tetgen"                      # an STL is not an extrusion: tetgen meshes it
-    return Design(path, str(name), kind, disc, stl_path, unit, material, gauges, gf, r_ohm, rated,
+    if kind != "spoke_disc":
+        mesher = "tetgen"                      # an STL or STEP solid is not an extrusion
+    return Design(path, str(name), kind, disc, file_path, unit, material, gauges, gf, r_ohm, rated,
                   load_r, fixed, fixed_r, sensor, size, order, raw=raw,
                   segments_per_quarter=geo.get("segments_per_quarter"), mesher=mesher)
 

@@ -235,6 +235,17 @@ def tetrahedralize(surface: Surface, h_far: float, minratio: float = 1.8, mindih
 MESHERS = ("sweep", "tetgen")
 
 
+def size_field(size: str, h_scale: float, gauge_centres, gauge_extent: float,
+               gauge_width: float | None = None) -> SizeField:
+    """h_far = SIZES[size].far · h_scale; h_gauge = SIZES[size].gauge · gauge width (≤ h_far)."""
+    if size not in SIZES:
+        raise InputError(f"--size: must be one of {', '.join(SIZES)}, got {size!r}")
+    s = SIZES[size]
+    h_far = s["far"] * h_scale
+    h_gauge = min(s["gauge"] * (gauge_width or gauge_extent), h_far)
+    return SizeField(h_far, h_gauge, np.asarray(gauge_centres, float).reshape(-1, 3), r_gauge=gauge_extent)
+
+
 def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gauge_centres: np.ndarray,
                         gauge_extent: float, h_scale: float, order: int = 1,
                         gauge_width: float | None = None, mesher: str = "sweep") -> MeshResult:
@@ -247,13 +258,8 @@ def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gau
     """
     if mesher not in MESHERS:
         raise InputError(f"mesh.mesher: must be one of {', '.join(MESHERS)}, got {mesher!r}")
-    if size not in SIZES:
-        raise InputError(f"--size: must be one of {', '.join(SIZES)}, got {size!r}")
-    s = SIZES[size]
-    h_far = s["far"] * h_scale
-    h_gauge = min(s["gauge"] * (gauge_width or gauge_extent), h_far)
-    field = SizeField(h_far, h_gauge, np.asarray(gauge_centres, float).reshape(-1, 3),
-                      r_gauge=gauge_extent)
+    field = size_field(size, h_scale, gauge_centres, gauge_extent, gauge_width)
+    s, h_far, h_gauge = SIZES[size], field.h_far, field.h_gauge
     layers = None
     if isinstance(surface_or_poly, Surface):
         surface, mesher = surface_or_poly, "tetgen"

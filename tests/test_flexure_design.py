@@ -253,32 +253,84 @@ def test_thin_spokes_against_beam_theory(thin):
     assert res["warnings"] == []
 
 
+def _explicit_design(design, kind: str, file: str) -> str:
+    """A design file for the paper disc's solid in ``file`` with its four gauges declared."""
+    gauges = "".join(
+        f"[[gauges.gauge]]\ncentre_mm = {[float(x) * 1e3 for x in g.centre_m]}\naxis = {list(map(float, g.axis))}\n"
+        f"arm = {g.arm}\n" for g in design.gauges)
+    return (f'[geometry]\nkind = "{kind}"\nfile = "{file}"\n'
+            f'[gauges]\ngrid_length_mm = 1.5\ngrid_width_mm = 1.5\n{gauges}'
+            f'[loads]\nrated_torque_Nm = 2.0\nload_radius_max_mm = 4.004\nfixed_radius_min_mm = 29.97\n'
+            f'[mesh]\nsize = "coarse"\n')
+
+
 def test_stl_design_matches_the_parametric_one(tmp_path, paper):
     """The same disc exported as an STL (mm) with its gauges declared explicitly reads the same."""
     import trimesh
 
-    design, res, _ = paper
     from flexure.analysis import SEGMENTS
     from flexure.geometry import profile
-    from flexure.meshing import extrude_graded, SizeField
+    from flexure.meshing import SizeField, extrude_graded
 
+    design, res, _ = paper
     poly = profile(design.disc, SEGMENTS["coarse"])
     gc = np.array([g.centre_m for g in design.gauges])
     surf = extrude_graded(poly, design.disc.thickness, SizeField(0.0022, 0.0009, gc, 1.4e-3))
     trimesh.Trimesh(surf.points * 1e3, surf.faces, process=False).export(tmp_path / "disc.stl")
-    gauges = "".join(
-        f"[[gauges.gauge]]\ncentre_mm = {[float(x) * 1e3 for x in g.centre_m]}\naxis = {list(map(float, g.axis))}\n"
-        f"arm = {g.arm}\n" for g in design.gauges)
-    text = (f'[geometry]\nkind = "stl"\nfile = "disc.stl"\n'
-            f'[gauges]\ngrid_length_mm = 1.5\ngrid_width_mm = 1.5\n{gauges}'
-            f'[loads]\nrated_torque_Nm = 2.0\nload_radius_max_mm = 4.004\nfixed_radius_min_mm = 29.97\n'
-            f'[mesh]\nsize = "coarse"\n')
-    d = load_design(_write(tmp_path, text, "stl.toml"))
-    r, _ = analyze(d)
+    r, _ = analyze(load_design(_write(tmp_path, _explicit_design(design, "stl", "disc.stl"), "stl.toml")))
     # same gauges on the same solid; held at the outer face instead of the bolt holes, so the
     # rim's compliance differs a little: compare the spoke strain, which the rim barely changes
     assert r["gauge_strain_per_Nm"] == pytest.approx(res["gauge_strain_per_Nm"], rel=0.05)
+    assert r["warnings"] == [] and r["mesh"]["mesher"] == "tetgen"
+
+
+def _write_step(poly, thickness_mm: float, path, copies: int = 1):
+    """The profile (m) extruded to a STEP solid in mm with gmsh's OpenCASCADE kernel."""
+    import gmsh
+
+    from flexure.cad import _quiet_stdout
+
+    gmsh.initialize(interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        occ = gmsh.model.occ
+        for k in range(copies):
+            loops = []
+            for ring in [poly.exterior, *poly.interiors]:
+                xy = np.asarray(ring.coords)[:-1] * 1e3
+                p = [occ.addPoint(x + 100 * k, y, 0) for x, y in xy]
+                loops.append(occ.addCurveLoop([occ.addLine(p[i], p[(i + 1) % len(p)]) for i in range(len(p))]))
+            occ.extrude([(2, occ.addPlaneSurface(loops))], 0, 0, thickness_mm)
+        occ.synchronize()
+        with _quiet_stdout():
+            gmsh.write(str(path))
+    finally:
+        gmsh.finalize()
+
+
+def test_step_design_matches_the_parametric_one(tmp_path, paper, capfd):
+    """A STEP solid (gmsh/OpenCASCADE) of the same disc reads the same strain; nothing reaches stdout."""
+    pytest.importorskip("gmsh")
+    from flexure.analysis import SEGMENTS
+    from flexure.geometry import profile
+
+    design, res, _ = paper
+    poly = profile(design.disc, SEGMENTS["coarse"])
+    _write_step(poly, design.disc.thickness * 1e3, tmp_path / "disc.step")
+    capfd.readouterr()
+    d = load_design(_write(tmp_path, _explicit_design(design, "step", "disc.step"), "step.toml"))
+    r, _ = analyze(d)
+    assert capfd.readouterr().out == ""                          # OpenCASCADE kept off stdout
+    assert r["gauge_strain_per_Nm"] == pytest.approx(res["gauge_strain_per_Nm"], rel=0.05)
+    assert r["mesh"]["total_volume_m3"] == pytest.approx(poly.area * design.disc.thickness, rel=1e-6)
     assert r["warnings"] == []
+    _write_step(poly, 2.2, tmp_path / "two.step", copies=2)
+    with pytest.raises(InputError, match="2 solids"):
+        load_design(_write(tmp_path, _explicit_design(design, "step", "two.step"), "two.toml"))
+        analyze(load_design(tmp_path / "two.toml"))
+    (tmp_path / "junk.step").write_text("ISO-10303-21;\nnot really\n")
+    with pytest.raises(InputError, match="junk.step"):
+        analyze(load_design(_write(tmp_path, _explicit_design(design, "step", "junk.step"), "junk.toml")))
 
 
 def test_near_incompressible_design_is_flagged_not_printed(tmp_path):

@@ -1,0 +1,93 @@
+"""STEP solids through gmsh's OpenCASCADE kernel (optional extra: ``pip install torquebench[step]``).
+
+The solid's boundary is triangulated by gmsh with our size field (finer at the gauges) and handed
+on as a closed, outward-oriented ``Surface`` for tetgen, exactly like an STL.
+"""
+
+from __future__ import annotations
+
+import os
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from flexure.errors import InputError
+from flexure.geometry import Surface, check_watertight
+
+
+@contextmanager
+def _quiet_stdout():
+    """OpenCASCADE prints its transfer statistics on file descriptor 1: keep them off stdout
+    (the ``--json`` contract) by pointing fd 1 at /dev/null for the duration."""
+    import sys
+
+    sys.stdout.flush()
+    saved = os.dup(1)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 1)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(devnull)
+
+
+def load_step(path: str | Path, unit_m: float = 1e-3, size_for=None, where: str = "geometry.file") -> Surface:
+    """Surface (m) of the one solid in a STEP file. ``size_for(scale_m) -> SizeField`` gives the
+    surface mesh size (m) from the solid's smallest bounding-box extent."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{where}: {path} does not exist")
+    try:
+        import gmsh
+    except ImportError:
+        raise InputError(f"{where}: {path}: STEP files need gmsh (pip install torquebench[step])") from None
+    gmsh.initialize(interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        with _quiet_stdout():
+            try:
+                gmsh.model.occ.importShapes(str(path))
+                gmsh.model.occ.synchronize()
+            except Exception as exc:
+                raise InputError(f"{where}: {path}: cannot read STEP ({str(exc).splitlines()[0]})") from None
+            solids = gmsh.model.getEntities(3)
+            if len(solids) != 1:
+                raise InputError(f"{where}: {path}: {len(solids)} solids; the flexure must be one solid "
+                                 "(fuse the bodies in your CAD tool)")
+            box = np.array(gmsh.model.getBoundingBox(-1, -1))
+            scale_m = float((box[3:] - box[:3]).min()) * unit_m
+            if size_for is not None:
+                field = size_for(scale_m)
+                gmsh.model.mesh.setSizeCallback(
+                    lambda dim, tag, x, y, z, lc: float(field(np.array([[x, y, z]]) * unit_m)[0]) / unit_m)
+                gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
+                gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
+            gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 16)     # elements per 2π of a hole
+            gmsh.model.mesh.generate(2)
+        tags, coords, _ = gmsh.model.mesh.getNodes()
+        index = np.zeros(int(tags.max()) + 1, dtype=np.int64)
+        index[tags.astype(np.int64)] = np.arange(len(tags))
+        tri = []
+        for dim, tag in gmsh.model.getEntities(2):
+            types, _, nodes = gmsh.model.mesh.getElements(dim, tag)
+            for t, n in zip(types, nodes):
+                if t != 2:                                                # 3-node triangles
+                    raise InputError(f"{where}: {path}: gmsh gave element type {t} on surface {tag}")
+                tri.append(index[np.asarray(n, dtype=np.int64)].reshape(-1, 3))
+    finally:
+        gmsh.finalize()
+    points = np.asarray(coords, float).reshape(-1, 3) * unit_m
+    faces = np.vstack(tri)
+    import trimesh
+
+    tm = trimesh.Trimesh(points, faces, process=True)               # merges seam duplicates
+    trimesh.repair.fix_normals(tm)
+    if tm.volume < 0:
+        tm.invert()
+    surf = Surface(np.asarray(tm.vertices, float), np.asarray(tm.faces, np.int64), source=str(path),
+                   info={"cad": "step", "triangles": int(len(tm.faces))})
+    check_watertight(surf, f"{where} {path}")
+    return surf
