@@ -90,3 +90,20 @@ def test_design_file_is_never_an_output(capsys, tmp_path):
     p.write_text("name = 'x'\n")
     code, _, err = _run(capsys, str(p), "--png", str(p))
     assert code == 2 and "design file" in err and p.read_text() == "name = 'x'\n"
+
+
+def test_demo_from_the_flexure_design(capsys, tmp_path):
+    """Design → FEM strain → bridge/ADC noise → simulated leg → localization, and the Monte Carlo
+    prediction of that error agrees with what the estimator measured."""
+    from bridge.chain import paper_chain
+
+    from torquebench.io import shipped
+
+    code = main(["demo", "--flexure", str(shipped("scenes", "paper_disc.toml")), "--out-dir", str(tmp_path), "--json"])
+    data = json.loads(capsys.readouterr().out)
+    assert code == 0
+    fx = data["flexure"]
+    assert data["torque_noise_std_Nm"] == pytest.approx(paper_chain(fx["gauge_strain_per_Nm"]).noise_std_Nm)
+    assert data["torque_noise_std_Nm"] > 5 * paper_chain().noise_std_Nm     # the stiff disc is noisier
+    dyn = data["methods"]["dynamic"]
+    assert dyn["position_error_rms_m"] == pytest.approx(dyn["predicted_position_rms_m"], rel=0.3)

@@ -1,5 +1,6 @@
 """`torquebench demo`: the workbench end to end on the paper's leg, no hardware, no input.
 
+0. (``--flexure DESIGN.toml``) the flexure's FEM gives the gauge strain per N·m (flexure);
 1. sensor: the paper's bridge/ADC chain → joint-torque noise σ_τ (bridge);
 2. robot: the paper's Table III test 2 (7 N on link 2 at α = 0.8, −π/3, floating base), simulated
    with that torque sensor and Table II FT noise (estimator.sim);
@@ -25,6 +26,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--out-dir", type=Path, default=Path("out/demo"),
                         help="where the demo writes its log and estimates (default out/demo)")
     parser.add_argument("--seed", type=int, default=1, help="sensor-noise seed")
+    parser.add_argument("--flexure", type=Path, default=None, metavar="DESIGN.toml",
+                        help="take the torque sensor's strain per N·m from this flexure's FEM "
+                             "(e.g. scenes/paper_disc.toml) instead of the paper's calibration")
 
 
 def _errors(est, truth, t_on, gain_per_s):
@@ -57,11 +61,33 @@ def run(args) -> int:
         raise InputError(f"--out-dir: cannot create {out_dir}: {exc.strerror}") from None
     say = (lambda *a: print(*a, file=sys.stderr)) if args.json else print
 
-    chain = paper_chain()
-    sigma_tau = chain.noise_std_Nm
-    say(f"1. sensor: paper bridge/ADC chain, {chain.strain_per_Nm:.3g} strain/N·m → σ_τ = {sigma_tau:.4f} N·m per sample")
-
     scene = load_scene(scene_path(SCENE))
+    results = {"scene": SCENE, "methods": {}}
+    if args.flexure is None:
+        chain = paper_chain()
+        say(f"1. sensor: paper bridge/ADC chain, {chain.strain_per_Nm:.3g} strain/N·m (paper's calibration)"
+            f" → σ_τ = {chain.noise_std_Nm:.4f} N·m per sample")
+    else:
+        from dataclasses import replace
+
+        from flexure.analysis import analyze
+        from flexure.design import load_design
+
+        fx, _ = analyze(load_design(args.flexure))
+        if fx.get("nan_reason"):
+            raise InputError(f"--flexure: {args.flexure}: no trustworthy gauge strain ({fx['nan_reason']})")
+        chain = paper_chain(fx["gauge_strain_per_Nm"])
+        say(f"0. flexure: {args.flexure}: {fx['gauge_strain_per_Nm']:.3g} strain/N·m at the gauges "
+            f"(P2 FEM, {fx['dofs']} DOFs), safety factor {fx['safety_factor']:.2f}")
+        say(f"1. sensor: paper bridge/ADC chain on that flexure → σ_τ = {chain.noise_std_Nm:.4f} N·m per "
+            "sample (simulated as Gaussian of that σ)")
+        scene = replace(scene, sim=replace(scene.sim, sensors=replace(
+            scene.sim.sensors, torque_model="gaussian", torque_noise_Nm=chain.noise_std_Nm)))
+        results["flexure"] = {k: fx[k] for k in ("design_file", "gauge_strain_per_Nm",
+                                                  "sensitivity_mV_per_V_per_Nm", "safety_factor", "dofs")}
+    sigma_tau = chain.noise_std_Nm
+    results["torque_noise_std_Nm"] = sigma_tau
+
     log, truth, stats = run_scene(scene, seed=args.seed)
     cfg = scene.sim
     poke = cfg.pokes[0]
@@ -70,7 +96,6 @@ def run(args) -> int:
     write_text_atomic(out_dir / "log.truth.csv", truth_csv(truth))
 
     K = scene.estimator.gain_per_s
-    results = {"scene": SCENE, "torque_noise_std_Nm": sigma_tau, "methods": {}}
     for method in ("dynamic", "paper"):
         est = estimate(cfg.robot, log, method=method, gain_per_s=K, threshold=scene.estimator.threshold)
         with_out = out_dir / f"estimate_{method}.csv"
