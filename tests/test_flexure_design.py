@@ -15,25 +15,7 @@ from torquebench.io import shipped
 
 PAPER_DISC = shipped("scenes", "paper_disc.toml")
 
-THIN = """
-name = "thin_spokes"
-[geometry]
-outer_radius_mm = 20
-rim_inner_radius_mm = 18
-hub_radius_mm = 4
-bore_radius_mm = 2
-thickness_mm = 1
-spokes = 4
-spoke_width_mm = 2
-fillet_radius_mm = 0
-[gauges]
-grid_length_mm = 0.7
-grid_width_mm = 0.7
-[loads]
-fixed = "rim_outer"
-[mesh]
-size = "coarse"
-"""
+BEAM_CHECK = shipped("scenes", "beam_check.toml")
 
 
 @pytest.fixture(scope="module")
@@ -44,10 +26,8 @@ def paper():
 
 
 @pytest.fixture(scope="module")
-def thin(tmp_path_factory):
-    path = tmp_path_factory.mktemp("thin") / "thin.toml"
-    path.write_text(THIN)
-    design = load_design(path)
+def thin():
+    design = load_design(BEAM_CHECK)
     return design, *analyze(design)
 
 
@@ -235,22 +215,35 @@ def test_sweep_mesh_is_conforming_and_exact_in_volume():
 
 
 def test_thin_spokes_against_beam_theory(thin):
-    """Guided-beam model of N spokes clamped in a rigid hub (radius a) and rim (radius b):
-    T = N EI θ (12a² + 12aL + 4L²)/L³, spoke shear V = T (12a + 6L)/(N (12a² + 12aL + 4L²)),
-    ±45° strain on the centre line γ/2 = 1.5 V/(w t)/(2G), averaged over a g × g grid at 45°:
-    × (1 − g²/(3w²)). The beam is kinematically stiffer than the solid (plane sections, rigid
-    clamps), so k_FEM < k_beam. Saint-Venant's shear at the surface of a section with t/w = 1/2
-    runs ≈ 3–4 % above 1.5 V/A (Timoshenko & Goodier), so the strain must lie in [1, 1.06]·beam."""
+    """flexure.beam's guided-spoke model (clamped in a rigid hub and rim): the beam is
+    kinematically stiffer than the solid, so k_FEM < k_beam; Saint-Venant's shear at the surface
+    of a section with t/w = 1/2 runs ≈ 3–4 % above 1.5 V/A (Timoshenko & Goodier), so the strain
+    must lie in [1, 1.06] × the model's."""
+    from flexure.beam import guided_spokes
+
     design, res, _ = thin
-    a, b, w, t, N, g = 4e-3, 18e-3, 2e-3, 1e-3, 4, 0.7e-3
-    L = b - a
-    E, G = design.material.E_Pa, design.material.shear_modulus_Pa
-    poly = 12 * a * a + 12 * a * L + 4 * L * L
-    k_beam = N * E * (t * w ** 3 / 12) * poly / L ** 3
-    eps_beam = 1.5 * (12 * a + 6 * L) / (N * poly) / (w * t) / (2 * G) * (1 - g ** 2 / (3 * w ** 2))
+    k_beam, eps_beam = guided_spokes(4e-3, 18e-3, 2e-3, 1e-3, 4, design.material, gauge_size_m=0.7e-3)
     assert 0.5 * k_beam < res["torsional_stiffness_Nm_per_rad"] < k_beam
     assert 1.0 < res["gauge_strain_per_Nm"] / eps_beam < 1.06
     assert res["warnings"] == []
+
+
+def test_guided_spoke_formulas_by_finite_differences_of_energy():
+    """k from the model equals d²U/dθ² of the four clamped-guided beams' bending energy,
+    U = Σ EI/(2L³)·[v, Lφ]ᵀ[[12, 6], [6, 4]][v, Lφ] with v = θa, φ = θ."""
+    from flexure.beam import guided_spokes
+    from flexure.material import ALUMINIUM_6061_T6 as MAT
+
+    a, b, w, t, N = 5e-3, 20e-3, 3e-3, 2e-3, 4
+    L, EI = b - a, MAT.E_Pa * t * w ** 3 / 12
+
+    def U(theta):
+        v, lphi = theta * a, L * theta
+        return N * EI / (2 * L ** 3) * (12 * v * v + 12 * v * lphi + 4 * lphi * lphi)
+
+    h = 1e-4
+    k_fd = (U(h) - 2 * U(0) + U(-h)) / h ** 2
+    assert guided_spokes(a, b, w, t, N, MAT)[0] == pytest.approx(k_fd, rel=1e-6)
 
 
 def _explicit_design(design, kind: str, file: str) -> str:
@@ -334,7 +327,7 @@ def test_step_design_matches_the_parametric_one(tmp_path, paper, capfd):
 
 
 def test_near_incompressible_design_is_flagged_not_printed(tmp_path):
-    p = _write(tmp_path, THIN.replace("[gauges]", "[material]\nnu = 0.499\n[gauges]"))
+    p = _write(tmp_path, BEAM_CHECK.read_text().replace("[gauges]", "[material]\nnu = 0.499\n[gauges]"))
     res, _ = analyze(load_design(p), order=1)
     assert "near_incompressible" in res["warnings"]
     assert math.isnan(res["sensitivity_mV_per_V_per_Nm"]) and math.isnan(res["safety_factor"])
