@@ -242,6 +242,8 @@ def render_png(fields, path, field: str = "strain", title: str | None = None, wa
     if field not in FIELDS:
         raise InputError(f"render: unknown field {field!r}; allowed: {', '.join(sorted(FIELDS))}")
     path = _check_target(path, ".png")
+    if not os.environ.get("DISPLAY"):      # no X server: go straight to EGL (no X warning on stderr)
+        os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
     try:
         import pyvista as pv
     except (ImportError, OSError) as exc:
