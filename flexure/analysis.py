@@ -2,7 +2,9 @@
 
 Load cases (all solved with one factorization): a torque M_z on the hub bore and the off-axis
 loads F_x, F_y, F_z, M_x, M_y, each a unit wrench at the reference point (0, 0, t/2) carried by a
-kinematic rigid coupling of the bore surface; the rim is held (bolt-hole walls, or outer face).
+kinematic rigid coupling of the bore surface (a stiff shaft; ``[loads] coupling = "rigid"``) or
+by the statically equivalent traction on it (a compliant hub, ``"distributed"``); the rim is held
+(bolt-hole walls, or outer face).
 
     sensitivity      S = (V_o/V_ex)(T_rated) / T_rated              (exact bridge, mV/V per N·m)
     stiffness        k = T / Θ_z                                     (Θ_z: coupling rotation)
@@ -142,17 +144,38 @@ def _nodal_average(mesh, values: np.ndarray) -> np.ndarray:
 RTOL = 1e-8
 
 
-def _solve_cases(problem, K, rhs_cases: np.ndarray):
-    """Reduced system once; q for every wrench column (6, n_q) with one factorization (direct,
-    below solve.DIRECT_MAX_DOFS) or one AMG hierarchy (P2: the p-multigrid) for all columns."""
-    from flexure import solve as fsolve
+def _solve_cases(design: Design, mesh, K, load_nodes, fixed_nodes, ref: np.ndarray, wrench: np.ndarray):
+    """Displacements U (n, 3, cases) and hub rotations Θ (3, cases) for unit wrenches (cases, 6)
+    at ``ref``, with one factorization (direct, below solve.DIRECT_MAX_DOFS) or one AMG hierarchy
+    (P2: the p-multigrid) for all cases.
 
+    coupling "rigid": the bore nodes move as a rigid body (multipoint constraint), Θ its rotation;
+    "distributed": the statically equivalent linear traction on the bore faces, Θ its
+    work-conjugate mean rotation J⁻¹∫ r × u dA (bc.wrench_traction, bc.mean_rotation)."""
+    from flexure import solve as fsolve
+    from flexure.bc import Problem, mean_rotation, wrench_traction
+
+    problem = Problem(mesh, design.material).fix(fixed_nodes)
+    if design.coupling == "rigid":
+        problem.couple_rigid(load_nodes, ref, kind="kinematic")
+        system = problem.reduced_system(K)
+        fsolve._check_restrained(system)
+        B = np.repeat(system.b[:, None], len(wrench), axis=1)
+        B[system.ref_slices[0], :] = wrench.T
+        q, info = fsolve.solve_reduced(system, B, rtol=RTOL)
+        U = np.stack([problem.expand(system, q[:, j]) for j in range(len(wrench))], axis=-1)
+        return U, q[system.ref_slices[0]][3:, :], info
+    is_load = np.zeros(mesh.n_nodes, bool)
+    is_load[load_nodes] = True
+    faces = mesh.boundary_faces()
+    faces = faces[is_load[faces].all(axis=1)]
     system = problem.reduced_system(K)
     fsolve._check_restrained(system)
-    B = np.repeat(system.b[:, None], len(rhs_cases), axis=1)
-    B[system.ref_slices[0], :] = rhs_cases.T
+    B = np.column_stack([wrench_traction(mesh, faces, ref, w[:3], w[3:]).ravel() for w in wrench])
+    B[system.fixed_q] = 0.0                       # fixed dofs hold zero displacement
     q, info = fsolve.solve_reduced(system, B, rtol=RTOL)
-    return system, q, info
+    U = q.reshape(mesh.n_nodes, 3, len(wrench))
+    return U, np.column_stack([mean_rotation(mesh, faces, U[..., j]) for j in range(len(wrench))]), info
 
 
 def _sensor_config(design: Design):
@@ -171,7 +194,6 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
     from bridge.budget import min_detectable_strain
     from bridge.wheatstone import output_ratio
     from flexure import solve as fsolve
-    from flexure.bc import Problem
     from flexure.fem import stiffness_matrix
 
     def say(msg):
@@ -187,9 +209,6 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
     load_nodes, fixed_nodes = _selections(design, mesh)
     t_mid = 0.5 * (mesh.points[:, 2].min() + mesh.points[:, 2].max())
     ref = np.array([0.0, 0.0, t_mid])
-    problem = Problem(mesh, design.material)
-    problem.fix(fixed_nodes)
-    problem.couple_rigid(load_nodes, ref, kind="kinematic")
     t0 = time.perf_counter()
     K = stiffness_matrix(mesh, design.material)
     assemble_s = time.perf_counter() - t0
@@ -197,7 +216,7 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
     for i, c in enumerate(CASES):
         wrench[i, {"Fx": 0, "Fy": 1, "Fz": 2, "Mx": 3, "My": 4, "Mz": 5}[c]] = 1.0
     t0 = time.perf_counter()
-    system, q, info = _solve_cases(problem, K, wrench)
+    U, theta, info = _solve_cases(design, mesh, K, load_nodes, fixed_nodes, ref, wrench)
     solve_s = time.perf_counter() - t0
     say(f"solved {len(CASES)} load cases ({info['solver']}, {solve_s:.1f} s, residual {info['residual_norm']:.1e})")
     warnings, metrics = fsolve.conditioning_warnings(mesh, design.material)
@@ -205,8 +224,6 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
         warnings.append("ill_conditioned")
     if not np.isfinite(info["residual_norm"]) or info["residual_norm"] > fsolve.RESIDUAL_LIMIT:
         warnings.append("large_residual")
-    U = np.stack([problem.expand(system, q[:, j]) for j in range(len(CASES))], axis=-1)   # (n,3,6)
-    theta = q[system.ref_slices[0]][3:, :]            # (3, cases) rotations of the hub
 
     readings = read(design.gauges, lambda p: strain_at(mesh, U, p))        # (g, cases)
     eps = bridge_strains(design.gauges, readings)                           # (cases, 4)

@@ -101,6 +101,29 @@ def face_set_properties(mesh: Mesh, faces):
     return A, xc, J
 
 
+def wrench_traction(mesh: Mesh, faces, ref_point_m, force_N=(0, 0, 0), moment_Nm=(0, 0, 0)) -> np.ndarray:
+    """Nodal forces (n,3) of the linear traction statically equivalent to (F, M about x_ref):
+    t(x) = F/A + (J⁻¹ M_c) × (x − x_c), M_c = M − (x_c − x_ref) × F (see the module doc)."""
+    F = np.asarray(force_N, dtype=np.float64).reshape(3)
+    M = np.asarray(moment_Nm, dtype=np.float64).reshape(3)
+    A, xc, J = face_set_properties(mesh, faces)
+    if np.linalg.cond(J) > 1e12:
+        raise InputError("couple_rigid: the face set has no rotational extent (J singular)")
+    omega = np.linalg.solve(J, M - np.cross(xc - np.asarray(ref_point_m, dtype=np.float64).reshape(3), F))
+    return traction_load(mesh, faces, lambda x: F / A + np.cross(omega, x - xc))
+
+
+def mean_rotation(mesh: Mesh, faces, u: np.ndarray) -> np.ndarray:
+    """Θ = J⁻¹ ∫ (x − x_c) × u dA: the rotation work-conjugate to a ``wrench_traction`` moment
+    (M·Θ is the work of the traction field on u)."""
+    faces = _faces_checked(mesh, faces, "mean_rotation")
+    N, x, nda = face_quadrature(mesh, faces)
+    dA = np.linalg.norm(nda, axis=2)
+    _, xc, J = face_set_properties(mesh, faces)
+    uq = np.einsum("qa,kai->kqi", N, np.asarray(u)[faces])
+    return np.linalg.solve(J, np.einsum("kq,kqi->i", dA, np.cross(x - xc, uq)))
+
+
 def _skew(d: np.ndarray) -> np.ndarray:
     """[d]× such that [d]× v = d × v, for d (k,3) → (k,3,3)."""
     S = np.zeros(d.shape[:-1] + (3, 3))
@@ -201,12 +224,7 @@ class Problem:
         if kind == "distributed":
             if arr.ndim != 2:
                 raise InputError("couple_rigid: kind='distributed' needs a face set (k, 3|6)")
-            A, xc, J = face_set_properties(self.mesh, arr)
-            if np.linalg.cond(J) > 1e12:
-                raise InputError("couple_rigid: the face set has no rotational extent (J singular)")
-            Mc = M - np.cross(xc - xr, F)
-            omega = np.linalg.solve(J, Mc)
-            self.add_traction(arr, lambda x: F / A + np.cross(omega, x - xc))
+            self.force_N += wrench_traction(self.mesh, arr, xr, F, M)
             self.couplings.append(Coupling(np.unique(arr), xr, F, M, kind))
         elif kind == "kinematic":
             nodes = _nodes_checked(self.mesh, arr, "couple_rigid")

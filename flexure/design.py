@@ -62,6 +62,7 @@ class Design:
     raw: dict = field(repr=False, default_factory=dict)
     segments_per_quarter: int | None = None
     mesher: str = "sweep"                 # "sweep" (layered extrusion) | "tetgen"
+    coupling: str = "rigid"               # torque into the bore: "rigid" shaft | "distributed" traction
 
 
 def _get(table: dict, key: str, where: str, kind=float, default=None, required=False):
@@ -246,7 +247,10 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
     # loads
     ld = raw.get("loads", {})
     w = f"{f}: loads"
-    _unknown(ld, {"rated_torque_Nm", "fixed", "load_radius_max_mm", "fixed_radius_min_mm"}, w)
+    _unknown(ld, {"rated_torque_Nm", "fixed", "load_radius_max_mm", "fixed_radius_min_mm", "coupling"}, w)
+    coupling = _get(ld, "coupling", w, str, "rigid")
+    if coupling not in ("rigid", "distributed"):
+        raise InputError(f"{w}.coupling: must be 'rigid' or 'distributed', got {coupling!r}")
     rated = _get(ld, "rated_torque_Nm", w, float, 2.0)
     if rated <= 0:
         raise InputError(f"{w}.rated_torque_Nm: must be > 0")
@@ -293,7 +297,7 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
         mesher = "tetgen"                      # an STL or STEP solid is not an extrusion
     return Design(path, str(name), kind, disc, file_path, unit, material, gauges, gf, r_ohm, rated,
                   load_r, fixed, fixed_r, sensor, size, order, raw=raw,
-                  segments_per_quarter=geo.get("segments_per_quarter"), mesher=mesher)
+                  segments_per_quarter=geo.get("segments_per_quarter"), mesher=mesher, coupling=coupling)
 
 
 def shear_45_layout(disc: SpokeDisc, length_m: float, width_m: float, position: float, where: str):
