@@ -11,8 +11,10 @@ by the statically equivalent traction on it (a compliant hub, ``"distributed"``)
     cross-talk       c_j = 100 · (V_o/V_ex)(unit load j) / (V_o/V_ex)(T_rated)   (% per N or N·m)
     single-arm leak  a_j = 100 · max_i |ε_i(unit load j)| / |ε1 − ε2 + ε3 − ε4|(T_rated)
                      (arms mismatched by δ leak up to ≈ δ · a_j: cross-talk's sensitivity to
-                     gauge tolerances; for a symmetric layout c_j → 0 and what remains of it is
-                     discretisation error of the order of the arm imbalance times a_j)
+                     gauge tolerances; for a symmetric layout c_j → 0 under mesh refinement,
+                     what remains of it being discretisation error)
+    arm imbalance    (max − min)/mean of |ε_i| under M_z: zero for a symmetric layout in the exact
+                     solution, so a measure of the discretisation error at the gauges
     reference strain ε_ref = (ε1 − ε2 + ε3 − ε4)/4 per N·m  (V_o/V_ex ≈ GF ε_ref, full bending)
     min torque       T_min = ε_min(bridge noise budget) / ε_ref
     safety factor    σ_y / max σ_vM at T_rated (element-nodal stresses, not averaged)
