@@ -106,7 +106,7 @@ def build(out_dir: Path) -> list[Path]:
          "tetgen's near-isotropic elements need about half the CG iterations (the swept layers are "
          "flat far from the gauges, which the p-multigrid handles less well), but on the coarse "
          f"size tetgen leaves elements down to {tet['coarse']['mesh']['min_dihedral_deg']:.1f}° "
-         + ("(flagged `sliver_elements`: numbers withheld), " if tet["coarse"]["warnings"] else "")
+         + ("(flagged `sliver_elements` in the warnings), " if tet["coarse"]["warnings"] else "")
          + "while the swept mesh has no slivers at any size. Loading the bore by the statically "
          "equivalent traction instead of a rigid shaft lowers the stiffness by "
          f"{(1 - dist['torsional_stiffness_Nm_per_rad'] / runs['medium']['torsional_stiffness_Nm_per_rad']) * 100:.1f} % "
@@ -144,7 +144,7 @@ def build(out_dir: Path) -> list[Path]:
          "0.001 N·m), which this design meets; the ~10 mV maximum output over a 0–2 N·m range would "
          "need ≈ 5.7e-4 per N·m at 5 V, ten times more, which the `bridge` package's default "
          "assumes (README, issue #4). For a spoke flexure the peak stress per unit gauge strain is "
-         "set by the spoke's proportions (≈ 8 G L/w for a guided beam), not its size: ours runs "
+         "set by the spoke's proportions (≈ 4 G L/w for a guided beam, more at the fillets), not its size: ours runs "
          f"{fine['max_von_mises_Pa'] / (eps * T) / 1e9:.0f} GPa per unit strain, so a disc of this "
          f"layout reading 5.7e-4 per N·m would see ≈ {fine['max_von_mises_Pa'] / eps * PAPER_STRAIN_PER_NM / 1e6:.0f} "
          f"MPa at {T:g} N·m, against σ_y = {fine['material']['yield_Pa'] / 1e6:.0f} MPa. We think the "
