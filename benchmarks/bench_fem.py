@@ -49,7 +49,7 @@ def tube_mesh(ri, ro, h, hmax, sections=64):
     return m
 
 
-def skfem_side_by_side(hmax=1.5e-3, sections=40):
+def skfem_side_by_side(hmax=3e-3, sections=40):
     import skfem
     from skfem.models.elasticity import lame_parameters, linear_elasticity
 
