@@ -464,7 +464,7 @@ def _targets(results) -> list[str]:
             ours = r["methods"][m]["collision_phase"]["mean"][5]
             goal = paper_p / 2 if m != "paper" and name in PAPER_TABLE_III else paper_p
             what = "≤ ½ paper" if goal < paper_p else "≤ paper"
-            rows.append(f"| {name} mean \|p\|, {m} | {what}: {1e3 * goal:.1f} mm | {1e3 * ours:.2f} mm | "
+            rows.append(f"| {name} mean \\|p\\|, {m} | {what}: {1e3 * goal:.1f} mm | {1e3 * ours:.2f} mm | "
                         f"{'reached' if ours <= goal else 'missed'} |")
     sw = results["static"].get("paper_posture_sweep")
     if sw is not None:
