@@ -195,7 +195,7 @@ def sweep_mesh(poly, height: float, size_fn, n_layers: int, order: int = 1):
 
 @dataclass
 class MeshResult:
-    """``mesh`` (flexure.mesh.Mesh), the surface meshed, and the quality report."""
+    """``mesh`` (flexure.mesh.Mesh), the surface tetgen meshed (None for a swept mesh), the quality report."""
 
     mesh: object
     surface: Surface
