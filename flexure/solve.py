@@ -86,17 +86,18 @@ def _sa_hierarchy(A, B, smoothed: bool = True):
         max_coarse=1000, coarse_solver="splu")
 
 
-def _pmg_preconditioner(A, coarse, B_coarse):
+def _pmg_preconditioner(A, coarse, B_coarse, smoothed: bool = False):
     """Two-level p-multigrid for P2: block Gauss–Seidel (forward before, backward after) on the
     P2 system, coarse correction on the Galerkin P1-vertex system A₁ = Iᵀ A I by one V-cycle of
-    (unsmoothed) aggregation AMG with the rigid-body modes. Symmetric, so it preconditions CG."""
+    aggregation AMG with the rigid-body modes (plain, or ``smoothed``: denser coarse levels, which
+    pay off on layered, flat-element meshes). Symmetric, so it preconditions CG."""
     from pyamg.relaxation.relaxation import block_gauss_seidel
     from pyamg.util.utils import get_block_diag
 
     Ab = A.tobsr(blocksize=(3, 3))
     Dinv = get_block_diag(Ab, blocksize=3, inv_flag=True)
     A1 = (coarse.T @ A @ coarse).tocsr()
-    ml = _sa_hierarchy(A1, B_coarse, smoothed=False)   # A₁ is wide-stencil: keep it sparse
+    ml = _sa_hierarchy(A1, B_coarse, smoothed=smoothed)   # A₁ is wide-stencil: plain keeps it sparse
     M1 = ml.aspreconditioner(cycle="V")
     It = coarse.T.tocsr()
 
@@ -114,7 +115,8 @@ def _pmg_preconditioner(A, coarse, B_coarse):
 
 def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, method: str = "auto",
                  rtol: float = 1e-10, maxiter: int = 2000, condition_estimate: bool = True,
-                 coarse: sp.csr_matrix | None = None, B_coarse: np.ndarray | None = None):
+                 coarse: sp.csr_matrix | None = None, B_coarse: np.ndarray | None = None,
+                 smoothed_coarse: bool = False):
     """Solve A q = b (b (n,) or (n, k) for k load cases); returns (q, info).
 
     ``B`` near-nullspace (rigid modes) for AMG; the factorization / AMG hierarchy is built once
@@ -140,7 +142,7 @@ def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, m
         q = np.empty_like(cols)
         its = []
         if coarse is not None:
-            M, ml = _pmg_preconditioner(A, coarse, B_coarse)
+            M, ml = _pmg_preconditioner(A, coarse, B_coarse, smoothed_coarse)
             info["setup_s"] = time.perf_counter() - t0
             for j in range(cols.shape[1]):
                 it = [0]
@@ -150,7 +152,8 @@ def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, m
 
                 q[:, j], _ = spla.cg(A, cols[:, j], rtol=rtol, atol=0.0, maxiter=maxiter, M=M, callback=cb)
                 its.append(it[0])
-            info["solver"] = ("amg-cg (p-multigrid: P2 block Gauss-Seidel + pyamg aggregation AMG "
+            info["solver"] = ("amg-cg (p-multigrid: P2 block Gauss-Seidel + pyamg "
+                              f"{'smoothed ' if smoothed_coarse else ''}aggregation AMG "
                               "on the P1 vertex system, 6 rigid-body modes)")
         else:
             ml = _sa_hierarchy(A, B)
@@ -210,7 +213,7 @@ def solve(problem, method: str = "auto", rtol: float = 1e-10, K: sp.csr_matrix |
 
 
 def solve_reduced(system, b: np.ndarray | None = None, method: str = "auto", rtol: float = 1e-10,
-                  condition_estimate: bool = True):
+                  condition_estimate: bool = True, smoothed_coarse: bool = False):
     """Solve a ``Problem.reduced_system`` for its own b or for load cases ``b`` (n_q,) / (n_q, k).
 
     One factorization / AMG hierarchy for all columns; passes the P2 → P1 coarse space so P2
@@ -220,4 +223,4 @@ def solve_reduced(system, b: np.ndarray | None = None, method: str = "auto", rto
     if b.shape[0] != system.A.shape[0]:
         raise InputError(f"solve_reduced: b has {b.shape[0]} rows, the system {system.A.shape[0]}")
     return solve_system(system.A, b, system.B, method, rtol, condition_estimate=condition_estimate,
-                        coarse=system.coarse, B_coarse=system.B_coarse)
+                        coarse=system.coarse, B_coarse=system.B_coarse, smoothed_coarse=smoothed_coarse)
