@@ -129,10 +129,11 @@ def test_vtu_wrong_suffix(tmp_path, name):
     assert os.listdir(tmp_path) == []
 
 
-def test_vtu_missing_directory(tmp_path):
-    path = tmp_path / "nope" / "box.vtu"
+@pytest.mark.parametrize("write, name", [("write_vtu", "box.vtu"), ("render_png", "out.png")])
+def test_missing_directory(tmp_path, write, name):
+    path = tmp_path / "nope" / name
     with pytest.raises(InputError) as err:
-        render.write_vtu(make_fields(), path)
+        getattr(render, write)(make_fields(), path)
     assert str(err.value) == f"{path}: directory {path.parent} does not exist"
     assert os.listdir(tmp_path) == []
 
@@ -218,13 +219,6 @@ def test_png_wrong_suffix(tmp_path, name):
     with pytest.raises(InputError, match=name.replace(".", r"\.")):
         render.render_png(make_fields(), tmp_path / name)
     assert os.listdir(tmp_path) == []
-
-
-def test_png_missing_directory(tmp_path):
-    path = tmp_path / "missing" / "out.png"
-    with pytest.raises(InputError) as err:
-        render.render_png(make_fields(), path)
-    assert str(err.value) == f"{path}: directory {path.parent} does not exist"
 
 
 def test_png_bad_field(tmp_path):
