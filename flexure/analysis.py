@@ -243,7 +243,7 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
                  for i, c in enumerate(CASES) if c != "Mz"}
     # what one arm alone sees of each off-axis load, as % of the rated bridge strain: a bridge
     # whose arms differ by δ (gauge factor, placement) leaks up to δ × this into the output
-    rated_bridge_strain = abs(float(eps[0, 0] - eps[0, 1] + eps[0, 2] - eps[0, 3])) * T
+    rated_bridge_strain = 4.0 * abs(eps_ref) * T
     arm_leak = {CROSSTALK_KEYS[c]: float(100.0 * np.abs(eps[i]).max() / rated_bridge_strain)
                 for i, c in enumerate(CASES) if c != "Mz"}
     # a symmetric layout reads |ε| equal on all arms under Mz: the spread is discretisation error
@@ -409,9 +409,9 @@ def sweep_plot(rows: list[dict], keys: list[str], out_png) -> None:
     ax.set_title("flexure sweep: " + " × ".join(keys) + " (labels)")
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
-    from flexure.render import _atomic_write
+    from flexure.files import atomic_write
     try:
-        _atomic_write(out_png, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+        atomic_write(out_png, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     finally:
         plt.close(fig)
 

@@ -18,6 +18,7 @@ import numpy as np
 from flexure.errors import InputError
 from flexure.gauges import Gauge
 from flexure.geometry import SpokeDisc
+from flexure.meshing import MESHERS
 
 DISC_KEYS = {  # TOML key → (SpokeDisc field, scale to SI)
     "outer_radius_mm": ("outer_radius", 1e-3), "rim_inner_radius_mm": ("rim_inner_radius", 1e-3),
@@ -291,8 +292,8 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
     if order not in (1, 2):
         raise InputError(f"{w}.order: must be 1 or 2, got {order}")
     mesher = _get(me, "mesher", w, str, "sweep")
-    if mesher not in ("sweep", "tetgen"):
-        raise InputError(f"{w}.mesher: must be 'sweep' or 'tetgen', got {mesher!r}")
+    if mesher not in MESHERS:
+        raise InputError(f"{w}.mesher: must be one of {', '.join(MESHERS)}, got {mesher!r}")
     if kind != "spoke_disc":
         mesher = "tetgen"                      # an STL or STEP solid is not an extrusion
     return Design(path, str(name), kind, disc, file_path, unit, material, gauges, gf, r_ohm, rated,

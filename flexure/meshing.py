@@ -260,17 +260,16 @@ def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gau
         raise InputError(f"mesh.mesher: must be one of {', '.join(MESHERS)}, got {mesher!r}")
     field = size_field(size, h_scale, gauge_centres, gauge_extent, gauge_width)
     s, h_far, h_gauge = SIZES[size], field.h_far, field.h_gauge
-    layers = None
+    surface, layers = None, None
     if isinstance(surface_or_poly, Surface):
         surface, mesher = surface_or_poly, "tetgen"
-        mesh = tetrahedralize(surface, h_far, s["minratio"], s["mindihedral"], order)
     elif mesher == "tetgen":
         surface = extrude_graded(surface_or_poly, thickness, field)
+    if surface is not None:
         mesh = tetrahedralize(surface, h_far, s["minratio"], s["mindihedral"], order)
     else:
         layers = max(2, int(np.ceil(thickness / h_gauge - 1e-9)))
         mesh = sweep_mesh(surface_or_poly, thickness, field, layers, order)
-        surface = None
     from flexure.mesh import quality
     rep = quality(mesh)
     rep.update({"size": size, "mesher": mesher, "layers": layers, "h_far_m": h_far, "h_gauge_m": h_gauge,

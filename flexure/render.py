@@ -12,12 +12,12 @@ pyvista is imported inside the functions, never at module import time.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from flexure.errors import InputError
+from flexure.files import atomic_write
 
 #: boundary_condition point-data codes.
 BC_FREE, BC_FIXED, BC_LOADED = 0, 1, 2
@@ -144,39 +144,11 @@ def _check_target(path, suffix: str) -> Path:
     return path
 
 
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-def _atomic_write(path, write_fn) -> Path:
-    """Call ``write_fn(tmp_path)`` on a temp file next to ``path``, then ``os.replace`` it into place.
-
-    On any exception the temp file is removed and the exception re-raised (``path`` is untouched).
-    The file gets mode 0o666 & ~umask, like a plain ``open(path, "w")``.
-    """
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(suffix=path.suffix.lower(), prefix="." + path.name, dir=path.parent)
-    os.close(fd)
-    try:
-        write_fn(tmp)
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    return path
-
-
 def write_vtu(fields, path) -> Path:
     """Write ``to_grid(fields)`` as a binary VTK XML unstructured grid (.vtu, opens in ParaView)."""
     path = _check_target(path, ".vtu")
     grid = to_grid(fields)
-    return _atomic_write(path, lambda tmp: grid.save(tmp, binary=True))
+    return atomic_write(path, lambda tmp: grid.save(tmp, binary=True))
 
 
 # ----------------------------------------------------------------------------- picture
@@ -328,4 +300,4 @@ def render_png(fields, path, field: str = "strain", title: str | None = None, wa
         finally:
             plotter.close()
 
-    return _atomic_write(path, draw)
+    return atomic_write(path, draw)

@@ -12,6 +12,7 @@ pv = pytest.importorskip("pyvista")
 from flexure import render  # noqa: E402
 from flexure.analysis import Fields  # noqa: E402
 from flexure.errors import InputError  # noqa: E402
+from flexure.files import atomic_write  # noqa: E402
 from flexure.gauges import Gauge  # noqa: E402
 from flexure.mesh import Mesh, box_mesh, to_quadratic  # noqa: E402
 
@@ -268,7 +269,7 @@ def test_atomic_write_failure_keeps_old_file_and_cleans_up(tmp_path):
         raise OSError("disk full")
 
     with pytest.raises(OSError, match="disk full"):
-        render._atomic_write(path, half_write)
+        atomic_write(path, half_write)
     assert path.read_bytes() == b"old contents"
     assert os.listdir(tmp_path) == ["out.vtu"]
     assert seen and not os.path.exists(seen[0])
@@ -282,14 +283,14 @@ def test_atomic_write_interrupt_and_vanished_temp(tmp_path):
         raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        render._atomic_write(path, interrupted)
+        atomic_write(path, interrupted)
     assert os.listdir(tmp_path) == []
 
 
 def test_atomic_write_mode_follows_umask(tmp_path):
     old = os.umask(0o027)
     try:
-        render._atomic_write(tmp_path / "m.png", lambda tmp: open(tmp, "wb").close())
+        atomic_write(tmp_path / "m.png", lambda tmp: open(tmp, "wb").close())
     finally:
         os.umask(old)
     assert ((tmp_path / "m.png").stat().st_mode & 0o777) == 0o640
