@@ -18,12 +18,12 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
 
 from bridge import adc as _adc
 from bridge.errors import InputError
+from userio.files import read_toml
 from bridge.wheatstone import ARRANGEMENTS, effective_gauge_factor, sensitivity_factor
 
 
@@ -221,9 +221,4 @@ def sensor_config_from_dict(data: dict, source: str = "<dict>") -> tuple[SensorC
 def load_sensor_config(path: str | os.PathLike) -> tuple[SensorConfig, float | None]:
     """Read and validate a sensor TOML file → (SensorConfig, strain_per_Nm or None)."""
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{path}: invalid TOML: {exc}") from None
-    return sensor_config_from_dict(data, source=str(path))
+    return sensor_config_from_dict(read_toml(path), source=str(path))

@@ -5,8 +5,7 @@ message must name the file, line, column or field and say what is wrong.
 """
 
 
-class InputError(ValueError):
-    """Bad user input (file, parameter); the message names where and what."""
+from userio.errors import InputError  # noqa: F401  (the project's one user-error type)
 
 
 class BridgeWarning(UserWarning):

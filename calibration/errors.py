@@ -1,9 +1,5 @@
-"""Errors a user can fix: bad files, bad parameters.
+"""Errors a user can fix: the project's one `InputError` (``userio.errors``), re-exported here."""
 
-The CLI turns an `InputError` into exit code 2 and its message on one line of stderr, so the
-message must name the file, line, column or field and say what is wrong.
-"""
+from userio.errors import InputError
 
-
-class InputError(ValueError):
-    """Bad user input (file, parameter); the message names where and what."""
+__all__ = ["InputError"]

@@ -78,7 +78,7 @@ class Session:
 
 def write_session(session: Session, path, *, overwrite: bool = False) -> Path:
     """Write a session CSV atomically (never replaces an existing file unless ``overwrite``)."""
-    from calibration._files import write_text_atomic
+    from userio.files import write_text_atomic
     return write_text_atomic(path, session.to_csv_text(), overwrite=overwrite)
 
 

@@ -105,7 +105,7 @@ def save(payload: dict, path, *, force: bool = False) -> Path:
 
     Existing ``path`` and not ``force`` → the file is kept and ``NAME.vK.json`` is written.
     """
-    from calibration._files import next_version_path, write_bytes_atomic
+    from userio.files import next_version_path, write_bytes_atomic
 
     doc = {k: v for k, v in payload.items() if k != "content_sha256"}
     doc["content_sha256"] = hashlib.sha256(_canonical(doc)).hexdigest()

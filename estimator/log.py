@@ -204,19 +204,6 @@ def log_to_frame(log: SensorLog):
 
 def write_log(log: SensorLog, path) -> None:
     """Write a log as CSV (full precision) atomically: temp file beside ``path`` + rename."""
-    import os
-    import tempfile
-    from pathlib import Path
+    from userio.files import atomic_write
 
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".csv", dir=path.parent)
-    os.close(fd)
-    try:
-        log_to_frame(log).to_csv(tmp, index=False, float_format="%.17g")
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)          # mkstemp creates 0600; give the usual mode
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write(path, lambda tmp: log_to_frame(log).to_csv(tmp, index=False, float_format="%.17g"))

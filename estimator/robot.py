@@ -8,13 +8,13 @@ centre of mass. The base's centre of mass is the base origin p_1 (the hip).
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from estimator.errors import InputError
+from userio.files import read_toml
 
 
 @dataclass(frozen=True)
@@ -112,12 +112,7 @@ def robot_from_dict(data: dict, source: str = "robot") -> Robot:
 def load_robot(path: str | Path) -> Robot:
     """Read and validate a robot TOML file; errors name the file and field."""
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{path}: invalid TOML: {exc}") from None
-    return robot_from_dict(data, source=str(path))
+    return robot_from_dict(read_toml(path), source=str(path))
 
 
 PAPER_LEG_TOML = Path(__file__).resolve().parents[1] / "robots" / "paper_leg.toml"

@@ -409,7 +409,7 @@ def sweep_plot(rows: list[dict], keys: list[str], out_png) -> None:
     ax.set_title("flexure sweep: " + " × ".join(keys) + " (labels)")
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
-    from flexure.files import atomic_write
+    from userio.files import atomic_write
     try:
         atomic_write(out_png, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     finally:

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import copy
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from flexure.errors import InputError
+from userio.files import read_toml
 from flexure.gauges import Gauge
 from flexure.geometry import SpokeDisc
 from flexure.meshing import MESHERS
@@ -107,13 +107,7 @@ def load_design(path: str | Path, overrides: dict | None = None) -> Design:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: design file not found")
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{path}: invalid TOML: {exc}") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a UTF-8 text file") from None
-    return design_from_dict(raw, path, overrides)
+    return design_from_dict(read_toml(path), path, overrides)
 
 
 def apply_override(raw: dict, key: str, value, where: str = "--sweep") -> dict:

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from flexure.errors import InputError
-from flexure.files import atomic_write
+from userio.files import atomic_write
 
 #: boundary_condition point-data codes.
 BC_FREE, BC_FIXED, BC_LOADED = 0, 1, 2

@@ -1,23 +1,13 @@
-"""The user-error types of every package, gathered for the CLI (exit code 2, one line)."""
+"""The user errors the CLI turns into exit code 2 and one line on stderr."""
 
-from bridge.errors import InputError as BridgeInputError
-from calibration.errors import InputError as CalibrationInputError
-from estimator.errors import InputError as EstimatorInputError
-from flexure.errors import InputError as FlexureInputError
-
-
-class InputError(ValueError):
-    """Bad user input met by the composition layer (scene files, CLI arguments)."""
-
+from userio.errors import InputError
 
 USER_ERRORS = (
     InputError,
-    BridgeInputError,
-    CalibrationInputError,
-    EstimatorInputError,
-    FlexureInputError,
     FileNotFoundError,
     IsADirectoryError,
     NotADirectoryError,
     PermissionError,
 )
+
+__all__ = ["InputError", "USER_ERRORS"]

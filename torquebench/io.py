@@ -1,4 +1,4 @@
-"""File I/O shared by the commands: atomic writes, TOML and JSON output.
+"""Output shared by the commands: shipped files and JSON (atomic files are ``userio.files``).
 
 Contracts (DESIGN.md): files the tool writes appear whole or not at all (temp file + rename);
 ``--json`` prints exactly one JSON object on stdout, numbers in SI units, NaN as null.
@@ -10,14 +10,11 @@ import json
 import math
 import os
 import sys
-import tempfile
-import tomllib
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
-from torquebench.errors import InputError
+from userio.files import atomic_path, read_toml, write_text_atomic  # noqa: F401  (re-exported)
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -25,50 +22,6 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 def shipped(kind: str, name: str) -> Path:
     """Path of a file shipped with the project, e.g. ``shipped("robots", "paper_leg.toml")``."""
     return REPO_ROOT / kind / name
-
-
-@contextmanager
-def atomic_path(path: str | os.PathLike, *, overwrite: bool = True):
-    """Yield a temporary path beside ``path``; rename it onto ``path`` only if the block succeeds.
-
-    With ``overwrite=False`` an existing ``path`` is an InputError (nothing is touched).
-    """
-    path = Path(path)
-    if not overwrite and path.exists():
-        raise InputError(f"{path}: exists; refusing to overwrite it")
-    if not path.parent.exists():
-        raise InputError(f"{path}: directory {path.parent} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.fchmod(fd, 0o666 & ~umask)      # mkstemp makes 0600; written files get the usual mode
-    os.close(fd)
-    try:
-        yield Path(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def write_text_atomic(path: str | os.PathLike, text: str, *, overwrite: bool = True) -> Path:
-    """Write ``text`` to ``path`` atomically (temp file + fsync + rename)."""
-    with atomic_path(path, overwrite=overwrite) as tmp:
-        with open(tmp, "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-    return Path(path)
-
-
-def read_toml(path: str | os.PathLike) -> dict:
-    """Parse a TOML file; a syntax error becomes an InputError naming the file and line."""
-    path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            return tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{path}: invalid TOML: {exc}") from None
 
 
 def jsonable(obj):

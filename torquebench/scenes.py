@@ -19,11 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from estimator.errors import InputError as EstimatorInputError
 from estimator.robot import Robot, load_robot
 from estimator.sim.config import (INTEGRATORS, Controller, Ground, Poke, Sensors, SimConfig)
 from torquebench.errors import InputError
-from torquebench.io import REPO_ROOT, read_toml
+from torquebench.io import REPO_ROOT
+from userio.fields import Fields as _Fields
+from userio.files import read_toml
 
 G_M_PER_S2 = 9.81
 KINDS = ("dynamic", "static_loading", "posture_sweep")
@@ -71,73 +72,6 @@ class Scene:
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
 
 
-# ------------------------------------------------------------------ field helpers
-class _Fields:
-    def __init__(self, path: Path):
-        self.path = path
-
-    def err(self, where: str, msg: str):
-        return InputError(f"{self.path}: {where}: {msg}")
-
-    def table(self, data: dict, key: str, where: str = "", required=False) -> dict:
-        value = data.get(key, None)
-        if value is None:
-            if required:
-                raise self.err(where + key, "missing table")
-            return {}
-        if not isinstance(value, dict):
-            raise self.err(where + key, f"expected a table, got {type(value).__name__}")
-        return value
-
-    def known(self, table: dict, allowed: set, where: str):
-        extra = sorted(set(table) - allowed)
-        if extra:
-            raise self.err(f"{where}.{extra[0]}" if where else extra[0],
-                           f"unknown field (allowed: {', '.join(sorted(allowed))})")
-
-    def number(self, table, key, where, default=None, *, positive=False, nonneg=False,
-               lo=None, hi=None) -> float:
-        if key not in table:
-            if default is None:
-                raise self.err(f"{where}.{key}" if where else key, "missing field")
-            return float(default)
-        v = table[key]
-        name = f"{where}.{key}" if where else key
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise self.err(name, f"expected a finite number, got {v!r}")
-        if positive and v <= 0:
-            raise self.err(name, f"must be > 0, got {v}")
-        if nonneg and v < 0:
-            raise self.err(name, f"must be ≥ 0, got {v}")
-        if lo is not None and v < lo or hi is not None and v > hi:
-            raise self.err(name, f"must lie in [{lo}, {hi}], got {v}")
-        return float(v)
-
-    def vector(self, table, key, where, length=None, default=None, *, nonneg=False):
-        name = f"{where}.{key}" if where else key
-        if key not in table:
-            if default is None:
-                raise self.err(name, "missing field")
-            return np.asarray(default, float)
-        v = table[key]
-        if (not isinstance(v, list) or not v
-                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
-            raise self.err(name, f"expected a list of numbers, got {v!r}")
-        arr = np.asarray(v, float)
-        if length is not None and arr.size != length:
-            raise self.err(name, f"expected {length} numbers, got {arr.size}")
-        if not np.all(np.isfinite(arr)) or (nonneg and np.any(arr < 0)):
-            raise self.err(name, f"values must be finite{' and ≥ 0' if nonneg else ''}, got {v}")
-        return arr
-
-    def choice(self, table, key, where, options, default):
-        v = table.get(key, default)
-        if v not in options:
-            name = f"{where}.{key}" if where else key
-            raise self.err(name, f"must be one of {', '.join(map(str, options))}, got {v!r}")
-        return v
-
-
 def _resolve_robot(f: _Fields, data: dict) -> Robot:
     name = data.get("robot", "paper_leg.toml")
     if not isinstance(name, str):
@@ -146,7 +80,7 @@ def _resolve_robot(f: _Fields, data: dict) -> Robot:
         if cand.is_file():
             try:
                 return load_robot(cand)
-            except EstimatorInputError as exc:
+            except InputError as exc:
                 raise InputError(f"{f.path}: robot: {exc}") from None
     raise f.err("robot", f"file {name!r} not found beside the scene or in robots/")
 

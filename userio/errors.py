@@ -1,0 +1,34 @@
+"""Errors a user can fix (bad files, bad parameters), and the checks that raise them.
+
+The CLI turns an `InputError` into exit code 2 and its message on one line of stderr, so the
+message must name the file, line, column or field and say what is wrong.
+"""
+
+from __future__ import annotations
+
+import math
+
+
+class InputError(ValueError):
+    """Bad user input (file, parameter); the message names where and what."""
+
+
+def finite(value, name: str, *, positive: bool = False, nonneg: bool = False,
+           lo: float | None = None, hi: float | None = None) -> float:
+    """``value`` as a float that is finite (and > 0, ≥ 0, or in [lo, hi] when asked).
+
+    Infinity and NaN never pass: ``inf > 0`` is true, so a bare ``> 0`` check is not enough.
+    """
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: expected a finite number, got {value!r}") from None
+    if isinstance(value, bool) or not math.isfinite(v):
+        raise InputError(f"{name}: expected a finite number, got {value!r}")
+    if positive and v <= 0:
+        raise InputError(f"{name}: must be > 0, got {value!r}")
+    if nonneg and v < 0:
+        raise InputError(f"{name}: must be ≥ 0, got {value!r}")
+    if (lo is not None and v < lo) or (hi is not None and v > hi):
+        raise InputError(f"{name}: must lie in [{lo}, {hi}], got {value!r}")
+    return v
