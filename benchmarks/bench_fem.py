@@ -5,7 +5,7 @@ Run from the repo root:  python benchmarks/bench_fem.py [--quick] [--skip-skfem]
    the anchor measured in this run), direct solve time, gauge-point strains (relative difference).
 2. Scale (in a subprocess, for a clean peak memory): a 329k-DOF P2 annular disc end to end
    (mesh → assemble → rigid coupling + fixed rim → AMG-CG → strains), DOFs, time, peak RSS.
-3. Error against run time, P1/P2 × mesh × solver (torquebench/report_fem.py → reports/).
+3. Error against run time, P1/P2 × mesh × solver (torquebench/reports/fem.py → reports/).
 4. The paper's disc (scenes/paper_disc.toml) at the fine size, ≥ 300k P2 DOFs, in a subprocess:
    the whole design analysis (swept mesh → assembly → six load cases with one p-multigrid
    set-up → gauges, stress, cross-talk), time per stage and per load case, peak RSS.
@@ -285,7 +285,7 @@ def main(argv=None) -> int:
               f"peak RSS {r['peak_rss_GB']:.2f} GB (target < 4 GB); "
               f"{r['sensitivity']:.4f} mV/V per N·m; warnings {r['warnings']}")
     if not a.skip_report:
-        from torquebench.report_fem import build, observed_orders, study  # noqa: F401
+        from torquebench.reports.fem import build, observed_orders, study  # noqa: F401
 
         t0 = time.perf_counter()
         paths = build(ROOT / "reports")

@@ -109,7 +109,7 @@ def sweep_batch(n_points=1000):
 
 def error_vs_time(quick):
     from estimator.sim import simulate
-    from torquebench.report_reproduction import stiffness_cases
+    from torquebench.reports.reproduction import stiffness_cases
 
     scenes, _ = stiffness_cases(quick=True)
     cfg = replace(next(iter(scenes.values())), duration_s=0.5)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from torquebench import report_reproduction as rr
+from torquebench.reports import reproduction as rr
 from torquebench.scenes import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]

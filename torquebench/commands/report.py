@@ -8,19 +8,17 @@ import sys
 import time
 from pathlib import Path
 
-import torquebench
+import torquebench.reports
 from torquebench.errors import InputError
 
 HELP = "regenerate the Markdown + PNG reports in reports/ (all areas, or --only AREA)"
 
 
 def builders() -> dict:
-    """{area: module} for every ``torquebench/report_<area>.py`` with a ``build(out_dir)``."""
-    found = {}
-    for info in pkgutil.iter_modules(torquebench.__path__):
-        if info.name.startswith("report_"):
-            found[info.name.removeprefix("report_")] = f"torquebench.{info.name}"
-    return dict(sorted(found.items()))
+    """{area: module} for every ``torquebench/reports/<area>.py`` (each has ``build(out_dir)``)."""
+    return {info.name: f"torquebench.reports.{info.name}"
+            for info in sorted(pkgutil.iter_modules(torquebench.reports.__path__), key=lambda i: i.name)
+            if not info.name.startswith("_")}
 
 
 def add_arguments(parser) -> None:

@@ -22,7 +22,7 @@ def add_arguments(parser) -> None:
 
 def run(args) -> int:
     from torquebench.io import REPO_ROOT, print_json
-    from torquebench import report_reproduction as rr
+    from torquebench.reports import reproduction as rr
 
     names = args.scene or rr.ALL_SCENES
     for n in names:
