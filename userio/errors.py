@@ -32,3 +32,12 @@ def finite(value, name: str, *, positive: bool = False, nonneg: bool = False,
     if (lo is not None and v < lo) or (hi is not None and v > hi):
         raise InputError(f"{name}: must lie in [{lo}, {hi}], got {value!r}")
     return v
+
+
+def seed(value, name: str = "--seed"):
+    """A random seed: None or an integer in [0, 2**63) (numpy refuses negative seeds)."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2 ** 63:
+        raise InputError(f"{name}: must be an integer in [0, 2^63), got {value!r}")
+    return value

@@ -232,3 +232,27 @@ def write_files_atomic(files, *, overwrite: bool = True) -> list[Path]:
     for _, bak in backups:
         bak.unlink(missing_ok=True)
     return [p for p, _ in items]
+
+
+def output_dir(out_dir, *, default: str, shipped_dir=None, regenerate: bool = False,
+               option: str = "--out-dir") -> Path:
+    """Where a report command writes: ``out_dir`` if given (must be a directory); the shipped
+    reports directory only when ``regenerate`` is asked explicitly; else ``./<default>``
+    (created). Shipped reports are never replaced by a default run."""
+    if out_dir is not None and regenerate:
+        raise InputError(f"{option}: give either {option} or --regenerate-shipped, not both")
+    if regenerate:
+        return Path(shipped_dir)
+    if out_dir is not None:
+        out_dir = Path(out_dir)
+        if not out_dir.is_dir():
+            raise InputError(f"{option}: {out_dir} is not a directory")
+        return out_dir
+    path = Path.cwd() / default
+    if path.exists() and not path.is_dir():
+        raise InputError(f"{option}: default output directory {path} exists and is not a directory")
+    if shipped_dir is not None and path.resolve() == Path(shipped_dir).resolve():
+        raise InputError(f"{option}: {path} is the shipped reports directory; pass "
+                         "--regenerate-shipped to replace the shipped reports")
+    path.mkdir(exist_ok=True)
+    return path

@@ -43,6 +43,17 @@ def run(args) -> int:
     from calibration.frames import MAX_CHANNELS, FrameParser
     from torquebench.io import print_json, write_text_atomic
 
+    from userio.errors import finite
+    from userio.files import plan_outputs
+
+    for name, v in (("--duration-s", args.duration_s), ("--idle-timeout-s", args.idle_timeout_s),
+                    ("--rate-hz", args.rate_hz), ("--settle-s", args.settle_s),
+                    ("--window-s", args.window_s), ("--lever-arm-m", args.lever_arm_m)):
+        if v is not None:
+            finite(v, name, positive=name not in ("--settle-s",), nonneg=True)
+    for name, v in (("--baud", args.baud), ("--repeats", args.repeats), ("--frames", args.frames)):
+        if v is not None and v < 1:
+            raise InputError(f"{name}: must be ≥ 1, got {v}")
     if not 1 <= args.channels <= MAX_CHANNELS:
         raise InputError(f"--channels: must be 1..{MAX_CHANNELS}, got {args.channels}")
     if not 0 <= args.channel < args.channels:
@@ -53,8 +64,13 @@ def run(args) -> int:
             masses = [float(m) for m in args.guided.split(",") if m.strip()]
         except ValueError:
             raise InputError(f"--guided: {args.guided!r} is not a comma-separated list of masses") from None
+        for m in masses:
+            finite(m, "--guided", nonneg=True)
         if len(set(masses)) < 2 or min(masses) < 0:
             raise InputError("--guided: need at least two distinct non-negative masses (g)")
+    plan_outputs({"--port": args.port} if not str(args.port).count("://") else {},
+                 {"--out": args.out, "--csv": args.csv,
+                  "--session": (args.session or args.out.with_suffix(".csv")) if masses else None})
     port = open_port(args.port, args.baud)
     raw = RawCapture(args.out, force=args.force)
     reader = Reader(port, raw, FrameParser(args.channels), keep=args.csv is not None)

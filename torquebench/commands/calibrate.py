@@ -104,8 +104,9 @@ def run(args) -> int:
     if args.lever_arm_m is not None:
         args.lever_arm_m = finite(args.lever_arm_m, "--lever-arm-m", positive=True)
     args.mass_std_g = finite(args.mass_std_g, "--mass-std-g", nonneg=True)
-    if args.seed < 0:
-        raise InputError(f"--seed: must be ≥ 0, got {args.seed}")
+    from userio.errors import seed
+
+    seed(args.seed)
     if args.walkers < 8:
         raise InputError(f"--walkers: need at least 8, got {args.walkers}")
     if args.max_steps < 1:

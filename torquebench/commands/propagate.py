@@ -86,6 +86,9 @@ def sensor_noise_from_args(args):
 
 
 def run(args) -> int:
+    from userio.errors import seed
+
+    seed(args.seed)                              # issue 16: negative seeds → exit 2
     from estimator.robot import load_robot, paper_leg
     from estimator.uncertainty import first_order, monte_carlo
     from torquebench.io import print_json
