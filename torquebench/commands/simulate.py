@@ -74,9 +74,10 @@ def run(args) -> int:
     if args.duration is not None:
         finite(args.duration, "--duration", positive=True)
     out, tpath = Path(args.out), truth_path(Path(args.out))
-    if out.suffix == ".toml":
-        raise InputError(f"--out: {out} looks like a scene/robot file; the log is a CSV")
     plan_outputs({"scene": args.scene}, {"--out": out, "truth (--out with .truth.csv)": tpath})
+    if out.suffix == ".toml":
+        raise InputError(f"--out: {out} looks like a scene/robot file; refusing to overwrite it "
+                         "with a log (the log is a CSV)")
     scene = load_scene(args.scene)
     log, truth, stats = run_scene(scene, args.seed, args.integrator, args.duration)
     write_files_atomic([(out, log_csv(log)), (tpath, truth_csv(truth))])   # log + truth: a set
