@@ -30,7 +30,11 @@ def finite(value, name: str, *, positive: bool = False, nonneg: bool = False,
     if nonneg and v < 0:
         raise InputError(f"{name}: must be ≥ 0, got {value!r}")
     if (lo is not None and v < lo) or (hi is not None and v > hi):
-        raise InputError(f"{name}: must lie in [{lo}, {hi}], got {value!r}")
+        if lo is None:
+            raise InputError(f"{name}: must be ≤ {hi:g}, got {value!r}")
+        if hi is None:
+            raise InputError(f"{name}: must be ≥ {lo:g}, got {value!r}")
+        raise InputError(f"{name}: must lie in [{lo:g}, {hi:g}], got {value!r}")
     return v
 
 

@@ -46,11 +46,11 @@ def run(args) -> int:
     from userio.errors import finite
     from userio.files import plan_outputs
 
-    for name, v in (("--duration-s", args.duration_s), ("--idle-timeout-s", args.idle_timeout_s),
-                    ("--rate-hz", args.rate_hz), ("--settle-s", args.settle_s),
-                    ("--window-s", args.window_s), ("--lever-arm-m", args.lever_arm_m)):
+    for name, v, hi in (("--duration-s", args.duration_s, 1e7), ("--idle-timeout-s", args.idle_timeout_s,
+                        3600.0), ("--rate-hz", args.rate_hz, 1e7), ("--settle-s", args.settle_s, 3600.0),
+                        ("--window-s", args.window_s, 3600.0), ("--lever-arm-m", args.lever_arm_m, 100.0)):
         if v is not None:
-            finite(v, name, positive=name not in ("--settle-s",), nonneg=True)
+            finite(v, name, positive=name != "--settle-s", nonneg=True, hi=hi)
     for name, v in (("--baud", args.baud), ("--repeats", args.repeats), ("--frames", args.frames)):
         if v is not None and v < 1:
             raise InputError(f"{name}: must be ≥ 1, got {v}")
