@@ -41,7 +41,8 @@ def run(args) -> int:
                                      session_csv)
     from calibration.errors import InputError
     from calibration.frames import MAX_CHANNELS, FrameParser
-    from torquebench.io import print_json, write_text_atomic
+    from torquebench.io import print_json
+    from userio.files import write_files_atomic
 
     from userio.errors import finite
     from userio.files import plan_outputs
@@ -95,19 +96,19 @@ def run(args) -> int:
         port.close()
     raw_path = raw.close()
     written = [str(raw_path)]
+    files = []
     if args.csv is not None and reader.seq_log:
         seq = np.concatenate(reader.seq_log)
         s = np.concatenate(reader.sample_log)
         text = "seq," + ",".join(f"ch{i}_counts" for i in range(args.channels)) + "\n"
         text += "\n".join(",".join(map(str, r)) for r in np.column_stack([seq, s]).tolist()) + "\n"
-        write_text_atomic(args.csv, text, overwrite=args.force)
-        written.append(str(args.csv))
+        files.append((args.csv, text))
     if rows is not None:
         spath = args.session or raw_path.with_suffix(".csv")
-        write_text_atomic(spath, session_csv(rows, sensor_id=args.sensor_id,
-                                             lever_arm_m=args.lever_arm_m, source=str(raw_path)),
-                          overwrite=args.force)
-        written.append(str(spath))
+        files.append((spath, session_csv(rows, sensor_id=args.sensor_id,
+                                         lever_arm_m=args.lever_arm_m, source=str(raw_path))))
+    write_files_atomic(files, overwrite=args.force)      # decoded CSV + session: all or none
+    written += [str(p) for p, _ in files]
     st = reader.parser.stats.as_dict()
     if args.json:
         print_json({**st, "written": written, "readings": len(rows) if rows else 0})
