@@ -371,12 +371,34 @@ def _nearest(key, allowed) -> str:
     return nearest(key, allowed)
 
 
-def load_scene(path: str | Path) -> Scene:
-    """Read and validate a scene file."""
+def set_key(data: dict, key: str, value, path) -> None:
+    """Set a dotted scene key (``calibration.seed``, ``poke.1.alpha``: list items 1-based)."""
+    parts, node = key.split("."), data
+    for i, part in enumerate(parts):
+        last = i == len(parts) - 1
+        if isinstance(node, list):
+            if not part.isdigit() or not 1 <= int(part) <= len(node):
+                raise InputError(f"{path}: --vary {key}: {part!r} is not an item 1..{len(node)}")
+            if last:
+                node[int(part) - 1] = value
+            else:
+                node = node[int(part) - 1]
+        elif last:
+            node[part] = value
+        else:
+            node = node.setdefault(part, {})
+            if not isinstance(node, (dict, list)):
+                raise InputError(f"{path}: --vary {key}: {part!r} is not a table")
+
+
+def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
+    """Read and validate a scene file (``overrides``: dotted keys set before validation)."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: scene file not found")
     data = read_toml(path)
+    for key, value in (overrides or {}).items():
+        set_key(data, key, value, path)
     f = _Fields(path)
     f.known(data, {"name", "description", "kind", "robot", "base", "duration_s", "controller",
                    "poke", "ground", "sensors", "integrator", "mount", "estimator", "hold", "q_rad",
