@@ -373,6 +373,9 @@ def _nearest(key, allowed) -> str:
 
 def set_key(data: dict, key: str, value, path) -> None:
     """Set a dotted scene key (``calibration.seed``, ``poke.1.alpha``: list items 1-based)."""
+    if key == "flexure":          # --vary flexure=a.toml,b.toml (a design) or =5e-5,1e-4 (strain per N·m)
+        data["flexure"] = {"design" if isinstance(value, str) else "strain_per_Nm": value}
+        return
     parts, node = key.split("."), data
     for i, part in enumerate(parts):
         last = i == len(parts) - 1
