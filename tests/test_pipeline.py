@@ -181,3 +181,22 @@ def test_log_only_scene_imports_no_heavy_packages(tmp_path, cache):
     assert out["heavy"] == []
     assert "flexure_fem" not in out["stages"] and "calibration_fit" not in out["stages"]
     assert "simulation" not in out["stages"] and "estimates" in out["stages"]
+
+
+def test_simulator_bridge_sensor_takes_the_given_chain():
+    """estimator.sim.sensors.measure reads torques through the chain it is given: a 10× less
+    sensitive chain gives ≈ 10× the torque noise of the paper's."""
+    from bridge.chain import paper_chain
+    from estimator.sim.config import Sensors
+    from estimator.sim.sensors import measure
+
+    T = 4000
+    z = np.zeros((T, 5))
+    s = Sensors(torque_model="bridge", seed=3)
+    tau = np.full((T, 2), 0.5)
+    _, _, t_paper, _ = measure(s, z, z, tau, np.zeros((T, 3)), 3)
+    weak = paper_chain(paper_chain().strain_per_Nm / 10)
+    _, _, t_weak, _ = measure(s, z, z, tau, np.zeros((T, 3)), 3, chain=weak)
+    ratio = t_weak.std() / t_paper.std()
+    assert 7 < ratio < 13, ratio
+    assert abs(t_weak.mean() - 0.5) < 5 * weak.noise_std_Nm / np.sqrt(t_weak.size)
