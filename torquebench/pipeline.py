@@ -30,7 +30,8 @@ import numpy as np
 
 from userio.errors import InputError
 
-CODE_VERSION = "pipeline-2"
+# the code version in every cache key: this file's content (any edit to a stage invalidates)
+CODE_VERSION = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
 METHODS = ("dynamic", "paper")
 
 
@@ -135,7 +136,8 @@ def run_flexure_fem(scene, inp):
         raise InputError(f"{scene.path}: flexure.design: no trustworthy gauge strain ({fx['nan_reason']})")
     keep = ("gauge_strain_per_Nm", "sensitivity_mV_per_V_per_Nm", "torsional_stiffness_Nm_per_rad",
             "safety_factor", "dofs")
-    return {k: fx.get(k) for k in keep}
+    extra = {k: v for k, v in fx.items() if k.endswith(("_error_estimate", "_error_method"))}
+    return {**{k: fx.get(k) for k in keep}, **extra}      # FEM error estimates when analyze gives them
 
 
 def run_sensor_chain(scene, inp):

@@ -40,6 +40,10 @@ def summarize(arts: dict) -> dict:
                               "slope_counts_per_g_error_estimate": sd,
                               "slope_counts_per_g_error_method": "posterior standard deviation (emcee), 1σ",
                               "offset_counts": float(cal.coef_mean[1])}
+        n, tau = cal.info.get("n_samples"), cal.info.get("tau_max")
+        if n and tau:
+            # Monte Carlo standard error of the posterior-mean slope: sd / √(N_eff), N_eff = N / τ
+            out["calibration"]["slope_mean_monte_carlo_standard_error_counts_per_g"] = sd / (n / tau) ** 0.5
     if "torques" in arts:
         out["flagged_samples"] = int(arts["torques"]["flagged"].any(axis=-1).sum())
     if "localization_error" in arts:
