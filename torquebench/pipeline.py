@@ -382,7 +382,9 @@ def _feasible(scene, art: str) -> str | None:
 
 def plan(scene, outputs=None, cache=None, seed=None, force=False) -> list[Step]:
     """Steps in execution order, built backwards from ``outputs``."""
-    wants = [ALIASES.get(o, o) for o in (outputs or scene.chain.outputs or DEFAULT_OUTPUTS)]
+    default = DEFAULT_OUTPUTS if scene.sim is not None else ("estimates",) if scene.chain.log_file \
+        else ("sensitivity",)          # a static scene: the sensor model only (run by `reproduce`)
+    wants = [ALIASES.get(o, o) for o in (outputs or scene.chain.outputs or default)]
     for w in wants:
         if w not in BY_GIVES:
             raise InputError(f"{scene.path}: outputs: unknown output {w!r}")
