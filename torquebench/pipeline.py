@@ -271,9 +271,7 @@ def run_calibrated_torques(scene, inp):
             warnings.simplefilter("ignore")
             tau = inp["chain"].torque_from_counts(codes)
         return {"tau_Nm": np.where(flagged, np.nan, tau), "tau_std_Nm": None, "flagged": flagged}
-    # the calibration gives torque per count and its zero at the unloaded reading
-    zero = cal.mass_g(np.asarray(cal.coef_mean[1]))      # reading = offset ↔ zero torque
-    tau = cal.torque(codes) - cal._torque_per_g() * zero
+    tau = cal.torque(codes)            # m = (reading − offset)/slope, τ = m g L (zero at the offset)
     tau_std = cal.torque_std(codes, include_noise=False)
     tau = np.where(flagged, np.nan, tau)
     return {"tau_Nm": tau, "tau_std_Nm": tau_std, "flagged": flagged}
