@@ -29,6 +29,7 @@ class SensorLog:
     valid_mask: np.ndarray | None = None      # over the file's data rows: False = skipped (NaN/inf)
     skipped_lines: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     expected_contacts: tuple = ()   # ((link, α), …) the robot expects, e.g. ((N, 1.0),) stance foot
+    timing: list | None = None      # per force channel [(kind, delay_s)] (estimator.timing); None: instant
 
     @property
     def n_skipped(self) -> int:
@@ -184,6 +185,8 @@ def read_log(path, robot=None, *, max_jitter: float = 0.01) -> SensorLog:
     log.source = source
     log.valid_mask = valid
     log.skipped_lines = rows_to_lines(np.flatnonzero(~valid))
+    from estimator.timing import read_declaration
+    log.timing = read_declaration(path, n)       # LOG.timing.toml beside the log, if any
     return log
 
 

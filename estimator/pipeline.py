@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from estimator import detection, localization as loc_mod, observer
+from estimator import timing as timing_mod
 from estimator.errors import InputError
 from estimator.log import SensorLog
 from estimator.robot import Robot
@@ -127,7 +128,7 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
              threshold: float = 0.06, debounce: int = 0, expected_contacts=None, *,
              discretization: str = "exact", row_weights=None, min_force_N: float = 0.05,
              max_condition: float = 20.0, isolation_floor: float = 0.01,
-             lag_compensation: bool = True) -> ContactEstimate:
+             lag_compensation: bool = True, timing=None) -> ContactEstimate:
     """Run observer, detection and localization on a whole log (offline, vectorized).
 
     expected_contacts: None (→ ``log.expected_contacts``), ``"foot"`` (last link, α = 1) or
@@ -141,6 +142,9 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     lag_compensation (``dynamic`` only): r lags τ_ext by ≈ 1/K (``observer.lag_s``), so r_k is
     paired with the posture q(t_k − lag) (linear interpolation) to solve for (F, α); α is a body
     coordinate, so the reported point is p_c + α Δ_c at the CURRENT posture.
+
+    timing: per force channel [(kind, delay_s)] or one 'instant' | 'mean' | 'delay:SECONDS' for
+    all (estimator.timing); None → what the log declares (``log.timing``), else instantaneous.
     """
     if method not in METHODS:
         raise InputError(f"method: unknown {method!r}; use one of {', '.join(METHODS)}")
@@ -150,10 +154,17 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     if expected_contacts is None:
         expected_contacts = getattr(log, "expected_contacts", ()) or None
     expected = _expected(robot, expected_contacts)
+    if timing is None:
+        timing = getattr(log, "timing", None)
+        timing_source = "log declaration" if timing is not None else "default (instantaneous)"
+    else:
+        timing_source = "option"
+    if isinstance(timing, str):
+        timing = timing_mod.uniform(timing, robot.n_links)
     tau_meas = log.tau_meas                            # assembled once
     P, u = observer.momentum_terms(robot, log.q, log.dq, tau_meas)
     r = observer.residual_offline(robot, log.t, log.q, log.dq, tau_meas, gain_per_s,
-                                  method=discretization, terms=(P, u))
+                                  method=discretization, terms=(P, u), timing=timing)
     if expected:
         unexp, _ = loc_mod.explain_expected(robot, log.q, r, expected, row_weights)
     else:
@@ -172,7 +183,7 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     condition = np.full(T, np.nan)
     reason = np.full(T, loc_mod.NO_CONTACT, dtype=np.int8)
     expected_force = None
-    info = {}
+    info = {"timing": timing_mod.describe(timing), "timing_source": timing_source}
     # noise-aware floors from the samples without contact (robust σ; noise-free logs keep the floors)
     quiet = ~contact
     force_floor = float(detection.noise_thresholds(r[:, :2], quiet, floor=min_force_N).max())

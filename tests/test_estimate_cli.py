@@ -182,3 +182,23 @@ def test_leg_poke_summary(capsys):
     code, out, _ = run(capsys, LEG_POKE, "--json")
     (iv,) = json.loads(out)["intervals"]
     assert code == 0 and iv["link"] == 2 and abs(iv["alpha"] - 0.4) < 1e-3
+
+
+def test_timing_option_side_file_and_bad_value(capsys, tmp_path, good_log):
+    import shutil
+
+    code, out, _ = run(capsys, good_log, "--json")
+    assert code == 0 and json.loads(out)["timing_source"] == "default (instantaneous)"
+    log = tmp_path / "declared.csv"
+    shutil.copy(good_log, log)
+    (tmp_path / "declared.timing.toml").write_text('[timing]\ndefault = "mean"\n')
+    code, out, _ = run(capsys, log, "--json")
+    s = json.loads(out)
+    assert code == 0 and s["timing"] == "mean" and s["timing_source"] == "log declaration"
+    code, out, _ = run(capsys, log, "--timing", "delay:0.001")
+    assert code == 0 and "sensor timing: delay:0.001 (option)" in out
+    err = _bad(capsys, good_log, "--timing", "sometimes")
+    assert "--timing" in err
+    (tmp_path / "declared.timing.toml").write_text('[timing]\nFy = "mean"\n')
+    err = _bad(capsys, log)
+    assert "timing.Fy" in err

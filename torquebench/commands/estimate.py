@@ -47,6 +47,11 @@ def add_arguments(parser) -> None:
                         help="samples ||r|| must stay above EPS before a contact is declared (default 0)")
     parser.add_argument("--stance-foot", action="store_true",
                         help="the foot (last link, alpha=1) is an expected contact, estimated jointly")
+    parser.add_argument("--timing", default=None, metavar="instant|mean|delay:SECONDS",
+                        help="how every force channel (tau, Fx, Fz, My) was sampled: the value at "
+                             "the sample time, the mean over the preceding interval, or a filter "
+                             "with this group delay (default: LOG.timing.toml beside the log, "
+                             "else instant)")
     parser.add_argument("--out", type=Path, default=None, metavar="OUT.csv",
                         help="write t,contact,link,alpha,Fx,Fz,px,pz,rnorm per sample (atomically)")
 
@@ -70,9 +75,13 @@ def run(args) -> int:
             raise InputError(f"--out {args.out}: is the input log; refusing to overwrite it")
     robot = load_robot(args.robot or PAPER_LEG_TOML)
     log = read_log(args.log, robot)
+    timing = None
+    if args.timing is not None:
+        from estimator.timing import uniform
+        timing = uniform(args.timing, robot.n_links, "--timing")
     result = estimate(robot, log, method=args.method, gain_per_s=args.gain,
                       threshold=args.threshold, debounce=args.debounce,
-                      expected_contacts="foot" if args.stance_foot else None)
+                      expected_contacts="foot" if args.stance_foot else None, timing=timing)
     if args.out is not None:
         with atomic_path(args.out) as tmp:
             result.to_frame().to_csv(tmp, index=False, float_format="%.9g", na_rep="NaN")
@@ -87,6 +96,7 @@ def run(args) -> int:
         return 0
     print(f"{args.log}: {summary['samples']} samples ({summary['skipped_samples']} skipped for NaN/inf), "
           f"method {args.method}, {summary['contact_samples']} in contact, {elapsed:.2f} s")
+    print(f"  sensor timing: {summary['timing']} ({summary['timing_source']})")
     for iv in summary["intervals"]:
         print(f"  contact {iv['t_start_s']:.4f}-{iv['t_end_s']:.4f} s: link {iv['link']}, "
               f"alpha {iv['alpha']:.3f}, F = ({iv['Fx_N']:.3f}, {iv['Fz_N']:.3f}) N, "
