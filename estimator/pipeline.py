@@ -14,12 +14,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from estimator import detection, localization as loc_mod, observer
+from estimator import noise as noise_mod
 from estimator import timing as timing_mod
 from estimator.errors import InputError
 from estimator.log import SensorLog
 from estimator.robot import Robot
 
 METHODS = ("dynamic", "paper")
+DEFAULT_FALSE_ALARM_RATE = (1.0, "h")
 FRAME_COLUMNS = ["t", "contact", "link", "alpha", "Fx", "Fz", "px", "pz", "rnorm"]
 
 
@@ -124,11 +126,45 @@ def _delayed(t: np.ndarray, q: np.ndarray, lag_s: float, dt_s: float) -> np.ndar
     return np.stack([np.interp(t - lag_s, t, q[:, k]) for k in range(q.shape[1])], axis=-1)
 
 
+def _noise_detector(robot, log, r, unexp, gain_per_s, timing, noise, quiet_window,
+                    false_alarm_rate, cov_stride_s):
+    """(contact, statistic, info) of the chi-square detector (estimator.noise)."""
+    T = len(log.t)
+    dt = observer.regular_period(log.t)
+    value, unit = false_alarm_rate if isinstance(false_alarm_rate, tuple) else (false_alarm_rate, "s")
+    alpha = noise_mod.per_sample_rate(value, unit, dt)
+    n = r.shape[1]
+    h = noise_mod.chi2_threshold(alpha, n)
+    if quiet_window is not None:
+        R = noise_mod.quiet_covariance(r, log.t, *quiet_window, gain_per_s, dt)
+        stride, source = None, (f"robust estimate over the quiet window {quiet_window[0]:g}–"
+                                f"{quiet_window[1]:g} s")
+    else:
+        noise = noise_mod.paper_leg_noise() if noise is None else noise
+        if noise.velocity_sigma_rad_per_s == 0 and noise.encoder_counts == 0:
+            R, stride = noise_mod.residual_covariance(robot, log.q[:1], log.dq[:1], noise, gain_per_s,
+                                                      dt, timing)[0], None     # posture-independent
+        else:
+            stride = max(1, int(round(cov_stride_s / dt)))
+            R = noise_mod.residual_covariance(robot, log.q[::stride], log.dq[::stride], noise,
+                                              gain_per_s, dt, timing)
+        source = "sensor noise model, " + noise.describe()
+    stat = noise_mod.whitened_statistic(unexp, R, stride)
+    Rm = R if R.ndim == 2 else np.median(R, axis=0)
+    info = {"detector": "chi-square on the whitened residual",
+            "false_alarm_probability_per_sample": alpha,
+            "false_alarm_rate_per_s": alpha / dt, "chi2_threshold": h, "chi2_dof": n,
+            "residual_noise_source": source,
+            "residual_sigma": np.sqrt(np.diag(Rm)).tolist()}
+    return stat > h, stat, info, Rm
+
+
 def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=100.0,
-             threshold: float = 0.06, debounce: int = 0, expected_contacts=None, *,
+             threshold: float | None = None, debounce: int = 0, expected_contacts=None, *,
              discretization: str = "exact", row_weights=None, min_force_N: float = 0.05,
              max_condition: float = 20.0, isolation_floor: float = 0.01,
-             lag_compensation: bool = True, timing=None) -> ContactEstimate:
+             lag_compensation: bool = True, timing=None, noise=None, quiet_window=None,
+             false_alarm_rate=DEFAULT_FALSE_ALARM_RATE, cov_stride_s: float = 0.01) -> ContactEstimate:
     """Run observer, detection and localization on a whole log (offline, vectorized).
 
     expected_contacts: None (→ ``log.expected_contacts``), ``"foot"`` (last link, α = 1) or
@@ -145,6 +181,12 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
 
     timing: per force channel [(kind, delay_s)] or one 'instant' | 'mean' | 'delay:SECONDS' for
     all (estimator.timing); None → what the log declares (``log.timing``), else instantaneous.
+
+    Detection: ``method="paper"`` or a given ``threshold`` → ‖r‖ > ε (ε = 0.06 by default, the
+    paper's rule). Otherwise (``dynamic``) the chi-square test on the residual whitened by its
+    no-contact covariance (estimator.noise) from ``noise`` (a NoiseModel; default the paper leg's
+    sensors) or from the ``quiet_window`` (t0, t1) of the log, at ``false_alarm_rate`` = (value,
+    unit) with unit 'sample', 's' or 'h' (default one per hour); ``rnorm`` is then √(rᵀR⁻¹r).
     """
     if method not in METHODS:
         raise InputError(f"method: unknown {method!r}; use one of {', '.join(METHODS)}")
@@ -169,9 +211,19 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
         unexp, _ = loc_mod.explain_expected(robot, log.q, r, expected, row_weights)
     else:
         unexp = r
-    rnorm = np.sqrt(np.einsum("tk,tk->t", unexp, unexp))
-    contact = detection.detect(rnorm, threshold, debounce)
     T = len(log.t)
+    det_info, R = {}, None
+    if method == "paper" or threshold is not None or T < 2:
+        threshold = 0.06 if threshold is None else threshold
+        rnorm = np.sqrt(np.einsum("tk,tk->t", unexp, unexp))
+        contact = detection.detect(rnorm, threshold, debounce)
+        det_info = {"detector": "paper rule ||r|| > threshold", "threshold": threshold}
+    else:
+        contact, stat, det_info, R = _noise_detector(robot, log, r, unexp, gain_per_s, timing, noise,
+                                                     quiet_window, false_alarm_rate, cov_stride_s)
+        rnorm = np.sqrt(stat)
+        if debounce:
+            contact = detection.detect(rnorm, float(np.sqrt(det_info["chi2_threshold"])), debounce)
     sel = np.flatnonzero(contact)
     if sel.size == T:
         sel = slice(None)                              # every sample: views, no copies
@@ -183,11 +235,15 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     condition = np.full(T, np.nan)
     reason = np.full(T, loc_mod.NO_CONTACT, dtype=np.int8)
     expected_force = None
-    info = {"timing": timing_mod.describe(timing), "timing_source": timing_source}
+    info = {"timing": timing_mod.describe(timing), "timing_source": timing_source, **det_info}
     # noise-aware floors from the samples without contact (robust σ; noise-free logs keep the floors)
     quiet = ~contact
     force_floor = float(detection.noise_thresholds(r[:, :2], quiet, floor=min_force_N).max())
-    ambiguity_tol = max(1e-3, 2.0 * float(np.median(rnorm[quiet]))) if quiet.sum() >= 10 else 1e-3
+    if R is not None:               # from the noise: 2 · ‖σ_r‖ (as uncertainty.SensorNoise.ambiguity_tol)
+        ambiguity_tol = 2.0 * float(np.sqrt(np.trace(R)))
+        force_floor = max(min_force_N, 5.0 * float(np.sqrt(max(R[0, 0], R[1, 1]))))
+    else:
+        ambiguity_tol = max(1e-3, 2.0 * float(np.median(rnorm[quiet]))) if quiet.sum() >= 10 else 1e-3
     info.update(min_force_N=force_floor, ambiguity_tol=ambiguity_tol)
     if method == "dynamic":
         if lag_compensation and T > 1:

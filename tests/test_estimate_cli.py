@@ -202,3 +202,24 @@ def test_timing_option_side_file_and_bad_value(capsys, tmp_path, good_log):
     (tmp_path / "declared.timing.toml").write_text('[timing]\nFy = "mean"\n')
     err = _bad(capsys, log)
     assert "timing.Fy" in err
+
+
+def test_dynamic_default_is_the_chi_square_detector(capsys, good_log):
+    code, out, _ = run(capsys, good_log, "--json")
+    s = json.loads(out)
+    assert code == 0 and s["detector"].startswith("chi-square")
+    assert s["false_alarm_rate_per_s"] == pytest.approx(1 / 3600)
+    assert "paper leg" in s["residual_noise_source"]
+    assert s["intervals"] and s["intervals"][0]["link"] == 1
+    code, out, _ = run(capsys, good_log, "--json", "--threshold", "0.06")
+    assert json.loads(out)["detector"].startswith("paper rule")
+
+
+@pytest.mark.parametrize("option,value,name", [
+    ("--torque-sigma", "0", "torque sigma"), ("--ft-sigma", "0.1,-0.1,0.01", "FT sigma"),
+    ("--false-alarm-rate", "1/sample", "--false-alarm-rate"),
+    ("--false-alarm-rate", "5000/s", "--false-alarm-rate"),
+    ("--quiet-window", "0.05:0.25", "--quiet-window"), ("--quiet-window", "abc", "--quiet-window")])
+def test_bad_detector_options_exit_2(capsys, good_log, option, value, name):
+    err = _bad(capsys, good_log, option, value)
+    assert name in err
