@@ -45,6 +45,7 @@ class ContactEstimate:
     expected_force_N: np.ndarray | None = None     # (T, m, 2) at the expected contacts
     n_skipped: int = 0          # log rows skipped for NaN/inf fields
     info: dict = field(default_factory=dict)
+    interval_errors: list | None = None   # per interval: predicted 1σ of α, F, p (see _episode_errors)
 
     def reason_names(self) -> np.ndarray:
         return np.asarray(loc_mod.REASONS, dtype=object)[self.reason]
@@ -64,7 +65,7 @@ class ContactEstimate:
         edges = np.diff(np.concatenate([[0], c, [0]]))
         starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
         out = []
-        for a, b in zip(starts, stops):
+        for i, (a, b) in enumerate(zip(starts, stops)):
             links = self.link[a:b]
             known = links[links > 0]
             link = int(np.bincount(known).argmax()) if known.size else 0
@@ -77,6 +78,8 @@ class ContactEstimate:
                         "Fx_N": fmean(self.Fx), "Fz_N": fmean(self.Fz),
                         "px_m": mean(self.px), "pz_m": mean(self.pz),
                         "well_conditioned_fraction": float(good.mean())})
+            if self.interval_errors is not None and i < len(self.interval_errors):
+                out[-1].update(self.interval_errors[i])
         return out
 
     def summary(self) -> dict:
@@ -157,6 +160,39 @@ def _noise_detector(robot, log, r, unexp, gain_per_s, timing, noise, quiet_windo
             "residual_noise_source": source,
             "residual_sigma": np.sqrt(np.diag(Rm)).tolist()}
     return stat > h, stat, info, Rm
+
+
+ERROR_METHOD = ("first-order propagation of the residual's no-contact covariance through the "
+                "least-squares localization at the episode's middle sample, 1σ per sample")
+
+
+def _episode_errors(robot, contact, q_loc_full, r, R, loc_kwargs, h=1e-4):
+    """Per contact episode: 1σ of α, Fx, Fz, px, pz per sample, J R Jᵀ with J = ∂(α, F, p)/∂r
+    by central differences of localize_dynamic at the episode's middle sample."""
+    c = contact.astype(np.int8)
+    edges = np.diff(np.concatenate([[0], c, [0]]))
+    mids = (np.flatnonzero(edges == 1) + np.flatnonzero(edges == -1) - 1) // 2
+    n = r.shape[1]
+    out = []
+    if mids.size == 0:
+        return out
+    eye = np.eye(n) * h
+    rp = np.concatenate([r[mids][:, None] + eye, r[mids][:, None] - eye], axis=1).reshape(-1, n)
+    qp = np.repeat(q_loc_full[mids], 2 * n, axis=0)
+    res = loc_mod.localize_dynamic(robot, qp, rp, **loc_kwargs)
+    y = np.concatenate([res.alpha[:, None], res.force_N, res.point_m], axis=1).reshape(len(mids), 2 * n, 5)
+    J = (y[:, :n] - y[:, n:]) / (2 * h)                           # (E, n, 5)
+    cov = np.einsum("eki,kl,elj->eij", J, R, J)
+    sd = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0, None))
+    for e in range(len(mids)):
+        row = {}
+        for j, key in enumerate(["alpha", "Fx_N", "Fz_N", "px_m", "pz_m"]):
+            v = float(sd[e, j])
+            row[f"{key}_error_estimate"] = v if np.isfinite(v) else None
+            row[f"{key}_error_method"] = ERROR_METHOD if np.isfinite(v) else \
+                "not available: the localization refused a perturbed answer (ill-conditioned)"
+        out.append(row)
+    return out
 
 
 def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=100.0,
@@ -250,9 +286,10 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
             dt = observer.regular_period(log.t)
             lag = float(np.mean(observer.lag_s(observer.gains(robot, gain_per_s), dt, discretization)))
             info["lag_compensation_s"] = lag
-            q_loc = _delayed(log.t, log.q, lag, dt)[sel]
+            q_loc_full = _delayed(log.t, log.q, lag, dt)
         else:
-            q_loc = log.q[sel]
+            q_loc_full = log.q
+        q_loc = q_loc_full[sel]
         if n_sel:
             res = loc_mod.localize_dynamic(robot, q_loc, r[sel], expected=expected,
                                            row_weights=row_weights, min_force_N=force_floor,
@@ -287,7 +324,12 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
         point[sel] = res.point_m
         condition[sel] = res.condition
         reason[sel] = res.reason
-    return ContactEstimate(t=log.t.copy(), contact=contact, link=link, alpha=alpha, Fx=force[:, 0],
+    interval_errors = None
+    if method == "dynamic" and R is not None and not expected and n_sel:
+        kw = dict(row_weights=row_weights, min_force_N=force_floor, max_condition=max_condition,
+                  ambiguity_tol=ambiguity_tol)
+        interval_errors = _episode_errors(robot, contact, q_loc_full, r, R, kw)
+    return ContactEstimate(interval_errors=interval_errors, t=log.t.copy(), contact=contact, link=link, alpha=alpha, Fx=force[:, 0],
                            Fz=force[:, 1], px=point[:, 0], pz=point[:, 1], rnorm=rnorm,
                            condition=condition, reason=reason, residual=r, method=method,
                            expected_force_N=expected_force, n_skipped=getattr(log, "n_skipped", 0),

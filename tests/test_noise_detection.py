@@ -91,3 +91,27 @@ def test_quiet_window_refuses_a_contact():
     r2[t > 10.0, 4] += 0.5 * (1 - np.exp(-100 * (t[t > 10.0] - 10.0)))    # a 0.5 N·m contact
     with pytest.raises(InputError, match="--quiet-window.*contains a contact"):
         Nz.quiet_covariance(r2, t, 1.0, 15.0, 100.0, DT)
+
+
+def test_episode_error_estimate_matches_the_spread_of_answers():
+    """A held 3 N poke under the issue's noise: the predicted per-sample 1σ of α and F agrees with
+    the standard deviation of the per-sample answers over the episode (within 15 %)."""
+    from estimator.log import SensorLog
+    from estimator.pipeline import estimate
+
+    T = 60_000
+    t = np.arange(T) * DT
+    q = np.tile([0.0, 0.0, 0.0, 0.9, -1.6], (T, 1))
+    z = np.zeros_like(q)
+    log, _ = inverse_dynamics_log(ROBOT, t, q, z, z, 2, 0.4, [-1.5, 2.6], active=t >= 1.0)
+    sig = np.r_[0.1, 0.1, 0.01, 0.005, 0.005]
+    tau = log.tau_meas + np.random.default_rng(5).standard_normal((T, 5)) * sig
+    noisy = SensorLog(t=t, q=q, dq=z, tau_Nm=tau[:, 3:], wrench=tau[:, :3])
+    est = estimate(ROBOT, noisy)
+    iv = max(est.intervals(), key=lambda i: i["samples"])
+    steady = est.t > 1.2
+    for key, arr in (("alpha", est.alpha), ("Fx_N", est.Fx), ("Fz_N", est.Fz)):
+        spread = np.nanstd(arr[steady])
+        print(key, "predicted", iv[f"{key}_error_estimate"], "measured", spread)
+        assert iv[f"{key}_error_estimate"] == pytest.approx(spread, rel=0.15)
+        assert "1σ" in iv[f"{key}_error_method"]

@@ -161,9 +161,12 @@ def run(args) -> int:
     else:
         print(f"  detector: {summary['detector']}, threshold {summary['threshold']:g}")
     for iv in summary["intervals"]:
+        def pm(key, fmt):
+            err = iv.get(f"{key}_error_estimate")
+            return f"{iv[key]:{fmt}}" + (f" ± {err:{fmt}}" if err is not None else "")
         print(f"  contact {iv['t_start_s']:.4f}-{iv['t_end_s']:.4f} s: link {iv['link']}, "
-              f"alpha {iv['alpha']:.3f}, F = ({iv['Fx_N']:.3f}, {iv['Fz_N']:.3f}) N, "
-              f"p = ({iv['px_m']:.4f}, {iv['pz_m']:.4f}) m")
+              f"alpha {pm('alpha', '.3f')}, F = ({pm('Fx_N', '.3f')}, {pm('Fz_N', '.3f')}) N, "
+              f"p = ({pm('px_m', '.4f')}, {pm('pz_m', '.4f')}) m")
     if args.out is not None:
         print(f"wrote {args.out}")
     return 0
