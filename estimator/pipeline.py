@@ -1,10 +1,13 @@
 """The whole estimator on a log: observer → detection → isolation/localization, per sample.
 
-``estimate(robot, log, method="dynamic", gain_per_s=100.0, threshold=0.06, ...)`` returns a
+``estimate(robot, log, method="dynamic", gain_per_s=100.0, threshold=None, ...)`` returns a
 ``ContactEstimate`` with one entry per log sample (see its fields). Methods (estimator.localization):
 ``dynamic`` (observer residual on all rows, least squares per link; default) and ``paper``
-(eqs. 6–9, quasi-static). Detection is ‖r‖ > ε_res on the observer residual (minus the part
-explained by the expected contacts, when there are any), with an optional debounce.
+(eqs. 6–9, quasi-static). Detection (on the observer residual minus the part explained by the
+expected contacts): for ``dynamic`` a chi-square test on the residual whitened by its no-contact
+covariance (estimator.noise) at a stated false-alarm rate; for ``paper`` or a given ``threshold``
+the paper's ‖r‖ > ε_res; optional debounce. The force channels' sampling (estimator.timing) sets
+the observer's quadrature.
 """
 
 from __future__ import annotations
