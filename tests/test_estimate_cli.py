@@ -223,3 +223,21 @@ def test_dynamic_default_is_the_chi_square_detector(capsys, good_log):
 def test_bad_detector_options_exit_2(capsys, good_log, option, value, name):
     err = _bad(capsys, good_log, option, value)
     assert name in err
+
+
+def test_parquet_log_and_output_match_csv(capsys, tmp_path, good_log):
+    pytest.importorskip("pyarrow")
+    log = read_log(good_log)
+    pq = tmp_path / "poke.parquet"
+    write_log(log, pq)
+    back = read_log(pq)
+    assert np.array_equal(back.q, log.q) and np.array_equal(back.tau_meas, log.tau_meas)
+    assert run(capsys, good_log, "--out", tmp_path / "a.csv")[0] == 0
+    assert run(capsys, pq, "--out", tmp_path / "b.parquet")[0] == 0
+    a = pd.read_csv(tmp_path / "a.csv")
+    b = pd.read_parquet(tmp_path / "b.parquet")
+    assert list(a.columns) == list(b.columns)
+    assert np.array_equal(a["contact"], b["contact"])
+    assert np.allclose(a["Fx"].fillna(0), b["Fx"].fillna(0), rtol=1e-8, atol=0)
+    (tmp_path / "junk.parquet").write_text("not parquet")
+    assert "Parquet" in _bad(capsys, tmp_path / "junk.parquet")

@@ -33,7 +33,7 @@ def _count(text: str) -> int:
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("log", type=Path, metavar="LOG.csv", help="sensor log (DESIGN.md format)")
+    parser.add_argument("log", type=Path, metavar="LOG.csv", help="sensor log (DESIGN.md format): CSV, or Parquet for .parquet")
     parser.add_argument("--robot", type=Path, default=None,
                         help="robot TOML (default: robots/paper_leg.toml)")
     parser.add_argument("--method", choices=["paper", "dynamic"], default="dynamic",
@@ -67,7 +67,8 @@ def add_arguments(parser) -> None:
                              "with this group delay (default: LOG.timing.toml beside the log, "
                              "else instant)")
     parser.add_argument("--out", type=Path, default=None, metavar="OUT.csv",
-                        help="write t,contact,link,alpha,Fx,Fz,px,pz,rnorm per sample (atomically)")
+                        help="write t,contact,link,alpha,Fx,Fz,px,pz,rnorm per sample (atomically; Parquet "
+                             "for .parquet, else CSV)")
 
 
 def _floats(text, where, count=None):
@@ -141,7 +142,10 @@ def run(args) -> int:
                       noise=noise, quiet_window=quiet, false_alarm_rate=rate)
     if args.out is not None:
         with atomic_path(args.out) as tmp:
-            result.to_frame().to_csv(tmp, index=False, float_format="%.9g", na_rep="NaN")
+            if args.out.suffix.lower() == ".parquet":
+                result.to_frame().to_parquet(tmp, index=False)
+            else:
+                result.to_frame().to_csv(tmp, index=False, float_format="%.9g", na_rep="NaN")
     elapsed = time.perf_counter() - start
     summary = {"log": str(args.log), "robot": robot.name, "gain_per_s": args.gain,
                **result.summary(),
