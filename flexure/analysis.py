@@ -76,7 +76,14 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
     else:
         surf = load_stl(design.file_path, design.file_unit_m, where=where)
     scale = float(np.ptp(surf.points, axis=0).min())
-    return mesh_design_surface(surf, None, size, centres, extent, scale, order, gauge_width=gw)
+    if design.kind == "step" and design.mesher == "gmsh":     # mesh the exact solid, not its triangles
+        from flexure.gmsh_mesh import mesh_step
+        from flexure.meshing import MeshResult, mesh_report
+        field = size_field(size, scale, centres, extent, gw)
+        mesh = mesh_step(design.file_path, design.file_unit_m, field, order, where=where)
+        return MeshResult(mesh, surf, mesh_report(mesh, size, "gmsh", None, field))
+    return mesh_design_surface(surf, None, size, centres, extent, scale, order, gauge_width=gw,
+                               mesher=design.mesher)
 
 
 def _selections(design: Design, mesh):
@@ -147,7 +154,7 @@ RTOL = 1e-8
 #: swept meshes (flat layers) get the smoothed-aggregation coarse solve: on the paper disc's fine
 #: mesh 142 → 69 CG iterations, 27 → 18 s for the torque case (a structured annulus, by contrast,
 #: keeps its iterations and only pays the denser set-up: see benchmarks/bench_fem.py).
-SMOOTHED_COARSE = {"sweep": True, "tetgen": False}
+SMOOTHED_COARSE = {"sweep": True, "tetgen": False, "gmsh": False}
 
 
 def _solve_cases(design: Design, mesh, K, load_nodes, fixed_nodes, ref: np.ndarray, wrench: np.ndarray):

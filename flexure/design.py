@@ -62,7 +62,7 @@ class Design:
     order: int
     raw: dict = field(repr=False, default_factory=dict)
     segments_per_quarter: int | None = None
-    mesher: str = "sweep"                 # "sweep" (layered extrusion) | "tetgen"
+    mesher: str = "sweep"                 # "sweep" (layered extrusion) | "gmsh" (graded volume) | "tetgen"
     coupling: str = "rigid"               # torque into the bore: "rigid" shaft | "distributed" traction
 
 
@@ -288,8 +288,11 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
     mesher = _get(me, "mesher", w, str, "sweep")
     if mesher not in MESHERS:
         raise InputError(f"{w}.mesher: must be one of {', '.join(MESHERS)}, got {mesher!r}")
-    if kind != "spoke_disc":
-        mesher = "tetgen"                      # an STL or STEP solid is not an extrusion
+    if kind != "spoke_disc" and mesher == "sweep":
+        if "mesher" in me:
+            raise InputError(f"{w}.mesher: 'sweep' needs an extruded profile (geometry.kind = "
+                             f"'spoke_disc'); use 'gmsh' or 'tetgen' for a {kind.upper()} solid")
+        mesher = "gmsh"                        # an STL or STEP solid: graded volume mesh by gmsh
     return Design(path, str(name), kind, disc, file_path, unit, material, gauges, gf, r_ohm, rated,
                   load_r, fixed, fixed_r, sensor, size, order, raw=raw,
                   segments_per_quarter=geo.get("segments_per_quarter"), mesher=mesher, coupling=coupling)

@@ -10,6 +10,7 @@ angle (``mindihedral``) and the volume bound V ≤ h_far³/(6√2) (regular tetr
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -232,7 +233,7 @@ def tetrahedralize(surface: Surface, h_far: float, minratio: float = 1.8, mindih
     return mesh
 
 
-MESHERS = ("sweep", "tetgen")
+MESHERS = ("gmsh", "sweep", "tetgen")
 
 
 def size_field(size: str, h_scale: float, gauge_centres, gauge_extent: float,
@@ -253,25 +254,49 @@ def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gau
 
     h_far = SIZES[size].far · h_scale (the thickness); h_gauge = SIZES[size].gauge · gauge width,
     within ``gauge_extent`` of each gauge centre, graded outwards. A profile is swept through
-    ⌈thickness / h_gauge⌉ layers (``mesher="sweep"``) or its closed surface handed to tetgen
-    (``"tetgen"``, which grades only from the surface); a Surface always goes to tetgen.
+    ⌈thickness / h_gauge⌉ layers (``mesher="sweep"``), or its closed surface handed to tetgen
+    (``"tetgen"``, which grades only from the surface); ``"gmsh"`` meshes the volume with the size
+    field (isotropic, graded in 3-D; flexure.gmsh_mesh), re-meshing a Surface (STL) on the way.
     """
     if mesher not in MESHERS:
         raise InputError(f"mesh.mesher: must be one of {', '.join(MESHERS)}, got {mesher!r}")
     field = size_field(size, h_scale, gauge_centres, gauge_extent, gauge_width)
     s, h_far, h_gauge = SIZES[size], field.h_far, field.h_gauge
     surface, layers = None, None
-    if isinstance(surface_or_poly, Surface):
-        surface, mesher = surface_or_poly, "tetgen"
+    is_surface = isinstance(surface_or_poly, Surface)
+    if is_surface and mesher == "sweep":
+        mesher = "gmsh"                          # a closed surface is not an extrusion
+    if mesher == "gmsh":
+        from flexure import gmsh_mesh
+        if is_surface:
+            surface = surface_or_poly
+            mesh = gmsh_mesh.mesh_surface(surface, field, order)
+        else:
+            mesh = gmsh_mesh.mesh_extrusion(surface_or_poly, thickness, field, order)
     elif mesher == "tetgen":
-        surface = extrude_graded(surface_or_poly, thickness, field)
-    if surface is not None:
+        surface = surface_or_poly if is_surface else extrude_graded(surface_or_poly, thickness, field)
         mesh = tetrahedralize(surface, h_far, s["minratio"], s["mindihedral"], order)
     else:
         layers = max(2, int(np.ceil(thickness / h_gauge - 1e-9)))
         mesh = sweep_mesh(surface_or_poly, thickness, field, layers, order)
+    return MeshResult(mesh, surface, mesh_report(mesh, size, mesher, layers, field, surface))
+
+
+def mesh_report(mesh, size: str, mesher: str, layers, field: SizeField, surface: Surface | None = None) -> dict:
+    """Quality (min/max dihedral, aspect and radius-edge ratios, slivers) and sizing of a mesh; for
+    a re-meshed closed surface also the relative volume change (the re-mesh is a geometry change)."""
     from flexure.mesh import quality
+
     rep = quality(mesh)
-    rep.update({"size": size, "mesher": mesher, "layers": layers, "h_far_m": h_far, "h_gauge_m": h_gauge,
-                "surface_triangles": int(len(mesh.boundary_faces()))})
-    return MeshResult(mesh, surface, rep)
+    rep.update({"size": size, "mesher": mesher, "layers": layers, "h_far_m": field.h_far,
+                "h_gauge_m": field.h_gauge, "surface_triangles": int(len(mesh.boundary_faces()))})
+    if surface is not None and mesher == "gmsh":
+        v0 = surface_volume(surface)
+        rep["remesh_volume_change"] = float(rep["total_volume_m3"] / v0 - 1.0) if v0 > 0 else math.nan
+    return rep
+
+
+def surface_volume(surface: Surface) -> float:
+    """Enclosed volume of a closed, outward-oriented triangulation: V = Σ x_a·(x_b × x_c)/6."""
+    x = surface.points[surface.faces]
+    return float(np.einsum("ij,ij->i", x[:, 0], np.cross(x[:, 1], x[:, 2])).sum() / 6.0)
