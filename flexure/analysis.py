@@ -51,7 +51,7 @@ class Fields:
     load_nodes: np.ndarray
 
 
-def build_mesh(design: Design, size: str | None = None, order: int | None = None):
+def build_mesh(design: Design, size: str | None = None, order: int | None = None, h_factor: float = 1.0):
     """Mesh of the design (P1/P2), finer at the gauges: a swept or tetgen mesh of the parametric
     profile, or tetgen on the surface of an STL (repaired if need be) or a STEP solid (gmsh)."""
     from flexure.geometry import load_stl, profile
@@ -66,24 +66,24 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
         qs = design.segments_per_quarter or SEGMENTS.get(size, 3)
         poly = profile(design.disc, qs)
         return mesh_design_surface(poly, design.disc.thickness, size, centres, extent, design.disc.thickness,
-                                   order, gauge_width=gw, mesher=design.mesher)
+                                   order, gauge_width=gw, mesher=design.mesher, h_factor=h_factor)
     where = f"{design.path}: geometry.file"
     if design.kind == "step":
         from flexure.cad import load_step
         from flexure.meshing import size_field
         surf = load_step(design.file_path, design.file_unit_m, where=where,
-                         size_for=lambda scale: size_field(size, scale, centres, extent, gw))
+                         size_for=lambda scale: size_field(size, scale, centres, extent, gw, h_factor))
     else:
         surf = load_stl(design.file_path, design.file_unit_m, where=where)
     scale = float(np.ptp(surf.points, axis=0).min())
     if design.kind == "step" and design.mesher == "gmsh":     # mesh the exact solid, not its triangles
         from flexure.gmsh_mesh import mesh_step
         from flexure.meshing import MeshResult, mesh_report
-        field = size_field(size, scale, centres, extent, gw)
+        field = size_field(size, scale, centres, extent, gw, h_factor)
         mesh = mesh_step(design.file_path, design.file_unit_m, field, order, where=where)
         return MeshResult(mesh, surf, mesh_report(mesh, size, "gmsh", None, field))
     return mesh_design_surface(surf, None, size, centres, extent, scale, order, gauge_width=gw,
-                               mesher=design.mesher)
+                               mesher=design.mesher, h_factor=h_factor)
 
 
 def _selections(design: Design, mesh):
@@ -202,8 +202,10 @@ def _sensor_config(design: Design):
                        arrangement="full_bending")
 
 
-def analyze(design: Design, size: str | None = None, order: int | None = None, progress: bool = False):
-    """Mesh, solve the six load cases, read the gauges → (results dict, Fields)."""
+def analyze(design: Design, size: str | None = None, order: int | None = None, progress: bool = False,
+            h_factor: float = 1.0):
+    """Mesh (element sizes × ``h_factor``), solve the six load cases, read the gauges → (results
+    dict, Fields). One mesh level: flexure.convergence adds the discretisation error estimate."""
     from bridge.budget import min_detectable_strain
     from bridge.wheatstone import output_ratio
     from flexure import solve as fsolve
@@ -215,7 +217,7 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
 
     t_all = time.perf_counter()
     t0 = time.perf_counter()
-    mres = build_mesh(design, size, order)
+    mres = build_mesh(design, size, order, h_factor)
     mesh = mres.mesh
     mesh_s = time.perf_counter() - t0
     say(f"mesh {mres.report['n_elements']} P{mesh.order} tetrahedra, {mesh.n_dofs} dofs ({mesh_s:.1f} s)")

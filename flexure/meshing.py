@@ -237,19 +237,23 @@ MESHERS = ("gmsh", "sweep", "tetgen")
 
 
 def size_field(size: str, h_scale: float, gauge_centres, gauge_extent: float,
-               gauge_width: float | None = None) -> SizeField:
-    """h_far = SIZES[size].far · h_scale; h_gauge = SIZES[size].gauge · gauge width (≤ h_far)."""
+               gauge_width: float | None = None, h_factor: float = 1.0) -> SizeField:
+    """h_far = f · SIZES[size].far · h_scale; h_gauge = f · SIZES[size].gauge · gauge width (≤ h_far),
+    f = ``h_factor`` (the refinement levels of flexure.convergence)."""
     if size not in SIZES:
         raise InputError(f"--size: must be one of {', '.join(SIZES)}, got {size!r}")
     s = SIZES[size]
-    h_far = s["far"] * h_scale
-    h_gauge = min(s["gauge"] * (gauge_width or gauge_extent), h_far)
-    return SizeField(h_far, h_gauge, np.asarray(gauge_centres, float).reshape(-1, 3), r_gauge=gauge_extent)
+    h_far = h_factor * s["far"] * h_scale
+    h_gauge = min(h_factor * s["gauge"] * (gauge_width or gauge_extent), h_far)
+    # grading × f too, so that the whole size function scales by f (h_f(x) = f·h_1(x)): nested levels
+    return SizeField(h_far, h_gauge, np.asarray(gauge_centres, float).reshape(-1, 3), r_gauge=gauge_extent,
+                     grading=SizeField.grading * h_factor)
 
 
 def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gauge_centres: np.ndarray,
                         gauge_extent: float, h_scale: float, order: int = 1,
-                        gauge_width: float | None = None, mesher: str = "sweep") -> MeshResult:
+                        gauge_width: float | None = None, mesher: str = "sweep",
+                        h_factor: float = 1.0) -> MeshResult:
     """Mesh an extruded profile (shapely polygon + thickness) or a closed Surface (user STL).
 
     h_far = SIZES[size].far · h_scale (the thickness); h_gauge = SIZES[size].gauge · gauge width,
@@ -260,7 +264,7 @@ def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gau
     """
     if mesher not in MESHERS:
         raise InputError(f"mesh.mesher: must be one of {', '.join(MESHERS)}, got {mesher!r}")
-    field = size_field(size, h_scale, gauge_centres, gauge_extent, gauge_width)
+    field = size_field(size, h_scale, gauge_centres, gauge_extent, gauge_width, h_factor)
     s, h_far, h_gauge = SIZES[size], field.h_far, field.h_gauge
     surface, layers = None, None
     is_surface = isinstance(surface_or_poly, Surface)
