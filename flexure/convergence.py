@@ -105,7 +105,8 @@ def relative_error(res: dict, key: str) -> float:
 
 
 def analyze_with_error(design, size: str | None = None, order: int | None = None, rtol: float | None = None,
-                       max_dofs: int = MAX_DOFS, progress: bool = False, factors=FACTORS):
+                       max_dofs: int = MAX_DOFS, progress: bool = False, factors=FACTORS,
+                       max_elements: float | None = None):
     """``analysis.analyze`` on the levels ``factors`` (coarsest first; the last is the answer),
     then, with ``rtol``, on finer levels (× 1/√2 each) until the relative error estimates of
     RTOL_FIGURES are ≤ rtol, or the next level would exceed ``max_dofs`` (a warning says so).
@@ -121,7 +122,7 @@ def analyze_with_error(design, size: str | None = None, order: int | None = None
         nonlocal res, fields
         if progress:
             print(f"flexure: mesh level h × {f:.3g}", file=sys.stderr)
-        res, fields = analyze(design, size, order, progress=progress, h_factor=f)
+        res, fields = analyze(design, size, order, progress=progress, h_factor=f, max_elements=max_elements)
         levels.append({"h_factor": float(f), "dofs": int(res["dofs"]), "total_s": res["total_s"],
                        **{k: res[k] for k in FIGURES}})
 

@@ -62,7 +62,7 @@ class Design:
     order: int
     raw: dict = field(repr=False, default_factory=dict)
     segments_per_quarter: int | None = None
-    mesher: str = "sweep"                 # "sweep" (layered extrusion) | "gmsh" (graded volume) | "tetgen"
+    mesher: str = "gmsh"                  # "gmsh" (graded isotropic volume) | "sweep" (layered extrusion) | "tetgen"
     coupling: str = "rigid"               # torque into the bore: "rigid" shaft | "distributed" traction
 
 
@@ -285,7 +285,7 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
     order = _get(me, "order", w, int, 2)
     if order not in (1, 2):
         raise InputError(f"{w}.order: must be 1 or 2, got {order}")
-    mesher = _get(me, "mesher", w, str, "sweep")
+    mesher = _get(me, "mesher", w, str, "gmsh")
     if mesher not in MESHERS:
         raise InputError(f"{w}.mesher: must be one of {', '.join(MESHERS)}, got {mesher!r}")
     if kind != "spoke_disc" and mesher == "sweep":

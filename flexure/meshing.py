@@ -234,6 +234,30 @@ def tetrahedralize(surface: Surface, h_far: float, minratio: float = 1.8, mindih
 
 
 MESHERS = ("gmsh", "sweep", "tetgen")
+#: refuse a mesh estimated above this many tetrahedra before meshing (``--max-elements``)
+MAX_ELEMENTS = 500_000
+#: bytes per P2 tetrahedron for the memory figure of the refusal (assembly + AMG, measured order)
+BYTES_PER_ELEMENT = 12_000
+
+
+def estimate_elements(field: SizeField, points: np.ndarray, volume_m3: float, h_max: float = np.inf) -> float:
+    """N ≈ V · mean(1/v(h)) over ``points`` sampling the solid, v(h) = h³/(6√2) (regular tet), with
+    h ≤ ``h_max`` (the part's own thickness 2V/A: no element is larger than the part)."""
+    h = field(points[:, :2]) if points.shape[1] == 2 else field(points)
+    h = np.minimum(h, h_max)
+    return float(volume_m3 * np.mean(6 * np.sqrt(2) / h ** 3))
+
+
+def check_cost(field: SizeField, points: np.ndarray, volume_m3: float, max_elements: float,
+               where: str = "mesh", area_m2: float | None = None) -> float:
+    """Refuse up front (InputError) a mesh estimated above ``max_elements``; → the estimate."""
+    h_max = 2 * volume_m3 / area_m2 if area_m2 else np.inf
+    n = estimate_elements(field, points, volume_m3, h_max)
+    if not np.isfinite(n) or n > max_elements:
+        raise InputError(f"{where}: the mesh would have ~{n:.3g} tetrahedra (~{n * BYTES_PER_ELEMENT / 1e9:.3g} GB "
+                         f"for P2), above --max-elements {max_elements:.3g}; check the dimensions "
+                         "(a feature far thinner or thicker than the gauges?) or raise --max-elements")
+    return n
 
 
 def size_field(size: str, h_scale: float, gauge_centres, gauge_extent: float,
@@ -253,7 +277,7 @@ def size_field(size: str, h_scale: float, gauge_centres, gauge_extent: float,
 def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gauge_centres: np.ndarray,
                         gauge_extent: float, h_scale: float, order: int = 1,
                         gauge_width: float | None = None, mesher: str = "sweep",
-                        h_factor: float = 1.0) -> MeshResult:
+                        h_factor: float = 1.0, max_elements: float = MAX_ELEMENTS) -> MeshResult:
     """Mesh an extruded profile (shapely polygon + thickness) or a closed Surface (user STL).
 
     h_far = SIZES[size].far · h_scale (the thickness); h_gauge = SIZES[size].gauge · gauge width,
@@ -268,6 +292,21 @@ def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gau
     s, h_far, h_gauge = SIZES[size], field.h_far, field.h_gauge
     surface, layers = None, None
     is_surface = isinstance(surface_or_poly, Surface)
+    if is_surface:
+        x = surface_or_poly.points[surface_or_poly.faces]
+        area = 0.5 * np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), axis=1).sum()
+        check_cost(field, surface_or_poly.points, surface_volume(surface_or_poly), max_elements, area_m2=area)
+    else:
+        import shapely
+        minx, miny, maxx, maxy = surface_or_poly.bounds
+        gx, gy = np.meshgrid(np.linspace(minx, maxx, 80), np.linspace(miny, maxy, 80))
+        xy = np.column_stack([gx.ravel(), gy.ravel()])
+        xy = xy[shapely.contains_xy(surface_or_poly, xy[:, 0], xy[:, 1])]
+        if len(xy) == 0:
+            xy = np.asarray(surface_or_poly.exterior.coords)
+        perimeter = surface_or_poly.exterior.length + sum(r.length for r in surface_or_poly.interiors)
+        check_cost(field, xy, surface_or_poly.area * thickness, max_elements,
+                   area_m2=2 * surface_or_poly.area + perimeter * thickness)
     if is_surface and mesher == "sweep":
         mesher = "gmsh"                          # a closed surface is not an extrusion
     if mesher == "gmsh":
