@@ -51,14 +51,16 @@ class Fields:
     load_nodes: np.ndarray
 
 
-def build_mesh(design: Design, size: str | None = None, order: int | None = None):
+def build_mesh(design: Design, size: str | None = None, order: int | None = None, h_factor: float = 1.0,
+               max_elements: float | None = None):
     """Mesh of the design (P1/P2), finer at the gauges: a swept or tetgen mesh of the parametric
     profile, or tetgen on the surface of an STL (repaired if need be) or a STEP solid (gmsh)."""
     from flexure.geometry import load_stl, profile
-    from flexure.meshing import mesh_design_surface
+    from flexure.meshing import MAX_ELEMENTS, mesh_design_surface
 
     size = size or design.size
     order = order or design.order
+    cap = max_elements or MAX_ELEMENTS
     centres = np.array([g.centre_m for g in design.gauges])
     extent = 0.5 * max(g.length_m + g.width_m for g in design.gauges) / math.sqrt(2) * 1.3
     gw = min(min(g.width_m, g.length_m) for g in design.gauges)
@@ -66,17 +68,27 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
         qs = design.segments_per_quarter or SEGMENTS.get(size, 3)
         poly = profile(design.disc, qs)
         return mesh_design_surface(poly, design.disc.thickness, size, centres, extent, design.disc.thickness,
-                                   order, gauge_width=gw, mesher=design.mesher)
+                                   order, gauge_width=gw, mesher=design.mesher, h_factor=h_factor,
+                                   max_elements=cap)
     where = f"{design.path}: geometry.file"
     if design.kind == "step":
         from flexure.cad import load_step
         from flexure.meshing import size_field
         surf = load_step(design.file_path, design.file_unit_m, where=where,
-                         size_for=lambda scale: size_field(size, scale, centres, extent, gw))
+                         size_for=lambda scale: size_field(size, scale, centres, extent, gw, h_factor))
     else:
         surf = load_stl(design.file_path, design.file_unit_m, where=where)
     scale = float(np.ptp(surf.points, axis=0).min())
-    return mesh_design_surface(surf, None, size, centres, extent, scale, order, gauge_width=gw)
+    if design.kind == "step" and design.mesher == "gmsh":     # mesh the exact solid, not its triangles
+        from flexure.gmsh_mesh import mesh_step
+        from flexure.meshing import MeshResult, mesh_report
+        field = size_field(size, scale, centres, extent, gw, h_factor)
+        from flexure.meshing import check_cost, surface_volume
+        check_cost(field, surf.points, surface_volume(surf), cap, where)
+        mesh = mesh_step(design.file_path, design.file_unit_m, field, order, where=where)
+        return MeshResult(mesh, surf, mesh_report(mesh, size, "gmsh", None, field))
+    return mesh_design_surface(surf, None, size, centres, extent, scale, order, gauge_width=gw,
+                               mesher=design.mesher, h_factor=h_factor, max_elements=cap)
 
 
 def _selections(design: Design, mesh):
@@ -147,7 +159,7 @@ RTOL = 1e-8
 #: swept meshes (flat layers) get the smoothed-aggregation coarse solve: on the paper disc's fine
 #: mesh 142 → 69 CG iterations, 27 → 18 s for the torque case (a structured annulus, by contrast,
 #: keeps its iterations and only pays the denser set-up: see benchmarks/bench_fem.py).
-SMOOTHED_COARSE = {"sweep": True, "tetgen": False}
+SMOOTHED_COARSE = {"sweep": True, "tetgen": False, "gmsh": False}
 
 
 def _solve_cases(design: Design, mesh, K, load_nodes, fixed_nodes, ref: np.ndarray, wrench: np.ndarray):
@@ -195,8 +207,10 @@ def _sensor_config(design: Design):
                        arrangement="full_bending")
 
 
-def analyze(design: Design, size: str | None = None, order: int | None = None, progress: bool = False):
-    """Mesh, solve the six load cases, read the gauges → (results dict, Fields)."""
+def analyze(design: Design, size: str | None = None, order: int | None = None, progress: bool = False,
+            h_factor: float = 1.0, max_elements: float | None = None):
+    """Mesh (element sizes × ``h_factor``), solve the six load cases, read the gauges → (results
+    dict, Fields). One mesh level: flexure.convergence adds the discretisation error estimate."""
     from bridge.budget import min_detectable_strain
     from bridge.wheatstone import output_ratio
     from flexure import solve as fsolve
@@ -208,7 +222,7 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
 
     t_all = time.perf_counter()
     t0 = time.perf_counter()
-    mres = build_mesh(design, size, order)
+    mres = build_mesh(design, size, order, h_factor, max_elements)
     mesh = mres.mesh
     mesh_s = time.perf_counter() - t0
     say(f"mesh {mres.report['n_elements']} P{mesh.order} tetrahedra, {mesh.n_dofs} dofs ({mesh_s:.1f} s)")

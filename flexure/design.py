@@ -62,7 +62,7 @@ class Design:
     order: int
     raw: dict = field(repr=False, default_factory=dict)
     segments_per_quarter: int | None = None
-    mesher: str = "sweep"                 # "sweep" (layered extrusion) | "tetgen"
+    mesher: str = "gmsh"                  # "gmsh" (graded isotropic volume) | "sweep" (layered extrusion) | "tetgen"
     coupling: str = "rigid"               # torque into the bore: "rigid" shaft | "distributed" traction
 
 
@@ -285,11 +285,14 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
     order = _get(me, "order", w, int, 2)
     if order not in (1, 2):
         raise InputError(f"{w}.order: must be 1 or 2, got {order}")
-    mesher = _get(me, "mesher", w, str, "sweep")
+    mesher = _get(me, "mesher", w, str, "gmsh")
     if mesher not in MESHERS:
         raise InputError(f"{w}.mesher: must be one of {', '.join(MESHERS)}, got {mesher!r}")
-    if kind != "spoke_disc":
-        mesher = "tetgen"                      # an STL or STEP solid is not an extrusion
+    if kind != "spoke_disc" and mesher == "sweep":
+        if "mesher" in me:
+            raise InputError(f"{w}.mesher: 'sweep' needs an extruded profile (geometry.kind = "
+                             f"'spoke_disc'); use 'gmsh' or 'tetgen' for a {kind.upper()} solid")
+        mesher = "gmsh"                        # an STL or STEP solid: graded volume mesh by gmsh
     return Design(path, str(name), kind, disc, file_path, unit, material, gauges, gf, r_ohm, rated,
                   load_r, fixed, fixed_r, sensor, size, order, raw=raw,
                   segments_per_quarter=geo.get("segments_per_quarter"), mesher=mesher, coupling=coupling)

@@ -10,6 +10,7 @@ angle (``mindihedral``) and the volume bound V ≤ h_far³/(6√2) (regular tetr
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -232,46 +233,113 @@ def tetrahedralize(surface: Surface, h_far: float, minratio: float = 1.8, mindih
     return mesh
 
 
-MESHERS = ("sweep", "tetgen")
+MESHERS = ("gmsh", "sweep", "tetgen")
+#: refuse a mesh estimated above this many tetrahedra before meshing (``--max-elements``)
+MAX_ELEMENTS = 500_000
+#: bytes per P2 tetrahedron for the memory figure of the refusal (assembly + AMG, measured order)
+BYTES_PER_ELEMENT = 12_000
+
+
+def estimate_elements(field: SizeField, points: np.ndarray, volume_m3: float, h_max: float = np.inf) -> float:
+    """N ≈ V · mean(1/v(h)) over ``points`` sampling the solid, v(h) = h³/(6√2) (regular tet), with
+    h ≤ ``h_max`` (the part's own thickness 2V/A: no element is larger than the part)."""
+    h = field(points[:, :2]) if points.shape[1] == 2 else field(points)
+    h = np.minimum(h, h_max)
+    return float(volume_m3 * np.mean(6 * np.sqrt(2) / h ** 3))
+
+
+def check_cost(field: SizeField, points: np.ndarray, volume_m3: float, max_elements: float,
+               where: str = "mesh", area_m2: float | None = None) -> float:
+    """Refuse up front (InputError) a mesh estimated above ``max_elements``; → the estimate."""
+    h_max = 2 * volume_m3 / area_m2 if area_m2 else np.inf
+    n = estimate_elements(field, points, volume_m3, h_max)
+    if not np.isfinite(n) or n > max_elements:
+        raise InputError(f"{where}: the mesh would have ~{n:.3g} tetrahedra (~{n * BYTES_PER_ELEMENT / 1e9:.3g} GB "
+                         f"for P2), above --max-elements {max_elements:.3g}; check the dimensions "
+                         "(a feature far thinner or thicker than the gauges?) or raise --max-elements")
+    return n
 
 
 def size_field(size: str, h_scale: float, gauge_centres, gauge_extent: float,
-               gauge_width: float | None = None) -> SizeField:
-    """h_far = SIZES[size].far · h_scale; h_gauge = SIZES[size].gauge · gauge width (≤ h_far)."""
+               gauge_width: float | None = None, h_factor: float = 1.0) -> SizeField:
+    """h_far = f · SIZES[size].far · h_scale; h_gauge = f · SIZES[size].gauge · gauge width (≤ h_far),
+    f = ``h_factor`` (the refinement levels of flexure.convergence)."""
     if size not in SIZES:
         raise InputError(f"--size: must be one of {', '.join(SIZES)}, got {size!r}")
     s = SIZES[size]
-    h_far = s["far"] * h_scale
-    h_gauge = min(s["gauge"] * (gauge_width or gauge_extent), h_far)
-    return SizeField(h_far, h_gauge, np.asarray(gauge_centres, float).reshape(-1, 3), r_gauge=gauge_extent)
+    h_far = h_factor * s["far"] * h_scale
+    h_gauge = min(h_factor * s["gauge"] * (gauge_width or gauge_extent), h_far)
+    # grading × f too, so that the whole size function scales by f (h_f(x) = f·h_1(x)): nested levels
+    return SizeField(h_far, h_gauge, np.asarray(gauge_centres, float).reshape(-1, 3), r_gauge=gauge_extent,
+                     grading=SizeField.grading * h_factor)
 
 
 def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gauge_centres: np.ndarray,
                         gauge_extent: float, h_scale: float, order: int = 1,
-                        gauge_width: float | None = None, mesher: str = "sweep") -> MeshResult:
+                        gauge_width: float | None = None, mesher: str = "sweep",
+                        h_factor: float = 1.0, max_elements: float = MAX_ELEMENTS) -> MeshResult:
     """Mesh an extruded profile (shapely polygon + thickness) or a closed Surface (user STL).
 
     h_far = SIZES[size].far · h_scale (the thickness); h_gauge = SIZES[size].gauge · gauge width,
     within ``gauge_extent`` of each gauge centre, graded outwards. A profile is swept through
-    ⌈thickness / h_gauge⌉ layers (``mesher="sweep"``) or its closed surface handed to tetgen
-    (``"tetgen"``, which grades only from the surface); a Surface always goes to tetgen.
+    ⌈thickness / h_gauge⌉ layers (``mesher="sweep"``), or its closed surface handed to tetgen
+    (``"tetgen"``, which grades only from the surface); ``"gmsh"`` meshes the volume with the size
+    field (isotropic, graded in 3-D; flexure.gmsh_mesh), re-meshing a Surface (STL) on the way.
     """
     if mesher not in MESHERS:
         raise InputError(f"mesh.mesher: must be one of {', '.join(MESHERS)}, got {mesher!r}")
-    field = size_field(size, h_scale, gauge_centres, gauge_extent, gauge_width)
+    field = size_field(size, h_scale, gauge_centres, gauge_extent, gauge_width, h_factor)
     s, h_far, h_gauge = SIZES[size], field.h_far, field.h_gauge
     surface, layers = None, None
-    if isinstance(surface_or_poly, Surface):
-        surface, mesher = surface_or_poly, "tetgen"
+    is_surface = isinstance(surface_or_poly, Surface)
+    if is_surface:
+        x = surface_or_poly.points[surface_or_poly.faces]
+        area = 0.5 * np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), axis=1).sum()
+        check_cost(field, surface_or_poly.points, surface_volume(surface_or_poly), max_elements, area_m2=area)
+    else:
+        import shapely
+        minx, miny, maxx, maxy = surface_or_poly.bounds
+        gx, gy = np.meshgrid(np.linspace(minx, maxx, 80), np.linspace(miny, maxy, 80))
+        xy = np.column_stack([gx.ravel(), gy.ravel()])
+        xy = xy[shapely.contains_xy(surface_or_poly, xy[:, 0], xy[:, 1])]
+        if len(xy) == 0:
+            xy = np.asarray(surface_or_poly.exterior.coords)
+        perimeter = surface_or_poly.exterior.length + sum(r.length for r in surface_or_poly.interiors)
+        check_cost(field, xy, surface_or_poly.area * thickness, max_elements,
+                   area_m2=2 * surface_or_poly.area + perimeter * thickness)
+    if is_surface and mesher == "sweep":
+        mesher = "gmsh"                          # a closed surface is not an extrusion
+    if mesher == "gmsh":
+        from flexure import gmsh_mesh
+        if is_surface:
+            surface = surface_or_poly
+            mesh = gmsh_mesh.mesh_surface(surface, field, order)
+        else:
+            mesh = gmsh_mesh.mesh_extrusion(surface_or_poly, thickness, field, order)
     elif mesher == "tetgen":
-        surface = extrude_graded(surface_or_poly, thickness, field)
-    if surface is not None:
+        surface = surface_or_poly if is_surface else extrude_graded(surface_or_poly, thickness, field)
         mesh = tetrahedralize(surface, h_far, s["minratio"], s["mindihedral"], order)
     else:
         layers = max(2, int(np.ceil(thickness / h_gauge - 1e-9)))
         mesh = sweep_mesh(surface_or_poly, thickness, field, layers, order)
+    return MeshResult(mesh, surface, mesh_report(mesh, size, mesher, layers, field, surface))
+
+
+def mesh_report(mesh, size: str, mesher: str, layers, field: SizeField, surface: Surface | None = None) -> dict:
+    """Quality (min/max dihedral, aspect and radius-edge ratios, slivers) and sizing of a mesh; for
+    a re-meshed closed surface also the relative volume change (the re-mesh is a geometry change)."""
     from flexure.mesh import quality
+
     rep = quality(mesh)
-    rep.update({"size": size, "mesher": mesher, "layers": layers, "h_far_m": h_far, "h_gauge_m": h_gauge,
-                "surface_triangles": int(len(mesh.boundary_faces()))})
-    return MeshResult(mesh, surface, rep)
+    rep.update({"size": size, "mesher": mesher, "layers": layers, "h_far_m": field.h_far,
+                "h_gauge_m": field.h_gauge, "surface_triangles": int(len(mesh.boundary_faces()))})
+    if surface is not None and mesher == "gmsh":
+        v0 = surface_volume(surface)
+        rep["remesh_volume_change"] = float(rep["total_volume_m3"] / v0 - 1.0) if v0 > 0 else math.nan
+    return rep
+
+
+def surface_volume(surface: Surface) -> float:
+    """Enclosed volume of a closed, outward-oriented triangulation: V = Σ x_a·(x_b × x_c)/6."""
+    x = surface.points[surface.faces]
+    return float(np.einsum("ij,ij->i", x[:, 0], np.cross(x[:, 1], x[:, 2])).sum() / 6.0)

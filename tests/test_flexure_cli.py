@@ -30,14 +30,37 @@ def test_json_keys_vtu_and_png(capsys, tmp_path):
     assert data["order"] == 1 and data["dofs"] > 1000 and data["sensitivity_mV_per_V_per_Nm"] > 0
     assert vtu.stat().st_size > 10_000 and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert data["vtu"] == str(vtu) and data["png"] == str(png)
+    for k in ("gauge_strain_per_Nm", "sensitivity_mV_per_V_per_Nm", "torsional_stiffness_Nm_per_rad",
+              "safety_factor"):                           # error estimate beside every FEM figure
+        assert 0 < data[f"{k}_error_estimate"] < 0.5 * abs(data[k]), k
+        assert "mesh levels" in data[f"{k}_error_method"], k
+    assert [lv["h_factor"] for lv in data["discretization_levels"]] == pytest.approx([2, 2 ** 0.5, 1])
 
 
 def test_text_output(capsys):
     code, out, _ = _run(capsys, "--order", "1")
     assert code == 0
     for words in ("sensitivity:", "mV/V per N·m", "torsional stiffness", "safety factor",
-                  "minimum detectable torque", "Mx_per_Nm", "min dihedral"):
+                  "minimum detectable torque", "Mx_per_Nm", "min dihedral", " %", "error estimates:"):
         assert words in out, words
+    assert out.count("±") >= 4                        # strain, sensitivity, stiffness, safety factor
+
+
+def test_rtol_stopped_by_the_dof_cap_says_so(capsys):
+    """An unreachable --rtol with a small --max-dofs: no refinement beyond the cap, one warning."""
+    code, out, _ = _run(capsys, "--order", "1", "--json", "--rtol", "1e-6", "--max-dofs", "20000")
+    assert code == 0
+    data = json.loads(out)
+    assert len(data["discretization_levels"]) == 3 and data["rtol"] == 1e-6
+    assert any("--rtol 1e-06 not reached" in w and "--max-dofs 20000" in w for w in data["warnings"])
+
+
+@pytest.mark.parametrize("argv, where", [(["--rtol", "0"], "--rtol"), (["--rtol", "2"], "--rtol"),
+                                         (["--rtol", "0.01", "--single-level"], "--rtol"),
+                                         (["--max-dofs", "10"], "--max-dofs")])
+def test_bad_rtol_options_exit_2(capsys, argv, where):
+    code, out, err = _run(capsys, "--order", "1", *argv)
+    assert code == 2 and out == "" and err.strip().count("\n") == 0 and where in err
 
 
 def test_sweep_table_with_an_infeasible_row_and_plot(capsys, tmp_path):
@@ -107,3 +130,19 @@ def test_demo_from_the_flexure_design(capsys, tmp_path):
     assert data["torque_noise_std_Nm"] > 5 * paper_chain().noise_std_Nm     # the stiff disc is noisier
     dyn = data["methods"]["dynamic"]
     assert dyn["position_error_rms_m"] == pytest.approx(dyn["predicted_position_rms_m"], rel=0.3)
+
+
+@pytest.mark.parametrize("thickness_mm", ["1e-6", "1e4"])
+def test_absurd_thickness_refused_before_meshing_with_the_cost(capsys, tmp_path, thickness_mm):
+    """A 1e-6 mm or 1e4 mm thick flexure: exit 2 with the estimated element count and memory,
+    before any mesh is allocated (the estimate, not gmsh, refuses it)."""
+    from torquebench.io import shipped
+
+    src = shipped("scenes", "paper_disc.toml")
+    text = src.read_text().replace("thickness_mm = 2.2 ", f"thickness_mm = {thickness_mm} ")
+    text = text.replace('sensor = "paper_sensor.toml"', f'sensor = "{src.parent / "paper_sensor.toml"}"')
+    p = tmp_path / "absurd.toml"
+    p.write_text(text)
+    code, out, err = _run(capsys, str(p), "--json")
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert "tetrahedra" in err and "GB" in err and "--max-elements" in err

@@ -32,6 +32,15 @@ def add_arguments(parser) -> None:
                         help="picture of the field with the gauges (a sweep: the trade-off plot)")
     parser.add_argument("--field", choices=("strain", "von_mises"), default="strain",
                         help="field drawn in --png (default: max shear strain, what ±45° gauges read)")
+    parser.add_argument("--rtol", type=float, default=None, metavar="R",
+                        help="refine the mesh until every figure's discretisation error estimate is "
+                             "below R (relative, e.g. 0.01), up to --max-dofs")
+    parser.add_argument("--max-dofs", type=int, default=None, metavar="N",
+                        help="DOF cap for --rtol refinement (default 2,000,000)")
+    parser.add_argument("--max-elements", type=float, default=None, metavar="N",
+                        help="refuse, before meshing, a mesh estimated above N tetrahedra (default 2e6)")
+    parser.add_argument("--single-level", action="store_true",
+                        help="one mesh level only: faster, but the answers carry no error estimate")
     parser.add_argument("--sweep", action="append", metavar="PARAM=v1,v2,...",
                         help="sweep a geometry parameter (e.g. spoke_width_mm=3,4,5); at most twice")
 
@@ -47,8 +56,22 @@ def _check_outputs(args, design_path: Path) -> None:
             raise InputError(f"{flag}: directory {path.parent} does not exist")
         if path.resolve() == design_path.resolve():
             raise InputError(f"{flag}: {path} is the design file; refusing to overwrite it")
+    if args.rtol is not None and args.single_level:
+        raise InputError("--rtol: needs the error estimate; drop --single-level")
+    if args.max_dofs is not None and args.max_dofs < 1000:
+        raise InputError(f"--max-dofs: must be ≥ 1000, got {args.max_dofs}")
+    if args.max_elements is not None and not args.max_elements >= 100:
+        raise InputError(f"--max-elements: must be ≥ 100, got {args.max_elements:g}")
     if args.sweep and args.vtu is not None:
         raise InputError("--vtu: one design at a time; drop --sweep to write fields")
+
+
+def _pm(res: dict, key: str) -> str:
+    """' ± x %' from ``key``'s error estimate ('' when there is none)."""
+    e, v = res.get(f"{key}_error_estimate"), res.get(key)
+    if e is None or v in (None, 0) or e != e:
+        return ""
+    return f" ± {100 * e / abs(v):.2g} %"
 
 
 def _print_design(res: dict) -> None:
@@ -63,20 +86,24 @@ def _print_design(res: dict) -> None:
     print(f"solver: {s['solver']}; relative residual {s['residual_norm']:.1e}; "
           f"mesh {res['mesh_s']:.1f} s, assembly {res['assemble_s']:.1f} s, solve {res['solve_s']:.1f} s")
     if res["warnings"]:
-        print(f"WARNING: {', '.join(res['warnings'])}"
+        print(f"WARNING: {'; '.join(res['warnings'])}"
               + (f": numbers withheld ({res['nan_reason']})" if "nan_reason" in res else ""))
     if "nan_reason" in res:
         print(f"results are not trustworthy: {res['nan_reason']}")
         return
     T = res["rated_torque_Nm"]
-    print(f"gauge strain: {res['gauge_strain_per_Nm'] * 1e6:.2f} µε per N·m "
+    print(f"gauge strain: {res['gauge_strain_per_Nm'] * 1e6:.2f} µε per N·m{_pm(res, 'gauge_strain_per_Nm')} "
           f"({res['gauge_strain_at_0p4Nm'] * 1e6:.2f} µε at 0.4 N·m); arm imbalance "
           f"{res['gauge_arm_imbalance'] * 100:.2f} %")
-    print(f"sensitivity: {res['sensitivity_mV_per_V_per_Nm']:.4g} mV/V per N·m "
+    print(f"sensitivity: {res['sensitivity_mV_per_V_per_Nm']:.4g} mV/V per N·m"
+          f"{_pm(res, 'sensitivity_mV_per_V_per_Nm')} "
           f"({res['output_mV_at_rated']:.3g} mV at {T:g} N·m, {res['excitation_V']:g} V excitation)")
-    print(f"torsional stiffness: {res['torsional_stiffness_Nm_per_rad']:.4g} N·m/rad")
+    print(f"torsional stiffness: {res['torsional_stiffness_Nm_per_rad']:.4g} N·m/rad"
+          f"{_pm(res, 'torsional_stiffness_Nm_per_rad')}")
     print(f"peak von Mises at {T:g} N·m: {res['max_von_mises_Pa'] / 1e6:.1f} MPa, "
-          f"safety factor {res['safety_factor']:.2f}")
+          f"safety factor {res['safety_factor']:.2f}{_pm(res, 'safety_factor')}")
+    if "gauge_strain_per_Nm_error_method" in res:
+        print(f"error estimates: {res['gauge_strain_per_Nm_error_method']} (gauge strain)")
     print(f"minimum detectable torque: {res['min_detectable_torque_Nm'] * 1e3:.3g} mN·m (1σ noise), "
           f"{res['min_detectable_torque_enob_Nm'] * 1e3:.3g} mN·m (ENOB resolution)")
     print("cross-talk (% of rated output per N or N·m; single-arm leak in brackets):")
@@ -108,7 +135,13 @@ def run(args) -> int:
         return 0
 
     design = load_design(path)
-    res, fields = analyze(design, args.size, args.order, progress=progress)
+    if args.single_level:
+        res, fields = analyze(design, args.size, args.order, progress=progress, max_elements=args.max_elements)
+    else:
+        from flexure.convergence import MAX_DOFS, analyze_with_error
+        res, fields = analyze_with_error(design, args.size, args.order, rtol=args.rtol,
+                                         max_dofs=args.max_dofs or MAX_DOFS, progress=progress,
+                                         max_elements=args.max_elements)
     if args.vtu is not None:
         from flexure.render import write_vtu
         res["vtu"] = str(write_vtu(fields, args.vtu))

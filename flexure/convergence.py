@@ -1,0 +1,169 @@
+"""Discretisation error estimate of a flexure analysis: the same design on nested mesh levels.
+
+Levels: the whole size function × f (h_f(x) = f·h(x): far size, gauge size and grading), f = 2, √2, 1
+(then 1/√2, 1/2, ... under ``rtol``); h of a level is f. For a figure Q with values Q_1, Q_2, Q_3
+on the three finest levels (h_1 > h_2 > h_3) the observed order p solves
+
+    (Q_1 − Q_2) / (Q_2 − Q_3) = (h_1^p − h_2^p) / (h_2^p − h_3^p)          (Richardson)
+
+and the error of the finest answer is estimated as the grid convergence index (Roache 1994)
+
+    e = F_s · |Q_3 − Q_2| / ((h_2/h_3)^p − 1),   F_s = 1.25 (three levels), 3 (two levels, p nominal).
+
+p is clipped to [0.5, 4]. Oscillatory convergence (the two changes of opposite sign) has no
+order: e = F_s · max(|Q_1 − Q_2|, |Q_2 − Q_3|), stated as such. The estimate is a bound-like
+figure (not a 1σ); ``tests/test_fem_error_estimate.py`` checks it brackets the true error.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import numpy as np
+
+from flexure.errors import InputError
+
+#: figure → nominal convergence order per element order (gauge strain ~ h^k, energy ~ h^2k)
+FIGURES = {
+    "gauge_strain_per_Nm": lambda k: k,
+    "sensitivity_mV_per_V_per_Nm": lambda k: k,
+    "torsional_stiffness_Nm_per_rad": lambda k: 2 * k,
+    "safety_factor": lambda k: k,
+}
+#: figures that ``rtol`` refines (the peak stress behind the safety factor may be singular)
+RTOL_FIGURES = ("gauge_strain_per_Nm", "torsional_stiffness_Nm_per_rad")
+FACTORS = (2.0, math.sqrt(2.0), 1.0)
+MAX_DOFS = 2_000_000
+P_RANGE = (0.5, 4.0)
+
+
+def observed_order(h: np.ndarray, q: np.ndarray) -> float:
+    """p solving (q1 − q2)/(q2 − q3) = (h1^p − h2^p)/(h2^p − h3^p) by bisection on P_RANGE (clipped);
+    NaN if the changes have opposite signs (oscillatory)."""
+    d12, d23 = q[0] - q[1], q[1] - q[2]
+    if d23 == 0.0:
+        return P_RANGE[1]
+    ratio = d12 / d23
+    if ratio <= 0:
+        return math.nan
+    g = lambda p: (h[0] ** p - h[1] ** p) / (h[1] ** p - h[2] ** p) - ratio  # noqa: E731 (increasing in p)
+    lo, hi = P_RANGE
+    if g(lo) >= 0:
+        return lo
+    if g(hi) <= 0:
+        return hi
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if g(mid) < 0 else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+def richardson(h, dofs, values, nominal_order: float) -> tuple[float, float, str]:
+    """(error estimate of values[-1] (absolute), order used, method) from levels of size ``h``."""
+    h = np.asarray(h, float)
+    dofs = np.asarray(dofs, float)
+    q = np.asarray(values, float)
+    if len(q) < 2 or not np.all(np.isfinite(q)):
+        return math.nan, math.nan, "not estimated (fewer than two finite levels)"
+    if len(q) == 2:
+        p = float(nominal_order)
+        e = 3.0 * abs(q[1] - q[0]) / ((h[0] / h[1]) ** p - 1.0)
+        return e, p, (f"Richardson/GCI from 2 mesh levels ({int(dofs[0])}, {int(dofs[1])} dofs), "
+                      f"nominal order {p:g}, safety factor 3; a bound, not 1σ")
+    h, q = h[-3:], q[-3:]
+    p = observed_order(h, q)
+    levels = ", ".join(str(int(n)) for n in dofs[-3:])
+    if math.isnan(p):
+        e = 1.25 * max(abs(q[0] - q[1]), abs(q[1] - q[2]))
+        return e, p, (f"oscillatory convergence over 3 mesh levels ({levels} dofs): 1.25 × the largest "
+                      "change; a bound, not 1σ")
+    e = 1.25 * abs(q[2] - q[1]) / ((h[1] / h[2]) ** p - 1.0)
+    return e, p, (f"Richardson/GCI from 3 mesh levels ({levels} dofs), observed order {p:.2f}, "
+                  "safety factor 1.25; a bound, not 1σ")
+
+
+def _attach(res: dict, levels: list[dict], order: int) -> dict:
+    """Error keys beside every figure of ``res`` (the finest level)."""
+    dofs = [lv["dofs"] for lv in levels]
+    orders = {}
+    for key, nominal in FIGURES.items():
+        vals = [lv[key] for lv in levels]
+        e, p, method = richardson([lv["h_factor"] for lv in levels], dofs, vals, nominal(order))
+        res[f"{key}_error_estimate"] = float(e)
+        res[f"{key}_error_method"] = method
+        orders[key] = None if math.isnan(p) else float(p)
+    res["discretization_levels"] = levels
+    res["discretization_observed_order"] = orders
+    return res
+
+
+def relative_error(res: dict, key: str) -> float:
+    v = res.get(key)
+    e = res.get(f"{key}_error_estimate", math.nan)
+    return abs(e / v) if v not in (None, 0) and math.isfinite(v) else math.nan
+
+
+def analyze_with_error(design, size: str | None = None, order: int | None = None, rtol: float | None = None,
+                       max_dofs: int = MAX_DOFS, progress: bool = False, factors=FACTORS,
+                       max_elements: float | None = None):
+    """``analysis.analyze`` on the levels ``factors`` (coarsest first; the last is the answer),
+    then, with ``rtol``, on finer levels (× 1/√2 each) until the relative error estimates of
+    RTOL_FIGURES are ≤ rtol, or the next level would exceed ``max_dofs`` (a warning says so).
+    → (results of the finest level with ``<figure>_error_estimate``/``_error_method``, Fields)."""
+    from flexure.analysis import analyze
+
+    if rtol is not None and not (math.isfinite(rtol) and 0 < rtol < 1):
+        raise InputError(f"--rtol: must be in (0, 1), got {rtol!r}")
+    levels, res, fields = [], None, None
+    factors = list(factors)
+
+    def run(f):
+        nonlocal res, fields
+        if progress:
+            print(f"flexure: mesh level h × {f:.3g}", file=sys.stderr)
+        res, fields = analyze(design, size, order, progress=progress, h_factor=f, max_elements=max_elements)
+        levels.append({"h_factor": float(f), "dofs": int(res["dofs"]), "total_s": res["total_s"],
+                       **{k: res[k] for k in FIGURES}})
+
+    for f in factors:
+        run(f)
+    order_used = int(res["order"])
+    _attach(res, levels, order_used)
+    warnings = []
+    if rtol is not None:
+        f = factors[-1]
+        while max(relative_error(res, k) for k in RTOL_FIGURES) > rtol:
+            predicted = int(levels[-1]["dofs"] * 2 ** 1.5)          # h / √2 → dofs × 2^1.5
+            if predicted > max_dofs:
+                worst = max(relative_error(res, k) for k in RTOL_FIGURES)
+                warnings.append(f"--rtol {rtol:g} not reached: error estimate {worst:.2%} at "
+                                f"{levels[-1]['dofs']} dofs; the next level (~{predicted} dofs) exceeds "
+                                f"--max-dofs {max_dofs}")
+                break
+            f /= math.sqrt(2.0)
+            run(f)
+            _attach(res, levels, order_used)
+        res["rtol"] = rtol
+        for k in FIGURES:
+            if relative_error(res, k) > rtol and not any(w.startswith(f"{k}:") for w in warnings):
+                warnings.append(f"{k}: discretization error estimate {relative_error(res, k):.2%} exceeds "
+                                f"--rtol {rtol:g}")
+    imb = res.get("gauge_arm_imbalance", math.nan)
+    if len(design.gauges) == 4 and math.isfinite(imb) and imb > 0.02:
+        warnings.append(f"gauge arms differ by {imb:.1%} under torque: a symmetric layout should read "
+                        "equal |strain| on every arm (mesh not converged at the gauges, or asymmetric)")
+    res["warnings"] = list(res["warnings"]) + warnings
+    res["total_s"] = float(sum(lv["total_s"] for lv in levels))
+    return res, fields
+
+
+def design_figures(path, overrides: dict | None = None, size: str | None = None, order: int | None = None,
+                   rtol: float | None = None) -> dict:
+    """For the pipeline: a design file (+ overrides) → gauge strain per N·m, torsional stiffness,
+    safety factor, sensitivity, each with ``_error_estimate``/``_error_method``, and warnings."""
+    from flexure.design import load_design
+
+    res, _ = analyze_with_error(load_design(path, overrides), size, order, rtol)
+    keys = [k for f in FIGURES for k in (f, f"{f}_error_estimate", f"{f}_error_method")]
+    return {**{k: res[k] for k in keys}, "dofs": res["dofs"], "warnings": list(res["warnings"])}
