@@ -19,13 +19,17 @@ from pathlib import Path
 import numpy as np
 
 HELP = "run the workbench end to end on the paper's leg (no hardware, no input)"
+EXAMPLES = """\
+torquebench demo
+torquebench demo --out-dir out/demo2 --seed 3 --flexure scenes/paper_disc.toml
+"""
 SCENE = "paper_floating_link2"
 
 
 def add_arguments(parser) -> None:
     parser.add_argument("--out-dir", type=Path, default=Path("out/demo"),
-                        help="where the demo writes its log and estimates (default out/demo)")
-    parser.add_argument("--seed", type=int, default=1, help="sensor-noise seed")
+                        help="directory for the demo's files, created if missing; the demo replaces its own four files there (log.csv, log.truth.csv, estimate_dynamic.csv, estimate_paper.csv) (default: %(default)s)")
+    parser.add_argument("--seed", type=int, default=1, help="sensor-noise seed (default: %(default)s)")
     parser.add_argument("--flexure", type=Path, default=None, metavar="DESIGN.toml",
                         help="take the torque sensor's strain per N·m from this flexure's FEM "
                              "(e.g. scenes/paper_disc.toml) instead of the paper's calibration")
@@ -54,11 +58,9 @@ def run(args) -> int:
     from torquebench.scenes import load_scene, scene_path
     from estimator.sim.output import truth_csv
 
-    out_dir = args.out_dir
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"--out-dir: cannot create {out_dir}: {exc.strerror}") from None
+    from torquebench.outputs import prepare_dir
+
+    out_dir = prepare_dir(args.out_dir, "--out-dir")
     say = (lambda *a: print(*a, file=sys.stderr)) if args.json else print
 
     scene = load_scene(scene_path(SCENE))

@@ -6,6 +6,10 @@ import math
 from pathlib import Path
 
 HELP = "estimate contacts (link, α, force, point) sample by sample from a sensor log CSV"
+EXAMPLES = """\
+torquebench estimate examples/leg_poke/leg_poke.csv
+torquebench estimate examples/sim/paper_fixed_link2.csv --method paper --out out/fixed_link2_estimate.csv --json
+"""
 
 
 def _positive(text: str) -> float:
@@ -33,22 +37,23 @@ def _count(text: str) -> int:
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("log", type=Path, metavar="LOG.csv", help="sensor log (DESIGN.md format)")
+    parser.add_argument("log", type=Path, metavar="LOG.csv", help="sensor log CSV: t,[x,z,theta,]q1,q2,[dx,dz,dtheta,]dq1,dq2,tau1,tau2,Fx,Fz,My in SI units (docs/conventions.md)")
     parser.add_argument("--robot", type=Path, default=None,
                         help="robot TOML (default: robots/paper_leg.toml)")
     parser.add_argument("--method", choices=["paper", "dynamic"], default="dynamic",
                         help="localization: 'dynamic' (observer residual, least squares; default) "
                              "or 'paper' (eqs. 6-9, quasi-static)")
     parser.add_argument("--gain", type=_positive, default=100.0, metavar="K",
-                        help="observer gain K in 1/s on every row (default 100)")
+                        help="observer gain K in 1/s on every row (default: %(default)s)")
     parser.add_argument("--threshold", type=_positive, default=0.06, metavar="EPS",
-                        help="detection threshold on ||r|| (default 0.06)")
+                        help="detection threshold on the residual norm ||r|| (default: %(default)s)")
     parser.add_argument("--debounce", type=_count, default=0, metavar="N",
-                        help="samples ||r|| must stay above EPS before a contact is declared (default 0)")
+                        help="samples ||r|| must stay above EPS before a contact is declared (default: %(default)s)")
     parser.add_argument("--stance-foot", action="store_true",
                         help="the foot (last link, alpha=1) is an expected contact, estimated jointly")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out file")
     parser.add_argument("--out", type=Path, default=None, metavar="OUT.csv",
-                        help="write t,contact,link,alpha,Fx,Fz,px,pz,rnorm per sample (atomically)")
+                        help="write t,contact,link,alpha,Fx,Fz,px,pz,rnorm per sample (s, -, -, -, N, N, m, m, -) to this CSV; its directory is created, an existing file is kept unless --force")
 
 
 def run(args) -> int:
@@ -68,6 +73,8 @@ def run(args) -> int:
             same = False
         if same:
             raise InputError(f"--out {args.out}: is the input log; refusing to overwrite it")
+    from torquebench.outputs import prepare_file
+    prepare_file(args.out, "--out", force=args.force, inputs=(args.log, args.robot))
     robot = load_robot(args.robot or PAPER_LEG_TOML)
     log = read_log(args.log, robot)
     result = estimate(robot, log, method=args.method, gain_per_s=args.gain,

@@ -7,13 +7,17 @@ from pathlib import Path
 from torquebench.errors import InputError
 
 HELP = "reproduce the paper's Tables III-V, the posture sweep and Fig. 4 (writes reports/paper_reproduction.md)"
+EXAMPLES = """\
+torquebench reproduce --scene paper_fixed_link1 --no-stiffness --out-dir out/repro
+torquebench reproduce --quick
+"""
 
 
 def add_arguments(parser) -> None:
     parser.add_argument("--scene", action="append", metavar="NAME",
-                        help="run only this shipped scene (repeatable), e.g. paper_fixed_link1")
+                        help="run only this shipped scene (repeatable; default: all), e.g. paper_fixed_link1")
     parser.add_argument("--out-dir", type=Path, default=None,
-                        help="where to write the report (default: the repository's reports/)")
+                        help="directory to write the report to, created if missing (default: the repository's reports/)")
     parser.add_argument("--no-stiffness", action="store_true",
                         help="skip the integrator × scene stiffness table")
     parser.add_argument("--quick", action="store_true",
@@ -29,8 +33,8 @@ def run(args) -> int:
         if n not in rr.ALL_SCENES:
             raise InputError(f"--scene: unknown scene {n!r}; known: {', '.join(rr.ALL_SCENES)}")
     out_dir = args.out_dir or REPO_ROOT / "reports"
-    if not Path(out_dir).is_dir():
-        raise InputError(f"--out-dir: {out_dir} is not a directory")
+    from torquebench.outputs import prepare_dir
+    prepare_dir(out_dir, "--out-dir")
     results = rr.run_reproduction(names, progress=True, quick=args.quick,
                                   stiffness=not args.no_stiffness)
     paths = rr.write(results, Path(out_dir))
