@@ -136,6 +136,8 @@ def test_out_dir_is_created_by_report(tmp_path):
     proc = _tb("report", "--only", "bridge", "--out-dir", target)
     assert proc.returncode == 0, proc.stderr
     assert (target / "bridge.md").is_file()
+    index = (target / "README.md").read_text()
+    assert "[Bridge" in index and "Regenerate: `torquebench report --only bridge`" in index
 
 
 def test_out_dir_that_is_a_file_is_a_user_error(tmp_path):

@@ -57,9 +57,12 @@ def run(args) -> int:
         paths = importlib.import_module(areas[area]).build(out_dir)
         timings[f"{area}_s"] = time.perf_counter() - start
         written[area] = [str(p) for p in paths]
+    from torquebench.reports_index import write_index
+    index = write_index(out_dir, list(areas))
     if args.json:
-        print_json({"written": written, "build_time_s": timings})
+        print_json({"written": written, "index": str(index), "build_time_s": timings})
     else:
         for area, paths in written.items():
             print(f"{area}: " + ", ".join(paths))
+        print(f"index: {index}")
     return 0
