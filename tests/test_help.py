@@ -221,3 +221,13 @@ def test_broken_pipe_is_quiet():
     assert proc.stdout == "line 0 " + "x" * 60 + "\n"
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == ""
+
+
+def test_demo_says_what_each_file_is(tmp_path):
+    proc = _tb("demo", "--out-dir", tmp_path / "d", "--json")
+    assert proc.returncode == 0, proc.stderr
+    files = json.loads(proc.stdout)["files"]
+    assert sorted(Path(p).name for p in files) == ["estimate_dynamic.csv", "estimate_paper.csv",
+                                                  "log.csv", "log.truth.csv"]
+    for path, what in files.items():
+        assert Path(path).is_file() and len(what) > 20, path

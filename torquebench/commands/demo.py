@@ -117,8 +117,16 @@ def run(args) -> int:
         mm = lambda v: f"{v * 1e3:.2f} mm" if v is not None else "—"   # noqa: E731
         say(f"   {method:8s} {mm(m['position_error_mean_m']):>13s} {mm(m['position_error_rms_m']):>12s} "
             f"{mm(m['predicted_position_rms_m']):>14s} {m['force_error_mean_N'] or float('nan'):>11.3f} N")
-    say(f"   paper's Table III test 2: mean |p| error 2 mm, |F| 0.121 N.  Files: {out_dir}/")
+    say("   paper's Table III test 2: mean |p| error 2 mm, |F| 0.121 N.")
+    files = {"log.csv": "the simulated sensor log (t, base and joint states, tau1, tau2, Fx, Fz, My; SI units)",
+             "log.truth.csv": "the contact really applied, per sample (t, link, alpha, Fx, Fz, px, pz)",
+             "estimate_dynamic.csv": "the 'dynamic' estimate per sample (t, contact, link, alpha, Fx, Fz, px, pz, rnorm)",
+             "estimate_paper.csv": "the 'paper' (quasi-static, eqs. 6-9) estimate, same columns"}
+    say(f"Files in {out_dir}/ (formats: docs/conventions.md):")
+    for name, what in files.items():
+        say(f"   {name:<21s} {what}")
     results["out_dir"] = str(out_dir)
+    results["files"] = {str(out_dir / name): what for name, what in files.items()}
     if args.json:
         print_json(results)
     return 0
