@@ -25,7 +25,7 @@ import torquebench
 import torquebench.commands
 from torquebench.errors import USER_ERRORS
 
-DESCRIPTION = ("torquebench: design a strain-gauge joint torque sensor (flexure FEM, bridge and ADC), "
+DESCRIPTION = ("torquebench: design a strain-gauge joint torque sensor (flexure FEM, bridge and ADC),\n"
                "calibrate it, and estimate contacts on a robot leg with a momentum observer.")
 EPILOG = """\
 Start here:
