@@ -18,6 +18,10 @@ from calibration.errors import InputError
 from calibration.session import G_STANDARD_M_PER_S2
 
 
+RANGE_MARGIN = 0.10                   # readings up to 10 % of the calibrated span outside it are used
+ADC_MIN, ADC_MAX = -(2 ** 23), 2 ** 23 - 1   # signed 24-bit full scale (calibration.frames)
+
+
 @dataclass
 class SensorModel:
     """A stored calibration usable downstream (estimator, Monte Carlo)."""
@@ -34,6 +38,24 @@ class SensorModel:
     sensor_id: str = "sensor"
     source: str = "<memory>"
     info: dict = field(default_factory=dict)
+    mass_range_g: tuple | None = None     # (min, max) applied mass of the calibration session
+
+    def flags(self, reading, direction=None) -> np.ndarray:
+        """Per reading: "" (usable), "saturated_adc" (24-bit count at or past full scale,
+        reading_unit "counts"), "outside_calibrated_range" (mass more than RANGE_MARGIN of the
+        calibrated span outside it: extrapolation), or "no_solution" (model has no root)."""
+        r = np.asarray(reading, float)
+        out = np.full(r.shape, "", dtype=object)
+        m = self.mass_g(r, direction)
+        out[~np.isfinite(m)] = "no_solution"
+        if self.mass_range_g is not None:
+            lo, hi = self.mass_range_g
+            pad = RANGE_MARGIN * (hi - lo)
+            with np.errstate(invalid="ignore"):
+                out[(m < lo - pad) | (m > hi + pad)] = "outside_calibrated_range"
+        if self.reading_unit == "counts":
+            out[(r <= ADC_MIN) | (r >= ADC_MAX)] = "saturated_adc"
+        return out.astype(str)
 
     # -- coefficient bookkeeping -------------------------------------------------------------
     def _split(self, coefs):

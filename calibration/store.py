@@ -92,12 +92,23 @@ def calibration_payload(fit, session, *, provenance: dict | None = None,
                   "p16": dict(zip(names, exq[0])), "p84": dict(zip(names, exq[2])),
                   "sigma_mean": ex.sigma_mean()},
         "characterization": characterize(session),
+        "calibrated_range": {"mass_g_min": float(np.min(session.mass_g)),
+                             "mass_g_max": float(np.max(session.mass_g)),
+                             "reading_min": float(np.min(session.reading)),
+                             "reading_max": float(np.max(session.reading))},
         "data": {"path": session.source, "sha256": session.sha256, "n_readings": len(session),
                  "meta": session.meta},
         "provenance": {"created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                        "emcee": emcee.__version__, "numpy": np.__version__,
                        "package": calibration.__name__, **(provenance or {})},
     })
+
+
+def encode(payload: dict) -> bytes:
+    """The file's bytes: ``payload`` + ``content_sha256`` (SHA-256 of the canonical JSON)."""
+    doc = {k: v for k, v in payload.items() if k != "content_sha256"}
+    doc["content_sha256"] = hashlib.sha256(_canonical(doc)).hexdigest()
+    return (json.dumps(doc, indent=1, allow_nan=False) + "\n").encode()
 
 
 def save(payload: dict, path, *, force: bool = False) -> Path:
@@ -107,9 +118,7 @@ def save(payload: dict, path, *, force: bool = False) -> Path:
     """
     from userio.files import next_version_path, write_bytes_atomic
 
-    doc = {k: v for k, v in payload.items() if k != "content_sha256"}
-    doc["content_sha256"] = hashlib.sha256(_canonical(doc)).hexdigest()
-    data = (json.dumps(doc, indent=1, allow_nan=False) + "\n").encode()
+    data = encode(payload)
     path = Path(path)
     if force:
         return write_bytes_atomic(path, data, overwrite=True)
@@ -152,7 +161,63 @@ def read_document(path, *, data_path=None) -> dict:
             raise InputError(f"{path}: field 'data.sha256': {data_path} is not the data this "
                              "calibration was fitted to (hash mismatch)")
     doc["content_sha256"] = stored
+    check_meaning(doc, path)
     return doc
+
+
+MODEL_COEFS = {"linear": ("slope", "offset"), "quadratic": ("slope", "offset", "quad"),
+               "hysteresis": ("slope", "offset", "hysteresis")}
+
+
+def check_meaning(doc: dict, path="<calibration>") -> None:
+    """Refuse a hash-valid document that does not make sense: unknown model, coefficients
+    missing or not finite, slope 0, lever arm not finite > 0, covariance missing, not square,
+    not symmetric or not positive semi-definite (eigenvalues ≥ −1e-9·max|λ|), bad samples."""
+    from userio.errors import finite
+
+    def field(name):
+        return f"{path}: field {name!r}"
+
+    model = doc.get("model")
+    if model not in MODEL_COEFS:
+        raise InputError(f"{field('model')}: unknown model {model!r} "
+                         f"(known: {', '.join(MODEL_COEFS)})")
+    names = MODEL_COEFS[model]
+    coefs = doc.get("coefficients")
+    if not isinstance(coefs, dict) or set(coefs) != set(names):
+        raise InputError(f"{field('coefficients')}: model {model!r} needs exactly {', '.join(names)}")
+    for n in names:
+        finite(coefs[n], f"{path}: field 'coefficients.{n}'")
+    if coefs["slope"] == 0:
+        raise InputError(f"{field('coefficients.slope')}: slope is 0; readings carry no load information")
+    if doc.get("lever_arm_m") is not None:
+        finite(doc["lever_arm_m"], f"{path}: field 'lever_arm_m'", positive=True)
+    cov = doc.get("covariance")
+    if not isinstance(cov, dict) or "matrix" not in cov or "names" not in cov:
+        raise InputError(f"{field('covariance')}: missing (need names and matrix); "
+                         "the torque uncertainty cannot be computed without it")
+    if list(cov["names"]) != list(names):
+        raise InputError(f"{field('covariance.names')}: expected {list(names)}, got {cov['names']!r}")
+    try:
+        mat = np.asarray(cov["matrix"], float)
+    except (TypeError, ValueError):
+        raise InputError(f"{field('covariance.matrix')}: not a numeric matrix") from None
+    p = len(names)
+    if mat.shape != (p, p) or not np.all(np.isfinite(mat)):
+        raise InputError(f"{field('covariance.matrix')}: expected a finite {p}×{p} matrix")
+    if not np.allclose(mat, mat.T, rtol=1e-9, atol=0):
+        raise InputError(f"{field('covariance.matrix')}: not symmetric")
+    lam = np.linalg.eigvalsh(mat)
+    if lam.min() < -1e-9 * max(abs(lam).max(), 1e-300):
+        raise InputError(f"{field('covariance.matrix')}: not positive semi-definite "
+                         f"(eigenvalue {lam.min():.3g})")
+    try:
+        finite(doc["posterior"]["sigma"]["mean"], f"{path}: field 'posterior.sigma.mean'", nonneg=True)
+        vals = np.asarray(doc["samples"]["values"], float)
+    except (KeyError, TypeError, ValueError):
+        raise InputError(f"{field('samples')}: posterior samples or sigma missing or not numeric") from None
+    if vals.ndim != 2 or vals.shape[0] < 1 or vals.shape[1] != p + 1 or not np.all(np.isfinite(vals)):
+        raise InputError(f"{field('samples.values')}: expected finite draws of shape (S, {p + 1})")
 
 
 def model_from_document(doc: dict, source: str = "<memory>"):
@@ -167,7 +232,22 @@ def model_from_document(doc: dict, source: str = "<memory>"):
                        sigma=float(doc["posterior"]["sigma"]["mean"]),
                        samples=values[:, :len(names)], sigma_samples=np.exp(values[:, -1]),
                        lever_arm_m=doc.get("lever_arm_m"), reading_unit=doc.get("reading_unit", ""),
+                       mass_range_g=calibrated_mass_range_g(doc),
                        sensor_id=doc.get("sensor_id", ""), source=source, info=doc)
+
+
+def calibrated_mass_range_g(doc: dict) -> tuple[float, float] | None:
+    """(min, max) applied mass (g) of the calibration session: ``calibrated_range`` if stored,
+    else [0, FSO/|BFSL slope|] from the characterization (sessions start at zero load)."""
+    rng = doc.get("calibrated_range")
+    try:
+        if rng:
+            return float(rng["mass_g_min"]), float(rng["mass_g_max"])
+        ch = doc["characterization"]
+        span = float(ch["fso"]) / abs(float(ch["bfsl_slope"]))
+        return (0.0, span) if np.isfinite(span) and span > 0 else None
+    except (KeyError, TypeError, ValueError, ZeroDivisionError):
+        return None
 
 
 def load(path: str | os.PathLike, *, data_path=None):

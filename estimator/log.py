@@ -121,6 +121,8 @@ def read_log(path, robot=None, *, max_jitter: float = 0.01) -> SensorLog:
     import pandas as pd
     from pathlib import Path
 
+    from estimator.plausibility import check_log
+
     path = Path(path)
     source = str(path)
     if not path.exists():
@@ -184,6 +186,7 @@ def read_log(path, robot=None, *, max_jitter: float = 0.01) -> SensorLog:
     log.source = source
     log.valid_mask = valid
     log.skipped_lines = rows_to_lines(np.flatnonzero(~valid))
+    check_log(log)                              # issue 16: units and sampling plausible
     return log
 
 

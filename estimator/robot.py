@@ -74,8 +74,34 @@ def _triple(table: dict, key: str, where: str) -> np.ndarray:
     return arr
 
 
+TOP_KEYS = {"name", "base", "gravity_m_per_s2", "friction_coefficient", "link", "base_body",
+            "base_mount"}
+LINK_KEYS = {"length_m", "com_m", "mass_kg", "inertia_kgm2"}
+BODY_KEYS = {"mass_kg", "inertia_kgm2"}
+MOUNT_KEYS = {"stiffness", "damping"}
+
+
+def _known(table: dict, allowed: set, where: str) -> None:
+    """Unknown key → InputError naming it, with the nearest valid key (userio.fields)."""
+    from userio.fields import nearest
+
+    extra = sorted(set(table) - allowed)
+    if extra:
+        raise InputError(f"{where}.{extra[0]}: unknown field{nearest(extra[0], allowed)} "
+                         f"(allowed: {', '.join(sorted(allowed))})")
+
+
+def _table(value, where: str) -> dict:
+    if not isinstance(value, dict):
+        raise InputError(f"{where}: expected a table, got {type(value).__name__}")
+    return value
+
+
 def robot_from_dict(data: dict, source: str = "robot") -> Robot:
-    """Validate a robot description (the TOML schema of ``robots/paper_leg.toml``)."""
+    """Validate a robot description (the TOML schema of ``robots/paper_leg.toml``): known keys
+    only, finite numbers, positive lengths/masses/inertias, COM on its link 0 ≤ r_i ≤ l_i,
+    gravity in [0, 100] m/s², friction coefficient in [0, 10]."""
+    _known(_table(data, source), TOP_KEYS, source)
     base = data.get("base", "floating")
     if base not in ("floating", "fixed"):
         raise InputError(f"{source}: field 'base' must be \"floating\" or \"fixed\", got {base!r}")
@@ -85,15 +111,27 @@ def robot_from_dict(data: dict, source: str = "robot") -> Robot:
     rows = []
     for i, link in enumerate(links, start=1):
         where = f"{source}: link[{i}]"
+        _known(_table(link, where), LINK_KEYS, where)
         length = _number(link, "length_m", where, positive=True)
-        com = _number(link, "com_m", where)
+        com = _number(link, "com_m", where, nonneg=True)
+        if com > length:
+            raise InputError(f"{where}.com_m: centre of mass {com:g} m lies beyond the link's end "
+                             f"(length_m = {length:g}); need 0 ≤ com_m ≤ length_m")
         rows.append((length, com, _number(link, "mass_kg", where, positive=True),
                      _number(link, "inertia_kgm2", where, positive=True)))
     lengths, coms, masses, inertias = (np.array(c) for c in zip(*rows))
     body = data.get("base_body")
     if not isinstance(body, dict):
         raise InputError(f"{source}: missing [base_body] table (mass_kg, inertia_kgm2)")
-    mount = data.get("base_mount", {})
+    _known(body, BODY_KEYS, f"{source}: base_body")
+    mount = _table(data.get("base_mount", {}), f"{source}: base_mount")
+    _known(mount, MOUNT_KEYS, f"{source}: base_mount")
+    if "gravity_m_per_s2" in data and not 0 <= _number(data, "gravity_m_per_s2", source) <= 100:
+        raise InputError(f"{source}.gravity_m_per_s2: must lie in [0, 100] m/s², "
+                         f"got {data['gravity_m_per_s2']}")
+    if "friction_coefficient" in data and _number(data, "friction_coefficient", source) > 10:
+        raise InputError(f"{source}.friction_coefficient: must lie in [0, 10], "
+                         f"got {data['friction_coefficient']}")
     return Robot(
         lengths_m=lengths, com_m=coms, masses_kg=masses, inertias_kgm2=inertias,
         base_mass_kg=_number(body, "mass_kg", f"{source}: base_body", positive=True),
@@ -105,8 +143,15 @@ def robot_from_dict(data: dict, source: str = "robot") -> Robot:
         base_damping=_triple(mount, "damping", f"{source}: base_mount"),
         friction_coefficient=_number(data, "friction_coefficient", source, nonneg=True)
         if "friction_coefficient" in data else 0.3,
-        name=str(data.get("name", Path(source).stem)),
+        name=_name(data, source),
     )
+
+
+def _name(data: dict, source: str) -> str:
+    name = data.get("name", Path(source).stem)
+    if not isinstance(name, str):
+        raise InputError(f"{source}.name: expected a string, got {name!r}")
+    return name
 
 
 def load_robot(path: str | Path) -> Robot:

@@ -1,5 +1,7 @@
 """Robot descriptions: the paper's leg loads as Table I says; bad files name the field."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -34,11 +36,23 @@ def _paper_dict():
     (lambda d: d.pop("link"), "missing [[link]] tables"),
     (lambda d: d["base_mount"].__setitem__("stiffness", [1.0, 2.0]), "base_mount.stiffness: expected three numbers"),
     (lambda d: d["base_mount"].__setitem__("damping", [1.0, -2.0, 3.0]), "base_mount.damping: values must be finite and ≥ 0"),
+    # hostile input (issue 16): misspelled keys, COM off its link, lists for numbers, inf
+    (lambda d: d.__setitem__("friction_coeficient", 0.5), "friction_coeficient: unknown field (did you mean 'friction_coefficient'?)"),
+    (lambda d: d.__setitem__("gravity_m_per_s", 9.81), "gravity_m_per_s: unknown field (did you mean 'gravity_m_per_s2'?)"),
+    (lambda d: d["link"][0].__setitem__("mas_kg", 1.0), "link[1].mas_kg: unknown field (did you mean 'mass_kg'?)"),
+    (lambda d: d["base_body"].__setitem__("inertia", 1.0), "base_body.inertia: unknown field"),
+    (lambda d: d["link"][0].__setitem__("com_m", 0.3), "link[1].com_m: centre of mass 0.3 m lies beyond"),
+    (lambda d: d["link"][1].__setitem__("com_m", -0.01), "link[2].com_m: must be ≥ 0"),
+    (lambda d: d["link"][0].__setitem__("mass_kg", [0.3, 0.4]), "link[1].mass_kg: expected a finite number"),
+    (lambda d: d["link"][0].__setitem__("length_m", float("inf")), "link[1].length_m: expected a finite number"),
+    (lambda d: d.__setitem__("gravity_m_per_s2", 1e6), "gravity_m_per_s2: must lie in [0, 100]"),
+    (lambda d: d.__setitem__("base_mount", 3), "base_mount: expected a table"),
+    (lambda d: d["link"].__setitem__(0, 5), "link[1]: expected a table"),
 ])
 def test_bad_robot_fields_are_named(mutate, message):
     data = _paper_dict()
     mutate(data)
-    with pytest.raises(InputError, match=message.replace("[", r"\[").replace("]", r"\]")):
+    with pytest.raises(InputError, match=re.escape(message)):
         robot_from_dict(data, source="leg.toml")
 
 
@@ -57,4 +71,19 @@ def test_invalid_toml_names_file_and_line(tmp_path):
     path = tmp_path / "broken.toml"
     path.write_text("name = 'x'\n[[link]\n")
     with pytest.raises(InputError, match=r"broken.toml: invalid TOML.*line 2"):
+        load_robot(path)
+
+
+def test_com_exactly_at_link_ends_is_accepted():
+    data = _paper_dict()
+    data["link"][0]["com_m"] = 0.0
+    data["link"][1]["com_m"] = data["link"][1]["length_m"]
+    robot = robot_from_dict(data, source="leg.toml")
+    assert robot.com_m[0] == 0.0 and robot.com_m[1] == robot.lengths_m[1]
+
+
+def test_non_utf8_robot_toml_is_one_line_error(tmp_path):
+    path = tmp_path / "latin1.toml"
+    path.write_bytes("name = 'B\xe9in'\n".encode("latin-1"))
+    with pytest.raises(InputError, match="not UTF-8"):
         load_robot(path)

@@ -30,5 +30,18 @@ def finite(value, name: str, *, positive: bool = False, nonneg: bool = False,
     if nonneg and v < 0:
         raise InputError(f"{name}: must be ≥ 0, got {value!r}")
     if (lo is not None and v < lo) or (hi is not None and v > hi):
-        raise InputError(f"{name}: must lie in [{lo}, {hi}], got {value!r}")
+        if lo is None:
+            raise InputError(f"{name}: must be ≤ {hi:g}, got {value!r}")
+        if hi is None:
+            raise InputError(f"{name}: must be ≥ {lo:g}, got {value!r}")
+        raise InputError(f"{name}: must lie in [{lo:g}, {hi:g}], got {value!r}")
     return v
+
+
+def seed(value, name: str = "--seed"):
+    """A random seed: None or an integer in [0, 2**63) (numpy refuses negative seeds)."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2 ** 63:
+        raise InputError(f"{name}: must be an integer in [0, 2^63), got {value!r}")
+    return value

@@ -113,3 +113,146 @@ def read_toml(path: str | os.PathLike) -> dict:
         raise InputError(f"{path}: invalid TOML: {exc}") from None
     except UnicodeDecodeError as exc:
         raise InputError(f"{path}: not UTF-8 text (byte {exc.start}); TOML files must be UTF-8") from None
+
+
+def _label_items(items) -> list[tuple[str, Path]]:
+    """``{label: path}`` or ``[(label, path)]`` or ``[path]`` → ``[(label, Path)]`` (None skipped)."""
+    if isinstance(items, dict):
+        items = list(items.items())
+    out = []
+    for it in items or ():
+        label, p = it if isinstance(it, tuple) else (str(it), it)
+        if p is not None:
+            out.append((str(label), Path(p)))
+    return out
+
+
+def _same(a: Path, b: Path) -> bool:
+    """Same file: equal real paths, or (both existing) the same inode (hard links, bind mounts)."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def plan_outputs(inputs, outputs) -> list[Path]:
+    """Check, before any work, the files a command will write against the files it reads.
+
+    ``inputs``/``outputs``: ``{label: path}`` (label: the option or argument, e.g. ``"--out"``).
+    Refuses (InputError) an output that is an input (real path or same inode), two outputs that
+    are the same file, an output that is a directory or whose directory does not exist.
+    Returns the output paths (as given), in order.
+    """
+    ins, outs = _label_items(inputs), _label_items(outputs)
+    for i, (olabel, o) in enumerate(outs):
+        if o.is_dir():
+            raise InputError(f"{olabel}: {o} is a directory, not a file")
+        if not o.parent.is_dir():
+            raise InputError(f"{olabel}: directory {o.parent} does not exist")
+        for ilabel, p in ins:
+            if _same(o, p):
+                raise InputError(f"{olabel}: {o} is the input {ilabel}; refusing to overwrite an input")
+        for olabel2, o2 in outs[:i]:
+            if _same(o, o2):
+                raise InputError(f"{olabel}: {o} is also written as {olabel2}; two outputs would "
+                                 "overwrite each other")
+    return [o for _, o in outs]
+
+
+def write_files_atomic(files, *, overwrite: bool = True) -> list[Path]:
+    """Write several files as a set: all of them or none.
+
+    ``files``: ``[(path, write_fn)]``, ``write_fn(tmp_path_str)`` writes one file (or
+    ``(path, bytes|str)``). Every file is first written to a temp name beside its target; only
+    when all succeeded are they renamed onto the targets. Files that existed are first kept
+    as hidden backups and put back if a rename fails; on any error (Ctrl-C included) the temps
+    are removed and the old files are left as they were. ``overwrite=False``: an existing
+    target is an InputError before anything is written.
+    """
+    items = []
+    for path, what in files:
+        path = Path(path)
+        if callable(what):
+            fn = what
+        else:
+            data = what.encode("utf-8") if isinstance(what, str) else bytes(what)
+            fn = (lambda d: (lambda tmp: Path(tmp).write_bytes(d)))(data)
+        items.append((path, fn))
+    plan_outputs({}, [(str(p), p) for p, _ in items])
+    if not overwrite:
+        for p, _ in items:
+            if p.exists():
+                raise _refuse_existing(p)
+    temps: list[Path] = []
+    backups: list[tuple[Path, Path]] = []
+    done: list[Path] = []
+    try:
+        for p, fn in items:
+            fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=p.suffix, dir=p.parent)
+            os.fchmod(fd, 0o666 & ~_umask())
+            os.close(fd)
+            temps.append(Path(tmp))
+            fn(tmp)
+            with open(tmp, "rb+") as fh:
+                os.fsync(fh.fileno())
+        for p, _ in items:                          # keep the old files until all are in place
+            if p.exists():
+                fd, bak = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".bak", dir=p.parent)
+                os.close(fd)
+                os.unlink(bak)
+                os.link(p, bak)
+                backups.append((p, Path(bak)))
+        for (p, _), tmp in zip(items, temps):
+            if overwrite:
+                os.replace(tmp, p)
+            else:
+                try:
+                    os.link(tmp, p)
+                except FileExistsError:
+                    raise _refuse_existing(p) from None
+                os.unlink(tmp)
+            done.append(p)
+        for p in {p.parent for p, _ in items}:
+            _fsync_dir(p)
+    except BaseException:
+        for t in temps:
+            t.unlink(missing_ok=True)
+        restored = {p for p, _ in backups}
+        for p, bak in backups:
+            if p in done:
+                os.replace(bak, p)
+        for p in done:
+            if p not in restored:
+                p.unlink(missing_ok=True)
+        for _, bak in backups:
+            bak.unlink(missing_ok=True)
+        raise
+    for _, bak in backups:
+        bak.unlink(missing_ok=True)
+    return [p for p, _ in items]
+
+
+def output_dir(out_dir, *, default: str, shipped_dir=None, regenerate: bool = False,
+               option: str = "--out-dir") -> Path:
+    """Where a report command writes: ``out_dir`` if given (must be a directory); the shipped
+    reports directory only when ``regenerate`` is asked explicitly; else ``./<default>``
+    (created). Shipped reports are never replaced by a default run."""
+    if out_dir is not None and regenerate:
+        raise InputError(f"{option}: give either {option} or --regenerate-shipped, not both")
+    if regenerate:
+        return Path(shipped_dir)
+    if out_dir is not None:
+        out_dir = Path(out_dir)
+        if not out_dir.is_dir():
+            raise InputError(f"{option}: {out_dir} is not a directory")
+        return out_dir
+    path = Path.cwd() / default
+    if path.exists() and not path.is_dir():
+        raise InputError(f"{option}: default output directory {path} exists and is not a directory")
+    if shipped_dir is not None and path.resolve() == Path(shipped_dir).resolve():
+        raise InputError(f"{option}: {path} is the shipped reports directory; pass "
+                         "--regenerate-shipped to replace the shipped reports")
+    path.mkdir(exist_ok=True)
+    return path

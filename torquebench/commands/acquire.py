@@ -51,8 +51,20 @@ def run(args) -> int:
                                      session_csv)
     from calibration.errors import InputError
     from calibration.frames import MAX_CHANNELS, FrameParser
-    from torquebench.io import print_json, write_text_atomic
+    from torquebench.io import print_json
+    from userio.files import write_files_atomic
 
+    from userio.errors import finite
+    from userio.files import plan_outputs
+
+    for name, v, hi in (("--duration-s", args.duration_s, 1e7), ("--idle-timeout-s", args.idle_timeout_s,
+                        3600.0), ("--rate-hz", args.rate_hz, 1e7), ("--settle-s", args.settle_s, 3600.0),
+                        ("--window-s", args.window_s, 3600.0), ("--lever-arm-m", args.lever_arm_m, 100.0)):
+        if v is not None:
+            finite(v, name, positive=name != "--settle-s", nonneg=True, hi=hi)
+    for name, v in (("--baud", args.baud), ("--repeats", args.repeats), ("--frames", args.frames)):
+        if v is not None and v < 1:
+            raise InputError(f"{name}: must be ≥ 1, got {v}")
     if not 1 <= args.channels <= MAX_CHANNELS:
         raise InputError(f"--channels: must be 1..{MAX_CHANNELS}, got {args.channels}")
     if not 0 <= args.channel < args.channels:
@@ -63,8 +75,13 @@ def run(args) -> int:
             masses = [float(m) for m in args.guided.split(",") if m.strip()]
         except ValueError:
             raise InputError(f"--guided: {args.guided!r} is not a comma-separated list of masses") from None
+        for m in masses:
+            finite(m, "--guided", nonneg=True)
         if len(set(masses)) < 2 or min(masses) < 0:
             raise InputError("--guided: need at least two distinct non-negative masses (g)")
+    plan_outputs({"--port": args.port} if not str(args.port).count("://") else {},
+                 {"--out": args.out, "--csv": args.csv,
+                  "--session": (args.session or args.out.with_suffix(".csv")) if masses else None})
     port = open_port(args.port, args.baud)
     from torquebench.outputs import prepare_dir
     for flag, path in (("--out", args.out), ("--csv", args.csv), ("--session", args.session)):
@@ -93,19 +110,19 @@ def run(args) -> int:
         port.close()
     raw_path = raw.close()
     written = [str(raw_path)]
+    files = []
     if args.csv is not None and reader.seq_log:
         seq = np.concatenate(reader.seq_log)
         s = np.concatenate(reader.sample_log)
         text = "seq," + ",".join(f"ch{i}_counts" for i in range(args.channels)) + "\n"
         text += "\n".join(",".join(map(str, r)) for r in np.column_stack([seq, s]).tolist()) + "\n"
-        write_text_atomic(args.csv, text, overwrite=args.force)
-        written.append(str(args.csv))
+        files.append((args.csv, text))
     if rows is not None:
         spath = args.session or raw_path.with_suffix(".csv")
-        write_text_atomic(spath, session_csv(rows, sensor_id=args.sensor_id,
-                                             lever_arm_m=args.lever_arm_m, source=str(raw_path)),
-                          overwrite=args.force)
-        written.append(str(spath))
+        files.append((spath, session_csv(rows, sensor_id=args.sensor_id,
+                                         lever_arm_m=args.lever_arm_m, source=str(raw_path))))
+    write_files_atomic(files, overwrite=args.force)      # decoded CSV + session: all or none
+    written += [str(p) for p, _ in files]
     st = reader.parser.stats.as_dict()
     if args.json:
         print_json({**st, "written": written, "readings": len(rows) if rows else 0})

@@ -35,7 +35,13 @@ def run(args) -> int:
     from torquebench.io import print_json, write_text_atomic
     from torquebench.outputs import prepare_file
 
-    prepare_file(args.out, "--out", force=args.force, inputs=(args.calibration, args.readings, args.data))
+    from userio.files import plan_outputs
+
+    if args.out is not None:
+        prepare_file(args.out, "--out", force=args.force,
+                     inputs=(args.calibration, args.readings, args.data))   # mkdir, --force
+        plan_outputs({"calibration": args.calibration, "readings": args.readings, "--data": args.data},
+                     {"--out": args.out})
     model = calibration.load(args.calibration, data_path=args.data)
     try:
         with open(args.readings, encoding="utf-8", errors="replace") as fh:
@@ -65,12 +71,17 @@ def run(args) -> int:
             raise InputError(f"{args.readings}: line {i + n_comment + 2}: column 'direction': "
                              f"{direction[i]!r} is not 'load' or 'unload'")
     out = df.copy()
-    out["mass_g"] = model.mass_g(vals, direction)
+    flags = model.flags(vals, direction)
+    use = np.where(flags == "", 1.0, np.nan)        # flagged readings: NaN, never extrapolated
+    out["mass_g"] = model.mass_g(vals, direction) * use
     noise = not args.coefficients_only
-    out["mass_std_g"] = model.mass_std_g(vals, direction, include_noise=noise)
+    out["mass_std_g"] = model.mass_std_g(vals, direction, include_noise=noise) * use
     if model.lever_arm_m is not None:
-        out["torque_Nm"] = model.torque(vals, direction)
-        out["torque_std_Nm"] = model.torque_std(vals, direction, include_noise=noise)
+        out["torque_Nm"] = model.torque(vals, direction) * use
+        out["torque_std_Nm"] = model.torque_std(vals, direction, include_noise=noise) * use
+    out["flag"] = flags
+    n_sat = int(np.count_nonzero(flags == "saturated_adc"))
+    n_range = int(np.count_nonzero(flags == "outside_calibrated_range"))
     n_nan = int(np.count_nonzero(~np.isfinite(out["mass_g"].to_numpy(float))))
     buf = io.StringIO()
     out.to_csv(buf, index=False, float_format="%.9g")
@@ -78,7 +89,9 @@ def run(args) -> int:
         write_text_atomic(args.out, buf.getvalue(), overwrite=True)
     if args.json:
         res = {"n": int(vals.size), "sensor_id": model.sensor_id, "model": model.model,
-               "out_of_range": n_nan, "written": str(args.out) if args.out else None,
+               "out_of_range": n_nan, "saturated_adc": n_sat, "outside_calibrated_range": n_range,
+               "calibrated_mass_range_g": list(model.mass_range_g) if model.mass_range_g else None,
+               "written": str(args.out) if args.out else None,
                "mass_g": out["mass_g"].to_numpy(float), "mass_std_g": out["mass_std_g"].to_numpy(float)}
         if "torque_Nm" in out:
             res["torque_Nm"] = out["torque_Nm"].to_numpy(float)
@@ -88,5 +101,6 @@ def run(args) -> int:
         print(buf.getvalue(), end="")
     else:
         print(f"wrote {args.out} ({vals.size} readings" +
-              (f", {n_nan} outside the calibrated model's range (NaN)" if n_nan else "") + ")")
+              (f", {n_nan} flagged and left NaN: {n_sat} saturated ADC, {n_range} outside the "
+               "calibrated range" if n_nan else "") + ")")
     return 0

@@ -30,11 +30,17 @@ def run(args) -> int:
     from torquebench.errors import InputError
     from torquebench.io import print_json, shipped
 
+    from userio.errors import finite
+
+    if args.strain_per_Nm is not None:
+        finite(args.strain_per_Nm, "--strain-per-Nm", positive=True)
+    if args.bandwidth_Hz is not None:
+        finite(args.bandwidth_Hz, "--bandwidth-Hz", positive=True)
+    if args.averaging < 1:
+        raise InputError(f"--averaging: must be ≥ 1, got {args.averaging}")
     path = args.config or shipped("scenes", "paper_sensor.toml")
     cfg, spn = load_sensor_config(path)
     if args.strain_per_Nm is not None:
-        if not args.strain_per_Nm > 0:
-            raise InputError(f"--strain-per-Nm: must be > 0, got {args.strain_per_Nm}")
         spn = args.strain_per_Nm
     out = sensor_summary(cfg, spn, args.bandwidth_Hz, args.averaging)
     out["config"] = str(path)

@@ -49,17 +49,18 @@ def coefficient_key(name: str, reading_unit: str) -> str:
     return f"{name}_" + _KEYS.get(name, "{u}").format(u=reading_unit)
 
 
-def _report(doc: dict, fit, session, out: Path) -> list[Path]:
-    from calibration.plots import corner_plot, residual_plot
-    from torquebench.io import atomic_path, write_text_atomic
-
+def report_paths(out: Path) -> tuple[Path, Path, Path]:
+    """(Markdown report, corner PNG, residual PNG) written beside the calibration ``out``."""
     stem = out.with_suffix("")
-    corner_png = stem.with_name(stem.name + "_corner.png")
-    resid_png = stem.with_name(stem.name + "_residuals.png")
-    with atomic_path(corner_png) as tmp:
-        corner_plot(fit, tmp, title=f"{session.sensor_id}: {fit.model}")
-    with atomic_path(resid_png) as tmp:
-        residual_plot(session, fit, tmp)
+    return (stem.with_name(stem.name + ".md"), stem.with_name(stem.name + "_corner.png"),
+            stem.with_name(stem.name + "_residuals.png"))
+
+
+def _report(doc: dict, fit, session, out: Path) -> list[tuple[Path, object]]:
+    """The report files as ``[(path, writer)]`` for :func:`userio.files.write_files_atomic`."""
+    from calibration.plots import corner_plot, residual_plot
+
+    md, corner_png, resid_png = report_paths(out)
     post, ex, ch, dg = doc["posterior"], doc["exact"], doc["characterization"], doc["diagnostics"]
     unit = doc["reading_unit"]
     lines = [f"# Calibration {out.name} ({session.sensor_id})", "",
@@ -81,24 +82,59 @@ def _report(doc: dict, fit, session, out: Path) -> list[Path]:
               + (f"{ch['repeatability_pct_fs']:.3f} % FS" if ch["repeatability_pct_fs"] is not None else "n/a")
               + f" (FS output {ch['fso']:.4g} {unit}).", "",
               f"![corner]({corner_png.name})", "", f"![residuals]({resid_png.name})", ""]
-    md = stem.with_name(stem.name + ".md")
-    write_text_atomic(md, "\n".join(lines))
-    return [md, corner_png, resid_png]
+    return [(md, "\n".join(lines)),
+            (corner_png, lambda tmp: corner_plot(fit, tmp, title=f"{session.sensor_id}: {fit.model}")),
+            (resid_png, lambda tmp: residual_plot(session, fit, tmp))]
+
+
+def _target(out: Path, force: bool, no_report: bool) -> Path:
+    """The calibration path to write: ``out``, or its first free ``NAME.vK.json`` without --force
+    (the report files of a versioned name must be free too)."""
+    def free(c: Path) -> bool:
+        return not c.exists() and (no_report or not any(p.exists() for p in report_paths(c)))
+
+    if force or free(out):
+        return out
+    k = 2
+    while not free(cand := out.with_name(f"{out.stem}.v{k}{out.suffix}")):
+        k += 1
+    return cand
+
+
+def _plan(args, out: Path) -> None:
+    """Refuse before fitting: an output equal to the input, or outputs colliding."""
+    from userio.files import plan_outputs
+
+    outputs = {"--out": out}
+    if not args.no_report:
+        md, corner, resid = report_paths(out)
+        outputs.update({"report (--out with .md)": md, "corner plot": corner, "residual plot": resid})
+    plan_outputs({"data": args.data}, outputs)
 
 
 def run(args) -> int:
     from calibration.errors import InputError
     from calibration.fit import fit_session
     from calibration.session import read_session
-    from calibration.store import calibration_payload, save
+    from calibration.store import calibration_payload, encode
     from torquebench.io import print_json
     from torquebench.outputs import prepare_dir
 
-    if args.lever_arm_m is not None and not args.lever_arm_m > 0:
-        raise InputError(f"--lever-arm-m: must be > 0, got {args.lever_arm_m:g}")
+    from userio.errors import finite
+    from userio.files import write_files_atomic
+
+    if args.lever_arm_m is not None:
+        args.lever_arm_m = finite(args.lever_arm_m, "--lever-arm-m", positive=True)
+    args.mass_std_g = finite(args.mass_std_g, "--mass-std-g", nonneg=True)
+    from userio.errors import seed
+
+    seed(args.seed)
     if args.walkers < 8:
         raise InputError(f"--walkers: need at least 8, got {args.walkers}")
-    prepare_dir(args.out.parent, "--out")
+    if args.max_steps < 1:
+        raise InputError(f"--max-steps: must be ≥ 1, got {args.max_steps}")
+    prepare_dir(args.out.parent, "--out")                          # created if missing
+    _plan(args, args.out)
     session = read_session(args.data)
     if args.lever_arm_m is not None:
         session.lever_arm_m = args.lever_arm_m
@@ -114,12 +150,17 @@ def run(args) -> int:
         "args": {"data": str(args.data), "model": args.model, "mass_std_g": args.mass_std_g,
                  "seed": args.seed, "walkers": args.walkers, "max_steps": args.max_steps,
                  "lever_arm_m": args.lever_arm_m}})
-    written = save(payload, args.out, force=args.force)
+    written = _target(args.out, args.force, args.no_report)
+    _plan(args, written)
+    files = [(written, encode(payload))]
+    if not args.no_report:
+        files += _report(payload, fit, session, written)
+    write_files_atomic(files, overwrite=args.force)    # calibration + report + plots: all or none
+    reports = [p for p, _ in files[1:]]
     versioned = written != args.out
     if versioned:
         print(f"calibrate: {args.out} exists; kept it and wrote {written} (use --force to replace)",
               file=sys.stderr)
-    reports = [] if args.no_report else _report(payload, fit, session, written)
     post = payload["posterior"]
     unit = session.reading_unit
     keys = {n: coefficient_key(n, unit) for n in (*fit.coef_names, "sigma")}

@@ -48,6 +48,9 @@ def _errors(est, truth, t_on, gain_per_s):
 
 
 def run(args) -> int:
+    from userio.errors import seed
+
+    seed(args.seed)                              # issue 16: negative seeds → exit 2
     from bridge.chain import paper_chain
     from estimator.log import write_log
     from estimator.pipeline import estimate

@@ -33,6 +33,18 @@ def _floats(text: str, count: int, name: str) -> list[float]:
     return values
 
 
+def _finite_args(args) -> None:
+    """Issue 16: numbers from the command line are finite and physically sized."""
+    from userio.errors import finite
+
+    if args.strain_per_Nm is not None:
+        finite(args.strain_per_Nm, "--strain-per-Nm", positive=True, hi=1.0)
+    if args.torque_noise_Nm is not None:
+        finite(args.torque_noise_Nm, "--torque-noise-Nm", lo=0.0, hi=1e6)
+    if args.gain_error is not None:
+        finite(args.gain_error, "--gain-error", lo=0.0, hi=1.0)
+
+
 def add_arguments(parser) -> None:
     parser.add_argument("--robot", type=Path, help="robot TOML (default: robots/paper_leg.toml)")
     parser.add_argument("--sensor", type=Path, help="sensor TOML (default: scenes/paper_sensor.toml)")
@@ -90,6 +102,10 @@ def sensor_noise_from_args(args):
 
 
 def run(args) -> int:
+    from userio.errors import seed
+
+    seed(args.seed)                              # issue 16: negative seeds → exit 2
+    _finite_args(args)
     from estimator.robot import load_robot, paper_leg
     from estimator.uncertainty import first_order, monte_carlo
     from torquebench.io import print_json

@@ -67,23 +67,28 @@ def run_scene(scene, seed=None, integrator=None, duration=None):
 
 def run(args) -> int:
     from estimator.sim.output import log_csv, truth_csv
-    from torquebench.io import print_json, write_text_atomic
+    from torquebench.io import print_json
     from torquebench.scenes import load_scene
 
-    scene = load_scene(args.scene)
+    from userio.errors import finite
+    from userio.files import plan_outputs, write_files_atomic
+
+    from userio.errors import seed
+
+    seed(args.seed)
+    if args.duration is not None:
+        finite(args.duration, "--duration", positive=True)
     out, tpath = Path(args.out), truth_path(Path(args.out))
-    inputs = {args.scene.resolve()}
-    if scene.sim is not None or scene.static is not None:
-        pass
-    for p in (out, tpath):
-        if p.resolve() in inputs or p.suffix == ".toml":
-            raise InputError(f"--out: {p} is an input (the scene file); refusing to overwrite it")
     from torquebench.outputs import prepare_file
     for p in (out, tpath):
-        prepare_file(p, "--out", force=args.force, inputs=(args.scene,))
+        prepare_file(p, "--out", force=args.force, inputs=(args.scene,))   # mkdir, --force
+    plan_outputs({"scene": args.scene}, {"--out": out, "truth (--out with .truth.csv)": tpath})
+    if out.suffix == ".toml":
+        raise InputError(f"--out: {out} looks like a scene/robot file; refusing to overwrite it "
+                         "with a log (the log is a CSV)")
+    scene = load_scene(args.scene)
     log, truth, stats = run_scene(scene, args.seed, args.integrator, args.duration)
-    write_text_atomic(out, log_csv(log))
-    write_text_atomic(tpath, truth_csv(truth))
+    write_files_atomic([(out, log_csv(log)), (tpath, truth_csv(truth))])   # log + truth: a set
     summary = {"scene": scene.name, "log": str(out), "truth": str(tpath), "samples": len(log.t),
                "duration_s": float(log.t[-1]) if len(log.t) else 0.0,
                "contact_samples": int((truth["link"] > 0).sum()), **stats}

@@ -1,0 +1,95 @@
+"""Plausibility of a sensor log beyond its syntax: units and sampling a robot can produce.
+
+Checked (``check_log``, called by ``estimator.log.read_log``):
+- sampling period Δt = median(t_{k+1} − t_k) in [10 µs, 1 s] (else InputError; a period of
+  ~1 usually means time in milliseconds, < 10 µs microseconds or nanoseconds);
+- joint angles |q_i| ≤ 2π (a leg joint never turns a full revolution; larger angles look like
+  degrees) → InputError;
+- velocities consistent with the angles: the least-squares scale s of the finite differences
+  on the logged velocities, Δq/Δt ≈ s · ½(q̇_k + q̇_{k+1}), computed when the two are strongly
+  correlated (r ≥ 0.9: real motion, not noise). s ≈ 1 is consistent; s off by more than 10×
+  → InputError naming the likely unit mix-up (57.3: angles in degrees; 1/57.3: velocities in
+  deg/s; 10⁻³: time in ms); s outside [0.5, 2] → a warning.
+Backwards, duplicate and irregular time steps are refused by ``read_log`` itself.
+Warnings are returned, stored on ``log.plausibility_warnings`` and issued as
+:class:`PlausibilityWarning`.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+
+from userio.errors import InputError
+
+DT_MIN_S, DT_MAX_S = 10e-6, 1.0
+MAX_JOINT_ANGLE_RAD = 2 * math.pi
+MIN_CORRELATION = 0.9
+
+
+class PlausibilityWarning(UserWarning):
+    """A log that is readable but looks odd (the message says what)."""
+
+
+def _unit_hint(scale: float) -> str:
+    hints = {180 / math.pi: "angles look like degrees while velocities are rad/s",
+             math.pi / 180: "velocities look like deg/s while angles are rad",
+             1e-3: "time looks like milliseconds", 1e3: "time looks like kiloseconds or velocities "
+             "like mrad/s", 1e-6: "time looks like microseconds"}
+    best = min(hints, key=lambda h: abs(math.log(scale / h)))
+    return hints[best] if abs(math.log(scale / best)) < math.log(1.5) else "units do not match"
+
+
+def velocity_scale(t: np.ndarray, q: np.ndarray, dq: np.ndarray) -> tuple[float, float]:
+    """(s, r): least-squares scale of Δq/Δt on the mid-step velocity, and their correlation."""
+    if len(t) < 3:
+        return float("nan"), float("nan")
+    fd = np.diff(q, axis=0) / np.diff(t)[:, None]
+    mid = 0.5 * (dq[1:] + dq[:-1])
+    fd, mid = fd.ravel(), mid.ravel()
+    den = float(mid @ mid)
+    if den == 0 or float(fd @ fd) == 0:
+        return float("nan"), float("nan")
+    s = float(fd @ mid) / den
+    r = float(fd @ mid) / math.sqrt(den * float(fd @ fd))
+    return s, r
+
+
+def check_log(log) -> list[str]:
+    """Raise InputError for an implausible log; return (and warn about) what merely looks odd."""
+    src = log.source
+    found: list[str] = []
+    t = np.asarray(log.t, float)
+    base = 0 if log.floating else 3
+    q, dq = np.asarray(log.q, float)[:, base:], np.asarray(log.dq, float)[:, base:]
+    s, r = velocity_scale(t, q, dq)
+    if math.isfinite(s) and r >= MIN_CORRELATION:
+        if not 0.1 <= s <= 10:
+            raise InputError(f"{src}: velocities disagree with the angle differences by a factor "
+                             f"{s:.4g} (Δq/Δt vs logged q̇, correlation {r:.2f}): {_unit_hint(s)}; "
+                             "the log must be in s, rad, rad/s")
+        if not 0.5 <= s <= 2:
+            found.append(f"{src}: velocities disagree with the angle differences by a factor "
+                         f"{s:.3g} (correlation {r:.2f}); check the velocity filter and units")
+    if len(t) > 1:
+        dt = float(np.median(np.diff(t)))
+        if not DT_MIN_S * (1 - 1e-6) <= dt <= DT_MAX_S * (1 + 1e-6):   # rounding of t
+            hint = (" (time in milliseconds?)" if 1.0 < dt <= 1e3 else
+                    " (time in µs or ns?)" if dt < DT_MIN_S else "")
+            raise InputError(f"{src}: column 't': sampling period {dt:.4g} s is outside the "
+                             f"plausible 10 µs–1 s{hint}; the log's time must be in seconds")
+    n = log.n_links
+    joints = np.asarray(log.q, float)[:, 3:3 + n]
+    if joints.size:
+        big = np.abs(joints) > MAX_JOINT_ANGLE_RAD
+        if big.any():
+            k, j = np.argwhere(big)[0]
+            raise InputError(f"{src}: column 'q{j + 1}': joint angle {joints[k, j]:g} rad at "
+                             f"t = {t[k]:g} s exceeds 2π; angles look like degrees (the log must "
+                             "be in rad)")
+    for msg in found:
+        warnings.warn(msg, PlausibilityWarning, stacklevel=3)
+    log.plausibility_warnings = found
+    return found
