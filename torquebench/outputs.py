@@ -8,6 +8,7 @@ Checked before any long computation, so a bad path fails in a second, not after 
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from torquebench.errors import InputError
@@ -20,6 +21,16 @@ def _mkdir(directory: Path, option: str) -> None:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise InputError(f"{option}: cannot create directory {directory}: {exc.strerror}") from None
+
+
+def _same(a: Path, b: Path) -> bool:
+    """Same file: same real path, or (both existing) the same inode, e.g. a hard link."""
+    if a.resolve() == b.resolve():
+        return True
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
 
 
 def prepare_dir(directory: str | Path, option: str) -> Path:
@@ -39,8 +50,8 @@ def prepare_file(path: str | Path | None, option: str, *, force: bool = False,
         return None
     path = Path(path)
     for given in inputs:
-        if given is not None and path.resolve() == Path(given).resolve():
-            raise InputError(f"{option}: {path} is an input of this command; refusing to overwrite it")
+        if given is not None and _same(path, Path(given)):
+            raise InputError(f"{option}: {path} is an input of this command; refusing to overwrite an input")
     if path.is_dir():
         raise InputError(f"{option}: {path} is a directory; give a file name")
     if path.exists() and not force:
