@@ -29,6 +29,7 @@ class SensorLog:
     valid_mask: np.ndarray | None = None      # over the file's data rows: False = skipped (NaN/inf)
     skipped_lines: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     expected_contacts: tuple = ()   # ((link, α), …) the robot expects, e.g. ((N, 1.0),) stance foot
+    timing: list | None = None      # per force channel [(kind, delay_s)] (estimator.timing); None: instant
 
     @property
     def n_skipped(self) -> int:
@@ -111,17 +112,14 @@ def _read_text_values(path, source: str, names: list[str], cols: list[str]) -> n
 
 
 def read_log(path, robot=None, *, max_jitter: float = 0.01) -> SensorLog:
-    """Read and validate a CSV sensor log (DESIGN.md format).
+    """Read and validate a sensor log (DESIGN.md format): CSV, or Parquet for ``.parquet``.
 
     Rows with a NaN/inf (or empty) field are skipped and counted (``skipped_lines``, ``valid_mask``);
     a non-numeric field, a non-increasing time or a step that is not a whole number of sample
     periods (±``max_jitter``) raises InputError naming the file, line and column. With ``robot``,
     the number of joints must match its links.
     """
-    import pandas as pd
     from pathlib import Path
-
-    from estimator.plausibility import check_log
 
     path = Path(path)
     source = str(path)
@@ -129,6 +127,38 @@ def read_log(path, robot=None, *, max_jitter: float = 0.01) -> SensorLog:
         raise InputError(f"{source}: no such file")
     if path.is_dir():
         raise InputError(f"{source}: is a directory, expected a CSV log")
+    if path.suffix.lower() == ".parquet":
+        names, values, n, floating = _read_parquet(path, source, robot)
+    else:
+        names, values, n, floating = _read_csv(path, source, robot)
+    return _from_values(path, source, values, n, floating, max_jitter)
+
+
+def _read_parquet(path, source, robot):
+    """(names, values in log_columns order, n_links, floating) of a Parquet log (pyarrow)."""
+    import pandas as pd
+
+    try:
+        frame = pd.read_parquet(path)
+    except ImportError:
+        raise InputError(f"{source}: reading Parquet needs pyarrow (pip install pyarrow)") from None
+    except Exception as exc:                   # pyarrow raises several types for a bad file
+        raise InputError(f"{source}: not a readable Parquet log: {str(exc).splitlines()[0]}") from None
+    names = [str(c).strip() for c in frame.columns]
+    n, floating = _layout(names, source, None if robot is None else robot.n_links)
+    cols = log_columns(n, floating)
+    frame.columns = names
+    try:
+        values = frame[cols].to_numpy(dtype=float)
+    except (ValueError, TypeError):
+        bad = next(c for c in cols if not pd.api.types.is_numeric_dtype(frame[c]))
+        raise InputError(f"{source}: column '{bad}' is not numeric") from None
+    return names, values, n, floating
+
+
+def _read_csv(path, source, robot):
+    import pandas as pd
+
     try:
         header = pd.read_csv(path, nrows=0, skipinitialspace=True)
     except pd.errors.EmptyDataError:
@@ -149,6 +179,10 @@ def read_log(path, robot=None, *, max_jitter: float = 0.01) -> SensorLog:
         values = frame[cols].to_numpy(dtype=float)
     except (ValueError, TypeError, pd.errors.ParserError, UnicodeDecodeError):
         values = _read_text_values(path, source, names, cols)
+    return names, values, n, floating
+
+
+def _from_values(path, source, values, n, floating, max_jitter):
     if len(values) == 0:
         raise InputError(f"{source}: no samples after the header")
     valid = np.all(np.isfinite(values), axis=1)
@@ -186,7 +220,11 @@ def read_log(path, robot=None, *, max_jitter: float = 0.01) -> SensorLog:
     log.source = source
     log.valid_mask = valid
     log.skipped_lines = rows_to_lines(np.flatnonzero(~valid))
-    check_log(log)                              # issue 16: units and sampling plausible
+    from estimator.timing import read_declaration
+    log.timing = read_declaration(path, n)       # LOG.timing.toml beside the log, if any
+    from estimator.plausibility import check_log
+
+    check_log(log)                              # units and sampling plausible
     return log
 
 
@@ -206,7 +244,13 @@ def log_to_frame(log: SensorLog):
 
 
 def write_log(log: SensorLog, path) -> None:
-    """Write a log as CSV (full precision) atomically: temp file beside ``path`` + rename."""
+    """Write a log atomically (temp file beside ``path`` + rename): Parquet for ``.parquet``,
+    else CSV at full precision."""
+    from pathlib import Path
+
     from userio.files import atomic_write
 
-    atomic_write(path, lambda tmp: log_to_frame(log).to_csv(tmp, index=False, float_format="%.17g"))
+    if Path(path).suffix.lower() == ".parquet":
+        atomic_write(path, lambda tmp: log_to_frame(log).to_parquet(tmp, index=False))
+    else:
+        atomic_write(path, lambda tmp: log_to_frame(log).to_csv(tmp, index=False, float_format="%.17g"))

@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from estimator import dynamics as dyn
+from estimator import timing as timing_mod
 from estimator.errors import InputError
 from estimator.robot import Robot
 
@@ -201,8 +202,11 @@ def regular_period(t: np.ndarray) -> float:
 
 
 def residual_offline(robot: Robot, t, q, dq, tau_meas, gain_per_s=100.0, method: str = "exact",
-                     dt_s: float | None = None, terms=None) -> np.ndarray:
+                     dt_s: float | None = None, terms=None, timing=None) -> np.ndarray:
     """Observer residual r (T, n) for a whole log, r_0 = 0 (P_0 = P(t_0)).
+
+    ``timing``: per-channel sampling of τ_meas [(kind, delay_s)] (estimator.timing; None =
+    instantaneous); the step mean ū_k of the measured force uses the matching quadrature.
 
     Steps equal to the nominal period ``dt_s`` (default: median step) run through
     ``scipy.signal.lfilter``; a longer step (a gap left by skipped NaN rows) is taken exactly with
@@ -224,6 +228,11 @@ def residual_offline(robot: Robot, t, q, dq, tau_meas, gain_per_s=100.0, method:
     steps = np.diff(t)
     gap = np.abs(steps - dt_s) > 0.01 * dt_s
     ubar = 0.5 * (uT[:, 1:] + uT[:, :-1]) if method == "exact" else uT[:, :-1]
+    if not timing_mod.is_instant(timing):
+        tauT = np.asarray(tau_meas, float).T
+        ubar = ubar + timing_mod.step_mean_correction(tauT, timing, dt_s)
+        if method != "exact":              # explicit: ū_k = u_k, so correct relative to τ_k
+            ubar += 0.5 * (tauT[:, 1:] - tauT[:, :-1])
     drive = np.diff(PT, axis=1)
     drive /= np.where(gap, steps, dt_s)
     drive -= ubar                          # d_k = (P_{k+1} − P_k)/Δt_k − ū_k, (n, T−1)
@@ -255,11 +264,19 @@ def lag_s(K: np.ndarray, dt_s: float, method: str = "exact") -> np.ndarray:
 class MomentumObserver:
     """Streaming observer: ``step(q, dq, tau_meas)`` → r (n,), one sample at a time.
 
-    The first call initializes P_0 and returns r = 0, as the offline form does.
+    The first call initializes P_0 and returns r = 0, as the offline form does. ``timing``: per
+    channel 'instant' or 'mean' (estimator.timing); a group delay needs future samples and is
+    offline only.
     """
 
-    def __init__(self, robot: Robot, dt_s: float, gain_per_s=100.0, method: str = "exact"):
+    def __init__(self, robot: Robot, dt_s: float, gain_per_s=100.0, method: str = "exact",
+                 timing=None):
         self.robot = full_robot(robot)
+        if timing is not None and any(k == "delay" and d > 0 for k, d in timing):
+            raise InputError("timing: a group delay needs future samples; the streaming observer "
+                             "supports 'instant' and 'mean' only (use the offline estimate)")
+        self._mean = None if timing_mod.is_instant(timing) else \
+            np.array([k == "mean" for k, _ in timing])
         self.K = gains(self.robot, gain_per_s)
         self.dt_s = float(dt_s)
         self.method = method
@@ -270,12 +287,14 @@ class MomentumObserver:
     def reset(self):
         self._P = None
         self._u = None
+        self._tau = None
         self.r = np.zeros(self.K.size)
 
     def step(self, q, dq, tau_meas, dt_s: float | None = None) -> np.ndarray:
-        P, u = self._fast(np.asarray(q, float), np.asarray(dq, float), np.asarray(tau_meas, float))
+        tau_meas = np.asarray(tau_meas, float)
+        P, u = self._fast(np.asarray(q, float), np.asarray(dq, float), tau_meas)
         if self._P is None:
-            self._P, self._u = P, u
+            self._P, self._u, self._tau = P, u, tau_meas
             return self.r.copy()
         if dt_s is None or abs(dt_s - self.dt_s) <= 0.01 * self.dt_s:
             dt, a, b = self.dt_s, self.a, self.b
@@ -283,9 +302,12 @@ class MomentumObserver:
             dt = float(dt_s)
             a, b = coefficients(self.K, dt, self.method)
         ubar = 0.5 * (u + self._u) if self.method == "exact" else self._u
+        if self._mean is not None:         # a 'mean' reading at t_{k+1} IS the step mean
+            half = 0.5 * (tau_meas - self._tau) if self.method == "exact" else tau_meas - self._tau
+            ubar = ubar + np.where(self._mean, half, 0.0)
         d = (P - self._P) / dt - ubar
         self.r = a * self.r + b * d
-        self._P, self._u = P, u
+        self._P, self._u, self._tau = P, u, tau_meas
         return self.r.copy()
 
 

@@ -41,6 +41,9 @@ from estimator.sim.static import static_readings
 METHODS = ("dynamic", "paper")
 
 
+AMBIGUITY_N_SIGMA = 2.0      # cost gap (in residual-noise norms) under which two fits tie
+
+
 @dataclass(frozen=True)
 class SensorNoise:
     """The sensors' errors. Arrays: per joint (N,) or per base axis (3,)."""
@@ -68,6 +71,12 @@ class SensorNoise:
             return 1.0
         a, _ = coefficients(np.array([self.gain_per_s]), 1.0 / self.sample_rate_Hz, "exact")
         return float(np.sqrt((1.0 - a[0]) / 2.0))
+
+    def ambiguity_tol(self, n_links: int, method: str = "dynamic", n_sigma: float = AMBIGUITY_N_SIGMA) -> float:
+        """Cost gap below which two candidate contacts are indistinguishable: n_σ · ‖f σ_n‖, the
+        norm of the residual's noise (f: filter factor), floored at 1e-9 for a noise-free model."""
+        sig_n, _ = self.per_row(n_links)
+        return max(1e-9, n_sigma * self.filter_factor(method) * float(np.linalg.norm(sig_n)))
 
     def per_row(self, n_links: int):
         """(σ_noise (n,), σ_gain (n,)) on the rows [x, z, θ, q_1…q_N]."""
@@ -100,10 +109,10 @@ def _check(robot: Robot, q_joint, link, alpha, force_N):
     return q_joint, link, alpha, force
 
 
-def _localize(robot, method, q, r, link):
+def _localize(robot, method, q, r, link, ambiguity_tol=1e-3):
     """(α, F) from residual-form readings r = G − τ_meas (rows [x, z, θ, q…])."""
     if method == "dynamic":
-        out = loc.localize_dynamic(robot, q, r)
+        out = loc.localize_dynamic(robot, q, r, ambiguity_tol=ambiguity_tol)
     else:
         G = dyn.gravity_vector(robot.with_base(True), q)
         out = loc.localize_paper(robot, q, np.zeros_like(q), G - r, link, bias=G)
@@ -165,7 +174,8 @@ def monte_carlo(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise,
     e = (f * sig_n * rng.standard_normal((B, draws, n))
          + sig_g * readings[:, None, :] * rng.standard_normal((B, draws, n)))
     r = (r_true[:, None, :] - e).reshape(-1, n)
-    a_out, f_out = _localize(robot, method, np.repeat(q, draws, axis=0), r, np.repeat(link, draws))
+    a_out, f_out = _localize(robot, method, np.repeat(q, draws, axis=0), r, np.repeat(link, draws),
+                             noise.ambiguity_tol(robot.n_links, method))
     a_err = a_out.reshape(B, draws) - alpha[:, None]
     f_err = np.hypot(*(f_out.reshape(B, draws, 2) - force[:, None, :]).transpose(2, 0, 1))
     length = _link_length(robot, q, link)

@@ -181,3 +181,62 @@ def test_leg_poke_summary(capsys):
     code, out, _ = run(capsys, LEG_POKE, "--json")
     (iv,) = json.loads(out)["intervals"]
     assert code == 0 and iv["link"] == 2 and abs(iv["alpha"] - 0.4) < 1e-3
+
+
+def test_timing_option_side_file_and_bad_value(capsys, tmp_path, good_log):
+    import shutil
+
+    code, out, _ = run(capsys, good_log, "--json")
+    assert code == 0 and json.loads(out)["timing_source"] == "default (instantaneous)"
+    log = tmp_path / "declared.csv"
+    shutil.copy(good_log, log)
+    (tmp_path / "declared.timing.toml").write_text('[timing]\ndefault = "mean"\n')
+    code, out, _ = run(capsys, log, "--json")
+    s = json.loads(out)
+    assert code == 0 and s["timing"] == "mean" and s["timing_source"] == "log declaration"
+    code, out, _ = run(capsys, log, "--timing", "delay:0.001")
+    assert code == 0 and "sensor timing: delay:0.001 (option)" in out
+    err = _bad(capsys, good_log, "--timing", "sometimes")
+    assert "--timing" in err
+    (tmp_path / "declared.timing.toml").write_text('[timing]\nFy = "mean"\n')
+    err = _bad(capsys, log)
+    assert "timing.Fy" in err
+
+
+def test_dynamic_default_is_the_chi_square_detector(capsys, good_log):
+    code, out, _ = run(capsys, good_log, "--json")
+    s = json.loads(out)
+    assert code == 0 and s["detector"].startswith("chi-square")
+    assert s["false_alarm_rate_per_s"] == pytest.approx(1 / 3600)
+    assert "paper leg" in s["residual_noise_source"]
+    assert s["intervals"] and s["intervals"][0]["link"] == 1
+    code, out, _ = run(capsys, good_log, "--json", "--threshold", "0.06")
+    assert json.loads(out)["detector"].startswith("paper rule")
+
+
+@pytest.mark.parametrize("option,value,name", [
+    ("--torque-sigma", "0", "torque sigma"), ("--ft-sigma", "0.1,-0.1,0.01", "FT sigma"),
+    ("--false-alarm-rate", "1/sample", "--false-alarm-rate"),
+    ("--false-alarm-rate", "5000/s", "--false-alarm-rate"),
+    ("--quiet-window", "0.05:0.25", "--quiet-window"), ("--quiet-window", "abc", "--quiet-window")])
+def test_bad_detector_options_exit_2(capsys, good_log, option, value, name):
+    err = _bad(capsys, good_log, option, value)
+    assert name in err
+
+
+def test_parquet_log_and_output_match_csv(capsys, tmp_path, good_log):
+    pytest.importorskip("pyarrow")
+    log = read_log(good_log)
+    pq = tmp_path / "poke.parquet"
+    write_log(log, pq)
+    back = read_log(pq)
+    assert np.array_equal(back.q, log.q) and np.array_equal(back.tau_meas, log.tau_meas)
+    assert run(capsys, good_log, "--out", tmp_path / "a.csv")[0] == 0
+    assert run(capsys, pq, "--out", tmp_path / "b.parquet")[0] == 0
+    a = pd.read_csv(tmp_path / "a.csv")
+    b = pd.read_parquet(tmp_path / "b.parquet")
+    assert list(a.columns) == list(b.columns)
+    assert np.array_equal(a["contact"], b["contact"])
+    assert np.allclose(a["Fx"].fillna(0), b["Fx"].fillna(0), rtol=1e-8, atol=0)
+    (tmp_path / "junk.parquet").write_text("not parquet")
+    assert "Parquet" in _bad(capsys, tmp_path / "junk.parquet")

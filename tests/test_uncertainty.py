@@ -74,10 +74,6 @@ def test_monte_carlo_predicts_the_pipeline_on_a_noisy_log():
     np.testing.assert_allclose(rms, predicted.position_rms_m[0], rtol=0.10)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "known defect: localize_dynamic's ambiguity tolerance is absolute (1e-3), not scaled to the "
-    "residual noise; with Table II FT noise 23 % of draws (measured 2026-11-22) still report the "
-    "knee (link 1, α = 1) instead of refusing"))
 def test_force_along_the_link_is_flagged_not_guessed():
     """A force along link 2's axis passes through the knee: it is indistinguishable from a knee
     contact on link 1, and from any point of link 2. The answer must be refused, not a guess."""

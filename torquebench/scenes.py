@@ -62,6 +62,30 @@ class StaticScene:
 
 
 @dataclass(frozen=True)
+class ChainSpec:
+    """What the scene gives for the sensor chain (torquebench.pipeline reads it).
+
+    ``[flexure]``: ``design`` (a flexure TOML, run through the FEM) or ``strain_per_Nm``;
+    ``[sensor]``: ``file`` (bridge/amplifier/ADC TOML) and ``true_gain_factor`` (the real sensor's
+    gain over its model: 1.05 = 5 % more sensitive than calibrated, for validation);
+    ``[calibration]``: ``file`` (a stored calibration JSON) or a simulated loading session
+    (``masses_g``, ``lever_arm_m``, ``repeats``, ``n_avg``, ``seed``) fitted with emcee;
+    ``[source]``: ``log`` (a recorded CSV, optionally with raw ADC ``counts_columns``) or, when
+    absent, the simulation of the scene's top-level keys; ``[outputs] want = [...]``.
+    """
+
+    flexure_design: Path | None = None
+    strain_per_Nm: float | None = None
+    sensor_file: Path | None = None
+    true_gain_factor: float = 1.0
+    calibration_file: Path | None = None
+    session: dict | None = None              # masses_g, lever_arm_m, repeats, n_avg, seed
+    log_file: Path | None = None
+    counts_columns: tuple = ()
+    outputs: tuple = ()
+
+
+@dataclass(frozen=True)
 class Scene:
     name: str
     kind: str
@@ -70,10 +94,15 @@ class Scene:
     sim: SimConfig | None
     static: StaticScene | None
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
+    chain: ChainSpec = field(default_factory=ChainSpec)
+    robot: Robot | None = None
 
 
 def _resolve_robot(f: _Fields, data: dict) -> Robot:
     name = data.get("robot", "paper_leg.toml")
+    if isinstance(name, dict):                       # [robot] file = "..."
+        f.known(name, {"file"}, "robot")
+        name = f.string(name, "file", "robot", "paper_leg.toml")
     if not isinstance(name, str):
         raise f.err("robot", f"expected a file name, got {name!r}")
     for cand in (f.path.parent / name, REPO_ROOT / "robots" / name, Path(name)):
@@ -273,16 +302,114 @@ def _static(f: _Fields, data: dict, robot: Robot, name: str, kind: str) -> Stati
                        grid_shape=shape)
 
 
-def load_scene(path: str | Path) -> Scene:
-    """Read and validate a scene file."""
+OUTPUTS = ("sensitivity", "noise_budget", "flexure", "calibration", "estimates",
+           "localization_error", "predicted_error")
+SESSION_KEYS = {"masses_g", "lever_arm_m", "repeats", "n_avg", "seed"}
+
+
+def _file(f: _Fields, table: dict, key: str, where: str, shipped: str) -> Path:
+    """A file named in the scene: beside the scene, else in the repository's ``shipped`` folder."""
+    name = f.string(table, key, where)
+    for cand in (f.path.parent / name, REPO_ROOT / shipped / name, Path(name)):
+        if cand.is_file():
+            return cand
+    raise f.err(f"{where}.{key}", f"file {name!r} not found beside the scene or in {shipped}/")
+
+
+def _chain_spec(f: _Fields, data: dict, kind: str) -> ChainSpec:
+    fx = f.table(data, "flexure")
+    f.known(fx, {"design", "strain_per_Nm"}, "flexure")
+    if "design" in fx and "strain_per_Nm" in fx:
+        raise f.err("flexure.strain_per_Nm", "give either a flexure design or a strain_per_Nm, not both")
+    design = _file(f, fx, "design", "flexure", "scenes") if "design" in fx else None
+    spn = f.number(fx, "strain_per_Nm", "flexure", positive=True) if "strain_per_Nm" in fx else None
+    se = f.table(data, "sensor")
+    f.known(se, {"file", "true_gain_factor"}, "sensor")
+    sensor_file = _file(f, se, "file", "sensor", "scenes") if "file" in se else None
+    gain = f.number(se, "true_gain_factor", "sensor", 1.0, positive=True)
+    ca = f.table(data, "calibration")
+    f.known(ca, {"file"} | SESSION_KEYS, "calibration")
+    cal_file, session = None, None
+    if "file" in ca:
+        extra = sorted(set(ca) & SESSION_KEYS)
+        if extra:
+            raise f.err(f"calibration.{extra[0]}", "give either a calibration file or a simulated "
+                        "session, not both")
+        cal_file = _file(f, ca, "file", "calibration", "calibration/data")
+    elif ca:
+        masses = f.vector(ca, "masses_g", "calibration", positive=True,
+                          default=[10, 20, 50, 100, 200, 300, 500, 700, 850, 1000])
+        if masses.size < 3:
+            raise f.err("calibration.masses_g", f"need at least 3 load levels, got {masses.size}")
+        session = {"masses_g": masses.tolist(),
+                   "lever_arm_m": f.number(ca, "lever_arm_m", "calibration", 0.205, positive=True),
+                   "repeats": f.integer(ca, "repeats", "calibration", 3, lo=1),
+                   "n_avg": f.integer(ca, "n_avg", "calibration", 256, lo=1),
+                   "seed": f.integer(ca, "seed", "calibration", 0, lo=0)}
+    so = f.table(data, "source")
+    f.known(so, {"log", "counts_columns"}, "source")
+    log_file = _file(f, so, "log", "source", "samples") if "log" in so else None
+    cols = so.get("counts_columns", [])
+    if not isinstance(cols, list) or not all(isinstance(c, str) for c in cols):
+        raise f.err("source.counts_columns", f"expected a list of column names, got {cols!r}")
+    if cols and log_file is None:
+        raise f.err("source.counts_columns", "counts columns need a recorded log (source.log)")
+    if cols and cal_file is None and session is None:
+        raise f.err("source.counts_columns", "raw ADC counts need a [calibration] to become torques")
+    out = f.table(data, "outputs")
+    f.known(out, {"want"}, "outputs")
+    want = out.get("want", [])
+    if not isinstance(want, list) or not all(isinstance(w, str) for w in want):
+        raise f.err("outputs.want", f"expected a list of output names, got {want!r}")
+    for w in want:
+        if w not in OUTPUTS:
+            raise f.err("outputs.want", f"unknown output {w!r}{_nearest(w, OUTPUTS)} "
+                        f"(known: {', '.join(OUTPUTS)})")
+    return ChainSpec(design, spn, sensor_file, gain, cal_file, session, log_file, tuple(cols),
+                     tuple(want))
+
+
+def _nearest(key, allowed) -> str:
+    from userio.fields import nearest
+    return nearest(key, allowed)
+
+
+def set_key(data: dict, key: str, value, path) -> None:
+    """Set a dotted scene key (``calibration.seed``, ``poke.1.alpha``: list items 1-based)."""
+    if key == "flexure":          # --vary flexure=a.toml,b.toml (a design) or =5e-5,1e-4 (strain per N·m)
+        data["flexure"] = {"design" if isinstance(value, str) else "strain_per_Nm": value}
+        return
+    parts, node = key.split("."), data
+    for i, part in enumerate(parts):
+        last = i == len(parts) - 1
+        if isinstance(node, list):
+            if not part.isdigit() or not 1 <= int(part) <= len(node):
+                raise InputError(f"{path}: --vary {key}: {part!r} is not an item 1..{len(node)}")
+            if last:
+                node[int(part) - 1] = value
+            else:
+                node = node[int(part) - 1]
+        elif last:
+            node[part] = value
+        else:
+            node = node.setdefault(part, {})
+            if not isinstance(node, (dict, list)):
+                raise InputError(f"{path}: --vary {key}: {part!r} is not a table")
+
+
+def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
+    """Read and validate a scene file (``overrides``: dotted keys set before validation)."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: scene file not found")
     data = read_toml(path)
+    for key, value in (overrides or {}).items():
+        set_key(data, key, value, path)
     f = _Fields(path)
     f.known(data, {"name", "description", "kind", "robot", "base", "duration_s", "controller",
                    "poke", "ground", "sensors", "integrator", "mount", "estimator", "hold", "q_rad",
-                   "load", "grid", "contact"}, "")
+                   "load", "grid", "contact", "flexure", "sensor", "calibration", "source",
+                   "outputs"}, "")
     name = data.get("name", path.stem)
     if not isinstance(name, str):
         raise f.err("name", f"expected a string, got {name!r}")
@@ -290,9 +417,15 @@ def load_scene(path: str | Path) -> Scene:
     robot = _resolve_robot(f, data)
     desc = str(data.get("description", ""))
     est = _estimator(f, data)
+    chain = _chain_spec(f, data, kind)
+    if kind == "dynamic" and chain.log_file is not None:
+        sim_keys = sorted(set(data) & {"controller", "poke", "ground", "integrator", "mount"})
+        if sim_keys:
+            raise f.err(sim_keys[0], "a scene with a recorded log (source.log) has no simulation keys")
+        return Scene(name, kind, path, desc, None, None, est, chain, robot)
     if kind == "dynamic":
-        return Scene(name, kind, path, desc, _dynamic(f, data, robot, name), None, est)
-    return Scene(name, kind, path, desc, None, _static(f, data, robot, name, kind), est)
+        return Scene(name, kind, path, desc, _dynamic(f, data, robot, name), None, est, chain, robot)
+    return Scene(name, kind, path, desc, None, _static(f, data, robot, name, kind), est, chain, robot)
 
 
 def scene_path(name: str) -> Path:

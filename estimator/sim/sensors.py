@@ -1,7 +1,9 @@
 """Sensor models applied to the sampled truth: joint torque, FT wrench, encoders.
 
-torque: τ_meas = τ + N(0, σ_τ²) ("gaussian"), or read through bridge.chain.paper_chain() ("bridge":
-torque → strain → bridge volts → ADC counts → torque, with its own noise and quantization).
+torque: τ_meas = τ + N(0, σ_τ²) ("gaussian"), or read through a bridge.chain.SensorChain ("bridge":
+torque → strain → bridge volts → ADC counts → torque, with its own noise and quantization): the
+``chain`` given to :func:`measure` (the one sensor model of torquebench.pipeline, e.g. a flexure's
+strain per N·m), else the paper's ``paper_chain()``.
 FT: W_meas = W + N(0, diag σ_FT²). Encoders: q_meas = Δ round(q / Δ), Δ = 2π / counts.
 """
 
@@ -22,8 +24,10 @@ def bridge_chain():
     return paper_chain()
 
 
-def measure(sensors: Sensors, q, dq, tau_Nm, wrench, n_base: int):
-    """Noisy, quantized readings (q, q̇, τ, W) of the true sampled signals (arrays (T, ·))."""
+def measure(sensors: Sensors, q, dq, tau_Nm, wrench, n_base: int, chain=None):
+    """Noisy, quantized readings (q, q̇, τ, W) of the true sampled signals (arrays (T, ·)).
+
+    ``chain``: the torque sensor's SensorChain for ``torque_model = "bridge"`` (default: paper's)."""
     rng = np.random.default_rng(sensors.seed)
     q = np.array(q, dtype=float, copy=True)
     dq = np.array(dq, dtype=float, copy=True)
@@ -33,7 +37,7 @@ def measure(sensors: Sensors, q, dq, tau_Nm, wrench, n_base: int):
     if sensors.velocity_noise_rad_per_s > 0:
         dq[:, n_base:] += rng.normal(0.0, sensors.velocity_noise_rad_per_s, dq[:, n_base:].shape)
     if sensors.torque_model == "bridge":
-        chain = bridge_chain()
+        chain = chain if chain is not None else bridge_chain()
         if chain is None:
             raise InputError("sensors.torque_model: 'bridge' needs bridge.chain.paper_chain, "
                              "which this installation does not provide; use 'gaussian'")

@@ -37,7 +37,7 @@ def _count(text: str) -> int:
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("log", type=Path, metavar="LOG.csv", help="sensor log CSV: t,[x,z,theta,]q1,q2,[dx,dz,dtheta,]dq1,dq2,tau1,tau2,Fx,Fz,My in SI units (docs/conventions.md)")
+    parser.add_argument("log", type=Path, metavar="LOG.csv", help="sensor log: CSV (or Parquet for .parquet) with t,[x,z,theta,]q1,q2,[dx,dz,dtheta,]dq1,dq2,tau1,tau2,Fx,Fz,My in SI units (docs/conventions.md)")
     parser.add_argument("--robot", type=Path, default=None,
                         help="robot TOML (default: robots/paper_leg.toml)")
     parser.add_argument("--method", choices=["paper", "dynamic"], default="dynamic",
@@ -45,15 +45,76 @@ def add_arguments(parser) -> None:
                              "or 'paper' (eqs. 6-9, quasi-static)")
     parser.add_argument("--gain", type=_positive, default=100.0, metavar="K",
                         help="observer gain K in 1/s on every row (default: %(default)s)")
-    parser.add_argument("--threshold", type=_positive, default=0.06, metavar="EPS",
-                        help="detection threshold on the residual norm ||r|| (default: %(default)s)")
+    parser.add_argument("--threshold", type=_positive, default=None, metavar="EPS",
+                        help="use the paper's rule ||r|| > EPS (default for --method paper, EPS 0.06)")
+    parser.add_argument("--false-alarm-rate", default="1/h", metavar="RATE",
+                        help="dynamic detector: target false alarms, e.g. 1/h (default), 0.01/s, "
+                             "1e-6/sample; must be in (0, 1) per sample")
+    parser.add_argument("--quiet-window", default=None, metavar="T0:T1",
+                        help="estimate the residual noise from this contact-free stretch (seconds) "
+                             "instead of the sensor noise model")
+    parser.add_argument("--torque-sigma", default=None, metavar="NM[,NM...]",
+                        help="joint torque noise σ per sample, N·m (default 0.005, paper leg)")
+    parser.add_argument("--ft-sigma", default=None, metavar="FX,FZ,MY",
+                        help="FT sensor noise σ per sample, N, N, N·m (default 0.1,0.1,0.01)")
+    parser.add_argument("--velocity-sigma", default=None, metavar="RAD_PER_S",
+                        help="joint-rate noise σ per sample (default 0)")
+    parser.add_argument("--encoder-counts", default=None, metavar="COUNTS",
+                        help="encoder counts per revolution (quantization noise; default 0 = none)")
     parser.add_argument("--debounce", type=_count, default=0, metavar="N",
                         help="samples ||r|| must stay above EPS before a contact is declared (default: %(default)s)")
     parser.add_argument("--stance-foot", action="store_true",
                         help="the foot (last link, alpha=1) is an expected contact, estimated jointly")
-    parser.add_argument("--force", action="store_true", help="replace an existing --out file")
+    parser.add_argument("--timing", default=None, metavar="instant|mean|delay:SECONDS",
+                        help="how every force channel (tau, Fx, Fz, My) was sampled: the value at "
+                             "the sample time, the mean over the preceding interval, or a filter "
+                             "with this group delay (default: LOG.timing.toml beside the log, "
+                             "else instant)")
     parser.add_argument("--out", type=Path, default=None, metavar="OUT.csv",
-                        help="write t,contact,link,alpha,Fx,Fz,px,pz,rnorm per sample (s, -, -, -, N, N, m, m, -) to this CSV; its directory is created, an existing file is kept unless --force")
+                        help="write t,contact,link,alpha,Fx,Fz,px,pz,rnorm per sample (s, -, -, -, N, N, m, m, -); "
+                             "Parquet for .parquet, else CSV; its directory is created, an existing file is kept unless --force")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out file")
+
+
+def _floats(text, where, count=None):
+    from torquebench.errors import InputError
+
+    try:
+        values = [float(v) for v in str(text).split(",")]
+    except ValueError:
+        raise InputError(f"{where}: expected comma-separated numbers, got {text!r}") from None
+    if count is not None and len(values) != count:
+        raise InputError(f"{where}: expected {count} values, got {len(values)}")
+    return values
+
+
+def _detector_options(args, n_links):
+    """(NoiseModel or None, quiet window or None, (rate, unit)) from the options."""
+    from estimator.noise import NoiseModel, paper_leg_noise, parse_rate
+    from torquebench.errors import InputError
+
+    rate = parse_rate(args.false_alarm_rate, "--false-alarm-rate")
+    if not (math.isfinite(rate[0]) and rate[0] > 0):
+        raise InputError(f"--false-alarm-rate: must be > 0, got {args.false_alarm_rate!r}")
+    quiet = None
+    if args.quiet_window is not None:
+        parts = str(args.quiet_window).split(":")
+        if len(parts) != 2:
+            raise InputError(f"--quiet-window: expected T0:T1 in seconds, got {args.quiet_window!r}")
+        quiet = tuple(_floats(p, "--quiet-window", 1)[0] for p in parts)
+    given = [args.torque_sigma, args.ft_sigma, args.velocity_sigma, args.encoder_counts]
+    if all(v is None for v in given):
+        return None, quiet, rate
+    base = paper_leg_noise()
+    tau = _floats(args.torque_sigma, "--torque-sigma") if args.torque_sigma is not None else base.torque_sigma_Nm
+    if len(tau) not in (1, n_links):
+        raise InputError(f"--torque-sigma: expected 1 or {n_links} values, got {len(tau)}")
+    ft = _floats(args.ft_sigma, "--ft-sigma", 3) if args.ft_sigma is not None else base.ft_sigma
+    vel = _floats(args.velocity_sigma, "--velocity-sigma", 1)[0] if args.velocity_sigma is not None else 0.0
+    enc = _floats(args.encoder_counts, "--encoder-counts", 1)[0] if args.encoder_counts is not None else 0
+    src = "--torque-sigma/--ft-sigma/--velocity-sigma/--encoder-counts"
+    return NoiseModel(torque_sigma_Nm=tau, ft_sigma=ft, velocity_sigma_rad_per_s=vel,
+                      encoder_counts=enc, source=src), quiet, rate
 
 
 def run(args) -> int:
@@ -77,15 +138,24 @@ def run(args) -> int:
     prepare_file(args.out, "--out", force=args.force, inputs=(args.log, args.robot))
     robot = load_robot(args.robot or PAPER_LEG_TOML)
     log = read_log(args.log, robot)
+    noise, quiet, rate = _detector_options(args, robot.n_links)
+    timing = None
+    if args.timing is not None:
+        from estimator.timing import uniform
+        timing = uniform(args.timing, robot.n_links, "--timing")
     result = estimate(robot, log, method=args.method, gain_per_s=args.gain,
                       threshold=args.threshold, debounce=args.debounce,
-                      expected_contacts="foot" if args.stance_foot else None)
+                      expected_contacts="foot" if args.stance_foot else None, timing=timing,
+                      noise=noise, quiet_window=quiet, false_alarm_rate=rate)
     if args.out is not None:
         with atomic_path(args.out) as tmp:
-            result.to_frame().to_csv(tmp, index=False, float_format="%.9g", na_rep="NaN")
+            if args.out.suffix.lower() == ".parquet":
+                result.to_frame().to_parquet(tmp, index=False)
+            else:
+                result.to_frame().to_csv(tmp, index=False, float_format="%.9g", na_rep="NaN")
     elapsed = time.perf_counter() - start
     summary = {"log": str(args.log), "robot": robot.name, "gain_per_s": args.gain,
-               "threshold": args.threshold, **result.summary(),
+               **result.summary(),
                "skipped_lines": log.skipped_lines[:20].tolist(), "run_time_s": elapsed}
     if args.out is not None:
         summary["out"] = str(args.out)
@@ -94,10 +164,20 @@ def run(args) -> int:
         return 0
     print(f"{args.log}: {summary['samples']} samples ({summary['skipped_samples']} skipped for NaN/inf), "
           f"method {args.method}, {summary['contact_samples']} in contact, {elapsed:.2f} s")
+    print(f"  sensor timing: {summary['timing']} ({summary['timing_source']})")
+    if "chi2_threshold" in summary:
+        print(f"  detector: chi-square, {summary['false_alarm_rate_per_s'] * 3600:.3g} false alarms/h "
+              f"({summary['false_alarm_probability_per_sample']:.3g}/sample); residual noise from "
+              f"{summary['residual_noise_source']}")
+    else:
+        print(f"  detector: {summary['detector']}, threshold {summary['threshold']:g}")
     for iv in summary["intervals"]:
+        def pm(key, fmt):
+            err = iv.get(f"{key}_error_estimate")
+            return f"{iv[key]:{fmt}}" + (f" ± {err:{fmt}}" if err is not None else "")
         print(f"  contact {iv['t_start_s']:.4f}-{iv['t_end_s']:.4f} s: link {iv['link']}, "
-              f"alpha {iv['alpha']:.3f}, F = ({iv['Fx_N']:.3f}, {iv['Fz_N']:.3f}) N, "
-              f"p = ({iv['px_m']:.4f}, {iv['pz_m']:.4f}) m")
+              f"alpha {pm('alpha', '.3f')}, F = ({pm('Fx_N', '.3f')}, {pm('Fz_N', '.3f')}) N, "
+              f"p = ({pm('px_m', '.4f')}, {pm('pz_m', '.4f')}) m")
     if args.out is not None:
         print(f"wrote {args.out}")
     return 0

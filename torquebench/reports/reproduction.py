@@ -99,16 +99,14 @@ def _stats(err, mask):
 def evaluate_dynamic(scene, res, *, with_traces=True) -> dict:
     """Estimate a simulated dynamic scene with both methods (+ filtered dynamic) and score them."""
     from estimator.pipeline import estimate
+    from torquebench.pipeline import collision_phase_mask
 
     cfg = scene.sim
     K = scene.estimator.gain_per_s
     robot = cfg.robot.with_base(cfg.base == "floating")
     truth, t = res.truth, res.t
     on = truth["link"] > 0
-    phase = np.zeros_like(on)
-    for p in cfg.pokes:
-        if p.t_off_s > p.t_on_s:
-            phase |= (t >= p.t_on_s + p.ramp_s + 5.0 / K) & (t < p.t_off_s)
+    phase = collision_phase_mask(t, cfg.pokes, K)      # the one definition (torquebench.pipeline)
     quiet = ~on & (t > 0.2)
     for p in cfg.pokes:   # the observer's decay after a poke ends is not a false positive
         quiet &= ~((t >= p.t_off_s) & (t < p.t_off_s + p.ramp_s + 5.0 / K))

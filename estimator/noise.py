@@ -1,0 +1,202 @@
+"""The observer residual's noise under no contact, and a detector with a stated false-alarm rate.
+
+The exact observer (estimator.observer) is the linear filter r_{k+1} = a ∘ r_k + b ∘ d_k with
+d_k = (P_{k+1} − P_k)/Δt − ū_k. Sensor noise e_k = [n_τ (n rows: Fx, Fz, My, τ_1…τ_N),
+n_q̇ (N joint rates), n_q (N joint angles)], white with Σ_e = diag(σ²), enters d_k as the moving
+average d_k = B0 e_{k+1} + B1 e_k (linearized at the posture):
+
+    B0 = [−c₁ I,  M_j/Δt − ½ ∂u/∂q̇_j,  ∂P/∂q_j/Δt − ½ ∂u/∂q_j]
+    B1 = [−c₀ I, −M_j/Δt − ½ ∂u/∂q̇_j, −∂P/∂q_j/Δt − ½ ∂u/∂q_j]
+
+(c₁ = c₀ = ½ for instantaneous readings, c₁ = 1, c₀ = 0 for interval means). With S0 = B0ΣB0ᵀ +
+B1ΣB1ᵀ and S1 = Cov(d_k, d_{k−1}) = B1ΣB0ᵀ, the stationary covariance (the discrete Lyapunov
+equation R = A R A + b bᵀ-terms, solved in closed form for the diagonal A) is
+
+    R_ij = b_i b_j (S0_ij + a_j S1_ij + a_i S1_ji) / (1 − a_i a_j).
+
+Detector: z_k = L_k⁻¹ r_k with L_k Lᵀ_k = R(posture_k), s_k = ‖z_k‖² ~ χ²_n under no contact;
+flag s_k > h with P(χ²_n > h) = α (the false-alarm probability per sample). The marginal law holds
+for the correlated r_k too, so the expected fraction of flagged contact-free samples is α, and the
+number of alarm onsets per second is at most α/Δt.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimator.errors import InputError
+
+DEFAULT_FALSE_ALARMS_PER_S = 1.0 / 3600.0
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """White sensor noise per sample (1σ): joint torques (N,), FT wrench [Fx N, Fz N, My N·m],
+    joint-rate noise and encoder resolution (0 = none)."""
+
+    torque_sigma_Nm: np.ndarray
+    ft_sigma: np.ndarray
+    velocity_sigma_rad_per_s: float = 0.0
+    encoder_counts: int = 0
+    source: str = "option"
+
+    def __post_init__(self):
+        for name, where in (("torque_sigma_Nm", "torque sigma"), ("ft_sigma", "FT sigma")):
+            v = np.atleast_1d(np.asarray(getattr(self, name), float))
+            if not np.all(np.isfinite(v)) or np.any(v <= 0):
+                raise InputError(f"{self.source}: {where}: every σ must be finite and > 0, got {v.tolist()}")
+            object.__setattr__(self, name, v)
+        if self.ft_sigma.shape != (3,):
+            raise InputError(f"{self.source}: FT sigma: needs 3 values [Fx, Fz, My], got {self.ft_sigma.size}")
+        if not (np.isfinite(self.velocity_sigma_rad_per_s) and self.velocity_sigma_rad_per_s >= 0):
+            raise InputError(f"{self.source}: velocity sigma must be finite and ≥ 0")
+        if int(self.encoder_counts) != self.encoder_counts or self.encoder_counts < 0:
+            raise InputError(f"{self.source}: encoder counts must be a whole number ≥ 0")
+
+    def describe(self) -> str:
+        return (f"{self.source}: τ σ {np.round(self.torque_sigma_Nm, 6).tolist()} N·m, FT σ "
+                f"{np.round(self.ft_sigma, 6).tolist()}, q̇ σ {self.velocity_sigma_rad_per_s:g} rad/s, "
+                f"encoder {self.encoder_counts} counts/rev")
+
+
+def paper_leg_noise() -> NoiseModel:
+    """The paper leg's sensors (issue 14): FT σ = 0.1 N, 0.1 N, 0.01 N·m; joint torque σ 0.005 N·m."""
+    return NoiseModel(torque_sigma_Nm=[0.005], ft_sigma=[0.1, 0.1, 0.01],
+                      source="default noise (paper leg sensors)")
+
+
+def per_sample_rate(value: float, unit: str, dt_s: float, where: str = "--false-alarm-rate") -> float:
+    """α per sample from a rate per 'sample', 's' or 'h'; must end in (0, 1) per sample."""
+    scale = {"sample": 1.0, "s": dt_s, "h": dt_s / 3600.0}
+    if unit not in scale:
+        raise InputError(f"{where}: unknown unit {unit!r}; use /sample, /s or /h")
+    alpha = float(value) * scale[unit]
+    if not (np.isfinite(alpha) and 0 < alpha < 1):
+        raise InputError(f"{where}: the false-alarm rate must be in (0, 1) per sample, got "
+                         f"{alpha:g} per sample ({value:g}/{unit} at Δt = {dt_s:g} s)")
+    return alpha
+
+
+def parse_rate(text: str, where: str = "--false-alarm-rate") -> tuple[float, str]:
+    """'1/h', '0.01/s', '1e-6/sample', or a bare number (per second) → (value, unit)."""
+    s = str(text).strip().replace(" ", "")
+    value, _, unit = s.partition("/")
+    try:
+        v = float(value)
+    except ValueError:
+        raise InputError(f"{where}: expected a rate like 1/h, 0.01/s or 1e-6/sample, got {text!r}") from None
+    return v, (unit or "s")
+
+
+def _jacobians(robot, q, dq, h=1e-6):
+    """∂P/∂q, ∂P/∂q̇ (= M), ∂u/∂q, ∂u/∂q̇ at B postures by central differences: (B, n, n) each,
+    u = Cᵀq̇ − G (the model part; τ_meas enters with the identity)."""
+    from estimator.observer import chain_terms, full_robot
+
+    rob = full_robot(robot)
+    q = np.atleast_2d(q)
+    dq = np.atleast_2d(dq)
+    B, n = q.shape
+    eye = np.eye(n) * h
+    out = []
+    for which in (0, 1):
+        qq = np.repeat(q[:, None], 2 * n, axis=1)
+        dd = np.repeat(dq[:, None], 2 * n, axis=1)
+        tgt = qq if which == 0 else dd
+        tgt[:, :n] += eye
+        tgt[:, n:] -= eye
+        t = chain_terms(rob, qq.reshape(-1, n), dd.reshape(-1, n))
+        P = t["P"].reshape(B, 2 * n, n)
+        u = (t["CTdq"] - t["G"]).reshape(B, 2 * n, n)
+        out.append(((P[:, :n] - P[:, n:]) / (2 * h)).transpose(0, 2, 1))   # (B, row, coord)
+        out.append(((u[:, :n] - u[:, n:]) / (2 * h)).transpose(0, 2, 1))
+    JPq, Juq, JPdq, Judq = out
+    return JPq, JPdq, Juq, Judq
+
+
+def residual_covariance(robot, q, dq, noise: NoiseModel, gain_per_s, dt_s: float, timing=None):
+    """Stationary no-contact covariance of the exact observer's residual, (B, n, n) (module doc)."""
+    from estimator import observer
+
+    q = np.atleast_2d(np.asarray(q, float))
+    dq = np.atleast_2d(np.asarray(dq, float))
+    B, n = q.shape
+    N = n - 3
+    K = observer.gains(robot, gain_per_s)
+    a, b = observer.coefficients(K, dt_s, "exact")
+    JPq, JPdq, Juq, Judq = _jacobians(robot, q, dq)
+    mean = np.zeros(n, bool) if timing is None else np.array([k == "mean" for k, _ in timing])
+    c1 = np.where(mean, 1.0, 0.5)
+    c0 = np.where(mean, 0.0, 0.5)
+    j = slice(3, n)
+    sig_tau = np.concatenate([noise.ft_sigma, np.broadcast_to(noise.torque_sigma_Nm, (N,))])
+    sig_dq = np.full(N, noise.velocity_sigma_rad_per_s)
+    sig_q = np.full(N, (2 * np.pi / noise.encoder_counts) / np.sqrt(12) if noise.encoder_counts else 0.0)
+    sig = np.concatenate([sig_tau, sig_dq, sig_q])
+    B0 = np.concatenate([np.broadcast_to(-np.diag(c1), (B, n, n)),
+                         JPdq[:, :, j] / dt_s - 0.5 * Judq[:, :, j],
+                         JPq[:, :, j] / dt_s - 0.5 * Juq[:, :, j]], axis=2) * sig
+    B1 = np.concatenate([np.broadcast_to(-np.diag(c0), (B, n, n)),
+                         -JPdq[:, :, j] / dt_s - 0.5 * Judq[:, :, j],
+                         -JPq[:, :, j] / dt_s - 0.5 * Juq[:, :, j]], axis=2) * sig
+    S0 = B0 @ B0.transpose(0, 2, 1) + B1 @ B1.transpose(0, 2, 1)
+    S1 = B1 @ B0.transpose(0, 2, 1)
+    num = S0 + S1 * a[None, None, :] + S1.transpose(0, 2, 1) * a[None, :, None]
+    return np.outer(b, b) * num / (1.0 - np.outer(a, a))
+
+
+def quiet_covariance(r: np.ndarray, t: np.ndarray, t0: float, t1: float, gain_per_s,
+                     dt_s: float, where: str = "--quiet-window") -> np.ndarray:
+    """Robust covariance of r over t0 ≤ t ≤ t1 (MAD scale, correlation of winsorized values at
+    ±4σ), (n, n). Refuses a stretch whose first and last quarters differ by more than 6 standard
+    errors (a contact, or a drift) on any row."""
+    from estimator.detection import robust_sigma
+
+    if not (np.isfinite(t0) and np.isfinite(t1) and t1 > t0):
+        raise InputError(f"{where}: expected T0:T1 with T0 < T1 (seconds), got {t0:g}:{t1:g}")
+    sel = (t >= t0) & (t <= t1)
+    x = r[sel]
+    a = float(np.exp(-np.min(np.atleast_1d(gain_per_s)) * dt_s))
+    tau_c = (1 + a) / (1 - a)                       # samples per independent value of r
+    if len(x) < 20 * tau_c:
+        raise InputError(f"{where}: {len(x)} samples in {t0:g}–{t1:g} s; need at least "
+                         f"{int(np.ceil(20 * tau_c))} (20 observer time constants)")
+    med = np.median(x, axis=0)
+    sig = robust_sigma(x, axis=0)
+    if np.any(sig <= 0):
+        raise InputError(f"{where}: the residual is constant on some row in {t0:g}–{t1:g} s "
+                         f"(a noise-free log?); give a noise model instead")
+    m = len(x) // 4
+    se = sig * np.sqrt(2 * 1.57 * tau_c / m)
+    z = np.abs(np.median(x[:m], axis=0) - np.median(x[-m:], axis=0)) / se
+    if np.any(z > 6):
+        raise InputError(f"{where}: the residual changes within {t0:g}–{t1:g} s ({z.max():.0f} "
+                         f"standard errors between its first and last quarter): it contains a "
+                         f"contact or a drift; mark a stretch without contact")
+    w = np.clip((x - med) / sig, -4, 4)
+    C = np.corrcoef(w, rowvar=False)
+    return C * np.outer(sig, sig)
+
+
+def chi2_threshold(alpha: float, n: int) -> float:
+    """h with P(χ²_n > h) = α."""
+    from scipy.stats import chi2
+
+    return float(chi2.isf(alpha, n))
+
+
+def whitened_statistic(r: np.ndarray, R: np.ndarray, stride: int | None = None) -> np.ndarray:
+    """s_k = r_kᵀ R⁻¹ r_k, with one R (n, n), or R (B, n, n) per block of ``stride`` samples
+    (sample k uses R[k // stride])."""
+    R = np.asarray(R, float)
+    T, n = r.shape
+    if R.ndim == 2:
+        R, stride = R[None], max(T, 1)
+    Linv = np.linalg.inv(np.linalg.cholesky(R))                # (B, n, n)
+    B = Linv.shape[0]
+    pad = np.zeros((B * stride, n))
+    pad[:T] = r
+    z = np.einsum("bij,bsj->bsi", Linv, pad.reshape(B, stride, n)).reshape(-1, n)[:T]
+    return np.einsum("tk,tk->t", z, z)

@@ -1,0 +1,28 @@
+"""`torquebench cache info|clear`: the stage-result cache (torquebench.cache)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+HELP = "show or clear the stage-result cache"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("action", choices=("info", "clear"))
+    parser.add_argument("--cache-dir", type=Path, default=None,
+                        help="cache directory (default $TORQUEBENCH_CACHE or .torquebench-cache)")
+
+
+def run(args) -> int:
+    from torquebench.cache import Cache
+    from torquebench.io import print_json
+
+    cache = Cache(args.cache_dir)
+    out = cache.info() if args.action == "info" else {"directory": str(cache.dir), "removed": cache.clear()}
+    if args.json:
+        print_json(out)
+    elif args.action == "info":
+        print(f"{out['directory']}: {out['entries']} entries, {out['size_bytes'] / 1e6:.1f} MB")
+    else:
+        print(f"{out['directory']}: removed {out['removed']} entries")
+    return 0

@@ -1,0 +1,97 @@
+"""`torquebench compare SCENE.toml --vary flexure.design=a.toml,b.toml`: designs end to end.
+
+Each value of the varied key (any dotted scene key) runs the scene's stage graph (torquebench.sweep);
+per variant: sensitivity, torsional stiffness and safety factor (when the scene has a flexure
+design), torque noise, and the predicted (Monte Carlo) and simulated localization error.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+HELP = "compare designs (or any scene key) end to end: sensitivity, stiffness, noise, localization error"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("scene", type=Path, help="scene TOML (e.g. scenes/end_to_end.toml)")
+    parser.add_argument("--vary", action="append", required=True, metavar="KEY=V1,V2",
+                        help="dotted scene key and its values, e.g. flexure.design=a.toml,b.toml")
+    parser.add_argument("--executor", default="local", help="local (default), processes:N, dask://HOST:PORT")
+    parser.add_argument("--png", type=Path, default=None, help="write a bar chart of the comparison")
+    parser.add_argument("--cache-dir", type=Path, default=None, help="cache directory")
+
+
+def row(r: dict) -> dict:
+    """One comparison row from a sweep point."""
+    if "error" in r:
+        return {"point": r["point"], "error": r["error"]}
+    res = r["result"]
+    fx, s = res.get("flexure", {}), res.get("sensor", {})
+    pr = res.get("predicted", {}).get("dynamic", {})
+    me = res.get("measured", {}).get("dynamic", {})
+    return {"point": r["point"],
+            "sensitivity_V_per_Nm": s.get("sensitivity_V_per_Nm"),
+            "torsional_stiffness_Nm_per_rad": fx.get("torsional_stiffness_Nm_per_rad"),
+            "safety_factor": fx.get("safety_factor"),
+            "torque_noise_std_Nm": s.get("torque_noise_std_Nm"),
+            "predicted_position_rms_m": pr.get("position_rms_m"),
+            "predicted_position_rms_m_error_estimate": pr.get("position_rms_m_error_estimate"),
+            "predicted_position_rms_m_error_method": pr.get("position_rms_m_error_method"),
+            "simulated_position_rms_m": me.get("position_error_rms_m")}
+
+
+def run(args) -> int:
+    from torquebench.io import print_json
+    from torquebench.scenes import scene_path
+    from torquebench.sweep import parse_vary, run_sweep
+
+    path = scene_path(str(args.scene))
+    rows = [row(r) for r in run_sweep(path, parse_vary(args.vary), None, args.executor,
+                                      str(args.cache_dir) if args.cache_dir else None)]
+    out = {"scene": str(path), "rows": rows}
+    if args.png:
+        _plot(args.png, rows)
+        out["png"] = str(args.png)
+    if args.json:
+        print_json(out)
+        return 0
+    f = (lambda v, k=1.0, d=3: "—" if v is None or (isinstance(v, float) and math.isnan(v))   # noqa: E731
+         else f"{v * k:.{d}g}")
+    print(f"{'variant':30s} {'mV/N·m':>8s} {'N·m/rad':>9s} {'SF':>6s} {'σ_τ N·m':>9s} "
+          f"{'pred. mm':>9s} {'sim. mm':>8s}")
+    for r in rows:
+        name = ", ".join(f"{k}={v}" for k, v in r["point"].items())[:30]
+        if "error" in r:
+            print(f"{name:30s} FAILED: {r['error']}")
+            continue
+        print(f"{name:30s} {f(r['sensitivity_V_per_Nm'], 1e3):>8s} "
+              f"{f(r['torsional_stiffness_Nm_per_rad']):>9s} {f(r['safety_factor']):>6s} "
+              f"{f(r['torque_noise_std_Nm']):>9s} {f(r['predicted_position_rms_m'], 1e3):>9s} "
+              f"{f(r['simulated_position_rms_m'], 1e3):>8s}")
+    return 0
+
+
+def _plot(path: Path, rows: list[dict]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from userio.files import atomic_path
+
+    ok = [r for r in rows if "error" not in r]
+    names = [", ".join(str(v) for v in r["point"].values()) for r in ok]
+    x = np.arange(len(ok))
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    val = lambda k: [r[k] if r[k] is not None else np.nan for r in ok]   # noqa: E731
+    a.bar(x - 0.2, np.array(val("predicted_position_rms_m")) * 1e3, 0.4, label="predicted (MC)")
+    a.bar(x + 0.2, np.array(val("simulated_position_rms_m")) * 1e3, 0.4, label="simulated")
+    a.set(xticks=x, xticklabels=names, ylabel="contact position RMS error [mm]")
+    a.legend()
+    b.bar(x, val("torque_noise_std_Nm"))
+    b.set(xticks=x, xticklabels=names, ylabel="torque noise σ_τ [N·m]")
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=100)
+    plt.close(fig)

@@ -1,0 +1,98 @@
+"""`torquebench run SCENE.toml`: the stage graph (torquebench.pipeline) on one scene.
+
+Built backwards from the requested outputs (``--only``, else the scene's ``[outputs] want``);
+``--explain`` prints each stage with run / skip / cached and the reason, without running.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+HELP = "run a scene through the stage graph (only the stages its outputs need)"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("scene", type=Path, help="scene TOML (e.g. scenes/end_to_end.toml)")
+    parser.add_argument("--only", nargs="+", metavar="OUTPUT", default=None,
+                        help="outputs to compute (localization_error, predicted_error, calibration, "
+                             "sensitivity, noise_budget, flexure, estimates)")
+    parser.add_argument("--explain", action="store_true", help="print the plan; run nothing")
+    parser.add_argument("--force", action="store_true", help="ignore cached results")
+    parser.add_argument("--seed", type=int, default=None, help="sensor-noise seed (default: the scene's)")
+    parser.add_argument("--cache-dir", type=Path, default=None,
+                        help="cache directory (default $TORQUEBENCH_CACHE or .torquebench-cache)")
+
+
+def summarize(arts: dict) -> dict:
+    """JSON-ready results of the computed artifacts (SI units, unit-suffixed keys)."""
+    out = {}
+    if "flexure" in arts:
+        out["flexure"] = arts["flexure"]
+    if "chain" in arts:
+        ch = arts["chain"]
+        out["sensor"] = {"strain_per_Nm": ch.strain_per_Nm, "sensitivity_V_per_Nm": ch.sensitivity_V_per_Nm,
+                         "torque_noise_std_Nm": ch.noise_std_Nm, "counts_per_Nm": ch.counts_per_Nm}
+    if "calibration" in arts:
+        cal = arts["calibration"]
+        sd = float(cal.coef_cov[0, 0] ** 0.5)
+        out["calibration"] = {"slope_counts_per_g": float(cal.coef_mean[0]),
+                              "slope_counts_per_g_error_estimate": sd,
+                              "slope_counts_per_g_error_method": "posterior standard deviation (emcee), 1σ",
+                              "offset_counts": float(cal.coef_mean[1])}
+        n, tau = cal.info.get("n_samples"), cal.info.get("tau_max")
+        if n and tau:
+            # Monte Carlo standard error of the posterior-mean slope: sd / √(N_eff), N_eff = N / τ
+            out["calibration"]["slope_mean_monte_carlo_standard_error_counts_per_g"] = sd / (n / tau) ** 0.5
+    if "torques" in arts:
+        out["flagged_samples"] = int(arts["torques"]["flagged"].any(axis=-1).sum())
+    if "localization_error" in arts:
+        out["measured"] = arts["localization_error"]
+    if "predicted_error" in arts:
+        out["predicted"] = arts["predicted_error"]
+    return out
+
+
+def run(args) -> int:
+    from torquebench import pipeline as P
+    from torquebench.cache import Cache
+    from torquebench.io import print_json
+    from torquebench.scenes import load_scene, scene_path
+
+    scene = load_scene(scene_path(str(args.scene)))
+    cache = Cache(args.cache_dir)
+    if args.explain:
+        steps = P.plan(scene, args.only, cache, args.seed, args.force)
+        rows = [{"stage": s.stage.name, "action": s.action, "reason": s.reason} for s in steps]
+        if args.json:
+            print_json({"scene": scene.name, "stages": rows})
+        else:
+            for r in rows:
+                print(f"{r['stage']:20s} {r['action']:7s} {r['reason']}")
+        return 0
+    arts, timing = P.execute(scene, args.only, cache, args.seed, args.force)
+    out = {"scene": scene.name, **summarize(arts),
+           "stages": [{"stage": n, "action": a, "time_s": t} for n, a, t in timing]}
+    if args.json:
+        print_json(out)
+        return 0
+    for n, a, t in timing:
+        print(f"  {n:20s} {a:7s} {t:7.2f} s", file=sys.stderr)
+    if "sensor" in out:
+        s = out["sensor"]
+        print(f"sensor: {s['strain_per_Nm']:.3g} strain/N·m, σ_τ = {s['torque_noise_std_Nm']:.4g} N·m per sample")
+    if "calibration" in out:
+        c = out["calibration"]
+        print(f"calibration: slope {c['slope_counts_per_g']:.5g} ± {c['slope_counts_per_g_error_estimate']:.2g} counts/g")
+    if "measured" in out or "predicted" in out:
+        print(f"{'method':8s} {'measured RMS |p| err':>21s} {'predicted RMS':>22s} {'predicted p95':>14s}")
+        for m in P.METHODS:
+            me = out.get("measured", {}).get(m, {}).get("position_error_rms_m")
+            pr = out.get("predicted", {}).get(m, {})
+            f = (lambda v: f"{v * 1e3:.2f} mm" if v is not None else "—")   # noqa: E731
+            pe = pr.get("position_rms_m_error_estimate")
+            pred = f"{f(pr.get('position_rms_m'))} ± {pe * 1e3:.2f} mm" if pe is not None else "—"
+            print(f"{m:8s} {f(me):>21s} {pred:>22s} {f(pr.get('position_p95_m')):>14s}")
+    if "flagged_samples" in out:
+        print(f"saturated/out-of-range samples kept out of detection: {out['flagged_samples']}")
+    return 0

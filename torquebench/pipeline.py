@@ -1,0 +1,479 @@
+"""The whole chain in one file: every stage, what it needs, what it gives, and the graph runner.
+
+    flexure_fem        [flexure].design           → flexure (FEM: strain per N·m, stiffness, safety)
+    sensor_chain       strain per N·m, [sensor]    → chain (bridge/ADC model; sensitivity, σ_τ)
+    calibration_session chain, [calibration]       → session (simulated 10–1000 g loading, ADC counts)
+    calibration_fit    session                     → calibration (emcee posterior → SensorModel)
+    simulation         scene's robot/controller/poke → truth (noise-free run: q, q̇, τ, W, contact)
+    raw_counts         truth, chain, seed          → readings (joint torques as ADC counts, FT noise)
+    calibrated_torques readings, calibration       → torques (τ̂ and σ per sample; rail samples NaN)
+    estimates          torques                     → estimates (observer + localizer, per method)
+    localization_error estimates, truth            → localization_error (collision-phase scores)
+    predicted_error    chain, calibration, truth   → predicted_error (Monte Carlo, same sensor/posture)
+
+The graph is built backwards from the requested outputs; a stage whose result the scene gives
+(a ``strain_per_Nm``, a calibration file, a recorded log) is not run. Stage results are cached
+on disk (torquebench.cache) under a key of the stage, its canonical inputs and the code version.
+Heavy packages are imported inside the stage functions only.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from userio.errors import InputError
+
+# the code version in every cache key: this file's content (any edit to a stage invalidates)
+CODE_VERSION = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
+METHODS = ("dynamic", "paper")
+
+
+@dataclass(frozen=True)
+class Stage:
+    name: str
+    needs: tuple          # artifact names
+    gives: str            # artifact name
+    doc: str
+
+
+STAGES = (
+    Stage("flexure_fem", (), "flexure", "tetrahedral FEM of the flexure design"),
+    Stage("sensor_chain", ("flexure?",), "chain", "bridge/amplifier/ADC model at the strain per N·m"),
+    Stage("calibration_session", ("chain",), "session", "simulated static loading session (ADC counts)"),
+    Stage("calibration_fit", ("session",), "calibration", "emcee fit of the loading session"),
+    Stage("simulation", (), "truth", "noise-free robot simulation"),
+    Stage("raw_counts", ("truth", "chain"), "readings", "joint torques as raw ADC counts + FT noise"),
+    Stage("calibrated_torques", ("readings", "calibration?", "chain?"), "torques",
+          "counts → torque through the fitted calibration"),
+    Stage("estimates", ("readings", "torques"), "estimates", "momentum observer + localizer"),
+    Stage("localization_error", ("estimates", "truth"), "localization_error",
+          "errors against the truth over the collision phase"),
+    Stage("predicted_error", ("chain", "calibration?", "truth?"), "predicted_error",
+          "Monte Carlo localization error for this sensor and posture"),
+)
+BY_GIVES = {s.gives: s for s in STAGES}
+ALIASES = {"sensitivity": "chain", "noise_budget": "chain"}
+DEFAULT_OUTPUTS = ("localization_error", "predicted_error")
+
+
+# ---------------------------------------------------------------- scoring (the one definition)
+def collision_phase_mask(t, pokes, gain_per_s: float) -> np.ndarray:
+    """The collision phase: t ∈ [t_on + ramp + 5/K, t_off) of each poke (after 5 observer time
+    constants the residual is within e⁻⁵ ≈ 0.7 % of the step)."""
+    t = np.asarray(t)
+    phase = np.zeros(t.shape, bool)
+    for p in pokes:
+        if p.t_off_s > p.t_on_s:
+            phase |= (t >= p.t_on_s + p.ramp_s + 5.0 / gain_per_s) & (t < p.t_off_s)
+    return phase
+
+
+def collision_phase_errors(est, truth, pokes, gain_per_s: float) -> dict:
+    """Mean/RMS |p̂ − p| and mean |F̂ − F| over the collision phase (collision_phase_mask), over
+    the samples with a finite estimate; the one scoring function of demo, run and the reports."""
+    phase = collision_phase_mask(truth["t"], pokes, gain_per_s) & (truth["link"] > 0)
+    ok = phase & np.isfinite(est.px)
+    dp = np.hypot(est.px[ok] - truth["px"][ok], est.pz[ok] - truth["pz"][ok])
+    dF = np.hypot(est.Fx[ok] - truth["Fx"][ok], est.Fz[ok] - truth["Fz"][ok])
+    return {"position_error_mean_m": float(dp.mean()) if dp.size else None,
+            "position_error_rms_m": float(np.sqrt(np.mean(dp ** 2))) if dp.size else None,
+            "force_error_mean_N": float(dF.mean()) if dF.size else None,
+            "scored_samples": int(ok.sum()), "collision_samples": int(phase.sum())}
+
+
+# ---------------------------------------------------------------- what the scene gives
+def given(scene, art: str) -> str | None:
+    """Why artifact ``art`` need not be computed (the scene gives it), or None."""
+    c = scene.chain
+    if art == "flexure" and c.flexure_design is None:
+        return "no [flexure].design" + (" (strain_per_Nm given)" if c.strain_per_Nm else "")
+    if art in ("session", "calibration") and c.calibration_file is not None:
+        return f"calibration file {c.calibration_file.name} given"
+    if art == "truth" and c.log_file is not None:
+        return f"recorded log {c.log_file.name} given"
+    return None
+
+
+def _params(scene, stage: str, seed) -> dict:
+    """The canonical inputs a stage reads from the scene (part of its cache key)."""
+    c = scene.chain
+    if stage == "flexure_fem":
+        return {"design": Path(c.flexure_design).read_text()}
+    if stage == "sensor_chain":
+        return {"spn": c.strain_per_Nm, "sensor": Path(c.sensor_file).read_text() if c.sensor_file else None}
+    if stage == "calibration_session":
+        return {"session": c.session}
+    if stage == "simulation":
+        return {"sim": repr(scene.sim).replace(f"seed={scene.sim.sensors.seed}", "seed=-")}
+    if stage == "raw_counts":
+        return {"gain": c.true_gain_factor, "seed": seed, "log": _file_hash(c.log_file),
+                "cols": c.counts_columns, "ft": repr(getattr(scene.sim, "sensors", None))}
+    if stage == "calibrated_torques":
+        return {"cal": _file_hash(c.calibration_file)}
+    if stage in ("estimates", "localization_error", "predicted_error"):
+        return {"est": repr(scene.estimator), "poke": repr(scene.sim.pokes if scene.sim else None)}
+    return {}
+
+
+def _file_hash(p):
+    return hashlib.sha256(Path(p).read_bytes()).hexdigest() if p else None
+
+
+# ---------------------------------------------------------------- the stage functions
+def run_flexure_fem(scene, inp):
+    from flexure.analysis import analyze          # the ONE call into the flexure package
+    from flexure.design import load_design
+
+    fx, _ = analyze(load_design(scene.chain.flexure_design))
+    if fx.get("nan_reason"):
+        raise InputError(f"{scene.path}: flexure.design: no trustworthy gauge strain ({fx['nan_reason']})")
+    keep = ("gauge_strain_per_Nm", "sensitivity_mV_per_V_per_Nm", "torsional_stiffness_Nm_per_rad",
+            "safety_factor", "dofs")
+    extra = {k: v for k, v in fx.items() if k.endswith(("_error_estimate", "_error_method"))}
+    return {**{k: fx.get(k) for k in keep}, **extra}      # FEM error estimates when analyze gives them
+
+
+def run_sensor_chain(scene, inp):
+    """The ONE sensor model: SensorChain(config of [sensor].file or the paper's, strain per N·m)."""
+    from bridge.chain import PAPER_STRAIN_PER_NM, SensorChain
+    from bridge.config import SensorConfig, load_sensor_config
+
+    c = scene.chain
+    config, spn = (load_sensor_config(c.sensor_file) if c.sensor_file else (SensorConfig(), None))
+    if inp.get("flexure"):
+        spn = inp["flexure"]["gauge_strain_per_Nm"]
+    elif c.strain_per_Nm is not None:
+        spn = c.strain_per_Nm
+    return SensorChain(config, spn or PAPER_STRAIN_PER_NM)
+
+
+def run_calibration_session(scene, inp):
+    """Dead weights m on lever L: τ = m g L; reading = mean of n_avg ADC codes of the chain."""
+    from calibration.session import G_STANDARD_M_PER_S2, Session
+
+    s, chain = scene.chain.session, inp["chain"]
+    rng = np.random.default_rng(s["seed"])
+    mass = np.tile(np.asarray(s["masses_g"], float), s["repeats"])
+    tau = mass * 1e-3 * G_STANDARD_M_PER_S2 * s["lever_arm_m"]
+    codes = chain.counts(np.repeat(tau[:, None], s["n_avg"], axis=1), rng)
+    n = mass.size
+    return Session(mass_g=mass, reading=codes.mean(axis=1), direction=np.array(["load"] * n),
+                   repeat=np.repeat(np.arange(s["repeats"]), len(s["masses_g"])),
+                   timestamp_s=np.full(n, np.nan), lever_arm_m=s["lever_arm_m"],
+                   sensor_id="simulated", reading_unit="counts", source=f"{scene.path}: calibration")
+
+
+def run_calibration_fit(scene, inp):
+    from calibration.fit import fit_session
+    from calibration.model import SensorModel
+
+    fit = fit_session(inp["session"], "linear", seed=scene.chain.session["seed"], n_walkers=64)
+    if not fit.converged:
+        raise InputError(f"{scene.path}: calibration: emcee did not converge ({fit.reason})")
+    k = len(fit.coef_names)
+    s = fit.thinned(2000)
+    return SensorModel(model="linear", coef_names=fit.coef_names, coef_mean=fit.mean[:k],
+                       coef_cov=fit.cov[:k, :k], sigma=fit.sigma, samples=s[:, :k],
+                       sigma_samples=np.exp(s[:, -1]), lever_arm_m=inp["session"].lever_arm_m,
+                       reading_unit="counts", sensor_id="simulated",
+                       info={"n_samples": int(fit.samples.shape[0]), "tau_max": fit.tau_max})
+
+
+def load_calibration(scene):
+    import calibration
+
+    return calibration.load(scene.chain.calibration_file)
+
+
+def run_simulation(scene, inp):
+    """Noise-free run (sensor noise is drawn by raw_counts, so seeds reuse this stage)."""
+    from dataclasses import replace
+
+    from estimator.sim import simulate
+    from estimator.sim.config import Sensors
+
+    cfg = scene.sim
+    quiet = Sensors(sample_rate_Hz=cfg.sensors.sample_rate_Hz, torque_model="gaussian",
+                    torque_noise_Nm=0.0, ft_noise=[0.0, 0.0, 0.0], seed=0)
+    res = simulate(replace(cfg, sensors=quiet))
+    return {"t": res.t, "q": res.q, "dq": res.dq, "tau_Nm": res.tau_Nm, "wrench": res.wrench,
+            "truth": res.truth, "floating": cfg.base == "floating", "stats": res.stats}
+
+
+def run_raw_counts(scene, inp, seed):
+    """Joint torques as ADC codes of the real sensor (true gain × model), FT and encoder noise
+    through estimator.sim.sensors.measure; codes at the rails are flagged (kept, never clipped
+    silently into a torque)."""
+    import warnings
+    from dataclasses import replace
+
+    from bridge.errors import ADCSaturationWarning
+    from estimator.sim.sensors import measure
+
+    if scene.chain.log_file is not None:
+        return _read_counts_log(scene)
+    tr, chain = inp["truth"], inp["chain"]
+    sensors = replace(scene.sim.sensors, seed=seed, torque_model="gaussian", torque_noise_Nm=0.0)
+    q, dq, _, W = measure(sensors, tr["q"], tr["dq"], tr["tau_Nm"], tr["wrench"], 3)
+    true_chain = replace(chain, strain_per_Nm=chain.strain_per_Nm * scene.chain.true_gain_factor)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ADCSaturationWarning)
+        codes = true_chain.counts(tr["tau_Nm"], np.random.default_rng([seed, 7]))
+    if not tr["floating"]:
+        q[:, :3] = dq[:, :3] = 0.0
+    return {"t": tr["t"], "q": q, "dq": dq, "counts": codes, "wrench": W, "floating": tr["floating"],
+            "rails": chain.code_limits}
+
+
+def _read_counts_log(scene):
+    """A recorded log; with counts columns, those are read here (pandas), torques come later."""
+    import pandas as pd
+
+    from estimator.log import read_log
+
+    c = scene.chain
+    log = read_log(c.log_file, scene.robot)
+    out = {"t": log.t, "q": log.q, "dq": log.dq, "wrench": log.wrench, "floating": log.floating,
+           "tau_Nm": log.tau_Nm}
+    if c.counts_columns:
+        frame = pd.read_csv(c.log_file, comment="#")
+        missing = [k for k in c.counts_columns if k not in frame.columns]
+        if missing:
+            raise InputError(f"{c.log_file}: column {missing[0]!r} (source.counts_columns) not in the log")
+        codes = frame[list(c.counts_columns)].to_numpy(float)
+        if log.valid_mask is not None:
+            codes = codes[log.valid_mask]
+        out["counts"] = codes
+        from bridge.adc import code_limits
+        out["rails"] = code_limits(24)
+    return out
+
+
+def run_calibrated_torques(scene, inp):
+    """τ̂ = calibration.torque(counts − zero) per sample, σ per sample from the posterior
+    covariance and the per-sample chain noise; rail samples → NaN (kept out of detection)."""
+    rd, cal = inp["readings"], inp.get("calibration")
+    if "counts" not in rd:
+        return {"tau_Nm": rd["tau_Nm"], "tau_std_Nm": None, "flagged": np.zeros(rd["tau_Nm"].shape, bool)}
+    codes = np.asarray(rd["counts"], float)
+    lo, hi = rd["rails"]
+    flagged = (codes <= lo) | (codes >= hi) | ~np.isfinite(codes)
+    if cal is None:                                     # no calibration: the model's nominal inverse
+        import warnings
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            tau = inp["chain"].torque_from_counts(codes)
+        return {"tau_Nm": np.where(flagged, np.nan, tau), "tau_std_Nm": None, "flagged": flagged}
+    tau = cal.torque(codes)            # m = (reading − offset)/slope, τ = m g L (zero at the offset)
+    tau_std = cal.torque_std(codes, include_noise=False)
+    tau = np.where(flagged, np.nan, tau)
+    return {"tau_Nm": tau, "tau_std_Nm": tau_std, "flagged": flagged}
+
+
+def run_estimates(scene, inp):
+    from estimator.log import SensorLog
+    from estimator.pipeline import estimate
+
+    rd, tq = inp["readings"], inp["torques"]
+    robot = scene.robot if scene.sim is None else scene.sim.robot
+    tau = tq["tau_Nm"]
+    keep = np.all(np.isfinite(tau), axis=1)             # flagged samples stay out of detection
+    log = SensorLog(t=rd["t"][keep], q=rd["q"][keep], dq=rd["dq"][keep], tau_Nm=tau[keep],
+                    wrench=rd["wrench"][keep], floating=rd["floating"], source=str(scene.path))
+    e = scene.estimator
+    out = {"kept": keep, "flagged_samples": int((~keep).sum())}
+    for m in METHODS:
+        out[m] = estimate(robot, log, method=m, gain_per_s=e.gain_per_s, threshold=e.threshold)
+    return out
+
+
+def _truth_rows(truth, keep):
+    return {k: np.asarray(v)[keep] for k, v in truth.items()}
+
+
+def run_localization_error(scene, inp):
+    est, tr = inp["estimates"], inp["truth"]
+    truth = _truth_rows(tr["truth"], est["kept"])
+    out = {"flagged_samples": est["flagged_samples"]}
+    for m in METHODS:
+        out[m] = collision_phase_errors(est[m], truth, scene.sim.pokes, scene.estimator.gain_per_s)
+    return out
+
+
+def run_predicted_error(scene, inp, draws=2000):
+    """Monte Carlo (estimator.uncertainty) at the mean posture of the collision phase, with the
+    chain's σ_τ and the calibration's relative slope uncertainty; MC standard error of the RMS
+    from the draws (σ_RMS ≈ RMS·√(kurtosis-1)/(2√n) estimated by the delta method)."""
+    from estimator.uncertainty import SensorNoise, monte_carlo
+
+    chain, cal = inp["chain"], inp.get("calibration")
+    gain_rel = 0.0
+    if cal is not None:
+        gain_rel = math.sqrt(cal.coef_cov[0, 0]) / abs(cal.coef_mean[0])
+    cfg = scene.sim
+    poke = cfg.pokes[0]
+    tr = inp.get("truth")
+    q = np.asarray(cfg.controller.q0_rad, float)
+    if tr is not None:
+        phase = tr["truth"]["link"] > 0
+        q = tr["q"][phase, 3:].mean(axis=0)
+    force = poke.magnitude_N * np.array([math.cos(poke.direction_rad), math.sin(poke.direction_rad)])
+    noise = SensorNoise(torque_std_Nm=chain.noise_std_Nm, wrench_std=cfg.sensors.ft_noise,
+                        torque_gain_rel_std=gain_rel, sample_rate_Hz=cfg.sensors.sample_rate_Hz,
+                        gain_per_s=scene.estimator.gain_per_s)
+    out = {"torque_noise_std_Nm": chain.noise_std_Nm, "gain_error_rel_std": gain_rel,
+           "posture_rad": q.tolist()}
+    for m in METHODS:
+        mc = monte_carlo(cfg.robot, q, poke.link, poke.alpha, force, noise, draws=draws, rng=0, method=m)
+        rms = float(mc.position_rms_m[0])
+        out[m] = {"position_rms_m": rms, "position_p95_m": float(mc.position_p95_m[0]),
+                  "position_rms_m_error_estimate": rms / math.sqrt(2 * draws),
+                  "position_rms_m_error_method": f"Monte Carlo standard error, {draws} draws "
+                                                 "(Gaussian approximation rms/√(2n), 1σ)"}
+    return out
+
+
+RUNNERS = {"flexure_fem": run_flexure_fem, "sensor_chain": run_sensor_chain,
+           "calibration_session": run_calibration_session, "calibration_fit": run_calibration_fit,
+           "simulation": run_simulation, "raw_counts": run_raw_counts,
+           "calibrated_torques": run_calibrated_torques, "estimates": run_estimates,
+           "localization_error": run_localization_error, "predicted_error": run_predicted_error}
+
+
+# ---------------------------------------------------------------- the graph
+@dataclass
+class Step:
+    stage: Stage
+    action: str           # "run" | "skip" | "cached"
+    reason: str
+    key: str = ""
+
+
+def _feasible(scene, art: str) -> str | None:
+    """Why ``art`` cannot be produced by this scene, or None."""
+    c = scene.chain
+    if art == "flexure" and c.flexure_design is None:
+        return "no [flexure].design"
+    if art == "session" and c.session is None:
+        return "no simulated session in [calibration]"
+    if art == "calibration" and c.session is None and c.calibration_file is None:
+        return "no [calibration] (file or simulated session)"
+    if art in ("truth", "localization_error") and scene.sim is None:
+        return "no simulation (a recorded log has no truth)" if c.log_file else "not a dynamic scene"
+    if art == "predicted_error" and scene.sim is None:
+        return "the prediction needs the scene's contact (a simulated poke)"
+    if art == "predicted_error" and not scene.sim.pokes:
+        return "no poke in the scene"
+    if art == "localization_error" and not scene.sim.pokes:
+        return "no poke in the scene"
+    if art == "torques" and c.log_file is None and scene.sim is None:
+        return "no source"
+    return None
+
+
+def plan(scene, outputs=None, cache=None, seed=None, force=False) -> list[Step]:
+    """Steps in execution order, built backwards from ``outputs``."""
+    default = DEFAULT_OUTPUTS if scene.sim is not None else ("estimates",) if scene.chain.log_file \
+        else ("sensitivity",)          # a static scene: the sensor model only (run by `reproduce`)
+    wants = [ALIASES.get(o, o) for o in (outputs or scene.chain.outputs or default)]
+    for w in wants:
+        if w not in BY_GIVES:
+            raise InputError(f"{scene.path}: outputs: unknown output {w!r}")
+        why = _feasible(scene, w)
+        if why:
+            raise InputError(f"{scene.path}: outputs: nothing in the scene can produce {w!r} ({why})")
+    needed: dict[str, str] = {}
+
+    def visit(art, reason):
+        if art in needed:
+            return
+        if art == "calibration" and scene.chain.calibration_file is not None:
+            needed[art] = "given"
+            return
+        if art == "readings" and scene.chain.log_file is None and scene.sim is None:
+            return
+        needed[art] = reason
+        st = BY_GIVES[art]
+        for n in st.needs:
+            opt = n.endswith("?")
+            n = n.rstrip("?")
+            if n == "truth" and scene.chain.log_file is not None and art == "readings":
+                continue
+            if opt and (given(scene, n) or _feasible(scene, n)):
+                continue
+            visit(n, f"needed by {st.name}")
+
+    for w in wants:
+        visit(w, "requested output")
+    seed = scene_seed(scene) if seed is None else seed
+    steps, keys = [], {}
+    for st in STAGES:
+        if st.gives not in needed:
+            g = given(scene, st.gives)
+            steps.append(Step(st, "skip", g or "not needed for the requested outputs"))
+            continue
+        if needed[st.gives] == "given":
+            steps.append(Step(st, "skip", given(scene, st.gives)))
+            continue
+        if st.gives == "readings" and scene.chain.log_file is not None:
+            pass
+        up = [keys.get(n.rstrip("?"), "") for n in st.needs]
+        key = _key(st.name, _params(scene, st.name, seed), up)
+        keys[st.gives] = key
+        if cache is not None and not force and cache.has(key):
+            steps.append(Step(st, "cached", f"{needed[st.gives]}; result in the cache", key))
+        else:
+            steps.append(Step(st, "run", needed[st.gives], key))
+    return steps
+
+
+def _key(stage, params, upstream) -> str:
+    blob = json.dumps({"stage": stage, "params": params, "up": upstream, "code": CODE_VERSION},
+                      sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()[:32]
+
+
+def scene_seed(scene) -> int:
+    s = scene.sim.sensors.seed if scene.sim is not None else 0
+    return int(s)
+
+
+def execute(scene, outputs=None, cache=None, seed=None, force=False, counter=None) -> tuple[dict, list]:
+    """Run the plan; returns (artifacts, [(stage, action, seconds)])."""
+    seed = scene_seed(scene) if seed is None else seed
+    steps = plan(scene, outputs, cache, seed, force)
+    arts, timing = {}, []
+    if any(s.stage.gives == "calibration" and s.action == "skip" and scene.chain.calibration_file
+           for s in steps) and _wanted_cal(steps):
+        arts["calibration"] = load_calibration(scene)
+    for s in steps:
+        if s.action == "skip":
+            continue
+        t0 = time.perf_counter()
+        if s.action == "cached":
+            value = cache.get(s.key)
+            if value is None:                    # corrupt entry: reported by the cache, recompute
+                s.action = "run"
+        if s.action == "run":
+            fn = RUNNERS[s.stage.name]
+            inp = {n.rstrip("?"): arts.get(n.rstrip("?")) for n in s.stage.needs}
+            value = fn(scene, inp, seed) if s.stage.name == "raw_counts" else fn(scene, inp)
+            if counter is not None:
+                counter[s.stage.name] = counter.get(s.stage.name, 0) + 1
+            if cache is not None:
+                cache.put(s.key, value)
+        arts[s.stage.gives] = value
+        timing.append((s.stage.name, s.action, time.perf_counter() - t0))
+    return arts, timing
+
+
+def _wanted_cal(steps):
+    return any(s.action != "skip" and "calibration" in [n.rstrip("?") for n in s.stage.needs]
+               for s in steps)

@@ -1,0 +1,235 @@
+"""reports/detection.md: contact detection against sensor noise (issue 14).
+
+Simulated logs of the paper leg (inverse dynamics on a 5 kHz grid, read out at 1 kHz as
+instantaneous states and interval-mean forces, the issue's noise: FT σ 0.1 N, 0.1 N, 0.01 N·m,
+joint torque σ 0.005 N·m, declared ``mean``). Scenes: static (joints held, base still) and moving
+(base shaking at 10 Hz, joints swinging). Measured when the report is built:
+
+* empirical false-alarm rate of the chi-square detector on 10⁶ contact-free samples per scene;
+* ROC: P(detect within 20 ms) against false alarms per hour, pokes 0.5–10 N, chi-square detector
+  vs the paper rule ‖r‖ > ε (whose false-alarm axis is measured on the contact-free log);
+* detection delay against magnitude at one false alarm per hour;
+* the cost of a wrong timing declaration.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from torquebench.io import atomic_path, write_text_atomic
+
+SUB, RATE = 5, 1000.0
+SIGMA = np.array([0.1, 0.1, 0.01, 0.005, 0.005])
+MAGNITUDES_N = (0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 3.0, 5.0, 10.0)
+WINDOW_S = 0.020
+
+
+def _motion(robot, t, scene):
+    from estimator.synthetic import sinusoidal_motion
+
+    if scene == "static":
+        q = np.tile([0.0, 0.0, 0.0, 0.9, -1.6], (len(t), 1))
+        return q, np.zeros_like(q), np.zeros_like(q)
+    return sinusoidal_motion(robot, t, q0=(0.9, -1.6), frequency_Hz=10.0, amplitude_rad=(0.05, 0.05),
+                             base_amplitude=(0.001, 0.002, 0.01))
+
+
+def simulated_log(robot, duration_s, scene, force_N=None, alpha=0.5, link=2, seed=0,
+                  readout="mean"):
+    """SensorLog (declared ``readout``) with per-sample poke force ``force_N`` (T_log, 2) or None."""
+    from estimator import timing
+    from estimator.log import SensorLog
+    from estimator.synthetic import inverse_dynamics_log
+
+    T = int(round(duration_s * RATE))
+    tf = np.arange(T * SUB + 1) / (RATE * SUB)
+    q, dq, ddq = _motion(robot, tf, scene)
+    if force_N is None:
+        F = np.zeros((len(tf), 2))
+    else:                                   # held over each log interval (t_{k−1}, t_k]
+        F = np.repeat(np.vstack([force_N[:1], force_N]), SUB, axis=0)[SUB - 1:SUB - 1 + len(tf)]
+    fine, _ = inverse_dynamics_log(robot, tf, q, dq, ddq, link, alpha, F)
+    f = fine.tau_meas
+    idx = np.arange(0, len(tf), SUB)[:T]
+    if readout == "mean":
+        c = np.concatenate([np.zeros((1, 5)), np.cumsum(0.5 * (f[1:] + f[:-1]), axis=0)])
+        out = f[idx].copy()
+        out[1:] = (c[idx[1:]] - c[idx[:-1]]) / SUB
+    else:
+        out = f[idx]
+    out = out + np.random.default_rng(seed).standard_normal(out.shape) * SIGMA
+    log = SensorLog(t=tf[idx], q=q[idx], dq=dq[idx], tau_Nm=out[:, 3:], wrench=out[:, :3])
+    log.timing = timing.uniform(readout, 2)
+    return log
+
+
+def _pokes(T, magnitude, seed, period=500, on=100):
+    """Per-sample force (T, 2): pokes of ``on`` samples every ``period``, random directions."""
+    rng = np.random.default_rng(seed)
+    starts = np.arange(period // 2, T - on, period)
+    ang = rng.uniform(0, 2 * np.pi, len(starts))
+    F = np.zeros((T, 2))
+    for s, a in zip(starts, ang):
+        F[s:s + on] = magnitude * np.array([np.cos(a), np.sin(a)])
+    return F, starts
+
+
+def _stats(robot, log):
+    """(chi-square statistic s_k, ‖r‖, chi2 dof) on a log with the default detector settings."""
+    from estimator.pipeline import estimate
+
+    est = estimate(robot, log)
+    paper = np.linalg.norm(est.residual, axis=1)
+    return est.rnorm ** 2, paper, est.info["chi2_dof"]
+
+
+def _save(fig, path: Path) -> Path:
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    return path
+
+
+def build(out_dir: Path, quick: bool = False) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from scipy.stats import chi2
+
+    from estimator.pipeline import estimate
+    from estimator.robot import paper_leg
+
+    robot = paper_leg()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    n_quiet_s = 100.0 if quick else 1000.0
+    dt = 1.0 / RATE
+    lines = ["# Contact detection against sensor noise", "",
+             "Paper leg, simulated (inverse dynamics on a 5 kHz grid, 1 kHz log, forces read as "
+             "interval means and declared `mean`), noise FT σ = 0.1 N, 0.1 N, 0.01 N·m, joint torque "
+             "σ = 0.005 N·m; observer K = 100 /s. Detector: chi-square on the residual whitened by "
+             "its covariance predicted from the noise model (`estimator/noise.py`); paper rule: "
+             "‖r‖ > ε. Built by `torquebench report --only detection`.", ""]
+    paths = []
+    # --------------------------------------------------------------- false alarms, contact free
+    lines += ["## False alarms on contact-free logs", "",
+              f"{int(n_quiet_s * RATE):,} samples per scene (100 s "
+              "segments, the first 0.2 s of each dropped). Expected count = target × samples.", "",
+              "Sampling σ of the flagged fraction: √(α/n_eff), n_eff = samples·(1 − a)/(1 + a) with "
+              "a = exp(−KΔt) (the residual's correlation time); the last column is the deviation "
+              "in those σ.", "",
+              "| scene | target per sample | expected flagged | flagged | flagged fraction | deviation σ |",
+              "|---|---|---|---|---|---|"]
+    quiet = {}
+    for scene in ("static", "moving"):
+        parts, wrong = [], []
+        for seg in range(int(np.ceil(n_quiet_s / 100.0))):      # 100 s segments: bounded memory
+            log = simulated_log(robot, 100.0, scene, seed=(11 if scene == "static" else 1011) + seg)
+            s, paper, n = _stats(robot, log)
+            parts.append((s[200:], paper[200:]))
+            if seg == 0:
+                wrong.append(estimate(robot, log, timing="instant").contact[200:].mean())
+        s = np.concatenate([p[0] for p in parts])
+        paper = np.concatenate([p[1] for p in parts])
+        quiet[scene] = (s, paper, n)
+        quiet[scene + "_wrong"] = wrong[0]
+        ac = np.exp(-100.0 * dt)
+        n_eff = len(s) * (1 - ac) / (1 + ac)
+        for a in (1e-2, 1e-3, 1e-4, dt / 3600):
+            k = int((s > chi2.isf(a, n)).sum())
+            dev = (k / len(s) - a) / np.sqrt(a / n_eff)
+            lines.append(f"| {scene} | {a:.3g}{' (1/h)' if a < 1e-6 else ''} | {a * len(s):.3g} | {k} | "
+                         f"{k / len(s):.3g} | {dev:+.1f} |")
+        lines.append(f"| {scene} | paper ε = 0.06 | – | {int((paper > 0.06).sum())} | "
+                     f"{(paper > 0.06).mean():.3g} | – |")
+    lines += ["", "## Cost of a wrong timing declaration", "",
+              "Interval-mean readings declared `instant` (half a sample of skew), detector at 1/h:", ""]
+    for scene in ("static", "moving"):
+        lines.append(f"- {scene}: {100 * quiet[scene + '_wrong']:.3g} % of contact-free samples flagged "
+                     f"(correctly declared: "
+                     f"{100 * (quiet[scene][0] > chi2.isf(dt / 3600, quiet[scene][2])).mean():.3g} %)")
+    # --------------------------------------------------------------- ROC and delay
+    n_pokes = 20 if quick else 60
+    T = 500 * n_pokes + 250
+    roc = {}
+    delays = {}
+    for scene in ("static", "moving"):
+        s_q, p_q, n = quiet[scene]
+        for mag in MAGNITUDES_N:
+            F, starts = _pokes(T, mag, seed=int(mag * 10))
+            log = simulated_log(robot, T / RATE, scene, force_N=F, seed=int(mag * 100) + 1)
+            s, paper, _ = _stats(robot, log)
+            w = int(WINDOW_S * RATE)
+            win = starts[:, None] + np.arange(1, w + 1)[None]
+            smax, pmax = s[win].max(axis=1), paper[win].max(axis=1)
+            roc[(scene, mag)] = (smax, pmax)
+            h = chi2.isf(dt / 3600, n)
+            first = np.argmax(s[win] > h, axis=1).astype(float) + 1
+            first[~(s[win] > h).any(axis=1)] = np.nan
+            delays[(scene, mag)] = first * dt
+    fa_h = np.logspace(-1, 4, 60)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
+    for ax, scene in zip(axes, ("static", "moving")):
+        s_q, p_q, n = quiet[scene]
+        p_sorted = np.sort(p_q)[::-1]
+        for i, mag in enumerate(MAGNITUDES_N):
+            smax, pmax = roc[(scene, mag)]
+            hs = chi2.isf(np.clip(fa_h * dt / 3600, 1e-300, 1), n)
+            ax.semilogx(fa_h, (smax[:, None] > hs[None]).mean(axis=0), color=f"C{i}", label=f"{mag:g} N")
+            # paper rule: thresholds from the contact-free ‖r‖ (FA measurable down to 1/log length)
+            k = np.clip((fa_h * dt / 3600 * len(p_sorted)).astype(int), 0, len(p_sorted) - 1)
+            ok = fa_h * dt / 3600 * len(p_sorted) >= 1
+            eps = p_sorted[k]
+            pd_paper = (pmax[:, None] > eps[None]).mean(axis=0)
+            ax.semilogx(fa_h[ok], pd_paper[ok], color=f"C{i}", ls="--")
+        ax.axvline(1.0, color="k", lw=0.7)
+        ax.set_ylim(-0.02, 1.02)
+        ax.set_title(f"{scene}: P(detect within 20 ms)")
+        ax.set_xlabel("false alarms per hour (flagged contact-free samples)")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].set_ylabel("detection probability")
+    axes[0].legend(title="poke (solid: chi-square, dashed: ‖r‖ > ε)", fontsize=8)
+    paths.append(_save(fig, out_dir / "detection_roc.png"))
+    plt.close(fig)
+    fig, ax = plt.subplots(figsize=(6, 4))
+    lines += ["", "## ROC and delay", "", "![ROC](detection_roc.png)", "",
+              f"{n_pokes} pokes per magnitude (random direction, link 2, α = 0.5, 100 ms each; the "
+              "grid goes below the issue's 0.5 N because every poke ≥ 0.5 N is detected at once). "
+              "The chi-square curves use the false-alarm rate the threshold is set for (validated "
+              "above); the paper rule's axis is measured on the contact-free log. Detection at one "
+              "false alarm per hour, within 20 ms of the poke's onset:", "",
+              "| scene | poke N | P(detect ≤ 20 ms) chi-square 1/h | median delay ms | paper ε = 0.06: P(≤ 20 ms) |",
+              "|---|---|---|---|---|"]
+    smallest = {}
+    for scene, ls in (("static", "-"), ("moving", "--")):
+        med = []
+        for mag in MAGNITUDES_N:
+            d = delays[(scene, mag)]
+            pdet = float(np.isfinite(d).mean())
+            md = float(np.nanmedian(d)) * 1e3 if np.isfinite(d).any() else float("nan")
+            med.append(md)
+            pp = float((roc[(scene, mag)][1] > 0.06).mean())
+            lines.append(f"| {scene} | {mag:g} | {pdet:.2f} | {md:.1f} | {pp:.2f} |")
+            if pdet >= 0.95 and scene not in smallest:
+                smallest[scene] = mag
+        ax.plot(MAGNITUDES_N, med, ls, marker="o", label=scene)
+    ax.set_xscale("log")
+    ax.set_xlabel("poke magnitude N")
+    ax.set_ylabel("median detection delay ms (1 false alarm/h)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    paths.append(_save(fig, out_dir / "detection_delay.png"))
+    plt.close(fig)
+    lines += ["", "![delay](detection_delay.png)", ""]
+    for scene in ("static", "moving"):
+        lines.append(f"- Smallest poke of the grid detected within 20 ms in ≥ 95 % of trials at one "
+                     f"false alarm per hour, {scene}: "
+                     f"{smallest.get(scene, float('nan')):g} N (grid {', '.join(map(str, MAGNITUDES_N))} N).")
+    lines += ["", f"Built in {time.perf_counter() - start:.0f} s{' (quick)' if quick else ''}."]
+    md = out_dir / "detection.md"
+    write_text_atomic(md, "\n".join(lines) + "\n")
+    return [md, *paths]
