@@ -3,35 +3,75 @@
 #   bash run.sh demo   # the main job: a hardware-free demo scene, end to end
 #   bash run.sh test   # the test suite
 #   bash run.sh ...    # anything else is passed to the `torquebench` CLI
-# Set-up is idempotent: Debian libraries for off-screen rendering (if missing), a venv in .venv,
-# and `pip install -e .[test]` whenever pyproject.toml changed.
+# Set-up is idempotent: Debian libraries for off-screen rendering (only if one is really missing),
+# a venv in .venv, and `pip install -e .[test]` whenever pyproject.toml changed (about a minute the
+# first time, nothing afterwards).
 set -euo pipefail
 cd "$(dirname "$0")"
 VENV=${TORQUEBENCH_VENV:-.venv}
+say() { echo "run.sh: $*" >&2; }
 
-# shared library → Debian package: VTK's off-screen rendering (pyvista), and gmsh (STEP files)
+# shared library → Debian package: VTK's off-screen rendering (pyvista), and gmsh (STEP files).
+# The loader cache is read ONCE into a variable: piping `ldconfig -p` into `grep -q` under pipefail
+# races (grep exits early, ldconfig dies of SIGPIPE, the check fails although the library is there).
 declare -A debian=([libGL.so.1]=libgl1 [libEGL.so.1]=libegl1 [libXrender.so.1]=libxrender1
                    [libGLU.so.1]=libglu1-mesa [libXcursor.so.1]=libxcursor1 [libXft.so.2]=libxft2
                    [libXinerama.so.1]=libxinerama1 [libfontconfig.so.1]=libfontconfig1)
+ldcache=$(ldconfig -p 2>/dev/null || /sbin/ldconfig -p 2>/dev/null || true)
 need_apt=()
 for lib in "${!debian[@]}"; do
-    ldconfig -p 2>/dev/null | grep -q "$lib" || need_apt+=("${debian[$lib]}")
+    case "$ldcache" in
+        *"$lib "*|*"/$lib"*) ;;                                   # in the loader cache
+        *) compgen -G "/usr/lib/*/$lib" >/dev/null || compgen -G "/usr/lib/$lib" >/dev/null \
+               || need_apt+=("${debian[$lib]}") ;;               # nor on disk: really missing
+    esac
 done
-if [ ${#need_apt[@]} -gt 0 ] && command -v apt-get >/dev/null; then
-    echo "run.sh: installing Debian libraries for rendering and gmsh (${need_apt[*]})" >&2
-    SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
-    $SUDO apt-get update -qq >&2
-    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need_apt[@]}" >&2
+if [ ${#need_apt[@]} -gt 0 ]; then
+    SUDO=""
+    if [ "$(id -u)" != 0 ]; then
+        if command -v sudo >/dev/null && sudo -n true 2>/dev/null; then SUDO="sudo -n"; fi
+    fi
+    if ! command -v apt-get >/dev/null || { [ "$(id -u)" != 0 ] && [ -z "$SUDO" ]; }; then
+        say "missing system libraries for rendering/gmsh; install them and rerun:"
+        say "    apt-get install ${need_apt[*]}"
+        exit 1
+    fi
+    say "installing Debian libraries for rendering and gmsh (${need_apt[*]})"
+    aptlog=$(mktemp)
+    if ! { $SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
+              $SUDO apt-get install -y -qq "${need_apt[@]}"; } >"$aptlog" 2>&1; then
+        tail -n 5 "$aptlog" >&2
+        say "could not install ${need_apt[*]} (offline? no permission?); install them and rerun"
+        rm -f "$aptlog"; exit 1
+    fi
+    rm -f "$aptlog"
 fi
 
+# pip, quietly: drop only the machine-configuration noise ("Location ... is ignored") and
+# setuptools' deprecation banners; every other line (real errors) still reaches stderr.
+quiet_pip() {
+    local log rc=0
+    log=$(mktemp)
+    PIP_DISABLE_PIP_VERSION_CHECK=1 PYTHONWARNINGS=ignore "$VENV/bin/pip" -q "$@" >"$log" 2>&1 || rc=$?
+    if [ $rc -ne 0 ]; then
+        grep -v "^WARNING: Location '.*' is ignored" "$log" >&2 || true
+        say "pip $* failed (exit $rc)"
+    fi
+    rm -f "$log"
+    return $rc
+}
+
 if [ ! -x "$VENV/bin/python" ]; then
-    python3 -m venv "$VENV"
-    "$VENV/bin/pip" install -q --upgrade pip >&2
+    python3 -m venv "$VENV" || { say "python3 -m venv failed (on Debian: apt-get install python3-venv)"; exit 1; }
+    quiet_pip install --upgrade pip || exit 1
 fi
 stamp="$VENV/.torquebench-installed"
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
-    "$VENV/bin/pip" install -q -e ".[test]" >&2
+    say "installing torquebench and its dependencies into $VENV (about a minute the first time)"
+    quiet_pip install -e ".[test]" || exit 1
     touch "$stamp"
+    say "ready: $VENV/bin/torquebench ($("$VENV/bin/torquebench" --version 2>/dev/null || echo installed));" \
+        "run 'source $VENV/bin/activate' to put it on PATH, or keep using 'bash run.sh COMMAND'"
 fi
 
 export MPLBACKEND=Agg PYVISTA_OFF_SCREEN=true

@@ -27,12 +27,16 @@ def test_calibrate_json_versioning_force_and_apply(tmp_path):
     p = _run("calibrate", str(DATA), "--out", str(out), "--json")
     assert p.returncode == 0, p.stderr
     res = json.loads(p.stdout)
-    for key in ("slope", "offset", "slope_std", "offset_std", "sigma", "r2", "autocorr_time",
-                "acceptance_fraction", "converged"):
+    for key in ("slope_mV_per_g", "offset_mV", "slope_mV_per_g_error_estimate",
+                "offset_mV_error_estimate", "sigma_mV", "slope_mV_per_g_error_method", "r2",
+                "autocorr_time", "acceptance_fraction", "converged", "sensitivity_mV_per_Nm"):
         assert key in res, key
+    assert not {"slope", "offset", "sigma", "slope_std"} & set(res)      # every figure has its unit
     assert res["converged"] is True and not res["versioned"]
-    assert abs(res["slope"] - 0.0115) < 4 * res["slope_std"]
-    assert abs(res["offset"] - 5.0069) < 4 * res["offset_std"]
+    assert abs(res["slope_mV_per_g"] - 0.0115) < 4 * res["slope_mV_per_g_error_estimate"]
+    assert abs(res["offset_mV"] - 5.0069) < 4 * res["offset_mV_error_estimate"]
+    # 1 g at 0.205 m is 2.01e-3 N·m: the sensitivity is the slope over that torque
+    assert res["sensitivity_mV_per_Nm"] == pytest.approx(res["slope_mV_per_g"] / (1e-3 * 9.81 * 0.205))
     assert {p.split("/")[-1] for p in res["report"]} == {"cal.md", "cal_corner.png", "cal_residuals.png"}
     before = out.read_bytes()
     p2 = _run("calibrate", str(DATA), "--out", str(out), "--json", "--no-report", "--seed", "1")

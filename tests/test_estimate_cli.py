@@ -12,7 +12,7 @@ from estimator.robot import paper_leg
 from estimator.synthetic import inverse_dynamics_log
 from torquebench.cli import main
 
-LEG_POKE = Path(__file__).resolve().parents[2] / "shared" / "samples" / "leg_poke.csv"
+LEG_POKE = Path(__file__).resolve().parents[1] / "examples" / "leg_poke" / "leg_poke.csv"
 
 
 @pytest.fixture(scope="module")
@@ -177,7 +177,6 @@ def test_never_overwrites_the_input(capsys, tmp_path, good_log):
     assert copy.read_bytes() == before
 
 
-@pytest.mark.skipif(not LEG_POKE.exists(), reason="shared sample log not present")
 def test_leg_poke_summary(capsys):
     code, out, _ = run(capsys, LEG_POKE, "--json")
     (iv,) = json.loads(out)["intervals"]

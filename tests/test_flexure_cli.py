@@ -88,7 +88,7 @@ def test_parse_sweep():
 
 @pytest.mark.parametrize("argv, needle", [
     (["--png", "out.jpg"], "--png"),
-    (["--vtu", "nowhere/x.vtu"], "does not exist"),
+    (["--vtu", "/dev/null/x.vtu"], "not a directory"),
     (["--sweep", "wheel_mm=1,2"], "wheel_mm"),
     (["--sweep", "spoke_width_mm=3,4", "--vtu", "x.vtu"], "--vtu"),
 ])

@@ -1,4 +1,4 @@
-"""The independent MuJoCo log ../shared/samples/leg_poke.csv: a 3 N poke on link 2 at α = 0.4,
+"""The independent MuJoCo log examples/leg_poke/leg_poke.csv: a 3 N poke on link 2 at α = 0.4,
 direction 2.0 rad, from t = 0.4 s to 0.9 s, on the paper leg held by its servos.
 
 Tolerances from physics: the log is noise-free, sampled at 1 kHz with a step on and off. In the
@@ -20,11 +20,9 @@ from estimator.log import read_log
 from estimator.pipeline import estimate
 from estimator.robot import paper_leg
 
-SAMPLES = Path(__file__).resolve().parents[2] / "shared" / "samples"
+SAMPLES = Path(__file__).resolve().parents[1] / "examples" / "leg_poke"
 LOG = SAMPLES / "leg_poke.csv"
 F_TRUE = 3.0 * np.array([np.cos(2.0), np.sin(2.0)])
-
-pytestmark = pytest.mark.skipif(not LOG.exists(), reason="shared sample log not present")
 
 
 @pytest.fixture(scope="module")

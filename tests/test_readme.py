@@ -1,7 +1,7 @@
 """The README's examples run as written: every `$ torquebench ...` line in a ```console block.
 
-Commands run in a scratch directory that links the shipped inputs (robots/, scenes/, ...) and
-../shared, with a fresh `out/` for what they write; they exit 0,
+Commands run in a scratch directory that links the shipped inputs (robots/, scenes/, examples/, ...)
+and nothing outside the repository, with a fresh `out/` for what they write; they exit 0,
 and with `--json` print exactly one JSON object on stdout.
 """
 
@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+SHIPPED = ("robots", "scenes", "calibration", "flexure", "bridge", "estimator", "examples")
 
 
 def readme_commands() -> list[str]:
@@ -33,12 +34,8 @@ def test_readme_has_examples():
 def test_readme_example_runs(command, tmp_path):
     work = tmp_path / "repo"
     work.mkdir()
-    for name in ("robots", "scenes", "calibration", "flexure", "bridge", "estimator"):
+    for name in SHIPPED:
         (work / name).symlink_to(ROOT / name)          # shipped inputs, read-only by contract
-    if "../shared/" in command and not (ROOT.parent / "shared").is_dir():
-        pytest.skip("needs ../shared beside the checkout (CI and the developers' machines have it)")
-    if (ROOT.parent / "shared").is_dir():
-        (tmp_path / "shared").symlink_to(ROOT.parent / "shared")
     (work / "out").mkdir()                             # everything an example writes goes here
     argv = shlex.split(command)
     proc = subprocess.run([sys.executable, "-m", "torquebench", *argv[1:]], cwd=work,
@@ -46,3 +43,9 @@ def test_readme_example_runs(command, tmp_path):
     assert proc.returncode == 0, f"{command}\n{proc.stderr[-2000:]}"
     if "--json" in argv:
         json.loads(proc.stdout)
+
+
+def test_readme_uses_only_in_repo_files():
+    """A fresh clone has nothing beside it: no example may reach outside the repository."""
+    for command in readme_commands():
+        assert "../" not in command, command

@@ -1,4 +1,4 @@
-"""Our floating-base simulator against an independent one: the MuJoCo sample log (../shared/samples).
+"""Our floating-base simulator against an independent one: the MuJoCo sample log (examples/leg_poke).
 
 Same scene (Table I leg, I_base = 0.002, Table II base springs, PD K_P = 500, K_D = 10 at
 q = (0.9, −1.6) from rest, 3 N on link 2 at α = 0.4, direction 2.0 rad, 0.4–0.9 s), no noise.
@@ -16,13 +16,11 @@ import pytest
 from estimator.robot import paper_leg
 from estimator.sim import Controller, Poke, Sensors, SimConfig, simulate
 
-SAMPLES = Path(__file__).resolve().parents[2] / "shared" / "samples"
+SAMPLES = Path(__file__).resolve().parents[1] / "examples" / "leg_poke"
 
 
 @pytest.fixture(scope="module")
 def pair():
-    if not (SAMPLES / "leg_poke.csv").is_file():
-        pytest.skip("shared sample log not available")
     ref = pd.read_csv(SAMPLES / "leg_poke.csv")
     truth = pd.read_csv(SAMPLES / "leg_poke.truth.csv")
     cfg = SimConfig(robot=paper_leg(), controller=Controller(q0_rad=np.array([0.9, -1.6])),

@@ -1,26 +1,38 @@
-"""The ``torquebench`` command line.
+"""The torquebench command line: joint-torque-sensor design, calibration and contact estimation.
 
 Each subcommand is a module in ``torquebench.commands`` with::
 
     HELP = "one line for --help"
+    EXAMPLES = "torquebench CMD ...\n..."                 # shown as "Example:" under --help
     def add_arguments(parser: argparse.ArgumentParser) -> None: ...
     def run(args: argparse.Namespace) -> int: ...          # returns the exit code
 
 Modules are discovered, so adding a command never touches this file. Every subcommand gets
-``--json`` (print one JSON object on stdout and nothing else). User errors (any of
-``torquebench.errors.USER_ERRORS``) exit with code 2 and one line on stderr; heavy imports happen
-inside ``run`` so ``torquebench --help`` stays fast.
+``--json`` (print one JSON object on stdout and nothing else). Exit codes: 0 success, 2 user error
+(one line on stderr), 130 interrupted (Ctrl-C), 1 a bug (one line; ``--debug`` shows the
+traceback). Heavy imports happen inside ``run`` so ``torquebench --help`` stays fast.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pkgutil
 import sys
 
+import torquebench
 import torquebench.commands
 from torquebench.errors import USER_ERRORS
+
+DESCRIPTION = ("torquebench: design a strain-gauge joint torque sensor (flexure FEM, bridge and ADC),\n"
+               "calibrate it, and estimate contacts on a robot leg with a momentum observer.")
+EPILOG = """\
+Start here:
+  torquebench demo                         the whole chain on the paper's leg, no input needed
+  torquebench COMMAND --help               options (with units and defaults) and an example
+  torquebench estimate examples/leg_poke/leg_poke.csv
+"""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -36,12 +48,24 @@ def _commands() -> dict:
             if not n.startswith("_")}
 
 
+def _epilog(module) -> str | None:
+    examples = getattr(module, "EXAMPLES", "").strip()
+    if not examples:
+        return None
+    return "Example:\n" + "\n".join(f"  {line}" for line in examples.splitlines())
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="torquebench", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    sub.required = True
+    parser = _Parser(prog="torquebench", description=DESCRIPTION, epilog=EPILOG,
+                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"torquebench {torquebench.__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help="show the full traceback when the program fails on a bug")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser,
+                                title="commands")
     for name, module in _commands().items():
-        p = sub.add_parser(name, help=module.HELP, description=module.HELP)
+        p = sub.add_parser(name, help=module.HELP, description=module.HELP, epilog=_epilog(module),
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
         module.add_arguments(p)
         p.add_argument("--json", action="store_true",
                        help="print one JSON object (SI units) on stdout and nothing else")
@@ -49,16 +73,59 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def _quiet_broken_pipe() -> int:
+    """The reader went away (``torquebench estimate LOG | head -1``): stop quietly."""
+    try:  # point stdout at /dev/null so the interpreter's final flush does not fail again
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if not argv:  # a bare call: show what there is to run
+        parser.print_usage(sys.stderr)
+        print(parser.format_help().split("\n\n", 1)[1].rstrip(), file=sys.stderr)
+        return 2
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.error("a command is required (see torquebench --help)")
+    where = f"torquebench {args.command}"
     try:
         return int(args._run(args) or 0)
+    except KeyboardInterrupt:
+        print(f"{where}: interrupted; files already written are complete, nothing was half-written",
+              file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return _quiet_broken_pipe()
     except USER_ERRORS as exc:
-        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        msg = _one_line(exc)
         if isinstance(exc, OSError) and exc.filename and str(exc.filename) not in msg:
             msg = f"{exc.filename}: {exc.strerror}"
-        print(f"torquebench {args.command}: error: {msg}", file=sys.stderr)
+        print(f"{where}: error: {msg}", file=sys.stderr)
         return 2
+    except UnicodeError as exc:  # UnicodeDecodeError: a binary or non-UTF-8 file given as text
+        print(f"{where}: error: an input file is not UTF-8 text ({_one_line(exc)})", file=sys.stderr)
+        return 2
+    except Exception as exc:  # noqa: BLE001 - the last line of defence
+        return _bug(where, exc, args.debug)
+
+
+def _bug(where: str, exc: BaseException, debug: bool) -> int:
+    if debug:
+        raise exc
+    print(f"{where}: internal error (a bug, please report it): {type(exc).__name__}: {_one_line(exc)}; "
+          f"rerun with 'torquebench --debug {where.split()[-1]} ...' for the traceback", file=sys.stderr)
+    return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -6,31 +6,41 @@ import sys
 from pathlib import Path
 
 HELP = "record the ADC frame stream from a serial port (or guided static-loading session)"
+EXAMPLES = """\
+torquebench acquire --port /dev/ttyACM0 --out out/capture.bin --duration-s 10 --csv out/capture.csv
+torquebench acquire --port /dev/ttyACM0 --out out/link1.bin --guided 0,10,20,50,100,200,500,1000 --lever-arm-m 0.205 --sensor-id link1
+"""
 
 
 def add_arguments(parser) -> None:
     parser.add_argument("--port", required=True,
                         help="serial device (/dev/ttyACM0) or pyserial URL (loop://, rfc2217://...)")
-    parser.add_argument("--baud", type=int, default=2_000_000)
-    parser.add_argument("--out", type=Path, required=True, help="raw byte capture file")
-    parser.add_argument("--channels", type=int, default=1, help="channels per frame (1–8)")
-    parser.add_argument("--duration-s", type=float, default=None, help="stop after this long")
-    parser.add_argument("--frames", type=int, default=None, help="stop after this many frames")
+    parser.add_argument("--baud", type=int, default=2_000_000,
+                        help="serial baud rate in bit/s (default: %(default)s)")
+    parser.add_argument("--out", type=Path, required=True, help="raw byte capture file to write (its directory is created; never replaced without --force)")
+    parser.add_argument("--channels", type=int, default=1, help="channels per frame, 1–8 (default: %(default)s)")
+    parser.add_argument("--duration-s", type=float, default=None, help="stop after this many seconds (default: no time limit)")
+    parser.add_argument("--frames", type=int, default=None, help="stop after this many frames (default: no frame limit)")
     parser.add_argument("--idle-timeout-s", type=float, default=2.0,
-                        help="stop when no bytes arrive for this long")
-    parser.add_argument("--csv", type=Path, default=None, help="also write decoded samples here")
+                        help="stop when no bytes arrive for this many seconds (default: %(default)s)")
+    parser.add_argument("--csv", type=Path, default=None, help="also write the decoded samples to this CSV (ADC counts per channel)")
     parser.add_argument("--guided", default=None, metavar="MASSES_G",
-                        help="guided session: comma-separated masses in g, e.g. 0,10,20,50,100")
+                        help="guided static-loading session: comma-separated masses in grams, e.g. 0,10,20,50,100")
     parser.add_argument("--session", type=Path, default=None,
-                        help="guided: session CSV to write (default: RAW with .csv)")
-    parser.add_argument("--repeats", type=int, default=1)
+                        help="guided: session CSV to write (default: the --out file with .csv)")
+    parser.add_argument("--repeats", type=int, default=1,
+                        help="guided: times to walk through the masses (default: %(default)s)")
     parser.add_argument("--unload", action="store_true", help="guided: also walk back down")
-    parser.add_argument("--rate-hz", type=float, default=4000.0, help="nominal sample rate")
-    parser.add_argument("--settle-s", type=float, default=2.0)
-    parser.add_argument("--window-s", type=float, default=1.0)
-    parser.add_argument("--channel", type=int, default=0, help="guided: channel to average")
-    parser.add_argument("--sensor-id", default="sensor")
-    parser.add_argument("--lever-arm-m", type=float, default=None)
+    parser.add_argument("--rate-hz", type=float, default=4000.0, help="nominal ADC sample rate in Hz (default: %(default)s)")
+    parser.add_argument("--settle-s", type=float, default=2.0,
+                        help="guided: seconds to wait after a mass is hung before averaging (default: %(default)s)")
+    parser.add_argument("--window-s", type=float, default=1.0,
+                        help="guided: seconds of readings averaged per mass (default: %(default)s)")
+    parser.add_argument("--channel", type=int, default=0, help="guided: channel to average, 0-based (default: %(default)s)")
+    parser.add_argument("--sensor-id", default="sensor",
+                        help="guided: sensor name written into the session CSV (default: %(default)s)")
+    parser.add_argument("--lever-arm-m", type=float, default=None,
+                        help="guided: lever arm in m from the joint axis to the hanging masses, written into the session CSV (default: not recorded)")
     parser.add_argument("--force", action="store_true", help="replace existing output files")
 
 
@@ -73,6 +83,10 @@ def run(args) -> int:
                  {"--out": args.out, "--csv": args.csv,
                   "--session": (args.session or args.out.with_suffix(".csv")) if masses else None})
     port = open_port(args.port, args.baud)
+    from torquebench.outputs import prepare_dir
+    for flag, path in (("--out", args.out), ("--csv", args.csv), ("--session", args.session)):
+        if path is not None:
+            prepare_dir(path.parent, flag)
     raw = RawCapture(args.out, force=args.force)
     reader = Reader(port, raw, FrameParser(args.channels), keep=args.csv is not None)
     rows = None

@@ -5,17 +5,21 @@ from __future__ import annotations
 from pathlib import Path
 
 HELP = "apply a calibration file to a CSV of readings: torque (N·m) with its uncertainty"
+EXAMPLES = """\
+torquebench apply calibration/data/paper_link1_cal.json calibration/data/paper_link1_readings.csv
+torquebench apply calibration/data/paper_link1_cal.json calibration/data/paper_link1_readings.csv --out out/torque.csv
+"""
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("calibration", type=Path, help="calibration JSON (from `calibrate`)")
+    parser.add_argument("calibration", type=Path, help="calibration JSON written by `torquebench calibrate`")
     parser.add_argument("readings", type=Path, help="CSV with a `reading` column (optional `direction`)")
     parser.add_argument("--out", type=Path, default=None,
-                        help="write the readings with torque_Nm, torque_std_Nm columns here")
-    parser.add_argument("--column", default="reading", help="name of the reading column")
+                        help="write the readings with mass_g, mass_std_g, torque_Nm, torque_std_Nm columns to this CSV (default: print a summary only)")
+    parser.add_argument("--column", default="reading", help="name of the reading column, in the calibration's reading unit (default: %(default)s)")
     parser.add_argument("--data", type=Path, default=None,
-                        help="verify that the calibration was fitted to this session CSV (hash)")
-    parser.add_argument("--force", action="store_true", help="replace an existing --out")
+                        help="verify (by SHA-256) that the calibration was fitted to this session CSV")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out file")
     parser.add_argument("--coefficients-only", action="store_true",
                         help="uncertainty from the coefficients alone (leave out the reading noise σ)")
 
@@ -29,10 +33,13 @@ def run(args) -> int:
     import calibration
     from calibration.errors import InputError
     from torquebench.io import print_json, write_text_atomic
+    from torquebench.outputs import prepare_file
 
     from userio.files import plan_outputs
 
     if args.out is not None:
+        prepare_file(args.out, "--out", force=args.force,
+                     inputs=(args.calibration, args.readings, args.data))   # mkdir, --force
         plan_outputs({"calibration": args.calibration, "readings": args.readings, "--data": args.data},
                      {"--out": args.out})
     model = calibration.load(args.calibration, data_path=args.data)
@@ -79,7 +86,7 @@ def run(args) -> int:
     buf = io.StringIO()
     out.to_csv(buf, index=False, float_format="%.9g")
     if args.out is not None:
-        write_text_atomic(args.out, buf.getvalue(), overwrite=args.force)
+        write_text_atomic(args.out, buf.getvalue(), overwrite=True)
     if args.json:
         res = {"n": int(vals.size), "sensor_id": model.sensor_id, "model": model.model,
                "out_of_range": n_nan, "saturated_adc": n_sat, "outside_calibrated_range": n_range,

@@ -3,17 +3,21 @@
 from __future__ import annotations
 
 HELP = "noise budget and minimum detectable strain/torque of a bridge + ADC (paper's by default)"
+EXAMPLES = """\
+torquebench bridge
+torquebench bridge scenes/paper_sensor.toml --averaging 4 --json
+"""
 
 
 def add_arguments(parser) -> None:
     parser.add_argument("config", nargs="?", default=None, metavar="CONFIG.toml",
                         help="sensor TOML (default: scenes/paper_sensor.toml)")
     parser.add_argument("--strain-per-Nm", type=float, default=None, dest="strain_per_Nm",
-                        help="gauge strain per N·m (overrides the file's [torque] strain_per_Nm)")
+                        help="gauge strain per N·m of joint torque, 1/(N·m) (default: the file's [torque] strain_per_Nm)")
     parser.add_argument("--bandwidth-Hz", type=float, default=None, dest="bandwidth_Hz",
-                        help="noise bandwidth (default: one ADC sample, 0.5 × data rate)")
+                        help="noise bandwidth in Hz (default: one ADC sample, 0.5 × data rate)")
     parser.add_argument("--averaging", type=int, default=1,
-                        help="average this many samples (noise bandwidth / N)")
+                        help="average this many ADC samples: noise bandwidth / N (default: %(default)s)")
 
 
 def _fmt(v) -> str:

@@ -5,10 +5,15 @@ from __future__ import annotations
 from pathlib import Path
 
 HELP = "show or clear the stage-result cache"
+EXAMPLES = """\
+torquebench cache info
+torquebench cache clear
+"""
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("action", choices=("info", "clear"))
+    parser.add_argument("action", choices=("info", "clear"),
+                        help="info: where the cache is and how big; clear: delete the cached stage results")
     parser.add_argument("--cache-dir", type=Path, default=None,
                         help="cache directory (default $TORQUEBENCH_CACHE or .torquebench-cache)")
 

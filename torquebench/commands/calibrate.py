@@ -6,26 +6,47 @@ import sys
 from pathlib import Path
 
 HELP = "fit calibration coefficients (emcee) to a loading-session CSV and store them safely"
+EXAMPLES = """\
+torquebench calibrate calibration/data/paper_link1_session.csv --out out/link1_cal.json
+torquebench calibrate calibration/data/paper_link2_session.csv --out out/link2_cal.json --model hysteresis --json
+"""
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("data", type=Path, help="session CSV (columns mass_g,reading[,direction,...])")
-    parser.add_argument("--out", type=Path, required=True, help="calibration file to write (JSON)")
-    parser.add_argument("--model", choices=("linear", "quadratic", "hysteresis"), default="linear")
+    parser.add_argument("data", type=Path, help="static-loading session CSV: columns mass_g,reading[,direction,repeat,lever_arm_m,timestamp,sensor_id] (docs/conventions.md)")
+    parser.add_argument("--out", type=Path, required=True, help="calibration JSON to write (its directory is created; an existing file is kept and NAME.vK.json written instead, unless --force)")
+    parser.add_argument("--model", choices=("linear", "quadratic", "hysteresis"), default="linear",
+                        help="reading model: linear (slope·m + offset), quadratic, or hysteresis (separate load/unload offsets) (default: %(default)s)")
     parser.add_argument("--force", action="store_true",
-                        help="replace an existing --out (default: keep it, write NAME.vK.json)")
+                        help="replace an existing --out (without it: keep it, write NAME.vK.json)")
     parser.add_argument("--lever-arm-m", type=float, default=None,
-                        help="lever arm (m) if the CSV has no lever_arm_m column")
+                        help="lever arm in m from the joint axis to the masses, if the CSV has no lever_arm_m column (default: the CSV's)")
     parser.add_argument("--mass-std-g", type=float, default=0.0,
-                        help="standard uncertainty of the applied masses (g): errors-in-load term")
-    parser.add_argument("--sensor-id", default=None, help="override the CSV's sensor_id")
-    parser.add_argument("--seed", type=int, default=0, help="sampler seed (reproducible fits)")
+                        help="standard uncertainty of the applied masses in g: errors-in-load term (default: %(default)s)")
+    parser.add_argument("--sensor-id", default=None, help="sensor name (default: the CSV's sensor_id)")
+    parser.add_argument("--seed", type=int, default=0, help="sampler seed, for reproducible fits (default: %(default)s)")
     parser.add_argument("--walkers", type=int, default=256,
-                        help="emcee walkers (vectorized: many walkers cost little per step)")
+                        help="emcee walkers, at least 8 (vectorized: many walkers cost little per step) (default: %(default)s)")
     parser.add_argument("--max-steps", type=int, default=50_000,
-                        help="give up (and refuse to store) if not converged by then")
+                        help="give up (and refuse to store) if not converged after this many steps (default: %(default)s)")
     parser.add_argument("--no-report", action="store_true",
                         help="skip the Markdown report and corner/residual plots beside --out")
+
+
+# coefficient → its unit, for a reading in READING_UNIT and masses in g (calibration.fit's model
+# reading = slope·m + offset + quad·m² + hysteresis·1{unloading} + ε, ε ~ N(0, sigma²))
+_UNITS = {"slope": "{u}/g", "offset": "{u}", "quad": "{u}/g²", "hysteresis": "{u}", "sigma": "{u}"}
+_KEYS = {"slope": "{u}_per_g", "offset": "{u}", "quad": "{u}_per_g2", "hysteresis": "{u}", "sigma": "{u}"}
+
+
+def coefficient_unit(name: str, reading_unit: str) -> str:
+    """Printed unit of a coefficient, e.g. slope → 'mV/g'."""
+    return _UNITS.get(name, "{u}").format(u=reading_unit)
+
+
+def coefficient_key(name: str, reading_unit: str) -> str:
+    """Unit-suffixed JSON key of a coefficient, e.g. slope → 'slope_mV_per_g'."""
+    return f"{name}_" + _KEYS.get(name, "{u}").format(u=reading_unit)
 
 
 def report_paths(out: Path) -> tuple[Path, Path, Path]:
@@ -97,6 +118,7 @@ def run(args) -> int:
     from calibration.session import read_session
     from calibration.store import calibration_payload, encode
     from torquebench.io import print_json
+    from torquebench.outputs import prepare_dir
 
     from userio.errors import finite
     from userio.files import write_files_atomic
@@ -111,8 +133,7 @@ def run(args) -> int:
         raise InputError(f"--walkers: need at least 8, got {args.walkers}")
     if args.max_steps < 1:
         raise InputError(f"--max-steps: must be ≥ 1, got {args.max_steps}")
-    if not args.out.parent.is_dir():
-        raise InputError(f"--out: directory {args.out.parent} does not exist")
+    prepare_dir(args.out.parent, "--out")                          # created if missing
     _plan(args, args.out)
     session = read_session(args.data)
     if args.lever_arm_m is not None:
@@ -141,36 +162,46 @@ def run(args) -> int:
         print(f"calibrate: {args.out} exists; kept it and wrote {written} (use --force to replace)",
               file=sys.stderr)
     post = payload["posterior"]
-    result = {n: post[n]["mean"] for n in fit.coef_names}
-    result.update({f"{n}_std": post[n]["std"] for n in fit.coef_names})
+    unit = session.reading_unit
+    keys = {n: coefficient_key(n, unit) for n in (*fit.coef_names, "sigma")}
+    method = (f"posterior standard deviation (1σ) of the emcee fit, {fit.n_walkers} walkers × "
+              f"{fit.n_steps} steps")
+    result = {}
+    for n, key in keys.items():
+        result[key] = post[n]["mean"]
+        result[f"{key}_error_estimate"] = post[n]["std"]
+        result[f"{key}_error_method"] = method
     result.update({
-        "sigma": post["sigma"]["mean"], "sigma_std": post["sigma"]["std"],
         "r2": fit.exact.r2, "autocorr_time": fit.tau_max,
         "autocorr_time_per_parameter": dict(zip(fit.names, fit.autocorr_time)),
         "acceptance_fraction": fit.acceptance_fraction, "converged": fit.converged,
         "n_steps": fit.n_steps, "n_walkers": fit.n_walkers, "burn_in": fit.burn_in,
-        "model": fit.model, "reading_unit": session.reading_unit, "mass_unit": "g",
+        "model": fit.model, "reading_unit": unit, "mass_unit": "g",
         "lever_arm_m": session.lever_arm_m,
-        "exact_mean": dict(zip(fit.coef_names, fit.exact.beta)),
-        "exact_std": dict(zip(fit.coef_names, fit.exact.std)),
+        "exact_mean": {keys[n]: v for n, v in zip(fit.coef_names, fit.exact.beta)},
+        "exact_std": {keys[n]: v for n, v in zip(fit.coef_names, fit.exact.std)},
         "characterization": payload["characterization"],
         "written": str(written), "versioned": versioned, "report": [str(p) for p in reports],
         "fit_time_s": fit.elapsed_s,
     })
     if session.lever_arm_m:
-        per_Nm = 1.0 / (1e-3 * 9.80665 * session.lever_arm_m)
-        result["sensitivity_per_Nm"] = result["slope"] * per_Nm
+        from calibration.session import G_STANDARD_M_PER_S2
+        per_Nm = 1.0 / (1e-3 * G_STANDARD_M_PER_S2 * session.lever_arm_m)     # τ of 1 g, N·m
+        result[f"sensitivity_{unit}_per_Nm"] = result[keys["slope"]] * per_Nm
     if args.json:
         print_json(result)
         return 0
-    unit = session.reading_unit
     print(f"{session.sensor_id}: {fit.model} fit of {len(session)} readings ({args.data})")
     ref = "exact" if args.mass_std_g == 0 else "exact without errors-in-load"
-    for n in fit.coef_names:
-        print(f"  {n:<11s}= {post[n]['mean']:.6g} ± {post[n]['std']:.2g}  "
-              f"({ref} {fit.exact.beta[list(fit.coef_names).index(n)]:.6g} ± "
-              f"{fit.exact.std[list(fit.coef_names).index(n)]:.2g})")
-    print(f"  sigma      = {post['sigma']['mean']:.4g} {unit};  R² = {fit.exact.r2:.5f}")
+    for i, n in enumerate(fit.coef_names):
+        u = coefficient_unit(n, unit)
+        print(f"  {n:<11s}= {post[n]['mean']:.6g} ± {post[n]['std']:.2g} {u}  "
+              f"({ref} {fit.exact.beta[i]:.6g} ± {fit.exact.std[i]:.2g} {u})")
+    print(f"  sigma      = {post['sigma']['mean']:.4g} ± {post['sigma']['std']:.2g} {unit};  "
+          f"R² = {fit.exact.r2:.5f}")
+    if session.lever_arm_m:
+        print(f"  sensitivity = {result[f'sensitivity_{unit}_per_Nm']:.6g} {unit}/(N·m) "
+              f"(lever arm {session.lever_arm_m:g} m)")
     print(f"  τ = {fit.tau_max:.1f} steps, {fit.n_steps} steps × {fit.n_walkers} walkers, "
           f"acceptance {fit.acceptance_fraction:.2f}, converged")
     print(f"wrote {written}" + ("".join(f", {p}" for p in reports)))

@@ -11,6 +11,9 @@ import math
 from pathlib import Path
 
 HELP = "compare designs (or any scene key) end to end: sensitivity, stiffness, noise, localization error"
+EXAMPLES = """\
+torquebench compare scenes/end_to_end.toml --vary flexure=5e-5,5e-4 --png out/compare.png
+"""
 
 
 def add_arguments(parser) -> None:

@@ -15,13 +15,17 @@ import sys
 from pathlib import Path
 
 HELP = "run the workbench end to end on the paper's leg (no hardware, no input)"
+EXAMPLES = """\
+torquebench demo
+torquebench demo --out-dir out/demo2 --seed 3 --flexure scenes/paper_disc.toml
+"""
 SCENE = "paper_floating_link2"
 
 
 def add_arguments(parser) -> None:
     parser.add_argument("--out-dir", type=Path, default=Path("out/demo"),
-                        help="where the demo writes its log and estimates (default out/demo)")
-    parser.add_argument("--seed", type=int, default=1, help="sensor-noise seed")
+                        help="directory for the demo's files, created if missing; the demo replaces its own four files there (log.csv, log.truth.csv, estimate_dynamic.csv, estimate_paper.csv) (default: %(default)s)")
+    parser.add_argument("--seed", type=int, default=1, help="sensor-noise seed (default: %(default)s)")
     parser.add_argument("--flexure", type=Path, default=None, metavar="DESIGN.toml",
                         help="take the torque sensor's strain per N·m from this flexure's FEM "
                              "(e.g. scenes/paper_disc.toml) instead of the paper's calibration")
@@ -41,11 +45,9 @@ def run(args) -> int:
     from torquebench.io import print_json, write_text_atomic
     from torquebench.scenes import load_scene, scene_path
 
-    out_dir = args.out_dir
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"--out-dir: cannot create {out_dir}: {exc.strerror}") from None
+    from torquebench.outputs import prepare_dir
+
+    out_dir = prepare_dir(args.out_dir, "--out-dir")
     say = (lambda *a: print(*a, file=sys.stderr)) if args.json else print
 
     scene = load_scene(scene_path(SCENE))
@@ -86,8 +88,16 @@ def run(args) -> int:
         mm = lambda v: f"{v * 1e3:.2f} mm" if v is not None else "—"   # noqa: E731
         say(f"   {method:8s} {mm(m['position_error_mean_m']):>13s} {mm(m['position_error_rms_m']):>12s} "
             f"{mm(m['predicted_position_rms_m']):>14s} {m['force_error_mean_N'] or float('nan'):>11.3f} N")
-    say(f"   paper's Table III test 2: mean |p| error 2 mm, |F| 0.121 N.  Files: {out_dir}/")
+    say("   paper's Table III test 2: mean |p| error 2 mm, |F| 0.121 N.")
+    files = {"log.csv": "the simulated sensor log (t, base and joint states, tau1, tau2, Fx, Fz, My; SI units)",
+             "log.truth.csv": "the contact really applied, per sample (t, link, alpha, Fx, Fz, px, pz)",
+             "estimate_dynamic.csv": "the 'dynamic' estimate per sample (t, contact, link, alpha, Fx, Fz, px, pz, rnorm)",
+             "estimate_paper.csv": "the 'paper' (quasi-static, eqs. 6-9) estimate, same columns"}
+    say(f"Files in {out_dir}/ (formats: docs/conventions.md):")
+    for name, what in files.items():
+        say(f"   {name:<21s} {what}")
     results["out_dir"] = str(out_dir)
+    results["files"] = {str(out_dir / name): what for name, what in files.items()}
     if args.json:
         print_json(results)
     return 0

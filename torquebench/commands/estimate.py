@@ -6,6 +6,10 @@ import math
 from pathlib import Path
 
 HELP = "estimate contacts (link, α, force, point) sample by sample from a sensor log CSV"
+EXAMPLES = """\
+torquebench estimate examples/leg_poke/leg_poke.csv
+torquebench estimate examples/sim/paper_fixed_link2.csv --method paper --out out/fixed_link2_estimate.csv --json
+"""
 
 
 def _positive(text: str) -> float:
@@ -33,14 +37,14 @@ def _count(text: str) -> int:
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("log", type=Path, metavar="LOG.csv", help="sensor log (DESIGN.md format): CSV, or Parquet for .parquet")
+    parser.add_argument("log", type=Path, metavar="LOG.csv", help="sensor log: CSV (or Parquet for .parquet) with t,[x,z,theta,]q1,q2,[dx,dz,dtheta,]dq1,dq2,tau1,tau2,Fx,Fz,My in SI units (docs/conventions.md)")
     parser.add_argument("--robot", type=Path, default=None,
                         help="robot TOML (default: robots/paper_leg.toml)")
     parser.add_argument("--method", choices=["paper", "dynamic"], default="dynamic",
                         help="localization: 'dynamic' (observer residual, least squares; default) "
                              "or 'paper' (eqs. 6-9, quasi-static)")
     parser.add_argument("--gain", type=_positive, default=100.0, metavar="K",
-                        help="observer gain K in 1/s on every row (default 100)")
+                        help="observer gain K in 1/s on every row (default: %(default)s)")
     parser.add_argument("--threshold", type=_positive, default=None, metavar="EPS",
                         help="use the paper's rule ||r|| > EPS (default for --method paper, EPS 0.06)")
     parser.add_argument("--false-alarm-rate", default="1/h", metavar="RATE",
@@ -58,7 +62,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--encoder-counts", default=None, metavar="COUNTS",
                         help="encoder counts per revolution (quantization noise; default 0 = none)")
     parser.add_argument("--debounce", type=_count, default=0, metavar="N",
-                        help="samples ||r|| must stay above EPS before a contact is declared (default 0)")
+                        help="samples ||r|| must stay above EPS before a contact is declared (default: %(default)s)")
     parser.add_argument("--stance-foot", action="store_true",
                         help="the foot (last link, alpha=1) is an expected contact, estimated jointly")
     parser.add_argument("--timing", default=None, metavar="instant|mean|delay:SECONDS",
@@ -67,8 +71,9 @@ def add_arguments(parser) -> None:
                              "with this group delay (default: LOG.timing.toml beside the log, "
                              "else instant)")
     parser.add_argument("--out", type=Path, default=None, metavar="OUT.csv",
-                        help="write t,contact,link,alpha,Fx,Fz,px,pz,rnorm per sample (atomically; Parquet "
-                             "for .parquet, else CSV)")
+                        help="write t,contact,link,alpha,Fx,Fz,px,pz,rnorm per sample (s, -, -, -, N, N, m, m, -); "
+                             "Parquet for .parquet, else CSV; its directory is created, an existing file is kept unless --force")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out file")
 
 
 def _floats(text, where, count=None):
@@ -129,6 +134,8 @@ def run(args) -> int:
             same = False
         if same:
             raise InputError(f"--out {args.out}: is the input log; refusing to overwrite it")
+    from torquebench.outputs import prepare_file
+    prepare_file(args.out, "--out", force=args.force, inputs=(args.log, args.robot))
     robot = load_robot(args.robot or PAPER_LEG_TOML)
     log = read_log(args.log, robot)
     noise, quiet, rate = _detector_options(args, robot.n_links)

@@ -15,47 +15,54 @@ from pathlib import Path
 from torquebench.errors import InputError
 
 HELP = "flexure FEM: sensitivity (mV/V per N·m), stiffness, stress, cross-talk, min torque; sweeps"
+EXAMPLES = """\
+torquebench flexure
+torquebench flexure scenes/paper_disc.toml --size medium --png out/disc_strain.png --json
+torquebench flexure --sweep spoke_width_mm=3,3.5,4 --order 2 --png out/spoke_sweep.png
+"""
 HEADLINE = ("sensitivity_mV_per_V_per_Nm", "torsional_stiffness_Nm_per_rad", "max_von_mises_Pa",
             "safety_factor", "min_detectable_torque_Nm", "gauge_strain_per_Nm", "dofs", "solve_s")
 
 
 def add_arguments(parser) -> None:
     parser.add_argument("design", nargs="?", type=Path, default=None, metavar="DESIGN.toml",
-                        help="design file (default: the shipped scenes/paper_disc.toml)")
+                        help="flexure design TOML (docs/conventions.md; default: the shipped scenes/paper_disc.toml)")
     parser.add_argument("--size", choices=("coarse", "medium", "fine"), default=None,
-                        help="mesh size (default: the file's [mesh] size)")
+                        help="mesh size: coarse, medium or fine (default: the file's [mesh] size)")
     parser.add_argument("--order", type=int, choices=(1, 2), default=None,
                         help="element order: 1 = 4-node, 2 = 10-node tetrahedra (default: the file's)")
     parser.add_argument("--vtu", type=Path, default=None, metavar="OUT.vtu",
-                        help="write displacement, von Mises and strain fields at rated torque (ParaView)")
+                        help="write displacement (m), von Mises stress (Pa) and strain fields at rated torque for ParaView; directory created, existing file kept unless --force")
     parser.add_argument("--png", type=Path, default=None, metavar="OUT.png",
-                        help="picture of the field with the gauges (a sweep: the trade-off plot)")
+                        help="picture of the --field with the gauges (with --sweep: the trade-off plot); directory created, existing file kept unless --force")
     parser.add_argument("--field", choices=("strain", "von_mises"), default="strain",
-                        help="field drawn in --png (default: max shear strain, what ±45° gauges read)")
+                        help="field drawn in --png: strain = max shear strain (what ±45° gauges read), von_mises = stress in Pa (default: %(default)s)")
     parser.add_argument("--rtol", type=float, default=None, metavar="R",
                         help="refine the mesh until every figure's discretisation error estimate is "
-                             "below R (relative, e.g. 0.01), up to --max-dofs")
+                             "below R (relative, e.g. 0.01), up to --max-dofs (default: none, three levels)")
     parser.add_argument("--max-dofs", type=int, default=None, metavar="N",
-                        help="DOF cap for --rtol refinement (default 2,000,000)")
+                        help="DOF cap for --rtol refinement (default: 2,000,000)")
     parser.add_argument("--max-elements", type=float, default=None, metavar="N",
-                        help="refuse, before meshing, a mesh estimated above N tetrahedra (default 2e6)")
+                        help="refuse, before meshing, a mesh estimated above N tetrahedra (default: 500,000)")
     parser.add_argument("--single-level", action="store_true",
                         help="one mesh level only: faster, but the answers carry no error estimate")
     parser.add_argument("--sweep", action="append", metavar="PARAM=v1,v2,...",
-                        help="sweep a geometry parameter (e.g. spoke_width_mm=3,4,5); at most twice")
+                        help="sweep a [geometry] parameter over values in its own unit (e.g. spoke_width_mm=3,4,5); repeat for a 2-D grid, at most twice")
+    parser.add_argument("--force", action="store_true", help="replace existing --vtu / --png files")
 
 
 def _check_outputs(args, design_path: Path) -> None:
     """Refuse bad output paths before the (long) analysis runs."""
+    from torquebench.outputs import prepare_file
+
     for flag, path, suffix in (("--vtu", args.vtu, ".vtu"), ("--png", args.png, ".png")):
         if path is None:
             continue
         if path.suffix.lower() != suffix:
             raise InputError(f"{flag}: {path} must end in {suffix}")
-        if not path.parent.exists():
-            raise InputError(f"{flag}: directory {path.parent} does not exist")
         if path.resolve() == design_path.resolve():
             raise InputError(f"{flag}: {path} is the design file; refusing to overwrite it")
+        prepare_file(path, flag, force=args.force, inputs=(design_path,))
     if args.rtol is not None and args.single_level:
         raise InputError("--rtol: needs the error estimate; drop --single-level")
     if args.max_dofs is not None and args.max_dofs < 1000:
@@ -106,9 +113,10 @@ def _print_design(res: dict) -> None:
         print(f"error estimates: {res['gauge_strain_per_Nm_error_method']} (gauge strain)")
     print(f"minimum detectable torque: {res['min_detectable_torque_Nm'] * 1e3:.3g} mN·m (1σ noise), "
           f"{res['min_detectable_torque_enob_Nm'] * 1e3:.3g} mN·m (ENOB resolution)")
-    print("cross-talk (% of rated output per N or N·m; single-arm leak in brackets):")
+    print("cross-talk, % of rated output per N (forces) or per N·m (moments); "
+          "single-arm leak in brackets:")
     for k in ct:
-        print(f"  {k:<10}{ct[k]:>+10.3g}  [{leak[k]:.3g}]")
+        print(f"  {k:<10}{ct[k]:>+10.3g} %  [{leak[k]:.3g} %]")
 
 
 def run(args) -> int:

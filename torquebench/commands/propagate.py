@@ -17,6 +17,10 @@ import numpy as np
 from torquebench.errors import InputError
 
 HELP = "propagate sensor noise and calibration uncertainty into contact-localization error"
+EXAMPLES = """\
+torquebench propagate --grid 4 --draws 200
+torquebench propagate --calibration calibration/data/paper_link1_cal.json --grid 6 --png out/position_error.png --json
+"""
 
 
 def _floats(text: str, count: int, name: str) -> list[float]:
@@ -45,21 +49,21 @@ def add_arguments(parser) -> None:
     parser.add_argument("--robot", type=Path, help="robot TOML (default: robots/paper_leg.toml)")
     parser.add_argument("--sensor", type=Path, help="sensor TOML (default: scenes/paper_sensor.toml)")
     parser.add_argument("--strain-per-Nm", type=float, dest="strain_per_Nm",
-                        help="gauge strain per N·m of the flexure (default: the sensor file's, or the paper's)")
+                        help="gauge strain per N·m of joint torque, 1/(N·m) (default: the sensor file's, or the paper's)")
     parser.add_argument("--torque-noise-Nm", type=float, dest="torque_noise_Nm",
-                        help="override: joint-torque noise std per sample [N·m]")
-    parser.add_argument("--calibration", type=Path, help="calibration JSON: its slope uncertainty becomes a gain error")
+                        help="joint-torque noise std per sample in N·m (default: from the sensor's bridge and ADC)")
+    parser.add_argument("--calibration", type=Path, help="calibration JSON from `calibrate`: its slope uncertainty becomes a gain error")
     parser.add_argument("--gain-error", type=float, default=None,
-                        help="relative calibration gain error std (default: from --calibration, else 0)")
-    parser.add_argument("--ft-noise", default="0.1,0.1,0.01", help="σ of Fx [N], Fz [N], My [N·m] (Table II)")
-    parser.add_argument("--contact", default="2,0.8", help="LINK,ALPHA of the contact (default: Table III test 2)")
-    parser.add_argument("--force", default=f"7,{-math.pi / 3}", help="MAGNITUDE_N,DIRECTION_RAD (default 7 N at −π/3)")
-    parser.add_argument("--grid", type=int, default=10, help="postures per joint over [0, π] (default 10)")
-    parser.add_argument("--rate", type=float, default=1000.0, help="sample rate [Hz]")
-    parser.add_argument("--gain", type=float, default=100.0, help="observer gain K [1/s]")
-    parser.add_argument("--draws", type=int, default=500, help="Monte Carlo draws per posture")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--png", type=Path, help="write a heat map of the position error over the grid")
+                        help="relative calibration gain error std, dimensionless (default: from --calibration, else 0)")
+    parser.add_argument("--ft-noise", default="0.1,0.1,0.01", help="σ of the base wrench Fx [N], Fz [N], My [N·m] (default: %(default)s, the paper's Table II)")
+    parser.add_argument("--contact", default="2,0.8", help="LINK,ALPHA of the contact: link number and fraction along it (default: %(default)s, Table III test 2)")
+    parser.add_argument("--force", default=f"7,{-math.pi / 3}", help="MAGNITUDE_N,DIRECTION_RAD of the contact force, direction from +x counter-clockwise (default: 7 N at −π/3)")
+    parser.add_argument("--grid", type=int, default=10, help="postures per joint over [0, π] rad (default: %(default)s)")
+    parser.add_argument("--rate", type=float, default=1000.0, help="sample rate in Hz (default: %(default)s)")
+    parser.add_argument("--gain", type=float, default=100.0, help="observer gain K in 1/s (default: %(default)s)")
+    parser.add_argument("--draws", type=int, default=500, help="Monte Carlo draws per posture, at least 2 (default: %(default)s)")
+    parser.add_argument("--seed", type=int, default=0, help="Monte Carlo seed (default: %(default)s)")
+    parser.add_argument("--png", type=Path, help="write a heat map of the position error (m) over the posture grid; directory created, an existing file is never replaced")
 
 
 def sensor_noise_from_args(args):
@@ -119,6 +123,8 @@ def run(args) -> int:
         raise InputError("--grid must be ≥ 1 and --draws ≥ 2")
     if args.png and robot.n_links != 2:
         raise InputError("--png: the heat map is drawn for two-link robots only")
+    from torquebench.outputs import prepare_file
+    prepare_file(args.png, "--png", force_flag=None)
     noise, provenance = sensor_noise_from_args(args)
     force = magnitude * np.array([math.cos(direction), math.sin(direction)])
     axes = [np.linspace(0.0, math.pi, args.grid)] * robot.n_links

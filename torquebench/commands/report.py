@@ -12,6 +12,10 @@ import torquebench.reports
 from torquebench.errors import InputError
 
 HELP = "regenerate the Markdown + PNG reports in reports/ (all areas, or --only AREA)"
+EXAMPLES = """\
+torquebench report --list
+torquebench report --only bridge --out-dir out/reports
+"""
 
 
 def builders() -> dict:
@@ -23,9 +27,9 @@ def builders() -> dict:
 
 def add_arguments(parser) -> None:
     parser.add_argument("--out-dir", type=Path, default=None,
-                        help="where to write (default: the repository's reports/)")
+                        help="directory to write the reports to, created if missing; reports are regenerated in place (default: the repository's reports/)")
     parser.add_argument("--only", action="append", metavar="AREA",
-                        help="build only this area (repeatable); see --list")
+                        help="build only this area (repeatable; default: all); see --list")
     parser.add_argument("--list", action="store_true", help="list the report areas and exit")
 
 
@@ -44,8 +48,8 @@ def run(args) -> int:
     if unknown:
         raise InputError(f"--only: unknown report area {unknown[0]!r}; known: {', '.join(areas)}")
     out_dir = args.out_dir or REPO_ROOT / "reports"
-    if not out_dir.is_dir():
-        raise InputError(f"--out-dir: {out_dir} is not a directory")
+    from torquebench.outputs import prepare_dir
+    prepare_dir(out_dir, "--out-dir")
     written, timings = {}, {}
     for area in chosen:
         start = time.perf_counter()
@@ -53,9 +57,12 @@ def run(args) -> int:
         paths = importlib.import_module(areas[area]).build(out_dir)
         timings[f"{area}_s"] = time.perf_counter() - start
         written[area] = [str(p) for p in paths]
+    from torquebench.reports_index import write_index
+    index = write_index(out_dir, list(areas))
     if args.json:
-        print_json({"written": written, "build_time_s": timings})
+        print_json({"written": written, "index": str(index), "build_time_s": timings})
     else:
         for area, paths in written.items():
             print(f"{area}: " + ", ".join(paths))
+        print(f"index: {index}")
     return 0

@@ -7,14 +7,18 @@ from pathlib import Path
 from torquebench.errors import InputError
 
 HELP = "reproduce the paper's Tables III-V, the posture sweep and Fig. 4 (writes ./reproduction/paper_reproduction.md)"
+EXAMPLES = """\
+torquebench reproduce --scene paper_fixed_link1 --no-stiffness --out-dir out/repro
+torquebench reproduce --quick
+"""
 
 
 def add_arguments(parser) -> None:
     parser.add_argument("--scene", action="append", metavar="NAME",
-                        help="run only this shipped scene (repeatable), e.g. paper_fixed_link1")
+                        help="run only this shipped scene (repeatable; default: all), e.g. paper_fixed_link1")
     parser.add_argument("--out-dir", type=Path, default=None,
-                        help="where to write the report (default: ./reproduction/; the shipped "
-                             "reports/ only with --regenerate-shipped)")
+                        help="directory to write the report to, created if missing (default: "
+                             "./reproduction/; the shipped reports/ only with --regenerate-shipped)")
     parser.add_argument("--regenerate-shipped", action="store_true",
                         help="replace the repository's reports/paper_reproduction.md (all scenes)")
     parser.add_argument("--no-stiffness", action="store_true",
@@ -36,6 +40,9 @@ def run(args) -> int:
     if args.regenerate_shipped and (args.scene or args.quick):
         raise InputError("--regenerate-shipped: the shipped report covers every scene at full "
                          "settings; drop --scene/--quick or write elsewhere with --out-dir")
+    if args.out_dir is not None:
+        from torquebench.outputs import prepare_dir
+        prepare_dir(args.out_dir, "--out-dir")                     # created if missing
     out_dir = output_dir(args.out_dir, default="reproduction", shipped_dir=REPO_ROOT / "reports",
                          regenerate=args.regenerate_shipped)
     results = rr.run_reproduction(names, progress=True, quick=args.quick,

@@ -10,6 +10,10 @@ import sys
 from pathlib import Path
 
 HELP = "run a scene through the stage graph (only the stages its outputs need)"
+EXAMPLES = """\
+torquebench run scenes/end_to_end.toml --explain
+torquebench run scenes/end_to_end.toml --json
+"""
 
 
 def add_arguments(parser) -> None:

@@ -8,16 +8,21 @@ from pathlib import Path
 
 from torquebench.errors import InputError
 
-HELP = "simulate a scene file: write LOG.csv (DESIGN.md log format) and LOG.truth.csv beside it"
+HELP = "simulate a scene file: write a sensor log CSV (docs/conventions.md) and LOG.truth.csv beside it"
+EXAMPLES = """\
+torquebench simulate scenes/paper_floating_link1.toml --out out/floating_link1.csv
+torquebench simulate scenes/paper_fixed_link2.toml --out out/fixed_link2.csv --seed 7 --duration 1.0 --json
+"""
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("scene", type=Path, help="scene TOML file (e.g. scenes/paper_floating_link1.toml)")
-    parser.add_argument("--out", type=Path, required=True, help="log CSV to write")
+    parser.add_argument("scene", type=Path, help="scene TOML file (docs/conventions.md), e.g. scenes/paper_floating_link1.toml")
+    parser.add_argument("--out", type=Path, required=True, help="sensor log CSV to write (SI units); LOG.truth.csv is written beside it; directory created, existing files kept unless --force")
     parser.add_argument("--integrator", default=None,
-                        help="override the scene's integrator (RK45, DOP853, Radau, BDF, LSODA, RK4)")
-    parser.add_argument("--seed", type=int, default=None, help="override the sensor-noise seed")
-    parser.add_argument("--duration", type=float, default=None, help="override duration_s (dynamic scenes)")
+                        help="integrator: RK45, DOP853, Radau, BDF, LSODA or RK4 (default: the scene's [integrator] method)")
+    parser.add_argument("--seed", type=int, default=None, help="sensor-noise seed (default: the scene's [sensors] seed)")
+    parser.add_argument("--duration", type=float, default=None, help="simulated time in s, dynamic scenes (default: the scene's duration_s)")
+    parser.add_argument("--force", action="store_true", help="replace existing log and truth files")
 
 
 def truth_path(out: Path) -> Path:
@@ -74,6 +79,9 @@ def run(args) -> int:
     if args.duration is not None:
         finite(args.duration, "--duration", positive=True)
     out, tpath = Path(args.out), truth_path(Path(args.out))
+    from torquebench.outputs import prepare_file
+    for p in (out, tpath):
+        prepare_file(p, "--out", force=args.force, inputs=(args.scene,))   # mkdir, --force
     plan_outputs({"scene": args.scene}, {"--out": out, "truth (--out with .truth.csv)": tpath})
     if out.suffix == ".toml":
         raise InputError(f"--out: {out} looks like a scene/robot file; refusing to overwrite it "

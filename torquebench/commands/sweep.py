@@ -5,6 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 HELP = "run a scene over a grid of varied keys (process pool, or a Dask cluster)"
+EXAMPLES = """\
+torquebench sweep scenes/paper_floating_link2.toml --vary sensors.seed=1,2,3,4 --json
+"""
 
 
 def add_arguments(parser) -> None:

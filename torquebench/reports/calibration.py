@@ -23,7 +23,7 @@ def build(out_dir: Path) -> list[Path]:
     from torquebench.io import atomic_path, write_text_atomic
 
     out_dir = Path(out_dir)
-    L = ["# Calibration (issue 6): static loading, Bayesian fit, store, serial, torque fidelity", "",
+    L = ["# Calibration: static loading, Bayesian fit, store, serial, torque fidelity", "",
          "All data here are **simulated** (`calibration.simulate`, fixed seeds) through "
          "`bridge.chain.paper_chain`, with dead-weight repeatability noise set so the expected R² "
          "is the paper's. Reading of eqs. 12–13: *y* is the bridge differential output in **mV**, "

@@ -14,7 +14,7 @@ import numpy as np
 
 from torquebench.io import REPO_ROOT, atomic_path, write_text_atomic
 
-SAMPLES = REPO_ROOT.parent / "shared" / "samples"
+SAMPLES = REPO_ROOT / "examples" / "leg_poke"
 
 
 def _save(fig, path: Path) -> Path:

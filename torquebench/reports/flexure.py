@@ -149,7 +149,7 @@ def build(out_dir: Path) -> list[Path]:
          "its FEA sentence put the strain near 4–6e-5 per N·m (ε_min reached at 0.4 N·m, resp. "
          "0.001 N·m), which this design meets; the ~10 mV maximum output over a 0–2 N·m range would "
          "need ≈ 5.7e-4 per N·m at 5 V, ten times more, which the `bridge` package's default "
-         "assumes (README, issue #4). For a spoke flexure the peak stress per unit gauge strain is "
+         "assumes (README). For a spoke flexure the peak stress per unit gauge strain is "
          "set by the spoke's proportions (≈ 4 G L/w for a guided beam, more at the fillets), not its size: ours runs "
          f"{fine['max_von_mises_Pa'] / (eps * T) / 1e9:.0f} GPa per unit strain, so a disc of this "
          f"layout reading 5.7e-4 per N·m would see ≈ {fine['max_von_mises_Pa'] / eps * PAPER_STRAIN_PER_NM / 1e6:.0f} "

@@ -480,7 +480,7 @@ def _targets(results) -> list[str]:
                         f"{'reached' if ok else 'missed'} |")
     if not rows:
         return []
-    return ["## Targets (issue 3)", "", "| target | goal | ours | |", "|---|---|---|---|", *rows, "",
+    return ["## Targets", "", "| target | goal | ours | |", "|---|---|---|---|", *rows, "",
             "The `paper` method (eqs. 6–9 as published) solves each sample from the instantaneous",
             "readings (no observer filtering: σ_FT = 0.1 N goes straight into F and, divided by the",
             "lever arm, into α) and is quasi-static (on the floating base the spring-mounted base keeps",

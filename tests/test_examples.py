@@ -1,0 +1,70 @@
+"""The example logs shipped in examples/ are what they claim to be.
+
+examples/sim/: re-simulating the scene gives the shipped file again (same seed, same integrator),
+and `estimate` finds the applied contact in it. examples/leg_poke/: the independent log is present
+(a fresh clone needs nothing beside it). Nothing here refers outside the repository.
+"""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SIM = ROOT / "examples" / "sim"
+SCENES = ("paper_floating_link1", "paper_fixed_link2")
+# this file names the string it looks for; README.md's examples are checked by test_readme.py
+OWN_CHECKS = {"tests/test_examples.py", "README.md"}
+
+
+def _tb(*argv, cwd=ROOT):
+    return subprocess.run([sys.executable, "-m", "torquebench", *map(str, argv)], cwd=cwd,
+                          capture_output=True, text=True, timeout=300)
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_shipped_sim_log_is_what_the_simulator_makes(scene, tmp_path):
+    proc = _tb("simulate", ROOT / "scenes" / f"{scene}.toml", "--out", tmp_path / "log.csv")
+    assert proc.returncode == 0, proc.stderr
+    for made, shipped in ((tmp_path / "log.csv", SIM / f"{scene}.csv"),
+                          (tmp_path / "log.truth.csv", SIM / f"{scene}.truth.csv")):
+        a, b = pd.read_csv(made), pd.read_csv(shipped)
+        assert list(a.columns) == list(b.columns) and a.shape == b.shape
+        # same seed and integrator: equal up to the CSV's printed digits and BLAS round-off
+        np.testing.assert_allclose(a.to_numpy(), b.to_numpy(), rtol=1e-6, atol=1e-7, equal_nan=True)
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_estimate_finds_the_true_contact_in_the_shipped_log(scene):
+    truth = pd.read_csv(SIM / f"{scene}.truth.csv")
+    touching = truth[truth.link > 0]
+    link, alpha = int(touching.link.iloc[0]), float(touching.alpha.iloc[0])
+    proc = _tb("estimate", SIM / f"{scene}.csv", "--json")
+    assert proc.returncode == 0, proc.stderr
+    longest = max(json.loads(proc.stdout)["intervals"], key=lambda iv: iv["samples"])
+    assert longest["link"] == link
+    assert abs(longest["alpha"] - alpha) < 0.05
+    assert abs(longest["t_start_s"] - touching.t.iloc[0]) < 0.02
+
+
+def test_leg_poke_sample_is_in_the_repository():
+    for name in ("leg_poke.csv", "leg_poke.truth.csv", "README.md"):
+        assert (ROOT / "examples" / "leg_poke" / name).is_file(), name
+    assert "independent" in (ROOT / "examples" / "leg_poke" / "README.md").read_text(encoding="utf-8")
+
+
+def test_nothing_in_the_repository_points_outside_it():
+    """No tracked text file refers to ../shared (a fresh clone has nothing beside it)."""
+    files = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True).stdout.split()
+    offenders = []
+    for name in files:
+        path = ROOT / name
+        if path.suffix not in {".py", ".md", ".toml", ".sh", ".txt", ".cfg"} or not path.is_file():
+            continue
+        if name not in OWN_CHECKS and "../shared" in path.read_text(encoding="utf-8", errors="replace"):
+            offenders.append(name)
+    assert offenders == []
