@@ -18,6 +18,8 @@ def add_arguments(parser) -> None:
                         help="override the scene's integrator (RK45, DOP853, Radau, BDF, LSODA, RK4)")
     parser.add_argument("--seed", type=int, default=None, help="override the sensor-noise seed")
     parser.add_argument("--duration", type=float, default=None, help="override duration_s (dynamic scenes)")
+    parser.add_argument("--max-run-time", type=float, default=600.0, metavar="S",
+                        help="refuse a run predicted (or found) to take longer than S seconds (default 600)")
 
 
 def truth_path(out: Path) -> Path:
@@ -25,7 +27,7 @@ def truth_path(out: Path) -> Path:
     return out.with_name(out.stem + ".truth" + (out.suffix or ".csv"))
 
 
-def run_scene(scene, seed=None, integrator=None, duration=None):
+def run_scene(scene, seed=None, integrator=None, duration=None, max_run_time_s=600.0):
     """(SensorLog, truth dict, stats) of a dynamic or static scene."""
     from dataclasses import replace
 
@@ -43,10 +45,10 @@ def run_scene(scene, seed=None, integrator=None, duration=None):
                 raise InputError(f"--integrator: must be one of {', '.join(INTEGRATORS)}, got {integrator!r}")
             cfg = replace(cfg, integrator=integrator)
         if duration is not None:
-            if not duration > 0:
+            if not (duration > 0 and duration < float("inf")):
                 raise InputError(f"--duration: must be > 0, got {duration}")
             cfg = replace(cfg, duration_s=duration)
-        res = simulate(cfg)
+        res = simulate(cfg, max_run_time_s=max_run_time_s)
         return res.log, res.truth, res.stats
     st = scene.static
     sensors = st.sensors if seed is None else replace(st.sensors, seed=seed)
@@ -75,7 +77,11 @@ def run(args) -> int:
             raise InputError(f"--out: {p} is an input (the scene file); refusing to overwrite it")
     if not out.parent.exists():
         raise InputError(f"--out: directory {out.parent} does not exist")
-    log, truth, stats = run_scene(scene, args.seed, args.integrator, args.duration)
+    max_run = getattr(args, "max_run_time", 600.0)
+    if not (max_run > 0):
+        raise InputError(f"--max-run-time: must be > 0 s, got {max_run}")
+    log, truth, stats = run_scene(scene, args.seed, args.integrator, args.duration,
+                                   max_run)
     write_text_atomic(out, log_csv(log))
     write_text_atomic(tpath, truth_csv(truth))
     summary = {"scene": scene.name, "log": str(out), "truth": str(tpath), "samples": len(log.t),
@@ -85,6 +91,8 @@ def run(args) -> int:
         print_json(summary)
     else:
         print(f"{scene.name}: {summary['samples']} samples, {summary['contact_samples']} in contact "
-              f"→ {out} (+ {tpath.name}); {stats.get('integrator')} in {stats['run_time_s']:.2f} s",
+              f"→ {out} (+ {tpath.name}); {stats.get('integrator')} in {stats['run_time_s']:.2f} s"
+              + (f"; integration error ± {stats['q_rad_error_estimate']:.2g} rad"
+                 if "q_rad_error_estimate" in stats else ""),
               file=sys.stdout)
     return 0
