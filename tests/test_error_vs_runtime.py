@@ -52,3 +52,18 @@ def test_calibration_rows_converge_toward_the_exact_posterior():
     rows, _ = evr.calibration_rows(quick=True)
     rule = [r for r in rows if r["family"] == "autocorrelation stopping rule"][0]
     assert rule["error"] < 0.05                   # ≥ 50 τ: mean within 5 % σ, σ within 5 %
+
+
+def test_observer_rows_trade_delay_against_noise():
+    rows, _ = evr.observer_rows(quick=True)
+    at_1k = {r["setting"]: r for r in rows if r["family"] == "1000 Hz"}
+    slow, fast = at_1k["K = 30 1/s @ 1000 Hz"], at_1k["K = 300 1/s @ 1000 Hz"]
+    assert fast["rise_90pct_s"] < 0.2 * slow["rise_90pct_s"]
+    assert abs(slow["rise_90pct_s"] - np.log(10) / 30) < 0.01     # first-order lag: t90 = ln 10 / K
+    assert fast["noise_rel"] > slow["noise_rel"]
+
+
+def test_localizer_rows_dynamic_beats_paper_on_the_moving_leg():
+    rows, _ = evr.localizer_rows(quick=True)
+    by = {r["family"]: r["error"] for r in rows}
+    assert by["dynamic (moving)"] < 0.2 * by["paper (moving)"]
