@@ -105,3 +105,14 @@ def test_observer_gain_times_step_stays_stable_and_naive_euler_would_not(k_dt):
         r = a[0] * r + b[0] * 1.0
         out.append(r)
     assert max(out) <= 1.0 + 1e-12 and abs(out[-1] - 1.0) < 1e-6 * max(1, 1 / k_dt) + np.exp(-200 * k_dt)
+
+
+def test_stability_report_rows_name_existing_tests_and_build(tmp_path):
+    from torquebench.io import REPO_ROOT
+    from torquebench.reports import stability
+
+    assert stability.missing_tests(REPO_ROOT) == []
+    assert len(stability.ROWS) >= 20
+    (md,) = stability.build(tmp_path)
+    text = md.read_text()
+    assert text.count("| `tests/") == len(stability.ROWS)
