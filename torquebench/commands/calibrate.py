@@ -102,6 +102,12 @@ def run(args) -> int:
     post = payload["posterior"]
     result = {n: post[n]["mean"] for n in fit.coef_names}
     result.update({f"{n}_std": post[n]["std"] for n in fit.coef_names})
+    se = dict(zip(fit.names, fit.mc_standard_error))
+    method = (f"Monte Carlo standard error (1 sigma) of the posterior mean, sigma_post*sqrt(tau/N), "
+              f"N = {fit.samples.shape[0]} samples, tau = {fit.tau_max:.1f} steps, split R-hat = {fit.rhat:.4f}")
+    result.update({f"{n}_error_estimate": float(se[n]) for n in fit.coef_names})
+    result.update({f"{n}_error_method": method for n in fit.coef_names})
+    result["rhat"] = fit.rhat
     result.update({
         "sigma": post["sigma"]["mean"], "sigma_std": post["sigma"]["std"],
         "r2": fit.exact.r2, "autocorr_time": fit.tau_max,
@@ -126,11 +132,12 @@ def run(args) -> int:
     print(f"{session.sensor_id}: {fit.model} fit of {len(session)} readings ({args.data})")
     ref = "exact" if args.mass_std_g == 0 else "exact without errors-in-load"
     for n in fit.coef_names:
-        print(f"  {n:<11s}= {post[n]['mean']:.6g} ± {post[n]['std']:.2g}  "
+        print(f"  {n:<11s}= {post[n]['mean']:.6g} ± {post[n]['std']:.2g} (posterior σ; MC error "
+              f"± {result[n + '_error_estimate']:.2g})  "
               f"({ref} {fit.exact.beta[list(fit.coef_names).index(n)]:.6g} ± "
               f"{fit.exact.std[list(fit.coef_names).index(n)]:.2g})")
     print(f"  sigma      = {post['sigma']['mean']:.4g} {unit};  R² = {fit.exact.r2:.5f}")
     print(f"  τ = {fit.tau_max:.1f} steps, {fit.n_steps} steps × {fit.n_walkers} walkers, "
-          f"acceptance {fit.acceptance_fraction:.2f}, converged")
+          f"acceptance {fit.acceptance_fraction:.2f}, split R̂ = {fit.rhat:.4f}, converged")
     print(f"wrote {written}" + ("".join(f", {p}" for p in reports)))
     return 0
