@@ -32,3 +32,15 @@ def test_apply_json_carries_per_sample_error(capsys, tmp_path):
     assert np.allclose(d["mass_g_error_estimate"], d["mass_std_g"])
     assert np.all(np.asarray(d["mass_g_error_estimate"], float) > 0)
     assert "posterior" in d["mass_g_error_method"]
+
+
+def test_simulate_json_error_estimate_and_tolerance_warning(capsys, tmp_path):
+    base = ["simulate", "scenes/moving_leg.toml", "--duration", "0.05", "--json"]
+    assert main(base + ["--out", str(tmp_path / "a.csv"), "--error-tolerance", "1e-15"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert 0 < d["q_rad_error_estimate"] < 1e-4 and "tighter" in d["q_rad_error_method"]
+    assert len(d["warnings"]) == 1 and "exceeds --error-tolerance" in d["warnings"][0]
+    assert main(base + ["--out", str(tmp_path / "b.csv"), "--error-tolerance", "1"]) == 0
+    assert "warnings" not in json.loads(capsys.readouterr().out)
+    assert main(base + ["--out", str(tmp_path / "c.csv"), "--error-tolerance", "-1"]) == 2
+    assert "--error-tolerance" in capsys.readouterr().err

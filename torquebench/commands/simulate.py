@@ -20,6 +20,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--duration", type=float, default=None, help="override duration_s (dynamic scenes)")
     parser.add_argument("--max-run-time", type=float, default=600.0, metavar="S",
                         help="refuse a run predicted (or found) to take longer than S seconds (default 600)")
+    parser.add_argument("--error-tolerance", type=float, default=None, metavar="RAD",
+                        help="warn when the integration error estimate (q_rad_error_estimate) exceeds RAD")
 
 
 def truth_path(out: Path) -> Path:
@@ -77,6 +79,9 @@ def run(args) -> int:
             raise InputError(f"--out: {p} is an input (the scene file); refusing to overwrite it")
     if not out.parent.exists():
         raise InputError(f"--out: directory {out.parent} does not exist")
+    tol = getattr(args, "error_tolerance", None)
+    if tol is not None and not tol > 0:
+        raise InputError(f"--error-tolerance: must be > 0 rad, got {tol}")
     max_run = getattr(args, "max_run_time", 600.0)
     if not (max_run > 0):
         raise InputError(f"--max-run-time: must be > 0 s, got {max_run}")
@@ -87,6 +92,12 @@ def run(args) -> int:
     summary = {"scene": scene.name, "log": str(out), "truth": str(tpath), "samples": len(log.t),
                "duration_s": float(log.t[-1]) if len(log.t) else 0.0,
                "contact_samples": int((truth["link"] > 0).sum()), **stats}
+    tol = getattr(args, "error_tolerance", None)
+    est = summary.get("q_rad_error_estimate")
+    if tol is not None and est is not None and not est <= tol:
+        summary.setdefault("warnings", []).append(
+            f"q_rad_error_estimate {est:.3g} rad exceeds --error-tolerance {tol:g} rad: tighten rtol/atol "
+            f"or the step")
     if args.json:
         print_json(summary)
     else:
@@ -95,4 +106,6 @@ def run(args) -> int:
               + (f"; integration error ± {stats['q_rad_error_estimate']:.2g} rad"
                  if "q_rad_error_estimate" in stats else ""),
               file=sys.stdout)
+        for w in summary.get("warnings", []):
+            print(f"warning: {w}", file=sys.stderr)
     return 0
