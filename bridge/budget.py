@@ -197,4 +197,26 @@ def sensor_summary(config: SensorConfig | None = None, strain_per_Nm: float | No
         out["min_detectable_torque_Nm"] = bud.total_Nm
         out["min_detectable_torque_ideal_Nm"] = out["eps_min_ideal_bridge"] / strain_per_Nm
         out["min_detectable_torque_enob_Nm"] = out["eps_min_enob_bridge"] / strain_per_Nm
+        est, how = _enob_definition_spread(cfg, strain_per_Nm, bandwidth_Hz, averaging, bud.total_Nm)
+        out["min_detectable_torque_Nm_error_estimate"] = est
+        out["min_detectable_torque_Nm_error_method"] = how
     return out
+
+
+def _enob_definition_spread(cfg: SensorConfig, strain_per_Nm, bandwidth_Hz, averaging, value: float):
+    """|Δ| of the 1σ noise floor when the datasheet ENOB is read under the other definition.
+
+    The ADC noise term is σ_ADC = FSR / (2^ENOB √12) ('ti') or with the sine-wave 1.76 dB
+    ('ieee'); a datasheet often does not say which. The other model terms (Johnson, amplifier,
+    quantization) are taken as exact, so this is the spread from that one ambiguity, not a bound.
+    """
+    from dataclasses import replace as _replace
+
+    spread = 0.0
+    for other in ("ti", "ieee"):
+        if other == cfg.enob_definition:
+            continue
+        alt = noise_budget(_replace(cfg, enob_definition=other), strain_per_Nm, bandwidth_Hz, averaging)
+        spread = max(spread, abs(alt.total_Nm - value))
+    return spread, ("spread from the ENOB-definition ambiguity (same datasheet ENOB read as 'ti' vs "
+                    "'ieee'); Johnson, amplifier and quantization terms taken as exact - not a bound")

@@ -76,6 +76,30 @@ class FitResult:
     def quantiles(self, q=(0.16, 0.5, 0.84)) -> np.ndarray:
         return np.quantile(self.samples, q, axis=0)
 
+    @property
+    def effective_samples(self) -> np.ndarray:
+        """N_eff = N / τ per parameter (N = kept samples over all walkers)."""
+        return self.samples.shape[0] / np.maximum(self.autocorr_time, 1.0)
+
+    @property
+    def mc_standard_error(self) -> np.ndarray:
+        """Monte Carlo standard error (1σ) of each posterior mean: SE = σ_post √(τ / N)."""
+        return self.std / np.sqrt(self.effective_samples)
+
+    @property
+    def rhat(self) -> float:
+        """Split-R̂ (Gelman–Rubin) over the walkers' halves, max over parameters (≈ 1 when mixed)."""
+        n_keep = self.samples.shape[0] // self.n_walkers
+        if n_keep < 4:
+            return float("nan")
+        ch = self.samples[: n_keep * self.n_walkers].reshape(n_keep, self.n_walkers, -1)
+        half = n_keep // 2
+        ch = np.concatenate([ch[:half], ch[half:2 * half]], axis=1)        # (half, 2W, p)
+        W = ch.var(axis=0, ddof=1).mean(axis=0)
+        B = half * ch.mean(axis=0).var(axis=0, ddof=1)
+        var = (half - 1) / half * W + B / half
+        return float(np.max(np.sqrt(var / W)))
+
     def thinned(self, max_samples: int = 2000, rng=None) -> np.ndarray:
         """Thin by ~τ/2 then keep at most ``max_samples`` rows (for the store)."""
         thin = max(1, int(self.tau_max / 2))

@@ -94,6 +94,25 @@ class Propagation:
     force_rms_N: np.ndarray
     flagged_fraction: np.ndarray       # share of draws the localizer refused (NaN α); 0 for first order
     position_p95_m: np.ndarray | None = None
+    position_rms_se_m: np.ndarray | None = None    # Monte Carlo standard error (1σ) of position_rms_m
+    position_p95_se_m: np.ndarray | None = None    # Monte Carlo standard error (1σ) of position_p95_m
+
+
+def percentile_standard_error(x: np.ndarray, p: float = 95.0) -> np.ndarray:
+    """1σ sampling error of the p-th percentile of each row (NaNs dropped), distribution-free.
+
+    The order statistic at rank N·p has a binomial rank spread √(N p (1−p)); half the distance
+    between the order statistics at ranks N p ∓ √(N p (1−p)) is its standard error
+    (≈ √(p(1−p)/N)/f(x_p)); NaN with fewer than 20 finite draws.
+    """
+    x = np.sort(np.atleast_2d(x), axis=1)            # NaNs sort last
+    n = np.sum(np.isfinite(x), axis=1)
+    pf = p / 100.0
+    spread = np.sqrt(n * pf * (1 - pf))
+    lo = np.clip(np.floor(n * pf - spread), 0, np.maximum(n - 1, 0)).astype(int)
+    hi = np.clip(np.ceil(n * pf + spread), 0, np.maximum(n - 1, 0)).astype(int)
+    se = 0.5 * (np.take_along_axis(x, hi[:, None], 1) - np.take_along_axis(x, lo[:, None], 1))[:, 0]
+    return np.where(n >= 20, se, np.nan)
 
 
 def _check(robot: Robot, q_joint, link, alpha, force_N):
@@ -186,6 +205,10 @@ def monte_carlo(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise,
         pos_rms = np.sqrt(np.nanmean(pos ** 2, axis=1))
         p95 = np.nanpercentile(pos, 95, axis=1)
         a_std = np.nanstd(a_err, axis=1)
+        # SE of an RMS: δ-method on the mean of e²: SE(√m) = SD(e²)/(2 √m √N)
+        n_ok = np.sum(np.isfinite(pos), axis=1)
+        rms_se = np.nanstd(pos ** 2, axis=1) / (2 * pos_rms * np.sqrt(np.maximum(n_ok, 1)))
     return Propagation(alpha_std=a_std, position_rms_m=pos_rms,
                        force_rms_N=np.sqrt(np.mean(f_err ** 2, axis=1)),
-                       flagged_fraction=flagged.mean(axis=1), position_p95_m=p95)
+                       flagged_fraction=flagged.mean(axis=1), position_p95_m=p95,
+                       position_rms_se_m=rms_se, position_p95_se_m=percentile_standard_error(pos, 95.0))

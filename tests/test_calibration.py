@@ -203,3 +203,20 @@ def test_session_with_missing_timestamps_and_bom_round_trips(tmp_path):
     assert np.isnan(s.timestamp_s[0]) and s.timestamp_s[1] == 3.5
     r = read_session(write_session(s, tmp_path / "t.csv"))
     assert np.isnan(r.timestamp_s[0]) and r.timestamp_s[1] == 3.5
+
+
+def test_mc_standard_error_and_rhat_are_honest():
+    """The reported MC error of each posterior mean is the size of the actual deviation from the
+    exact posterior mean, over independent seeds; split R̂ ≈ 1 once converged, > 1 for a stuck start."""
+    s = paper_session(1)
+    devs, ses = [], []
+    for seed in range(8):
+        fit = fit_session(s, seed=seed, n_walkers=32)
+        p = len(fit.exact.beta)
+        devs.append(fit.mean[:p] - fit.exact.beta)
+        ses.append(fit.mc_standard_error[:p])
+        assert fit.converged and fit.rhat < 1.05
+    z = np.array(devs) / np.array(ses)
+    assert 0.4 < np.sqrt(np.mean(z ** 2)) < 2.5          # z-scores of unit size (16 values)
+    short = fit_session(s, max_steps=60, min_steps=60, seed=0, n_walkers=32)
+    assert short.rhat > fit.rhat

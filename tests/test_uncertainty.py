@@ -113,3 +113,28 @@ def test_propagate_cli_bad_input_exits_2(capsys):
     assert main(["propagate", "--force", "7"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--force" in err
+
+
+def test_percentile_and_rms_standard_errors_match_the_spread_over_seeds():
+    """The reported MC standard errors equal the scatter of the figure over 60 independent runs."""
+    runs = [monte_carlo(ROBOT, POSTURES[:2], 2, 0.6, F7, NOISE, draws=400, rng=seed, method="paper")
+            for seed in range(60)]
+    p95 = np.array([r.position_p95_m for r in runs])
+    rms = np.array([r.position_rms_m for r in runs])
+    se95 = np.mean([r.position_p95_se_m for r in runs], axis=0)
+    se_rms = np.mean([r.position_rms_se_m for r in runs], axis=0)
+    # the std of 60 draws is itself known to ~±9 % (1σ); allow ±35 %
+    np.testing.assert_allclose(se95, p95.std(axis=0, ddof=1), rtol=0.35)
+    np.testing.assert_allclose(se_rms, rms.std(axis=0, ddof=1), rtol=0.35)
+
+
+def test_propagate_json_carries_the_error_estimates(capsys):
+    import json
+
+    from torquebench.cli import main
+
+    assert main(["propagate", "--grid", "2", "--draws", "200", "--json"]) == 0
+    m = json.loads(capsys.readouterr().out)["methods"]["dynamic"]
+    assert 0 < m["position_p95_max_m_error_estimate"] < m["position_p95_max_m"]
+    assert "standard error" in m["position_p95_max_m_error_method"]
+    assert 0 < m["position_rms_median_m_error_estimate"] < m["position_rms_median_m"]

@@ -19,6 +19,7 @@ from scipy.integrate import solve_ivp
 from estimator import dynamics as dyn
 from estimator.errors import InputError
 from estimator.log import SensorLog
+from estimator.sim.cost import Watch, estimate_cost
 from estimator.sim.config import ADAPTIVE, INTEGRATORS, SimConfig
 from estimator.sim.model import Plant
 from estimator.sim.sensors import measure
@@ -56,7 +57,7 @@ def _breakpoints(config: SimConfig) -> np.ndarray:
     return np.array(sorted(pts))
 
 
-def _adaptive(plant: Plant, config: SimConfig, ts: np.ndarray, zoh: bool):
+def _adaptive(plant: Plant, config: SimConfig, ts: np.ndarray, zoh: bool, bar=None):
     """solve_ivp between breakpoints (and control ticks for a ZOH); returns states at ts, τ held."""
     cuts = _breakpoints(config)
     if zoh:
@@ -77,6 +78,8 @@ def _adaptive(plant: Plant, config: SimConfig, ts: np.ndarray, zoh: bool):
         t_eval = ts[idx:hi]
 
         def f(t, yy, _h=tau_hold):
+            if bar is not None and plant.nfev % 2000 == 0:
+                bar.check(t)
             return plant.rhs1(t, yy, _h)
 
         grid = np.append(t_eval[t_eval < b], b)
@@ -94,7 +97,7 @@ def _adaptive(plant: Plant, config: SimConfig, ts: np.ndarray, zoh: bool):
     return Y, held
 
 
-def _rk4(plant: Plant, config: SimConfig, ts: np.ndarray, zoh: bool, y0=None):
+def _rk4(plant: Plant, config: SimConfig, ts: np.ndarray, zoh: bool, y0=None, bar=None):
     """Classic RK4 with step h (batched over the rows of y0); samples where t hits ts."""
     h = config.fixed_step_s
     per_sample = round(1.0 / (config.sensors.sample_rate_Hz * h))
@@ -137,6 +140,8 @@ def _rk4(plant: Plant, config: SimConfig, ts: np.ndarray, zoh: bool, y0=None):
             raise InputError(f"scene '{config.name}': RK4 diverged at t = {t:.6g} s")
         if (k + 1) % per_sample == 0:
             Y[(k + 1) // per_sample] = y
+            if bar is not None and (k + 1) % (per_sample * 100) == 0:
+                bar.check((k + 1) * h)
     if zoh:
         q, dq, _ = plant.split(y)
         held[-1] = tau_hold
@@ -164,23 +169,39 @@ def truth_table(config: SimConfig, ts: np.ndarray, q: np.ndarray) -> dict:
     return out
 
 
-def simulate(config: SimConfig, *, check: bool = True) -> SimResult:
-    """Integrate ``config`` and return the sampled truth and the measured log."""
+def simulate(config: SimConfig, *, check: bool = True, max_run_time_s: float = 600.0,
+             estimate: bool = True) -> SimResult:
+    """Integrate ``config`` and return the sampled truth and the measured log.
+
+    With ``estimate`` (default) a short probe first predicts the run time (refused above
+    ``max_run_time_s``) and estimates the integration error (see estimator.sim.cost); a run
+    still running after 2 s shows a tqdm bar on stderr, and one extrapolated past the limit after
+    5 s is stopped with an InputError (see estimator.sim.cost.Watch).
+    """
     if config.integrator not in INTEGRATORS:
         raise InputError(f"scene '{config.name}': integrator must be one of {', '.join(INTEGRATORS)}, "
                          f"got {config.integrator!r}")
     if config.base == "rigid" and config.ground is not None:
         raise InputError(f"scene '{config.name}': a ground contact needs a floating or spring-mounted base")
+    if not (np.isfinite(config.duration_s) and config.duration_s > 0):
+        raise InputError(f"scene '{config.name}': duration_s must be a finite number > 0, "
+                         f"got {config.duration_s!r}")
     stab = check_stability(config, raise_on_unstable=check)
+    cost = (estimate_cost(config, stab.fastest_pole_per_s, stab.stiffness_ratio, max_run_time_s)
+            if estimate else None)
     plant = Plant(config)
     ts = sample_times(config)
     zoh = config.controller.mode == "zoh"
+    bar = Watch(config, max_run_time_s, stab.fastest_pole_per_s, stab.stiffness_ratio)
     start = time.perf_counter()
-    if config.integrator in ADAPTIVE:
-        Y, held = _adaptive(plant, config, ts, zoh)
-    else:
-        Y, held = _rk4(plant, config, ts, zoh)
-        Y, held = Y[:, 0], held[:, 0]
+    try:
+        if config.integrator in ADAPTIVE:
+            Y, held = _adaptive(plant, config, ts, zoh, bar)
+        else:
+            Y, held = _rk4(plant, config, ts, zoh, bar=bar)
+            Y, held = Y[:, 0], held[:, 0]
+    finally:
+        bar.close()
     wall = time.perf_counter() - start
     q, dq, s = plant.split(Y)
     tau = held if zoh else plant.control(ts, q, dq)
@@ -202,7 +223,12 @@ def simulate(config: SimConfig, *, check: bool = True) -> SimResult:
              "run_time_s": wall, "rhs_evaluations": plant.nfev,
              "real_time_factor": config.duration_s / wall if wall > 0 else float("inf"),
              "fastest_pole_per_s": stab.fastest_pole_per_s,
-             "min_stable_zoh_rate_Hz": stab.min_stable_zoh_rate_Hz, "stability": stab.message}
+             "min_stable_zoh_rate_Hz": stab.min_stable_zoh_rate_Hz, "stability": stab.message,
+             "stiffness_ratio": stab.stiffness_ratio}
+    if cost is not None:
+        stats.update({"predicted_run_time_s": cost.predicted_run_time_s,
+                      "q_rad_error_estimate": cost.q_error_estimate,
+                      "q_rad_error_method": cost.error_method})
     return SimResult(config, ts, q, dq, tau, wrench, ground, log, truth, stats)
 
 

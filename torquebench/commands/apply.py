@@ -96,6 +96,13 @@ def run(args) -> int:
         if "torque_Nm" in out:
             res["torque_Nm"] = out["torque_Nm"].to_numpy(float)
             res["torque_std_Nm"] = out["torque_std_Nm"].to_numpy(float)
+            res["torque_Nm_error_estimate"] = res["torque_std_Nm"]
+            res["torque_Nm_error_method"] = (
+                "per-sample 1 sigma from the stored posterior samples" + (" and the reading noise"
+                                                                          if noise else " (coefficients only)"))
+        res["mass_g_error_estimate"] = res["mass_std_g"]
+        res["mass_g_error_method"] = ("per-sample 1 sigma from the stored posterior samples"
+                                      + (" and the reading noise" if noise else " (coefficients only)"))
         print_json(res)
     elif args.out is None:
         print(buf.getvalue(), end="")

@@ -68,7 +68,8 @@ def run(args) -> int:
           "mW/gauge")
     if spn:
         print(f"strain per N·m {spn:.4g}: sensitivity {out['sensitivity_V_per_Nm'] * 1e3:.4g} mV/N·m;"
-              f" min detectable torque 1σ {out['min_detectable_torque_Nm']:.4g} N·m "
+              f" min detectable torque 1σ {out['min_detectable_torque_Nm']:.4g} ± "
+              f"{out['min_detectable_torque_Nm_error_estimate']:.2g} N·m (ENOB-definition spread) "
               f"(resolution: ideal {out['min_detectable_torque_ideal_Nm']:.3g}, "
               f"ENOB {out['min_detectable_torque_enob_Nm']:.3g} N·m)")
     return 0

@@ -164,13 +164,19 @@ def run(args) -> int:
     post = payload["posterior"]
     unit = session.reading_unit
     keys = {n: coefficient_key(n, unit) for n in (*fit.coef_names, "sigma")}
+    se = dict(zip(fit.names, fit.mc_standard_error))
     method = (f"posterior standard deviation (1σ) of the emcee fit, {fit.n_walkers} walkers × "
-              f"{fit.n_steps} steps")
+              f"{fit.n_steps} steps; the posterior mean's own Monte Carlo standard error is "
+              f"<key>_mc_standard_error (σ_post·√(τ/N), τ = {fit.tau_max:.1f} steps, "
+              f"split R̂ = {fit.rhat:.4f})")
     result = {}
     for n, key in keys.items():
         result[key] = post[n]["mean"]
         result[f"{key}_error_estimate"] = post[n]["std"]
         result[f"{key}_error_method"] = method
+        if n in se:
+            result[f"{key}_mc_standard_error"] = float(se[n])
+    result["rhat"] = fit.rhat
     result.update({
         "r2": fit.exact.r2, "autocorr_time": fit.tau_max,
         "autocorr_time_per_parameter": dict(zip(fit.names, fit.autocorr_time)),
@@ -195,14 +201,14 @@ def run(args) -> int:
     ref = "exact" if args.mass_std_g == 0 else "exact without errors-in-load"
     for i, n in enumerate(fit.coef_names):
         u = coefficient_unit(n, unit)
-        print(f"  {n:<11s}= {post[n]['mean']:.6g} ± {post[n]['std']:.2g} {u}  "
-              f"({ref} {fit.exact.beta[i]:.6g} ± {fit.exact.std[i]:.2g} {u})")
+        print(f"  {n:<11s}= {post[n]['mean']:.6g} ± {post[n]['std']:.2g} {u} (posterior σ; "
+              f"MC error ± {se[n]:.2g})  ({ref} {fit.exact.beta[i]:.6g} ± {fit.exact.std[i]:.2g} {u})")
     print(f"  sigma      = {post['sigma']['mean']:.4g} ± {post['sigma']['std']:.2g} {unit};  "
           f"R² = {fit.exact.r2:.5f}")
     if session.lever_arm_m:
         print(f"  sensitivity = {result[f'sensitivity_{unit}_per_Nm']:.6g} {unit}/(N·m) "
               f"(lever arm {session.lever_arm_m:g} m)")
     print(f"  τ = {fit.tau_max:.1f} steps, {fit.n_steps} steps × {fit.n_walkers} walkers, "
-          f"acceptance {fit.acceptance_fraction:.2f}, converged")
+          f"acceptance {fit.acceptance_fraction:.2f}, split R̂ = {fit.rhat:.4f}, converged")
     print(f"wrote {written}" + ("".join(f", {p}" for p in reports)))
     return 0

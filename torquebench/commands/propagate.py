@@ -143,10 +143,20 @@ def run(args) -> int:
         usable = mc.flagged_fraction < 0.05
         pos = mc.position_rms_m[usable]
         ratio = mc.position_rms_m[usable] / fo.position_rms_m[usable]
+        worst = int(np.flatnonzero(usable)[np.argmax(mc.position_p95_m[usable])]) if pos.size else None
         results["methods"][method] = {
             "position_rms_median_m": float(np.median(pos)) if pos.size else None,
+            "position_rms_median_m_error_estimate":
+                float(np.median(mc.position_rms_se_m[usable])) if pos.size else None,
+            "position_rms_median_m_error_method":
+                f"Monte Carlo standard error (1 sigma, delta method), median over postures, {args.draws} draws",
             "position_rms_max_m": float(np.max(pos)) if pos.size else None,
             "position_p95_max_m": float(np.max(mc.position_p95_m[usable])) if pos.size else None,
+            "position_p95_max_m_error_estimate":
+                float(mc.position_p95_se_m[worst]) if pos.size else None,
+            "position_p95_max_m_error_method":
+                f"Monte Carlo standard error (1 sigma) of the 95th percentile at the worst posture, "
+                f"from the binomial spread of order statistics, {args.draws} draws",
             "force_rms_median_N": float(np.median(mc.force_rms_N[usable])) if pos.size else None,
             "flagged_postures": int((~usable).sum()),
             "monte_carlo_over_first_order_median": float(np.median(ratio)) if pos.size else None,
@@ -165,10 +175,12 @@ def run(args) -> int:
     print(f"{'method':8s} {'median |p| RMS':>15s} {'max |p| RMS':>12s} {'max p95':>9s} "
           f"{'median |F| RMS':>15s} {'flagged':>8s} {'MC/1st-order':>13s}")
     for method, m in results["methods"].items():
-        def mm(v):
-            return f"{v * 1e3:.2f} mm" if v is not None else "—"
-        print(f"{method:8s} {mm(m['position_rms_median_m']):>15s} {mm(m['position_rms_max_m']):>12s} "
-              f"{mm(m['position_p95_max_m']):>9s} {m['force_rms_median_N'] or float('nan'):>13.3f} N "
+        def mm(v, e=None):
+            if v is None:
+                return "—"
+            return f"{v * 1e3:.2f}" + (f"±{e * 1e3:.2f}" if e is not None and np.isfinite(e) else "") + " mm"
+        print(f"{method:8s} {mm(m['position_rms_median_m'], m['position_rms_median_m_error_estimate']):>15s} {mm(m['position_rms_max_m']):>12s} "
+              f"{mm(m['position_p95_max_m'], m['position_p95_max_m_error_estimate']):>9s} {m['force_rms_median_N'] or float('nan'):>13.3f} N "
               f"{m['flagged_postures']:>8d} {m['monte_carlo_over_first_order_median'] or float('nan'):>13.3f}")
     return 0
 

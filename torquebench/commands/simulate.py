@@ -23,6 +23,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--seed", type=int, default=None, help="sensor-noise seed (default: the scene's [sensors] seed)")
     parser.add_argument("--duration", type=float, default=None, help="simulated time in s, dynamic scenes (default: the scene's duration_s)")
     parser.add_argument("--force", action="store_true", help="replace existing log and truth files")
+    parser.add_argument("--max-run-time", type=float, default=600.0, metavar="S",
+                        help="refuse a run predicted (or found) to take longer than S seconds (default: %(default)s)")
+    parser.add_argument("--error-tolerance", type=float, default=None, metavar="RAD",
+                        help="warn when the integration error estimate q_rad_error_estimate exceeds RAD (default: no check)")
 
 
 def truth_path(out: Path) -> Path:
@@ -30,7 +34,7 @@ def truth_path(out: Path) -> Path:
     return out.with_name(out.stem + ".truth" + (out.suffix or ".csv"))
 
 
-def run_scene(scene, seed=None, integrator=None, duration=None):
+def run_scene(scene, seed=None, integrator=None, duration=None, max_run_time_s=600.0):
     """(SensorLog, truth dict, stats) of a dynamic or static scene."""
     from dataclasses import replace
 
@@ -48,10 +52,10 @@ def run_scene(scene, seed=None, integrator=None, duration=None):
                 raise InputError(f"--integrator: must be one of {', '.join(INTEGRATORS)}, got {integrator!r}")
             cfg = replace(cfg, integrator=integrator)
         if duration is not None:
-            if not duration > 0:
+            if not (duration > 0 and duration < float("inf")):
                 raise InputError(f"--duration: must be > 0, got {duration}")
             cfg = replace(cfg, duration_s=duration)
-        res = simulate(cfg)
+        res = simulate(cfg, max_run_time_s=max_run_time_s)
         return res.log, res.truth, res.stats
     st = scene.static
     sensors = st.sensors if seed is None else replace(st.sensors, seed=seed)
@@ -68,34 +72,44 @@ def run_scene(scene, seed=None, integrator=None, duration=None):
 def run(args) -> int:
     from estimator.sim.output import log_csv, truth_csv
     from torquebench.io import print_json
+    from torquebench.outputs import prepare_file
     from torquebench.scenes import load_scene
-
-    from userio.errors import finite
+    from userio.errors import finite, seed
     from userio.files import plan_outputs, write_files_atomic
-
-    from userio.errors import seed
 
     seed(args.seed)
     if args.duration is not None:
         finite(args.duration, "--duration", positive=True)
     out, tpath = Path(args.out), truth_path(Path(args.out))
-    from torquebench.outputs import prepare_file
     for p in (out, tpath):
         prepare_file(p, "--out", force=args.force, inputs=(args.scene,))   # mkdir, --force
     plan_outputs({"scene": args.scene}, {"--out": out, "truth (--out with .truth.csv)": tpath})
     if out.suffix == ".toml":
         raise InputError(f"--out: {out} looks like a scene/robot file; refusing to overwrite it "
                          "with a log (the log is a CSV)")
+    tol = getattr(args, "error_tolerance", None)
+    if tol is not None:
+        finite(tol, "--error-tolerance", positive=True)
+    max_run = finite(getattr(args, "max_run_time", 600.0), "--max-run-time", positive=True)
     scene = load_scene(args.scene)
-    log, truth, stats = run_scene(scene, args.seed, args.integrator, args.duration)
+    log, truth, stats = run_scene(scene, args.seed, args.integrator, args.duration, max_run)
     write_files_atomic([(out, log_csv(log)), (tpath, truth_csv(truth))])   # log + truth: a set
     summary = {"scene": scene.name, "log": str(out), "truth": str(tpath), "samples": len(log.t),
                "duration_s": float(log.t[-1]) if len(log.t) else 0.0,
                "contact_samples": int((truth["link"] > 0).sum()), **stats}
+    est = summary.get("q_rad_error_estimate")
+    if tol is not None and est is not None and not est <= tol:
+        summary.setdefault("warnings", []).append(
+            f"q_rad_error_estimate {est:.3g} rad exceeds --error-tolerance {tol:g} rad: tighten rtol/atol "
+            f"or the step")
     if args.json:
         print_json(summary)
     else:
         print(f"{scene.name}: {summary['samples']} samples, {summary['contact_samples']} in contact "
-              f"→ {out} (+ {tpath.name}); {stats.get('integrator')} in {stats['run_time_s']:.2f} s",
+              f"→ {out} (+ {tpath.name}); {stats.get('integrator')} in {stats['run_time_s']:.2f} s"
+              + (f"; integration error ± {stats['q_rad_error_estimate']:.2g} rad"
+                 if "q_rad_error_estimate" in stats else ""),
               file=sys.stdout)
+        for w in summary.get("warnings", []):
+            print(f"warning: {w}", file=sys.stderr)
     return 0

@@ -1,0 +1,43 @@
+"""The measurements behind reports/error_vs_runtime.md, as one JSON document on stdout.
+
+    python benchmarks/bench_accuracy.py [--quick] [--write-report DIR]
+
+Runs every error-vs-run-time sweep (simulators, calibration, uncertainty propagation, plus any
+section another report module contributes when --write-report is given) and prints the rows
+(setting, wall time, error) of each. Timings are wall time on whatever machine runs it: compare
+them within one run, never against a number from another machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+from datetime import datetime, timezone
+from pathlib import Path
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="reduced sweeps (~30 s)")
+    ap.add_argument("--write-report", type=Path, default=None, metavar="DIR",
+                    help="also write error_vs_runtime.md + PNGs into DIR")
+    args = ap.parse_args(argv)
+    from torquebench.reports import error_vs_runtime as evr
+
+    out = {"machine": f"{platform.node()} {platform.machine()} Python {platform.python_version()}",
+           "date_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"), "quick": args.quick}
+    for name, fn in (("simulators", evr.simulator_rows), ("calibration", evr.calibration_rows),
+                     ("propagation", evr.propagation_rows)):
+        rows, info = fn(args.quick)
+        out[name] = {"rows": rows, "info": info}
+    if args.write_report:
+        out["written"] = [str(p) for p in evr.build(args.write_report, quick=args.quick)]
+    json.dump(out, sys.stdout, indent=1, default=float)
+    print()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,69 @@
+"""The error-vs-run-time report: Pareto front, cheapest-setting table, section discovery."""
+
+import importlib
+import pkgutil
+
+import numpy as np
+
+import torquebench.reports as reports
+from torquebench.reports import error_vs_runtime as evr
+
+
+def test_pareto_front_and_cheapest_setting():
+    t = [1.0, 2.0, 3.0, 0.5, 4.0]
+    e = [0.1, 0.2, 0.01, 0.5, 0.001]          # (2.0, 0.2) is dominated by (1.0, 0.1)
+    assert evr.pareto_front(t, e).tolist() == [3, 0, 2, 4]
+    rows = [{"setting": str(i), "time_s": ti, "error": ei} for i, (ti, ei) in enumerate(zip(t, e))]
+    assert evr.cheapest(rows, 0.1)["setting"] == "0"
+    assert evr.cheapest(rows, 0.01)["setting"] == "2"
+    assert evr.cheapest(rows, 1e-4) is None
+
+
+def test_section_markdown_lists_targets_and_marks_the_front(tmp_path):
+    rows = [{"setting": "a", "family": "x", "time_s": 1.0, "error": 0.05, "k": 1.0},
+            {"setting": "b", "family": "x", "time_s": 2.0, "error": 0.2, "k": 2.0},
+            {"setting": "c", "family": "y", "time_s": 3.0, "error": 0.005, "k": 3.0}]
+    lines, pngs = evr.section("Demo family", rows, tmp_path, "demo", error_label="err", reference="exact")
+    text = "\n".join(lines)
+    assert lines[0] == "## Demo family" and pngs[0].stat().st_size > 1000
+    assert "| 10.0% | a |" in text and "| 1.0% | c |" in text and "| 0.1% | none reached" in text
+    assert "| a ★ |" in text and "| b |" in text
+
+
+def test_every_report_module_with_a_section_is_discovered():
+    expected = set()
+    for info in pkgutil.iter_modules(reports.__path__):
+        if info.name in ("error_vs_runtime", "stability") or info.name.startswith("_"):
+            continue
+        if hasattr(importlib.import_module(f"torquebench.reports.{info.name}"), "error_vs_runtime_section"):
+            expected.add(f"torquebench.reports.{info.name}")
+    assert {fn.__module__ for fn in evr.discovered_sections()} == expected
+
+
+def test_propagation_section_error_shrinks_with_draws_and_reported_se_is_honest(tmp_path):
+    rows, info = evr.propagation_rows(quick=True)
+    mc = [r for r in rows if r["family"] == "Monte Carlo"]
+    assert mc[-1]["p95_error"] < mc[0]["p95_error"]
+    # the reported standard error is the right size: the actual error at 3000 draws is within 3 SE
+    assert mc[-1]["p95_error"] < 3 * mc[-1]["reported_p95_se_rel"] + info["ref_se"]
+
+
+def test_calibration_rows_converge_toward_the_exact_posterior():
+    rows, _ = evr.calibration_rows(quick=True)
+    rule = [r for r in rows if r["family"] == "autocorrelation stopping rule"][0]
+    assert rule["error"] < 0.05                   # ≥ 50 τ: mean within 5 % σ, σ within 5 %
+
+
+def test_observer_rows_trade_delay_against_noise():
+    rows, _ = evr.observer_rows(quick=True)
+    at_1k = {r["setting"]: r for r in rows if r["family"] == "1000 Hz"}
+    slow, fast = at_1k["K = 30 1/s @ 1000 Hz"], at_1k["K = 300 1/s @ 1000 Hz"]
+    assert fast["rise_90pct_s"] < 0.2 * slow["rise_90pct_s"]
+    assert abs(slow["rise_90pct_s"] - np.log(10) / 30) < 0.01     # first-order lag: t90 = ln 10 / K
+    assert fast["noise_rel"] > slow["noise_rel"]
+
+
+def test_localizer_rows_dynamic_beats_paper_on_the_moving_leg():
+    rows, _ = evr.localizer_rows(quick=True)
+    by = {r["family"]: r["error"] for r in rows}
+    assert by["dynamic (moving)"] < 0.2 * by["paper (moving)"]
