@@ -1,6 +1,6 @@
 """Benchmark: emcee calibration fit of a 10-level × 5-repeat session to convergence.
 
-Targets (issue 6): < 2 s on one core; posterior mean and std within 2 % of the exact Student-t
+Targets: < 2 s on one core; posterior mean and std within 2 % of the exact Student-t
 posterior. "Mean within 2 %" is measured as |mean_emcee − mean_exact| / std_exact (the relative
 error of the mean itself is ~1e-5 and says nothing); std as |std_emcee/std_exact − 1|.
 Anchor, measured in the same run: the closed-form exact posterior (QR least squares).

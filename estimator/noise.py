@@ -62,7 +62,7 @@ class NoiseModel:
 
 
 def paper_leg_noise() -> NoiseModel:
-    """The paper leg's sensors (issue 14): FT σ = 0.1 N, 0.1 N, 0.01 N·m; joint torque σ 0.005 N·m."""
+    """The paper leg's sensors: FT σ = 0.1 N, 0.1 N, 0.01 N·m; joint torque σ 0.005 N·m."""
     return NoiseModel(torque_sigma_Nm=[0.005], ft_sigma=[0.1, 0.1, 0.01],
                       source="default noise (paper leg sensors)")
 

@@ -1,4 +1,4 @@
-"""Issue 14's done-when on a simulated log: fast base motion, interval-mean force readings with
+"""Detection done-when on a simulated log: fast base motion, interval-mean force readings with
 the issue's noise (FT σ 0.1 N, 0.1 N, 0.01 N·m; τ σ 0.005 N·m), correctly declared."""
 
 import numpy as np

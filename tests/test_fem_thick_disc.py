@@ -54,7 +54,7 @@ def test_thick_disc_as_stl_agrees_arm_to_arm_and_with_the_parametric_one(thick, 
     (tmp_path / "stl.toml").write_text(text)
     r, _ = analyze(load_design(tmp_path / "stl.toml"))
     assert r["mesh"]["mesher"] == "gmsh" and abs(r["mesh"]["remesh_volume_change"]) < 0.01
-    # issue 13: ±25 % with tetgen on the raw STL. Its target is 2 %: NOT met, 2.97 % measured with the
+    # tetgen on the raw STL gave ±25 %. The target is 2 %: NOT met, 2.97 % measured with the
     # re-meshed STL (the re-parametrised surface patches are not four-fold symmetric); this bounds it
     assert r["gauge_arm_imbalance"] < 0.04
     # held at the outer face instead of the bolt holes: compare the spoke strain only

@@ -1,4 +1,4 @@
-"""Hostile input (issue 16): each reported example ends with exit 2 and one line, or a flagged
+"""Hostile input: each reported example ends with exit 2 and one line, or a flagged
 answer; no input or earlier output is changed. The CLI runs in-process (``cli.main``)."""
 
 import json

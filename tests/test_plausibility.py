@@ -1,4 +1,4 @@
-"""Log plausibility (issue 16): readable logs in the wrong units are refused or flagged."""
+"""Log plausibility: readable logs in the wrong units are refused or flagged."""
 
 import math
 import warnings

@@ -36,7 +36,7 @@ def _paper_dict():
     (lambda d: d.pop("link"), "missing [[link]] tables"),
     (lambda d: d["base_mount"].__setitem__("stiffness", [1.0, 2.0]), "base_mount.stiffness: expected three numbers"),
     (lambda d: d["base_mount"].__setitem__("damping", [1.0, -2.0, 3.0]), "base_mount.damping: values must be finite and ≥ 0"),
-    # hostile input (issue 16): misspelled keys, COM off its link, lists for numbers, inf
+    # hostile input: misspelled keys, COM off its link, lists for numbers, inf
     (lambda d: d.__setitem__("friction_coeficient", 0.5), "friction_coeficient: unknown field (did you mean 'friction_coefficient'?)"),
     (lambda d: d.__setitem__("gravity_m_per_s", 9.81), "gravity_m_per_s: unknown field (did you mean 'gravity_m_per_s2'?)"),
     (lambda d: d["link"][0].__setitem__("mas_kg", 1.0), "link[1].mas_kg: unknown field (did you mean 'mass_kg'?)"),

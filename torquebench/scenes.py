@@ -121,7 +121,7 @@ def _sensors(f: _Fields, data: dict) -> Sensors:
     counts = t.get("encoder_counts", 0)
     if isinstance(counts, bool) or not isinstance(counts, int) or counts < 0:
         raise f.err("sensors.encoder_counts", f"expected an integer ≥ 0, got {counts!r}")
-    if t.get("torque_model") == "bridge" and "torque_noise_Nm" in t:   # issue 16: never ignore
+    if t.get("torque_model") == "bridge" and "torque_noise_Nm" in t:   # never ignore
         raise f.err("sensors.torque_noise_Nm", "is ignored with torque_model = \"bridge\" (the "
                     "bridge chain sets the noise); remove it or use torque_model = \"gaussian\"")
     seed = t.get("seed", 0)
@@ -230,7 +230,7 @@ def _dynamic(f: _Fields, data: dict, robot: Robot, name: str) -> SimConfig:
         robot=robot, controller=controller, base=base, duration_s=duration, pokes=pokes,
         ground=ground, sensors=_sensors(f, data),
         integrator=f.choice(it, "method", "integrator", INTEGRATORS, "BDF"),
-        rtol=f.number(it, "rtol", "integrator", 1e-6, lo=1e-13, hi=1e-2),   # issue 16: a 1 %
+        rtol=f.number(it, "rtol", "integrator", 1e-6, lo=1e-13, hi=1e-2),   # a 1 %
         atol=f.number(it, "atol", "integrator", 1e-8, positive=True, hi=1e-2),  # cap, ≥ 100 eps
         fixed_step_s=f.number(it, "fixed_step_s", "integrator", 5e-5, positive=True),
         mount_stiffness=f.vector(m, "stiffness", "mount", 3, nonneg=True) if m else None,

@@ -34,7 +34,7 @@ def _floats(text: str, count: int, name: str) -> list[float]:
 
 
 def _finite_args(args) -> None:
-    """Issue 16: numbers from the command line are finite and physically sized."""
+    """Numbers from the command line are finite and physically sized."""
     from userio.errors import finite
 
     if args.strain_per_Nm is not None:
@@ -104,7 +104,7 @@ def sensor_noise_from_args(args):
 def run(args) -> int:
     from userio.errors import seed
 
-    seed(args.seed)                              # issue 16: negative seeds → exit 2
+    seed(args.seed)                              # negative seeds → exit 2
     _finite_args(args)
     from estimator.robot import load_robot, paper_leg
     from estimator.uncertainty import first_order, monte_carlo

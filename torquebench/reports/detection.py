@@ -1,4 +1,4 @@
-"""reports/detection.md: contact detection against sensor noise (issue 14).
+"""reports/detection.md: contact detection against sensor noise.
 
 Simulated logs of the paper leg (inverse dynamics on a 5 kHz grid, read out at 1 kHz as
 instantaneous states and interval-mean forces, the issue's noise: FT σ 0.1 N, 0.1 N, 0.01 N·m,
