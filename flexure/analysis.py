@@ -347,9 +347,16 @@ def parse_sweep(specs: list[str]) -> list[tuple[str, list]]:
     return out
 
 
+SWEEP_FIGURES = ("sensitivity_mV_per_V_per_Nm", "torsional_stiffness_Nm_per_rad", "safety_factor",
+                 "crosstalk_max_percent")
+SWEEP_ERROR_METHOD = ("|difference| between the mesh and one √2-coarser mesh: a discretization-error "
+                      "indicator that over-estimates the error of a converging answer")
+
+
 def sweep(path, params: list[tuple[str, list]], size: str | None = None, order: int | None = None,
-          progress: bool = True) -> list[dict]:
-    """Analyse every combination; each row: parameter values + the headline numbers (or the error)."""
+          progress: bool = True, error_estimate: bool = True) -> list[dict]:
+    """Analyse every combination; each row: parameter values + the headline numbers (or the error)
+    and, with ``error_estimate``, each figure's discretization-error indicator (SWEEP_ERROR_METHOD)."""
     from itertools import product
 
     from flexure.design import load_design as _load
@@ -376,11 +383,43 @@ def sweep(path, params: list[tuple[str, list]], size: str | None = None, order: 
                                             "max_von_mises_Pa", "safety_factor", "min_detectable_torque_Nm",
                                             "gauge_strain_per_Nm", "dofs", "solve_s")})
             row["crosstalk_max_percent"] = max(abs(v) for v in res["crosstalk_percent"].values())
+            if error_estimate:                        # one coarser level (h × √2): |Δ| per figure
+                coarse, _ = analyze(d, size, order, h_factor=math.sqrt(2.0))
+                coarse["crosstalk_max_percent"] = max(abs(v) for v in coarse["crosstalk_percent"].values())
+                for k in SWEEP_FIGURES:
+                    row[f"{k}_error_estimate"] = abs(row[k] - coarse[k])
+                    row[f"{k}_error_method"] = SWEEP_ERROR_METHOD
             row["error"] = None
         except InputError as exc:                     # an infeasible combination is a row, not a crash
             row["error"] = str(exc)
         rows.append(row)
     return rows
+
+
+def sweep_warnings(rows: list[dict], params: list[tuple[str, list]]) -> list[str]:
+    """Neighbouring designs (one step along one swept parameter) whose figure differs by less than
+    the sum of their discretization-error indicators: that change is mesh noise, not design."""
+    keys = [k for k, _ in params]
+    index = {tuple(r[k] for k in keys): r for r in rows if not r.get("error")}
+    out = []
+    for axis, (key, values) in enumerate(params):
+        for point, a in index.items():
+            i = list(values).index(point[axis])
+            if i + 1 >= len(values):
+                continue
+            b = index.get(point[:axis] + (values[i + 1],) + point[axis + 1:])
+            if b is None:
+                continue
+            for fig in SWEEP_FIGURES:
+                ea, eb = a.get(f"{fig}_error_estimate"), b.get(f"{fig}_error_estimate")
+                if ea is None or eb is None:
+                    continue
+                if abs(a[fig] - b[fig]) <= ea + eb:
+                    where = ", ".join(f"{k}={v:g}" for k, v in zip(keys, point) if k != key)
+                    out.append(f"{fig}: the change from {key}={point[axis]:g} to {values[i + 1]:g}"
+                               f"{' (' + where + ')' if where else ''} ({b[fig] - a[fig]:+.3g}) is within "
+                               f"the discretization error (±{ea + eb:.2g}); refine the mesh to resolve it")
+    return out
 
 
 def sweep_table(rows: list[dict], keys: list[str]) -> str:
@@ -430,4 +469,5 @@ def sweep_plot(rows: list[dict], keys: list[str], out_png) -> None:
         plt.close(fig)
 
 
-__all__ = ["analyze", "build_mesh", "sweep", "parse_sweep", "sweep_table", "sweep_plot", "load_design"]
+__all__ = ["analyze", "build_mesh", "sweep", "sweep_warnings", "parse_sweep", "sweep_table", "sweep_plot",
+           "load_design"]

@@ -76,6 +76,14 @@ def test_sweep_table_with_an_infeasible_row_and_plot(capsys, tmp_path):
     assert ok[1]["torsional_stiffness_Nm_per_rad"] > ok[0]["torsional_stiffness_Nm_per_rad"]
     assert ok[1]["sensitivity_mV_per_V_per_Nm"] < ok[0]["sensitivity_mV_per_V_per_Nm"]
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # every figure carries its discretization-error indicator (two mesh levels); the sensitivity
+    # step between 3.5 and 4.5 mm spokes is resolved, so it is not among the mesh-noise warnings
+    doc = json.loads(out)
+    for r in ok:
+        assert r["sensitivity_mV_per_V_per_Nm_error_estimate"] >= 0
+        assert "coarser mesh" in r["sensitivity_mV_per_V_per_Nm_error_method"]
+    assert isinstance(doc["warnings"], list)
+    assert not any(w.startswith("sensitivity_mV_per_V_per_Nm:") for w in doc["warnings"])
 
 
 def test_parse_sweep():

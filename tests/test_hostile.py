@@ -275,3 +275,11 @@ def test_scene_torque_noise_ignored_by_bridge_model_exit_2(tmp_path, capsys):
     scene.write_text(text)
     code, _, err = cli(["simulate", scene, "--out", tmp_path / "a.csv"], capsys)
     assert_one_line_error(code, err, "torque_noise_Nm: is ignored with torque_model")
+
+
+@pytest.mark.parametrize("argv", [["propagate", "--grid", "100000"],
+                                  ["propagate", "--draws", "100000000"]])
+def test_propagate_runaway_size_refused_before_any_work(capsys, argv):
+    """--grid 100000 or --draws 1e8 used to end in MemoryError; now the size is refused up front."""
+    code, _, err = cli(argv, capsys)
+    assert_one_line_error(code, err, "--max-localizations")

@@ -45,7 +45,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--max-elements", type=float, default=None, metavar="N",
                         help="refuse, before meshing, a mesh estimated above N tetrahedra (default: 500,000)")
     parser.add_argument("--single-level", action="store_true",
-                        help="one mesh level only: faster, but the answers carry no error estimate")
+                        help="one mesh level only: faster, but the answers (and sweep rows) carry no error estimate")
     parser.add_argument("--sweep", action="append", metavar="PARAM=v1,v2,...",
                         help="sweep a [geometry] parameter over values in its own unit (e.g. spoke_width_mm=3,4,5); repeat for a 2-D grid, at most twice")
     parser.add_argument("--force", action="store_true", help="replace existing --vtu / --png files")
@@ -120,7 +120,7 @@ def _print_design(res: dict) -> None:
 
 
 def run(args) -> int:
-    from flexure.analysis import analyze, parse_sweep, sweep, sweep_plot, sweep_table
+    from flexure.analysis import analyze, parse_sweep, sweep, sweep_plot, sweep_table, sweep_warnings
     from flexure.design import load_design
     from torquebench.io import print_json, shipped
 
@@ -130,14 +130,18 @@ def run(args) -> int:
     progress = sys.stderr.isatty() or not args.json
     if params:
         keys = [k for k, _ in params]
-        rows = sweep(path, params, args.size, args.order, progress=progress)
+        rows = sweep(path, params, args.size, args.order, progress=progress,
+                     error_estimate=not args.single_level)
+        warnings = sweep_warnings(rows, params)
         if args.png is not None:
             sweep_plot(rows, keys, args.png)
         if args.json:
-            print_json({"design_file": str(path), "parameters": keys, "rows": rows,
+            print_json({"design_file": str(path), "parameters": keys, "rows": rows, "warnings": warnings,
                         "png": str(args.png) if args.png else None})
         else:
             print(sweep_table(rows, keys))
+            for w in warnings:
+                print(f"warning: {w}")
             if args.png is not None:
                 print(f"trade-off plot: {args.png}")
         return 0

@@ -62,6 +62,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--rate", type=float, default=1000.0, help="sample rate in Hz (default: %(default)s)")
     parser.add_argument("--gain", type=float, default=100.0, help="observer gain K in 1/s (default: %(default)s)")
     parser.add_argument("--draws", type=int, default=500, help="Monte Carlo draws per posture, at least 2 (default: %(default)s)")
+    parser.add_argument("--max-localizations", type=float, default=2e7, metavar="N",
+                        help="refuse, before any work, a run of more than N localizations "
+                             "(postures × draws × 2 methods) (default: %(default)g)")
     parser.add_argument("--seed", type=int, default=0, help="Monte Carlo seed (default: %(default)s)")
     parser.add_argument("--png", type=Path, help="write a heat map of the position error (m) over the posture grid; directory created, an existing file is never replaced")
 
@@ -102,7 +105,7 @@ def sensor_noise_from_args(args):
 
 
 def run(args) -> int:
-    from userio.errors import seed
+    from userio.errors import finite, seed
 
     seed(args.seed)                              # negative seeds → exit 2
     _finite_args(args)
@@ -121,6 +124,11 @@ def run(args) -> int:
     magnitude, direction = _floats(args.force, 2, "--force")
     if args.grid < 1 or args.draws < 2:
         raise InputError("--grid must be ≥ 1 and --draws ≥ 2")
+    work = float(args.grid) ** robot.n_links * args.draws * 2
+    if work > finite(args.max_localizations, "--max-localizations", positive=True):
+        raise InputError(f"--grid/--draws: {args.grid}^{robot.n_links} postures × {args.draws} draws × 2 "
+                         f"methods = {work:.3g} localizations, above --max-localizations "
+                         f"{args.max_localizations:.3g}; reduce them or raise the limit")
     if args.png and robot.n_links != 2:
         raise InputError("--png: the heat map is drawn for two-link robots only")
     from torquebench.outputs import prepare_file
