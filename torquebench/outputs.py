@@ -8,10 +8,10 @@ Checked before any long computation, so a bad path fails in a second, not after 
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 from torquebench.errors import InputError
+from userio.files import same_file
 
 
 def _mkdir(directory: Path, option: str) -> None:
@@ -21,16 +21,6 @@ def _mkdir(directory: Path, option: str) -> None:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise InputError(f"{option}: cannot create directory {directory}: {exc.strerror}") from None
-
-
-def _same(a: Path, b: Path) -> bool:
-    """Same file: same real path, or (both existing) the same inode, e.g. a hard link."""
-    if a.resolve() == b.resolve():
-        return True
-    try:
-        return a.exists() and b.exists() and os.path.samefile(a, b)
-    except OSError:
-        return False
 
 
 def prepare_dir(directory: str | Path, option: str) -> Path:
@@ -50,7 +40,7 @@ def prepare_file(path: str | Path | None, option: str, *, force: bool = False,
         return None
     path = Path(path)
     for given in inputs:
-        if given is not None and _same(path, Path(given)):
+        if given is not None and same_file(path, Path(given)):
             raise InputError(f"{option}: {path} is an input of this command; refusing to overwrite an input")
     if path.is_dir():
         raise InputError(f"{option}: {path} is a directory; give a file name")

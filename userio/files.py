@@ -127,7 +127,7 @@ def _label_items(items) -> list[tuple[str, Path]]:
     return out
 
 
-def _same(a: Path, b: Path) -> bool:
+def same_file(a: Path, b: Path) -> bool:
     """Same file: equal real paths, or (both existing) the same inode (hard links, bind mounts)."""
     if os.path.realpath(a) == os.path.realpath(b):
         return True
@@ -152,10 +152,10 @@ def plan_outputs(inputs, outputs) -> list[Path]:
         if not o.parent.is_dir():
             raise InputError(f"{olabel}: directory {o.parent} does not exist")
         for ilabel, p in ins:
-            if _same(o, p):
+            if same_file(o, p):
                 raise InputError(f"{olabel}: {o} is the input {ilabel}; refusing to overwrite an input")
         for olabel2, o2 in outs[:i]:
-            if _same(o, o2):
+            if same_file(o, o2):
                 raise InputError(f"{olabel}: {o} is also written as {olabel2}; two outputs would "
                                  "overwrite each other")
     return [o for _, o in outs]
