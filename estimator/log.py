@@ -88,12 +88,15 @@ def _layout(columns: list[str], source: str, n_links: int | None):
     return n, floating
 
 
-def _read_text_values(path, source: str, names: list[str], cols: list[str]) -> np.ndarray:
-    """Slow path: parse as text to name the first non-numeric field (line, column)."""
+def _read_text_values(path, source: str, names: list[str], cols: list[str], row0: int = 0,
+                      nrows: int | None = None) -> np.ndarray:
+    """Slow path: parse data rows row0 … row0 + nrows as text to name the first non-numeric
+    field (line, column)."""
     import pandas as pd
 
     try:
-        frame = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
+        frame = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True,
+                            skiprows=range(1, 1 + row0), nrows=nrows)
     except (pd.errors.ParserError, UnicodeDecodeError) as exc:
         msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
         raise InputError(f"{source}: not a readable CSV log: {msg}") from None
@@ -105,10 +108,15 @@ def _read_text_values(path, source: str, names: list[str], cols: list[str]) -> n
         bad = np.isnan(num) & ~text.str.lower().isin(["", "nan", "-nan", "+nan", "na", "null"]).to_numpy()
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise InputError(f"{source}: line {_line(i)}, column '{col}': "
+            raise InputError(f"{source}: line {_line(row0 + i)}, column '{col}': "
                              f"{frame[col].iloc[i]!r} is not a number")
         values[:, j] = num
     return values
+
+
+DEFAULT_CHUNK_SAMPLES = 65536
+KEEP_SKIPPED_LINES = 1000            # a streamed log keeps the first lines skipped (and a count)
+NA_VALUES = ["nan", "-nan", "+nan", "NaN", "NA", "null", ""]
 
 
 def read_log(path, robot=None, *, max_jitter: float = 0.01) -> SensorLog:
@@ -116,116 +124,236 @@ def read_log(path, robot=None, *, max_jitter: float = 0.01) -> SensorLog:
 
     Rows with a NaN/inf (or empty) field are skipped and counted (``skipped_lines``, ``valid_mask``);
     a non-numeric field, a non-increasing time or a step that is not a whole number of sample
-    periods (±``max_jitter``) raises InputError naming the file, line and column. With ``robot``,
-    the number of joints must match its links.
+    periods (±``max_jitter``; the period is ``observer.regular_period``: the median of the first
+    1024 steps) raises InputError naming the file, line and column. With ``robot``, the number of
+    joints must match its links. The whole file as one chunk of ``LogReader``.
     """
-    from pathlib import Path
-
-    path = Path(path)
-    source = str(path)
-    if not path.exists():
-        raise InputError(f"{source}: no such file")
-    if path.is_dir():
-        raise InputError(f"{source}: is a directory, expected a CSV log")
-    if path.suffix.lower() == ".parquet":
-        names, values, n, floating = _read_parquet(path, source, robot)
-    else:
-        names, values, n, floating = _read_csv(path, source, robot)
-    return _from_values(path, source, values, n, floating, max_jitter)
-
-
-def _read_parquet(path, source, robot):
-    """(names, values in log_columns order, n_links, floating) of a Parquet log (pyarrow)."""
-    import pandas as pd
-
-    try:
-        frame = pd.read_parquet(path)
-    except ImportError:
-        raise InputError(f"{source}: reading Parquet needs pyarrow (pip install pyarrow)") from None
-    except Exception as exc:                   # pyarrow raises several types for a bad file
-        raise InputError(f"{source}: not a readable Parquet log: {str(exc).splitlines()[0]}") from None
-    names = [str(c).strip() for c in frame.columns]
-    n, floating = _layout(names, source, None if robot is None else robot.n_links)
-    cols = log_columns(n, floating)
-    frame.columns = names
-    try:
-        values = frame[cols].to_numpy(dtype=float)
-    except (ValueError, TypeError):
-        bad = next(c for c in cols if not pd.api.types.is_numeric_dtype(frame[c]))
-        raise InputError(f"{source}: column '{bad}' is not numeric") from None
-    return names, values, n, floating
-
-
-def _read_csv(path, source, robot):
-    import pandas as pd
-
-    try:
-        header = pd.read_csv(path, nrows=0, skipinitialspace=True)
-    except pd.errors.EmptyDataError:
-        raise InputError(f"{source}: empty file (expected a CSV header and samples)") from None
-    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
-        raise InputError(f"{source}: not a readable CSV log: {msg}") from None
-    names = [str(c).strip() for c in header.columns]
-    dup = [c for i, c in enumerate(names) if c in names[:i]]
-    if dup:
-        raise InputError(f"{source}: line 1: column '{dup[0]}' appears twice")
-    n, floating = _layout(names, source, None if robot is None else robot.n_links)
-    cols = log_columns(n, floating)
-    try:                                        # fast path: every field numeric (or NaN/inf/empty)
-        frame = pd.read_csv(path, skipinitialspace=True, dtype=float, engine="c",
-                            na_values=["nan", "-nan", "+nan", "NaN", "NA", "null", ""])
-        frame.columns = names
-        values = frame[cols].to_numpy(dtype=float)
-    except (ValueError, TypeError, pd.errors.ParserError, UnicodeDecodeError):
-        values = _read_text_values(path, source, names, cols)
-    return names, values, n, floating
-
-
-def _from_values(path, source, values, n, floating, max_jitter):
-    if len(values) == 0:
-        raise InputError(f"{source}: no samples after the header")
-    valid = np.all(np.isfinite(values), axis=1)
-    if not valid.any():
-        raise InputError(f"{source}: every sample has a NaN/inf field; nothing to estimate")
-    data = values[valid]
-    rows = np.flatnonzero(valid)
-    t = data[:, 0]
-    steps = np.diff(t)
-    if np.any(steps <= 0):
-        k = int(np.flatnonzero(steps <= 0)[0])
-        raise InputError(f"{source}: line {_line(rows[k + 1])}, column 't': time {t[k + 1]:g} s does not "
-                         f"increase (previous sample {t[k]:g} s at line {_line(rows[k])})")
-    if len(t) > 2:
-        dt = float(np.median(steps))
-        # a step may span skipped rows: it must then be a whole number of periods
-        skipped = np.diff(rows) - 1
-        ratio = steps / dt
-        off = np.abs(ratio - np.maximum(np.round(ratio), 1)) > max_jitter
-        off |= np.round(ratio) != skipped + 1
-        if off.any():
-            k = int(np.flatnonzero(off)[0])
-            raise InputError(f"{source}: line {_line(rows[k + 1])}, column 't': irregular sampling, step "
-                             f"{steps[k]:.6g} s where the log's period is {dt:.6g} s "
-                             f"(±{100 * max_jitter:g}%)")
-    base = 3 if floating else 0
-    T = len(t)
-    q = np.zeros((T, n + 3))
-    dq = np.zeros((T, n + 3))
-    q[:, 3 - base:] = data[:, 1:1 + base + n]
-    dq[:, 3 - base:] = data[:, 1 + base + n:1 + 2 * (base + n)]
-    i0 = 1 + 2 * (base + n)
-    log = SensorLog(t=t, q=q, dq=dq, tau_Nm=data[:, i0:i0 + n], wrench=data[:, i0 + n:i0 + n + 3],
-                    floating=floating)
-    log.source = source
-    log.valid_mask = valid
-    log.skipped_lines = rows_to_lines(np.flatnonzero(~valid))
-    from estimator.timing import read_declaration
-    log.timing = read_declaration(path, n)       # LOG.timing.toml beside the log, if any
-    from estimator.plausibility import check_log
-
-    check_log(log)                              # units and sampling plausible
+    reader = LogReader(path, robot, chunk_samples=None, max_jitter=max_jitter, keep_valid_mask=True)
+    (log,) = list(reader)
+    log.skipped_lines = reader.skipped_lines
+    log.valid_mask = np.concatenate(reader.valid_masks)
+    log.plausibility_warnings = reader.finish()
     return log
+
+
+class LogReader:
+    """A sensor log read in chunks of ``chunk_samples`` file rows (None: the whole file at once),
+    each validated as ``read_log`` validates a whole log, with the state that spans chunks carried
+    over: the previous valid row (time order, whole periods across skipped rows), the sampling
+    period (from the head: the first 1025 valid rows are read before the first chunk is yielded),
+    the plausibility sums (estimator.plausibility.Checker). Iterating yields ``SensorLog`` chunks
+    (attribute ``row0``: the file's data-row index of the chunk's first row). ``finish()`` runs the
+    whole-log checks once every chunk has been seen and returns the warnings.
+
+    Attributes after the header: ``n_links``, ``floating``, ``source``, ``timing``; while reading:
+    ``n_samples``, ``n_skipped``, ``skipped_lines`` (the first ``KEEP_SKIPPED_LINES``), ``period_s``.
+    """
+
+    def __init__(self, path, robot=None, chunk_samples: int | None = DEFAULT_CHUNK_SAMPLES,
+                 max_jitter: float = 0.01, keep_valid_mask: bool = False):
+        from pathlib import Path
+
+        from estimator.plausibility import Checker
+        from estimator.timing import read_declaration
+
+        path = Path(path)
+        self.path, self.source = path, str(path)
+        if not path.exists():
+            raise InputError(f"{self.source}: no such file")
+        if path.is_dir():
+            raise InputError(f"{self.source}: is a directory, expected a CSV log")
+        if chunk_samples is not None and (int(chunk_samples) != chunk_samples or chunk_samples < 1):
+            raise InputError(f"chunk size: must be a whole number of samples ≥ 1, got {chunk_samples}")
+        self.chunk_samples = chunk_samples
+        self.parquet = path.suffix.lower() == ".parquet"
+        self.max_jitter = max_jitter
+        n_links = None if robot is None else robot.n_links
+        self.names = self._parquet_names() if self.parquet else self._csv_names()
+        self.n_links, self.floating = _layout(self.names, self.source, n_links)
+        self.cols = log_columns(self.n_links, self.floating)
+        self.timing = read_declaration(path, self.n_links)     # LOG.timing.toml beside the log, if any
+        self.checker = Checker(self.source, self.floating, self.n_links)
+        self.n_rows = self.n_samples = self.n_skipped = 0
+        self.skipped_lines = np.zeros(0, dtype=int)
+        self.period_s = None
+        self._last = None                      # (t, file row) of the last valid row
+        self.keep_valid_mask = keep_valid_mask
+        self.valid_masks: list[np.ndarray] = []
+
+    # ------------------------------------------------------------------ header
+    def _csv_names(self):
+        import pandas as pd
+
+        try:
+            header = pd.read_csv(self.path, nrows=0, skipinitialspace=True)
+        except pd.errors.EmptyDataError:
+            raise InputError(f"{self.source}: empty file (expected a CSV header and samples)") from None
+        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+            msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+            raise InputError(f"{self.source}: not a readable CSV log: {msg}") from None
+        names = [str(c).strip() for c in header.columns]
+        dup = [c for i, c in enumerate(names) if c in names[:i]]
+        if dup:
+            raise InputError(f"{self.source}: line 1: column '{dup[0]}' appears twice")
+        return names
+
+    def _parquet_file(self):
+        try:
+            import pyarrow.parquet as pq
+        except ImportError:
+            raise InputError(f"{self.source}: reading Parquet needs pyarrow (pip install pyarrow)") from None
+        try:
+            return pq.ParquetFile(self.path)
+        except Exception as exc:               # pyarrow raises several types for a bad file
+            raise InputError(f"{self.source}: not a readable Parquet log: {str(exc).splitlines()[0]}") from None
+
+    def _parquet_names(self):
+        return [str(c).strip() for c in self._parquet_file().schema_arrow.names]
+
+    # ------------------------------------------------------------------ raw blocks
+    def _blocks(self):
+        """Arrays (rows, columns in ``log_columns`` order) of up to ``chunk_samples`` file rows."""
+        if self.parquet:
+            yield from self._parquet_blocks()
+        else:
+            yield from self._csv_blocks()
+
+    def _parquet_blocks(self):
+        import pyarrow as pa
+
+        f = self._parquet_file()
+        index = {c: i for i, c in enumerate(self.names)}
+        for name in self.cols:
+            typ = f.schema_arrow.field(index[name]).type
+            if not (pa.types.is_floating(typ) or pa.types.is_integer(typ) or pa.types.is_null(typ)):
+                raise InputError(f"{self.source}: column '{name}' is not numeric")
+        raw = [f.schema_arrow.names[index[c]] for c in self.cols]
+        size = self.chunk_samples or max(f.metadata.num_rows, 1)
+        try:
+            for batch in f.iter_batches(batch_size=size, columns=raw):
+                out = np.empty((batch.num_rows, len(raw)))
+                for j in range(len(raw)):
+                    out[:, j] = batch.column(j).to_numpy(zero_copy_only=False)
+                yield out
+        except (OSError, ValueError) as exc:
+            raise InputError(f"{self.source}: not a readable Parquet log: {str(exc).splitlines()[0]}") from None
+
+    def _csv_blocks(self):
+        import pandas as pd
+
+        kw = dict(skipinitialspace=True, dtype=float, engine="c", na_values=NA_VALUES)
+        row0 = 0
+        try:
+            if self.chunk_samples is None:
+                frames = iter([pd.read_csv(self.path, **kw)])
+            else:
+                frames = pd.read_csv(self.path, chunksize=self.chunk_samples, **kw)
+            while True:
+                try:
+                    frame = next(frames)
+                except StopIteration:
+                    return
+                frame.columns = self.names
+                values = frame[self.cols].to_numpy(dtype=float)
+                row0 += len(values)
+                yield values
+        except (ValueError, TypeError, pd.errors.ParserError, UnicodeDecodeError):
+            # a non-numeric field in the rows from row0 on: name it (line, column)
+            values = _read_text_values(self.path, self.source, self.names, self.cols, row0,
+                                       self.chunk_samples)
+            raise InputError(f"{self.source}: not a readable CSV log after line {_line(row0)}") from None
+
+    # ------------------------------------------------------------------ validated chunks
+    def __iter__(self):
+        from estimator.observer import PERIOD_HEAD_STEPS
+
+        head, head_valid = [], 0
+        for values in self._blocks():
+            if self.period_s is None:
+                head.append(values)
+                head_valid += int(np.all(np.isfinite(values), axis=1).sum())
+                if head_valid <= PERIOD_HEAD_STEPS:
+                    continue
+                values = np.concatenate(head) if len(head) > 1 else head[0]
+                head = None
+            chunk = self._validate(values)
+            if chunk is not None:
+                yield chunk
+        if head:                                # a log shorter than the head
+            chunk = self._validate(np.concatenate(head))
+            if chunk is not None:
+                yield chunk
+        if self.n_rows == 0:
+            raise InputError(f"{self.source}: no samples after the header")
+        if self.n_samples == 0:
+            raise InputError(f"{self.source}: every sample has a NaN/inf field; nothing to estimate")
+
+    def _validate(self, values):
+        from estimator.observer import regular_period
+
+        row0 = self.n_rows
+        self.n_rows += len(values)
+        valid = np.all(np.isfinite(values), axis=1)
+        if self.keep_valid_mask:
+            self.valid_masks.append(valid)
+        bad_rows = np.flatnonzero(~valid)
+        if bad_rows.size:
+            self.n_skipped += bad_rows.size
+            room = KEEP_SKIPPED_LINES - len(self.skipped_lines)
+            if room > 0 or self.keep_valid_mask:
+                extra = bad_rows if self.keep_valid_mask else bad_rows[:room]
+                self.skipped_lines = np.concatenate([self.skipped_lines, rows_to_lines(row0 + extra)])
+        if not valid.any():
+            return None
+        data = values[valid] if bad_rows.size else values
+        rows = row0 + np.flatnonzero(valid)
+        t = data[:, 0]
+        if self._last is not None:                 # the step across the chunk boundary
+            tt, rr = np.r_[self._last[0], t], np.r_[self._last[1], rows]
+        else:
+            tt, rr = t, rows
+        steps = np.diff(tt)
+        if np.any(steps <= 0):
+            k = int(np.flatnonzero(steps <= 0)[0])
+            raise InputError(f"{self.source}: line {_line(rr[k + 1])}, column 't': time {tt[k + 1]:g} s "
+                             f"does not increase (previous sample {tt[k]:g} s at line {_line(rr[k])})")
+        if self.period_s is None:
+            self.period_s = regular_period(tt)
+            if len(tt) > 1:
+                self.checker.period(self.period_s)
+        dt = self.period_s
+        if self._last is not None or len(tt) > 2:
+            # a step may span skipped rows: it must then be a whole number of periods
+            skipped = np.diff(rr) - 1
+            ratio = steps / dt
+            off = np.abs(ratio - np.maximum(np.round(ratio), 1)) > self.max_jitter
+            off |= np.round(ratio) != skipped + 1
+            if off.any():
+                k = int(np.flatnonzero(off)[0])
+                raise InputError(f"{self.source}: line {_line(rr[k + 1])}, column 't': irregular "
+                                 f"sampling, step {steps[k]:.6g} s where the log's period is "
+                                 f"{dt:.6g} s (±{100 * self.max_jitter:g}%)")
+        self._last = (t[-1], rows[-1])
+        n, base = self.n_links, 3 if self.floating else 0
+        T = len(t)
+        q = np.zeros((T, n + 3))
+        dq = np.zeros((T, n + 3))
+        q[:, 3 - base:] = data[:, 1:1 + base + n]
+        dq[:, 3 - base:] = data[:, 1 + base + n:1 + 2 * (base + n)]
+        i0 = 1 + 2 * (base + n)
+        log = SensorLog(t=np.ascontiguousarray(t), q=q, dq=dq, tau_Nm=data[:, i0:i0 + n].copy(),
+                        wrench=data[:, i0 + n:i0 + n + 3].copy(), floating=self.floating,
+                        source=self.source, timing=self.timing)
+        log.row0 = int(row0)
+        log.period_s = dt
+        self.checker.rows(t, q, dq)
+        self.n_samples += T
+        return log
+
+    def finish(self) -> list[str]:
+        """The whole-log plausibility checks (velocity scale); warnings issued and returned."""
+        self.plausibility_warnings = self.checker.finish()
+        return self.plausibility_warnings
 
 
 def rows_to_lines(rows: np.ndarray) -> np.ndarray:

@@ -80,6 +80,16 @@ def _irot(rob: Robot) -> np.ndarray:
     return Irot
 
 
+def _matvec_rows(A: np.ndarray, xT: np.ndarray) -> np.ndarray:
+    """A @ xT for a small constant (n, n) A and link-major xT (n, T), as row additions in a fixed
+    order (skipping zeros): the same bits for a sample whatever batch it is in (BLAS may not)."""
+    out = np.zeros((A.shape[0], xT.shape[1]))
+    for i in range(A.shape[0]):
+        for k in np.flatnonzero(A[i]):
+            out[i] += A[i, k] * xT[k]
+    return out
+
+
 def cumrows(a: np.ndarray, reverse: bool = False) -> np.ndarray:
     """Cumulative sum over the first (link) axis by row additions (a loop over links, not samples:
     numpy's cumsum along a short leading axis is several times slower)."""
@@ -142,7 +152,7 @@ def chain_terms(robot: Robot, q: np.ndarray, dq: np.ndarray, want=("P", "CTdq", 
     Bx, Bz = suffix(m * vx)[sel], suffix(m * vz)[sel]
     if "P" in want:
         A = suffix(m * (cx * vz - cz * vx))[sel]
-        P = _irot(rob) @ dqT
+        P = _matvec_rows(_irot(rob), dqT)
         P[0] += Bx[0]
         P[1] += Bz[0]
         P[2:] += A - (ox * Bz - oz * Bx)
@@ -196,8 +206,13 @@ def momentum_terms(robot: Robot, q: np.ndarray, dq: np.ndarray, tau_meas: np.nda
     return PT.T, uT.T
 
 
+PERIOD_HEAD_STEPS = 1024
+
+
 def regular_period(t: np.ndarray) -> float:
-    """The nominal sample period: the median step."""
+    """The nominal sample period: the median of the first ``PERIOD_HEAD_STEPS`` (1024) steps
+    (all of them on a shorter log), so that a log read in chunks knows it from its head."""
+    t = np.asarray(t, float)[:PERIOD_HEAD_STEPS + 1]
     return float(np.median(np.diff(t))) if len(t) > 1 else 1.0
 
 
@@ -208,47 +223,67 @@ def residual_offline(robot: Robot, t, q, dq, tau_meas, gain_per_s=100.0, method:
     ``timing``: per-channel sampling of τ_meas [(kind, delay_s)] (estimator.timing; None =
     instantaneous); the step mean ū_k of the measured force uses the matching quadrature.
 
-    Steps equal to the nominal period ``dt_s`` (default: median step) run through
+    Steps equal to the nominal period ``dt_s`` (default: ``regular_period``) run through
     ``scipy.signal.lfilter``; a longer step (a gap left by skipped NaN rows) is taken exactly with
-    its own Δt and starts a new segment (a Python loop over gaps, not samples).
+    its own Δt and starts a new segment (a Python loop over gaps, not samples). The same
+    arithmetic as ``residual_window`` on a log read in chunks (estimator.pipeline).
     """
-    from scipy.signal import lfilter
-
     t = np.asarray(t, float)
     T = len(t)
     K = gains(robot, gain_per_s)
-    n = K.size
-    rT = np.zeros((n, T))                  # link-major: each channel contiguous for lfilter
     if T < 2:
-        return rT.T
+        return np.zeros((T, K.size))
     dt_s = regular_period(t) if dt_s is None else float(dt_s)
-    a, b = coefficients(K, dt_s, method)
     P, u = momentum_terms(robot, q, dq, tau_meas) if terms is None else terms
-    PT, uT = np.ascontiguousarray(P.T), np.ascontiguousarray(u.T)
+    rT = residual_window(t, np.ascontiguousarray(P.T), np.ascontiguousarray(u.T),
+                         np.asarray(tau_meas, float).T, K, dt_s, method, timing, np.zeros(K.size))
+    return rT.T
+
+
+def lookahead_rows(timing, dt_s: float) -> int:
+    """Samples of the future a step's force mean needs (a group delay D reads ⌊D/Δt⌋ + 1 ahead)."""
+    if timing is None:
+        return 0
+    return max([int(np.floor(d / dt_s)) + 1 for k, d in timing if k == "delay" and d > 0], default=0)
+
+
+def residual_window(t, PT, uT, tauT, K, dt_s: float, method: str, timing, r0) -> np.ndarray:
+    """r (n, W) over a window of W rows (link-major P, u, τ_meas) whose first row's r is ``r0``.
+
+    r_{k+1} = a r_k + b d_k, d_k = (P_{k+1} − P_k)/Δt_k − ū_k (module doc). Row k's value depends
+    only on r0 and rows ≤ k (+ ``lookahead_rows`` for a group delay), so a log cut into windows
+    that overlap by one row gives the same numbers as one window.
+    """
+    from scipy.signal import lfilter
+
+    n, W = PT.shape
+    rT = np.empty((n, W))
+    rT[:, 0] = r0
+    if W < 2:
+        return rT
+    a, b = coefficients(K, dt_s, method)
     steps = np.diff(t)
     gap = np.abs(steps - dt_s) > 0.01 * dt_s
-    ubar = 0.5 * (uT[:, 1:] + uT[:, :-1]) if method == "exact" else uT[:, :-1]
+    ubar = 0.5 * (uT[:, 1:] + uT[:, :-1]) if method == "exact" else uT[:, :-1].copy()
     if not timing_mod.is_instant(timing):
-        tauT = np.asarray(tau_meas, float).T
-        ubar = ubar + timing_mod.step_mean_correction(tauT, timing, dt_s)
+        ubar += timing_mod.step_mean_correction(tauT, timing, dt_s)
         if method != "exact":              # explicit: ū_k = u_k, so correct relative to τ_k
             ubar += 0.5 * (tauT[:, 1:] - tauT[:, :-1])
     drive = np.diff(PT, axis=1)
     drive /= np.where(gap, steps, dt_s)
-    drive -= ubar                          # d_k = (P_{k+1} − P_k)/Δt_k − ū_k, (n, T−1)
-    # segment boundaries: indices k where step k (k → k+1) is irregular
+    drive -= ubar                          # d_k = (P_{k+1} − P_k)/Δt_k − ū_k, (n, W−1)
     bounds = np.flatnonzero(gap)
     start = 0                              # r[start] is known
-    for stop in [*bounds, T - 1]:          # regular steps start … stop−1, then the gap step stop
+    for stop in [*bounds, W - 1]:          # regular steps start … stop−1, then the gap step stop
         if stop > start:
             for j in range(n):
                 zi = np.array([a[j] * rT[j, start]])
                 rT[j, start + 1:stop + 1], _ = lfilter([b[j]], [1.0, -a[j]], drive[j, start:stop], zi=zi)
-        if stop < T - 1:                   # the irregular step stop → stop+1
+        if stop < W - 1:                   # the irregular step stop → stop+1
             ag, bg = coefficients(K, steps[stop], method)
             rT[:, stop + 1] = ag * rT[:, stop] + bg * drive[:, stop]
             start = stop + 1
-    return rT.T
+    return rT
 
 
 def lag_s(K: np.ndarray, dt_s: float, method: str = "exact") -> np.ndarray:

@@ -8,10 +8,17 @@ expected contacts): for ``dynamic`` a chi-square test on the residual whitened b
 covariance (estimator.noise) at a stated false-alarm rate; for ``paper`` or a given ``threshold``
 the paper's ‖r‖ > ε_res; optional debounce. The force channels' sampling (estimator.timing) sets
 the observer's quadrature.
+
+One code path, in bounded memory: ``EstimatorStream`` takes a log chunk by chunk (any chunk
+sizes give the same per-sample numbers, bit for bit) and carries everything that spans a chunk
+boundary in its state: the observer (last row's r, P, u, τ), the rows a group delay reads ahead,
+the past postures for the lag compensation, the detector's state (``DetectorState``: debounce run),
+the open contact episode's running sums. ``estimate()`` is the one-chunk case.
 """
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -48,7 +55,7 @@ class ContactEstimate:
     expected_force_N: np.ndarray | None = None     # (T, m, 2) at the expected contacts
     n_skipped: int = 0          # log rows skipped for NaN/inf fields
     info: dict = field(default_factory=dict)
-    interval_errors: list | None = None   # per interval: predicted 1σ of α, F, p (see _episode_errors)
+    interval_list: list | None = None   # contact intervals (``EpisodeSummary``), with error estimates
 
     def reason_names(self) -> np.ndarray:
         return np.asarray(loc_mod.REASONS, dtype=object)[self.reason]
@@ -63,27 +70,9 @@ class ContactEstimate:
 
     def intervals(self) -> list[dict]:
         """Contact intervals: start/end time, samples, the most frequent link, mean α, F, p over
-        the samples with a well-conditioned answer on that link (NaN if none)."""
-        c = self.contact.astype(np.int8)
-        edges = np.diff(np.concatenate([[0], c, [0]]))
-        starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-        out = []
-        for i, (a, b) in enumerate(zip(starts, stops)):
-            links = self.link[a:b]
-            known = links[links > 0]
-            link = int(np.bincount(known).argmax()) if known.size else 0
-            good = (links == link) & np.isfinite(self.alpha[a:b])
-            mean = (lambda x: float(np.mean(x[a:b][good])) if good.any() else float("nan"))
-            same = (links == link) & np.isfinite(self.Fx[a:b])
-            fmean = (lambda x: float(np.mean(x[a:b][same])) if same.any() else float("nan"))
-            out.append({"t_start_s": float(self.t[a]), "t_end_s": float(self.t[b - 1]),
-                        "samples": int(b - a), "link": link, "alpha": mean(self.alpha),
-                        "Fx_N": fmean(self.Fx), "Fz_N": fmean(self.Fz),
-                        "px_m": mean(self.px), "pz_m": mean(self.pz),
-                        "well_conditioned_fraction": float(good.mean())})
-            if self.interval_errors is not None and i < len(self.interval_errors):
-                out[-1].update(self.interval_errors[i])
-        return out
+        the samples with a well-conditioned answer on that link (NaN if none), and the 1σ error
+        estimates (``EpisodeSummary``)."""
+        return list(self.interval_list or [])
 
     def summary(self) -> dict:
         reasons = self.reason_names()[self.contact]
@@ -105,92 +94,74 @@ def _expected(robot: Robot, expected_contacts):
     return tuple((int(k), float(a)) for k, a in expected_contacts)
 
 
-def _delayed(t: np.ndarray, q: np.ndarray, lag_s: float, dt_s: float) -> np.ndarray:
-    """q(t − lag) by linear interpolation (held at q(t_0) before the start), (T, n).
-
-    Uniform sampling: a shift by lag/Δt samples (two array passes); with gaps: ``np.interp``.
-    """
-    T = len(t)
-    steps = np.diff(t)
-    if np.all(np.abs(steps - dt_s) <= 0.01 * dt_s):
-        shift = lag_s / dt_s
-        i0 = int(np.floor(shift))
-        frac = shift - i0
-        def shifted(k):                               # q[max(i − k, 0)] by slicing
-            out = np.empty_like(q)
-            k = min(k, T)
-            out[:k] = q[0]
-            out[k:] = q[:T - k]
-            return out
-
-        a = shifted(i0)
-        b = shifted(i0 + 1)
-        b -= a
-        b *= frac
-        b += a
-        return b
-    return np.stack([np.interp(t - lag_s, t, q[:, k]) for k in range(q.shape[1])], axis=-1)
+STATS_SAMPLES = 65536           # the noise floors come from the contact-free samples among these
 
 
-def _noise_detector(robot, log, r, unexp, gain_per_s, timing, noise, quiet_window,
-                    false_alarm_rate, cov_stride_s):
-    """(contact, statistic, info) of the chi-square detector (estimator.noise)."""
-    T = len(log.t)
-    dt = observer.regular_period(log.t)
-    value, unit = false_alarm_rate if isinstance(false_alarm_rate, tuple) else (false_alarm_rate, "s")
-    alpha = noise_mod.per_sample_rate(value, unit, dt)
-    n = r.shape[1]
-    h = noise_mod.chi2_threshold(alpha, n)
-    if quiet_window is not None:
-        R = noise_mod.quiet_covariance(r, log.t, *quiet_window, gain_per_s, dt)
-        stride, source = None, (f"robust estimate over the quiet window {quiet_window[0]:g}–"
-                                f"{quiet_window[1]:g} s")
-    else:
-        noise = noise_mod.paper_leg_noise() if noise is None else noise
-        if noise.velocity_sigma_rad_per_s == 0 and noise.encoder_counts == 0:
-            R, stride = noise_mod.residual_covariance(robot, log.q[:1], log.dq[:1], noise, gain_per_s,
-                                                      dt, timing)[0], None     # posture-independent
-        else:
-            stride = max(1, int(round(cov_stride_s / dt)))
-            R = noise_mod.residual_covariance(robot, log.q[::stride], log.dq[::stride], noise,
-                                              gain_per_s, dt, timing)
-        source = "sensor noise model, " + noise.describe()
-    stat = noise_mod.whitened_statistic(unexp, R, stride)
-    Rm = R if R.ndim == 2 else np.median(R, axis=0)
-    info = {"detector": "chi-square on the whitened residual",
-            "false_alarm_probability_per_sample": alpha,
-            "false_alarm_rate_per_s": alpha / dt, "chi2_threshold": h, "chi2_dof": n,
-            "residual_noise_source": source,
-            "residual_sigma": np.sqrt(np.diag(Rm)).tolist()}
-    return stat > h, stat, info, Rm
+@dataclass
+class DetectorState:
+    """What a detector carries from one chunk to the next: the debounce run (samples in a row
+    above the threshold, up to the last one seen), and room for a sequential test's state."""
+
+    run: int = 0
+    extra: dict = field(default_factory=dict)
+
+
+def debounce_chunk(raw: np.ndarray, debounce: int, state: DetectorState) -> np.ndarray:
+    """contact[k] = raw for the ``debounce`` + 1 samples k−debounce…k (all of them), counted
+    across chunk boundaries through ``state.run`` (updated): the rule of ``detection.detect``."""
+    raw = np.asarray(raw, bool)
+    if raw.size == 0:
+        return raw
+    idx = np.arange(raw.size)
+    last_false = np.maximum.accumulate(np.where(raw, -1, idx))
+    run = np.where(last_false >= 0, idx - last_false, state.run + idx + 1)
+    state.run = int(run[-1])
+    return run >= debounce + 1
+
+
+def _sumsq_rows(xT: np.ndarray) -> np.ndarray:
+    """Σ_k x_k² per sample of a link-major (n, T) array, rows added in order (batch-independent)."""
+    out = xT[0] * xT[0]
+    for k in range(1, len(xT)):
+        out += xT[k] * xT[k]
+    return out
+
+
+def _whitened(rT: np.ndarray, Linv: np.ndarray) -> np.ndarray:
+    """s_k = ‖L⁻¹ r_k‖², with one lower-triangular L⁻¹ (n, n) or one per sample (T, n, n)."""
+    n = rT.shape[0]
+    out = np.zeros(rT.shape[1])
+    for i in range(n):
+        z = None
+        for j in range(i + 1):
+            c = Linv[i, j] if Linv.ndim == 2 else Linv[:, i, j]
+            z = c * rT[j] if z is None else z + c * rT[j]
+        out += z * z
+    return out
 
 
 ERROR_METHOD = ("first-order propagation of the residual's no-contact covariance through the "
-                "least-squares localization at the episode's middle sample, 1σ per sample")
+                "least-squares localization at one sample of the episode (the kept sample 2^j − 1 "
+                "samples after its start nearest below its middle), 1σ per sample")
 
 
-def _episode_errors(robot, contact, q_loc_full, r, R, loc_kwargs, h=1e-4):
-    """Per contact episode: 1σ of α, Fx, Fz, px, pz per sample, J R Jᵀ with J = ∂(α, F, p)/∂r
-    by central differences of localize_dynamic at the episode's middle sample."""
-    c = contact.astype(np.int8)
-    edges = np.diff(np.concatenate([[0], c, [0]]))
-    mids = (np.flatnonzero(edges == 1) + np.flatnonzero(edges == -1) - 1) // 2
-    n = r.shape[1]
-    out = []
-    if mids.size == 0:
-        return out
+def _episode_errors(robot, q_rows, r_rows, R, loc_kwargs, h=1e-4):
+    """Per episode: 1σ of α, Fx, Fz, px, pz, J R Jᵀ with J = ∂(α, F, p)/∂r by central differences
+    of localize_dynamic at the episode's representative sample (q_loc, r rows given, (E, n))."""
+    E, n = r_rows.shape
     eye = np.eye(n) * h
-    rp = np.concatenate([r[mids][:, None] + eye, r[mids][:, None] - eye], axis=1).reshape(-1, n)
-    qp = np.repeat(q_loc_full[mids], 2 * n, axis=0)
+    rp = np.concatenate([r_rows[:, None] + eye, r_rows[:, None] - eye], axis=1).reshape(-1, n)
+    qp = np.repeat(q_rows, 2 * n, axis=0)
     res = loc_mod.localize_dynamic(robot, qp, rp, **loc_kwargs)
-    y = np.concatenate([res.alpha[:, None], res.force_N, res.point_m], axis=1).reshape(len(mids), 2 * n, 5)
+    y = np.concatenate([res.alpha[:, None], res.force_N, res.point_m], axis=1).reshape(E, 2 * n, 5)
     J = (y[:, :n] - y[:, n:]) / (2 * h)                           # (E, n, 5)
-    cov = np.einsum("eki,kl,elj->eij", J, R, J)
-    sd = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0, None))
-    for e in range(len(mids)):
+    out = []
+    for e in range(E):
+        cov = J[e].T @ R @ J[e]
+        sd = np.sqrt(np.clip(np.diagonal(cov), 0, None))
         row = {}
         for j, key in enumerate(["alpha", "Fx_N", "Fz_N", "px_m", "pz_m"]):
-            v = float(sd[e, j])
+            v = float(sd[j])
             row[f"{key}_error_estimate"] = v if np.isfinite(v) else None
             row[f"{key}_error_method"] = ERROR_METHOD if np.isfinite(v) else \
                 "not available: the localization refused a perturbed answer (ill-conditioned)"
@@ -198,13 +169,485 @@ def _episode_errors(robot, contact, q_loc_full, r, R, loc_kwargs, h=1e-4):
     return out
 
 
+class _ObserverRun:
+    """The observer over a log fed in chunks: ``feed(log, final)`` → the finalized rows as a dict
+    (t, q, dq, tau (T, n), r (T, n)); rows a group delay still needs the future of are held back
+    (``observer.lookahead_rows``) until the next chunk or ``final``."""
+
+    def __init__(self, robot, K, dt, method, timing):
+        self.robot, self.K, self.dt, self.method, self.timing = robot, K, dt, method, timing
+        self.ahead = observer.lookahead_rows(timing, dt)
+        self.prev = None                 # (t, P, u, τ, r) of the last finalized row (link-major rows)
+        self.pending = None              # held-back raw rows: (t, q, dq, τ)
+
+    def feed(self, t, q, dq, tau, final: bool = False):
+        if self.pending is not None:
+            pt, pq, pdq, ptau = self.pending
+            t, q, dq, tau = np.r_[pt, t], np.vstack([pq, q]), np.vstack([pdq, dq]), np.vstack([ptau, tau])
+            self.pending = None
+        T = len(t)
+        keep = 0 if final else min(self.ahead, T)
+        if T == 0 or T - keep == 0:
+            self.pending = (t, q, dq, tau) if T else None
+            return None
+        P, u = observer.momentum_terms(self.robot, q, dq, tau)
+        PT, uT, tauT = P.T, u.T, tau.T
+        if self.prev is not None:
+            t0, P0, u0, tau0, r0 = self.prev
+            tw = np.r_[t0, t]
+            PT, uT, tauT = (np.concatenate([x0[:, None], x], axis=1) for x0, x in
+                            ((P0, PT), (u0, uT), (tau0, tauT)))
+        else:
+            tw, r0 = t, np.zeros(self.K.size)
+        rT = observer.residual_window(tw, np.ascontiguousarray(PT), np.ascontiguousarray(uT),
+                                      tauT, self.K, self.dt, self.method, self.timing, r0)
+        off = 1 if self.prev is not None else 0
+        m = T - keep                                            # rows finalized now
+        last = off + m - 1
+        self.prev = (tw[last], PT[:, last].copy(), uT[:, last].copy(), tauT[:, last].copy(),
+                     rT[:, last].copy())
+        if keep:
+            self.pending = (t[m:], q[m:], dq[m:], tau[m:])
+        return {"t": t[:m], "q": q[:m], "dq": dq[:m], "tau": tau[:m],
+                "rT": rT[:, off:off + m]}
+
+
+class _EpisodeAccumulator:
+    """Contact intervals merged across chunk boundaries from running sums (bounded memory).
+
+    Per interval: the most frequent link, and over its samples on that link with a finite α the
+    means of α, p, over those with a finite F the mean F (sums in sample order), the
+    well-conditioned fraction; the representative sample for the error estimate is kept from
+    the samples 2^j − 1 after the start (O(log L) rows)."""
+
+    KEYS = ("alpha", "px", "pz", "Fx", "Fz")
+
+    def __init__(self, n_links: int):
+        self.nb = n_links + 1
+        self.open = None
+        self.closed = []                 # finished episodes waiting for their error estimate
+
+    def _new(self, g, t):
+        return {"g0": g, "t0": t, "t1": t, "n": 0, "counts": np.zeros(self.nb),
+                "good": np.zeros(self.nb), "same": np.zeros(self.nb),
+                "sums": {k: np.zeros(self.nb) for k in self.KEYS}, "kept": []}
+
+    def feed(self, g0, t, contact, link, alpha, Fx, Fz, px, pz, q_loc, rT):
+        c = contact.astype(np.int8)
+        prev = 1 if self.open is not None else 0
+        edges = np.diff(np.concatenate([[prev], c, [0]]))
+        starts = np.flatnonzero(edges == 1)
+        stops = np.flatnonzero(edges == -1)
+        if prev:
+            starts = np.r_[0, starts]
+        if not starts.size:
+            return
+        # segment id per sample (valid where contact): index of the start at or before it
+        sid = np.searchsorted(starts, np.arange(len(c)), side="right") - 1
+        on = np.flatnonzero(c)
+        S = len(starts)
+        key = sid[on] * self.nb + link[on]
+        size = S * self.nb
+        counts = np.bincount(key, minlength=size).reshape(S, self.nb)
+        good = np.isfinite(alpha[on])
+        same = np.isfinite(Fx[on])
+        gcount = np.bincount(key[good], minlength=size).reshape(S, self.nb)
+        scount = np.bincount(key[same], minlength=size).reshape(S, self.nb)
+        sums = {}
+        for k, x, m in (("alpha", alpha, good), ("px", px, good), ("pz", pz, good),
+                        ("Fx", Fx, same), ("Fz", Fz, same)):
+            sums[k] = np.bincount(key[m], weights=x[on][m], minlength=size).reshape(S, self.nb)
+        for i in range(S):
+            a, b = int(starts[i]), int(stops[i])
+            if i == 0 and prev:
+                ep = self.open
+            else:
+                ep = self._new(g0 + a, float(t[a]))
+            off0 = g0 + a - ep["g0"]
+            j = 1
+            while j - 1 < off0 + (b - a):        # keep samples at offsets 2^j − 1
+                if j - 1 >= off0:
+                    k = a + (j - 1 - off0)
+                    ep["kept"].append((j - 1, q_loc[k].copy(), rT[:, k].copy()))
+                j *= 2
+            ep["n"] += b - a
+            if b > a:                            # b == a: it ended at the chunk boundary
+                ep["t1"] = float(t[b - 1])
+            ep["counts"] += counts[i]
+            ep["good"] += gcount[i]
+            ep["same"] += scount[i]
+            for k in self.KEYS:
+                ep["sums"][k] += sums[k][i]
+            if b < len(c):
+                self.closed.append(ep)
+                self.open = None
+            else:
+                self.open = ep
+
+    def close_all(self):
+        if self.open is not None:
+            self.closed.append(self.open)
+            self.open = None
+
+    @staticmethod
+    def summary(ep) -> dict:
+        counts = ep["counts"].copy()
+        counts[0] = 0
+        link = int(np.argmax(counts)) if counts.any() else 0
+        good, same = ep["good"][link], ep["same"][link]
+        mean = (lambda k: float(ep["sums"][k][link] / good) if good else float("nan"))
+        fmean = (lambda k: float(ep["sums"][k][link] / same) if same else float("nan"))
+        return {"t_start_s": ep["t0"], "t_end_s": ep["t1"], "samples": int(ep["n"]), "link": link,
+                "alpha": mean("alpha"), "Fx_N": fmean("Fx"), "Fz_N": fmean("Fz"),
+                "px_m": mean("px"), "pz_m": mean("pz"),
+                "well_conditioned_fraction": float(good / ep["n"])}
+
+    @staticmethod
+    def representative(ep):
+        """(q_loc, r) at the kept offset 2^j − 1 nearest below the middle (L − 1) // 2."""
+        mid = (ep["n"] - 1) // 2
+        best = max((k for k in ep["kept"] if k[0] <= mid), key=lambda k: k[0])
+        return best[1], best[2]
+
+
+class EstimatorStream:
+    """The estimator over a log fed in chunks (``feed``), in bounded memory; ``finish`` ends it.
+
+    Each call returns the ``ContactEstimate`` parts ready so far (per-sample arrays for a run of
+    consecutive samples; possibly none). Per-sample results do not depend on the chunk sizes.
+    The quantities that ``estimate`` once took from the whole log are fixed by rules that
+    stream exactly:
+
+    * sampling period: the median of the first 1024 steps (``observer.regular_period``, or the
+      period the log reader found with the same rule);
+    * noise floors (force floor, ambiguity tolerance, the paper method's isolation thresholds)
+      and the summary covariance (the median of the posture-dependent covariances): from the
+      contact-free samples (covariance blocks) among the first ``stats_samples`` samples of the
+      log (65 536 by default; the whole log when it is shorter). Localization waits until those
+      samples are in (they are held, observer and detection done);
+    * an episode's error estimate: at the sample 2^j − 1 samples after its start nearest below
+      its middle (``_EpisodeAccumulator``), not its exact middle (which needs the episode's end).
+    """
+
+    def __init__(self, robot: Robot, method: str = "dynamic", gain_per_s=100.0,
+                 threshold: float | None = None, debounce: int = 0, expected=(), *,
+                 period_s: float, discretization: str = "exact", row_weights=None,
+                 min_force_N: float = 0.05, max_condition: float = 20.0,
+                 isolation_floor: float = 0.01, lag_compensation: bool = True, timing=None,
+                 timing_source: str = "option", noise=None, residual_cov=None,
+                 residual_cov_source: str = "", false_alarm_rate=DEFAULT_FALSE_ALARM_RATE,
+                 cov_stride_s: float = 0.01, stats_samples: int = STATS_SAMPLES):
+        if method not in METHODS:
+            raise InputError(f"method: unknown {method!r}; use one of {', '.join(METHODS)}")
+        if int(debounce) != debounce or debounce < 0:
+            raise InputError(f"debounce: must be a whole number of samples ≥ 0, got {debounce}")
+        self.robot, self.method, self.expected = robot, method, tuple(expected)
+        self.full = observer.full_robot(robot)
+        self.dt = float(period_s)
+        self.K = observer.gains(robot, gain_per_s)
+        self.gain_per_s = gain_per_s
+        self.n = self.K.size
+        self.debounce = int(debounce)
+        self.row_weights = row_weights
+        self.min_force_N, self.max_condition = min_force_N, max_condition
+        self.isolation_floor = isolation_floor
+        self.stats_samples = int(stats_samples)
+        self.timing = timing
+        self.obs = _ObserverRun(robot, self.K, self.dt, discretization, timing)
+        self.state = DetectorState()
+        self.info = {"timing": timing_mod.describe(timing), "timing_source": timing_source}
+        self.R = self.Linv = None
+        self.stride = None
+        self._R_head = []                # posture-dependent covariances of the head's blocks
+        if method == "paper" or threshold is not None:
+            threshold = 0.06 if threshold is None else threshold
+            if not (np.isfinite(threshold) and threshold > 0):
+                raise InputError(f"threshold: must be a finite number > 0, got {threshold}")
+            self.chi2 = False
+            self.h = float(threshold)
+            self.info.update(detector="paper rule ||r|| > threshold", threshold=threshold)
+        else:
+            self.chi2 = True
+            value, unit = false_alarm_rate if isinstance(false_alarm_rate, tuple) else (false_alarm_rate, "s")
+            alpha = noise_mod.per_sample_rate(value, unit, self.dt)
+            self.h = noise_mod.chi2_threshold(alpha, self.n)
+            if residual_cov is not None:
+                self._set_R(np.asarray(residual_cov, float))
+                source = residual_cov_source
+            else:
+                self.noise = noise_mod.paper_leg_noise() if noise is None else noise
+                if not (self.noise.velocity_sigma_rad_per_s == 0 and self.noise.encoder_counts == 0):
+                    self.stride = max(1, int(round(cov_stride_s / self.dt)))
+                source = "sensor noise model, " + self.noise.describe()
+            self.info.update({"detector": "chi-square on the whitened residual",
+                              "false_alarm_probability_per_sample": alpha,
+                              "false_alarm_rate_per_s": alpha / self.dt, "chi2_threshold": self.h,
+                              "chi2_dof": self.n, "residual_noise_source": source})
+        self.lag = None
+        if method == "dynamic" and lag_compensation:
+            self.lag = float(np.mean(observer.lag_s(self.K, self.dt, discretization)))
+            self.info["lag_compensation_s"] = self.lag
+            self._past_rows = int(np.ceil(1.02 * self.lag / self.dt)) + 2
+            self._past = None                # (t, q) of the last finalized rows
+        self.g = 0                           # samples through detection so far
+        self.queue = []                      # detected chunks waiting for the noise floors
+        self.stats = None
+        self.episodes = _EpisodeAccumulator(robot.n_links)
+        self.intervals = []
+        self.reason_counts = np.zeros(len(loc_mod.REASONS), dtype=np.int64)
+        self.samples = self.contact_samples = 0
+        self._cur_block = None               # (block index, L⁻¹) of the block spanning chunks
+
+    def _set_R(self, R):
+        self.R = R
+        self.Linv = np.linalg.inv(np.linalg.cholesky(R))
+
+    # ------------------------------------------------------------------ stage 1
+    def _statistic(self, g0, q, dq, unexpT):
+        """The detector's statistic: ‖r‖ (paper rule) or rᵀR⁻¹r (chi-square) per sample."""
+        if not self.chi2:
+            return np.sqrt(_sumsq_rows(unexpT))
+        T = unexpT.shape[1]
+        if self.R is None and self.stride is None:          # posture-independent: first sample
+            R = noise_mod.residual_covariance(self.robot, q[:1], dq[:1], self.noise, self.gain_per_s,
+                                              self.dt, self.timing)[0]
+            self._set_R(R)
+        if self.stride is None:
+            return _whitened(unexpT, self.Linv)
+        st = self.stride
+        blocks = np.arange(g0 // st, (g0 + T - 1) // st + 1)
+        new = blocks[blocks * st >= g0]
+        Ls = {}
+        if self._cur_block is not None:
+            Ls[self._cur_block[0]] = self._cur_block[1]
+        if new.size:
+            Rb = noise_mod.residual_covariance(self.robot, q[new * st - g0], dq[new * st - g0],
+                                               self.noise, self.gain_per_s, self.dt, self.timing)
+            Lb = np.linalg.inv(np.linalg.cholesky(Rb))
+            for b, R, L in zip(new, Rb, Lb):
+                Ls[int(b)] = L
+                if b * st < self.stats_samples:
+                    self._R_head.append(R)
+        L_all = np.stack([Ls[int(b)] for b in blocks])
+        self._cur_block = (int(blocks[-1]), L_all[-1])
+        per = L_all[(g0 + np.arange(T)) // st - blocks[0]]
+        return _whitened(unexpT, per)
+
+    def _detect(self, stat):
+        """(contact, rnorm) from the statistic; the detector's state carries across chunks."""
+        raw = stat > self.h
+        contact = debounce_chunk(raw, self.debounce, self.state) if self.debounce else raw
+        return contact, (np.sqrt(stat) if self.chi2 else stat)
+
+    def _stage1(self, rows):
+        t, q, dq, tau, rT = rows["t"], rows["q"], rows["dq"], rows["tau"], rows["rT"]
+        T = len(t)
+        r = rT.T
+        ef = None
+        if self.expected:
+            unexp, ef = loc_mod.explain_expected(self.robot, q, r, self.expected, self.row_weights)
+            unexpT = np.ascontiguousarray(unexp.T)
+        else:
+            unexpT = rT
+        stat = self._statistic(self.g, q, dq, unexpT)
+        contact, rnorm = self._detect(stat)
+        q_loc = q
+        if self.lag is not None:
+            pt, pq = (t, q) if self._past is None else (np.r_[self._past[0], t], np.vstack([self._past[1], q]))
+            x = t - self.lag
+            q_loc = np.empty_like(q)
+            for k in range(q.shape[1]):
+                q_loc[:, k] = np.interp(x, pt, pq[:, k])
+            self._past = (pt[-self._past_rows:], pq[-self._past_rows:])
+        rec = {"g0": self.g, "t": t, "q": q, "dq": dq, "tau": tau, "rT": rT, "r": r,
+               "contact": contact, "rnorm": rnorm, "q_loc": q_loc, "ef": ef}
+        self.g += T
+        return rec
+
+    # ------------------------------------------------------------------ noise floors
+    def _freeze_stats(self):
+        S = self.stats_samples
+        parts = [(rec, min(len(rec["t"]), S - rec["g0"])) for rec in self.queue if rec["g0"] < S]
+        quiet_r = np.concatenate([rec["r"][:m][~rec["contact"][:m]] for rec, m in parts]) \
+            if parts else np.zeros((0, self.n))
+        quiet_rnorm = np.concatenate([rec["rnorm"][:m][~rec["contact"][:m]] for rec, m in parts]) \
+            if parts else np.zeros(0)
+        Rm = self.R
+        if self.stride is not None and self._R_head:
+            Rm = np.median(np.stack(self._R_head), axis=0)
+        info = {}
+        force_floor = float(detection.noise_thresholds(quiet_r[:, :2], None, floor=self.min_force_N).max())
+        if Rm is not None:
+            ambiguity_tol = 2.0 * float(np.sqrt(np.trace(Rm)))
+            force_floor = max(self.min_force_N, 5.0 * float(np.sqrt(max(Rm[0, 0], Rm[1, 1]))))
+            info["residual_sigma"] = np.sqrt(np.diag(Rm)).tolist()
+        else:
+            ambiguity_tol = max(1e-3, 2.0 * float(np.median(quiet_rnorm))) if len(quiet_rnorm) >= 10 else 1e-3
+        info.update(min_force_N=force_floor, ambiguity_tol=ambiguity_tol,
+                    noise_floor_samples=int(min(S, self.g)))
+        thresholds = None
+        if self.method == "paper":
+            thresholds = detection.noise_thresholds(quiet_r[:, 3:], None, floor=self.isolation_floor)
+            info["isolation_thresholds"] = thresholds.tolist()
+        self.info.update(info)
+        self.Rm = Rm
+        self.stats = {"force_floor": force_floor, "ambiguity_tol": ambiguity_tol,
+                      "thresholds": thresholds}
+        self.loc_kwargs = dict(row_weights=self.row_weights, min_force_N=force_floor,
+                               max_condition=self.max_condition, ambiguity_tol=ambiguity_tol)
+
+    # ------------------------------------------------------------------ stage 2
+    def _stage2(self, rec) -> ContactEstimate:
+        t, q, r, contact = rec["t"], rec["q"], rec["r"], rec["contact"]
+        T, N = len(t), self.robot.n_links
+        sel = np.flatnonzero(contact)
+        if sel.size == T:
+            sel = slice(None)                          # every sample: views, no copies
+        n_sel = T if isinstance(sel, slice) else sel.size
+        link = np.zeros(T, dtype=int)
+        alpha = np.full(T, np.nan)
+        force = np.full((T, 2), np.nan)
+        point = np.full((T, 2), np.nan)
+        condition = np.full(T, np.nan)
+        reason = np.full(T, loc_mod.NO_CONTACT, dtype=np.int8)
+        expected_force = None
+        if self.method == "dynamic":
+            if n_sel:
+                res = loc_mod.localize_dynamic(self.robot, rec["q_loc"][sel], r[sel],
+                                               expected=self.expected, **self.loc_kwargs)
+            if self.expected:
+                expected_force = np.full((T, len(self.expected), 2), np.nan)
+                quiet = np.flatnonzero(~contact)
+                expected_force[quiet] = rec["ef"][quiet]
+                if n_sel:
+                    expected_force[sel] = res.expected_force_N
+        elif n_sel:
+            iso = detection.isolate(r[sel, 3:], self.stats["thresholds"])
+            res = loc_mod.localize_paper(self.robot, q[sel], rec["dq"][sel], rec["tau"][sel], iso,
+                                         min_force_N=self.stats["force_floor"],
+                                         max_condition=self.max_condition)
+        if n_sel:
+            if self.method == "dynamic":    # the point at the current posture from the body coordinate α
+                qs = q[sel]
+                jx, jz = loc_mod._joints_link_major(self.full, qs)
+                c0 = np.clip(res.link - 1, 0, N - 1)
+                sx, sz = loc_mod._pick(jx[:-1], c0), loc_mod._pick(jz[:-1], c0)
+                ex, ez = loc_mod._pick(jx[1:], c0), loc_mod._pick(jz[1:], c0)
+                res.point_m = np.stack([qs[:, 0] + sx + res.alpha * (ex - sx),
+                                        qs[:, 1] + sz + res.alpha * (ez - sz)], axis=-1)
+            link[sel] = res.link
+            alpha[sel] = res.alpha
+            force[sel] = res.force_N
+            point[sel] = res.point_m
+            condition[sel] = res.condition
+            reason[sel] = res.reason
+        self.samples += T
+        self.contact_samples += int(contact.sum())
+        self.reason_counts += np.bincount(reason[contact], minlength=len(loc_mod.REASONS))
+        self.episodes.feed(rec["g0"], t, contact, link, alpha, force[:, 0], force[:, 1],
+                           point[:, 0], point[:, 1], rec["q_loc"], rec["rT"])
+        self._close_episodes()
+        return ContactEstimate(t=t, contact=contact, link=link, alpha=alpha, Fx=force[:, 0],
+                               Fz=force[:, 1], px=point[:, 0], pz=point[:, 1], rnorm=rec["rnorm"],
+                               condition=condition, reason=reason, residual=r, method=self.method,
+                               expected_force_N=expected_force)
+
+    def _close_episodes(self):
+        eps = self.episodes.closed
+        if not eps:
+            return
+        self.episodes.closed = []
+        rows = [_EpisodeAccumulator.summary(ep) for ep in eps]
+        if self.method == "dynamic" and self.Rm is not None and not self.expected:
+            reps = [_EpisodeAccumulator.representative(ep) for ep in eps]
+            errs = _episode_errors(self.robot, np.stack([a for a, _ in reps]),
+                                   np.stack([b for _, b in reps]), self.Rm, self.loc_kwargs)
+            for row, err in zip(rows, errs):
+                row.update(err)
+        self.intervals.extend(rows)
+
+    # ------------------------------------------------------------------ driving
+    def _drain(self, final: bool) -> list:
+        if self.stats is None:
+            if not final and self.g < self.stats_samples:
+                return []
+            self._freeze_stats()
+        out = [self._stage2(rec) for rec in self.queue]
+        self.queue = []
+        return out
+
+    def feed(self, log: SensorLog, final: bool = False) -> list:
+        """Run a chunk (a SensorLog of consecutive samples); returns the parts now ready."""
+        rows = self.obs.feed(log.t, log.q, log.dq, log.tau_meas, final=final)
+        if rows is not None:
+            self.queue.append(self._stage1(rows))
+        return self._drain(final)
+
+    def finish(self) -> list:
+        """Flush the held rows and the open episode; returns the last parts."""
+        rows = self.obs.feed(np.zeros(0), np.zeros((0, self.n)), np.zeros((0, self.n)),
+                             np.zeros((0, self.n)), final=True)
+        if rows is not None:
+            self.queue.append(self._stage1(rows))
+        out = self._drain(True)
+        self.episodes.close_all()
+        self._close_episodes()
+        return out
+
+    def summary(self) -> dict:
+        names = loc_mod.REASONS
+        flags = {names[k]: int(v) for k, v in enumerate(self.reason_counts) if v}
+        return {"method": self.method, "samples": int(self.samples),
+                "contact_samples": int(self.contact_samples), "flags_during_contact": flags,
+                "intervals": list(self.intervals), **self.info}
+
+
+def _resolve_timing(robot, log, timing):
+    if timing is None:
+        timing = getattr(log, "timing", None)
+        source = "log declaration" if timing is not None else "default (instantaneous)"
+    else:
+        source = "option"
+    if isinstance(timing, str):
+        timing = timing_mod.uniform(timing, robot.n_links)
+    return timing, source
+
+
+def quiet_window_covariance(robot, chunks, window, gain_per_s, period_s, discretization="exact",
+                            timing=None) -> np.ndarray:
+    """Robust covariance of the residual over the contact-free window (t0, t1) (noise.quiet_covariance),
+    from an observer-only pass over the log's chunks (stops after t1): the first of two passes."""
+    t0, t1 = window
+    K = observer.gains(robot, gain_per_s)
+    run = _ObserverRun(robot, K, float(period_s), discretization, timing)
+    ts, rs = [], []
+    empty = np.zeros((0, K.size))
+    for chunk in itertools.chain(chunks, [None]):        # lazily: stop after t1
+        final = chunk is None
+        rows = run.feed(np.zeros(0), empty, empty, empty, final=True) if final else \
+            run.feed(chunk.t, chunk.q, chunk.dq, chunk.tau_meas)
+        if rows is not None:
+            keep = (rows["t"] >= t0) & (rows["t"] <= t1)
+            ts.append(rows["t"][keep])
+            rs.append(rows["rT"].T[keep])
+            if rows["t"][-1] > t1:
+                break
+    t = np.concatenate(ts) if ts else np.zeros(0)
+    r = np.concatenate(rs) if rs else np.zeros((0, K.size))
+    return noise_mod.quiet_covariance(r, t, t0, t1, gain_per_s, float(period_s))
+
+
 def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=100.0,
              threshold: float | None = None, debounce: int = 0, expected_contacts=None, *,
              discretization: str = "exact", row_weights=None, min_force_N: float = 0.05,
              max_condition: float = 20.0, isolation_floor: float = 0.01,
              lag_compensation: bool = True, timing=None, noise=None, quiet_window=None,
-             false_alarm_rate=DEFAULT_FALSE_ALARM_RATE, cov_stride_s: float = 0.01) -> ContactEstimate:
+             false_alarm_rate=DEFAULT_FALSE_ALARM_RATE, cov_stride_s: float = 0.01,
+             stats_samples: int = STATS_SAMPLES, chunk_samples: int | None = None) -> ContactEstimate:
     """Run observer, detection and localization on a whole log (offline, vectorized).
+
+    ``EstimatorStream`` on the log in one chunk (or in chunks of ``chunk_samples``: the same
+    numbers); see it for the rules of the noise floors and the error estimates.
 
     expected_contacts: None (→ ``log.expected_contacts``), ``"foot"`` (last link, α = 1) or
     [(link, α), …]: contacts the robot expects; their forces are estimated jointly and never
@@ -213,10 +656,12 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     Flags (estimator.localization): |F| below max(min_force_N, 5 σ of the force rows without
     contact) → small_force; two links fitting within max(1e-3, 2 · median ‖r‖ without contact)
     at points > 5 mm apart → ambiguous_link; 1/|sin∠(F, link)| > max_condition → parallel_to_link.
+    (σ and the median: over the contact-free samples among the first ``stats_samples``.)
 
     lag_compensation (``dynamic`` only): r lags τ_ext by ≈ 1/K (``observer.lag_s``), so r_k is
-    paired with the posture q(t_k − lag) (linear interpolation) to solve for (F, α); α is a body
-    coordinate, so the reported point is p_c + α Δ_c at the CURRENT posture.
+    paired with the posture q(t_k − lag) (linear interpolation in time, held at q(t_0) before
+    the start) to solve for (F, α); α is a body coordinate, so the reported point is
+    p_c + α Δ_c at the CURRENT posture.
 
     timing: per force channel [(kind, delay_s)] or one 'instant' | 'mean' | 'delay:SECONDS' for
     all (estimator.timing); None → what the log declares (``log.timing``), else instantaneous.
@@ -227,113 +672,69 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     sensors) or from the ``quiet_window`` (t0, t1) of the log, at ``false_alarm_rate`` = (value,
     unit) with unit 'sample', 's' or 'h' (default one per hour); ``rnorm`` is then √(rᵀR⁻¹r).
     """
-    if method not in METHODS:
-        raise InputError(f"method: unknown {method!r}; use one of {', '.join(METHODS)}")
     if log.n_links != robot.n_links:
         raise InputError(f"{getattr(log, 'source', 'log')}: {log.n_links} joints in the log but the "
                          f"robot '{robot.name}' has {robot.n_links} links")
+    stream = open_stream(robot, log, method, gain_per_s, threshold, debounce, expected_contacts,
+                         discretization=discretization, row_weights=row_weights,
+                         min_force_N=min_force_N, max_condition=max_condition,
+                         isolation_floor=isolation_floor, lag_compensation=lag_compensation,
+                         timing=timing, noise=noise, quiet_window=quiet_window,
+                         quiet_chunks=lambda: [log], false_alarm_rate=false_alarm_rate,
+                         cov_stride_s=cov_stride_s, stats_samples=stats_samples)
+    T = len(log.t)
+    step = T if not chunk_samples else int(chunk_samples)
+    parts = []
+    for s in range(0, T, max(step, 1)):
+        parts += stream.feed(_slice_log(log, slice(s, s + step)))
+    parts += stream.finish()
+    return join_parts(parts, stream, n_skipped=getattr(log, "n_skipped", 0))
+
+
+def _slice_log(log: SensorLog, sl) -> SensorLog:
+    return SensorLog(t=log.t[sl], q=log.q[sl], dq=log.dq[sl], tau_Nm=log.tau_Nm[sl],
+                     wrench=log.wrench[sl], floating=log.floating, source=log.source)
+
+
+def open_stream(robot, log, method="dynamic", gain_per_s=100.0, threshold=None, debounce=0,
+                expected_contacts=None, *, timing=None, quiet_window=None, quiet_chunks=None,
+                period_s=None, **kw) -> EstimatorStream:
+    """An EstimatorStream set up for ``log`` (its first chunk, or a LogReader: the expected
+    contacts, timing declaration and period come from it). ``quiet_chunks()``: a fresh iterable
+    of the log's chunks for the quiet-window pass."""
+    if method not in METHODS:
+        raise InputError(f"method: unknown {method!r}; use one of {', '.join(METHODS)}")
     if expected_contacts is None:
         expected_contacts = getattr(log, "expected_contacts", ()) or None
     expected = _expected(robot, expected_contacts)
-    if timing is None:
-        timing = getattr(log, "timing", None)
-        timing_source = "log declaration" if timing is not None else "default (instantaneous)"
-    else:
-        timing_source = "option"
-    if isinstance(timing, str):
-        timing = timing_mod.uniform(timing, robot.n_links)
-    tau_meas = log.tau_meas                            # assembled once
-    P, u = observer.momentum_terms(robot, log.q, log.dq, tau_meas)
-    r = observer.residual_offline(robot, log.t, log.q, log.dq, tau_meas, gain_per_s,
-                                  method=discretization, terms=(P, u), timing=timing)
-    if expected:
-        unexp, _ = loc_mod.explain_expected(robot, log.q, r, expected, row_weights)
-    else:
-        unexp = r
-    T = len(log.t)
-    det_info, R = {}, None
-    if method == "paper" or threshold is not None or T < 2:
-        threshold = 0.06 if threshold is None else threshold
-        rnorm = np.sqrt(np.einsum("tk,tk->t", unexp, unexp))
-        contact = detection.detect(rnorm, threshold, debounce)
-        det_info = {"detector": "paper rule ||r|| > threshold", "threshold": threshold}
-    else:
-        contact, stat, det_info, R = _noise_detector(robot, log, r, unexp, gain_per_s, timing, noise,
-                                                     quiet_window, false_alarm_rate, cov_stride_s)
-        rnorm = np.sqrt(stat)
-        if debounce:
-            contact = detection.detect(rnorm, float(np.sqrt(det_info["chi2_threshold"])), debounce)
-    sel = np.flatnonzero(contact)
-    if sel.size == T:
-        sel = slice(None)                              # every sample: views, no copies
-    n_sel = T if isinstance(sel, slice) else sel.size
-    link = np.zeros(T, dtype=int)
-    alpha = np.full(T, np.nan)
-    force = np.full((T, 2), np.nan)
-    point = np.full((T, 2), np.nan)
-    condition = np.full(T, np.nan)
-    reason = np.full(T, loc_mod.NO_CONTACT, dtype=np.int8)
-    expected_force = None
-    info = {"timing": timing_mod.describe(timing), "timing_source": timing_source, **det_info}
-    # noise-aware floors from the samples without contact (robust σ; noise-free logs keep the floors)
-    quiet = ~contact
-    force_floor = float(detection.noise_thresholds(r[:, :2], quiet, floor=min_force_N).max())
-    if R is not None:               # from the noise: 2 · ‖σ_r‖ (as uncertainty.SensorNoise.ambiguity_tol)
-        ambiguity_tol = 2.0 * float(np.sqrt(np.trace(R)))
-        force_floor = max(min_force_N, 5.0 * float(np.sqrt(max(R[0, 0], R[1, 1]))))
-    else:
-        ambiguity_tol = max(1e-3, 2.0 * float(np.median(rnorm[quiet]))) if quiet.sum() >= 10 else 1e-3
-    info.update(min_force_N=force_floor, ambiguity_tol=ambiguity_tol)
-    if method == "dynamic":
-        if lag_compensation and T > 1:
-            dt = observer.regular_period(log.t)
-            lag = float(np.mean(observer.lag_s(observer.gains(robot, gain_per_s), dt, discretization)))
-            info["lag_compensation_s"] = lag
-            q_loc_full = _delayed(log.t, log.q, lag, dt)
-        else:
-            q_loc_full = log.q
-        q_loc = q_loc_full[sel]
-        if n_sel:
-            res = loc_mod.localize_dynamic(robot, q_loc, r[sel], expected=expected,
-                                           row_weights=row_weights, min_force_N=force_floor,
-                                           max_condition=max_condition, ambiguity_tol=ambiguity_tol)
-        if expected:
-            expected_force = np.full((T, len(expected), 2), np.nan)
-            quiet = np.flatnonzero(~contact)
-            if quiet.size:
-                expected_force[quiet] = loc_mod.explain_expected(robot, log.q[quiet], r[quiet],
-                                                                 expected, row_weights)[1]
-            if n_sel:
-                expected_force[sel] = res.expected_force_N
-    else:
-        thresholds = detection.noise_thresholds(r[:, 3:], ~contact, floor=isolation_floor)
-        info["isolation_thresholds"] = thresholds.tolist()
-        if n_sel:
-            iso = detection.isolate(r[sel, 3:], thresholds)
-            res = loc_mod.localize_paper(robot, log.q[sel], log.dq[sel], tau_meas[sel], iso,
-                                         min_force_N=force_floor, max_condition=max_condition)
-    if n_sel:
-        if method == "dynamic":       # the point at the current posture from the body coordinate α
-            qs = log.q[sel]
-            jx, jz = loc_mod._joints_link_major(observer.full_robot(robot), qs)
-            c0 = np.clip(res.link - 1, 0, robot.n_links - 1)
-            sx, sz = loc_mod._pick(jx[:-1], c0), loc_mod._pick(jz[:-1], c0)
-            ex, ez = loc_mod._pick(jx[1:], c0), loc_mod._pick(jz[1:], c0)
-            res.point_m = np.stack([qs[:, 0] + sx + res.alpha * (ex - sx),
-                                    qs[:, 1] + sz + res.alpha * (ez - sz)], axis=-1)
-        link[sel] = res.link
-        alpha[sel] = res.alpha
-        force[sel] = res.force_N
-        point[sel] = res.point_m
-        condition[sel] = res.condition
-        reason[sel] = res.reason
-    interval_errors = None
-    if method == "dynamic" and R is not None and not expected and n_sel:
-        kw = dict(row_weights=row_weights, min_force_N=force_floor, max_condition=max_condition,
-                  ambiguity_tol=ambiguity_tol)
-        interval_errors = _episode_errors(robot, contact, q_loc_full, r, R, kw)
-    return ContactEstimate(interval_errors=interval_errors, t=log.t.copy(), contact=contact, link=link, alpha=alpha, Fx=force[:, 0],
-                           Fz=force[:, 1], px=point[:, 0], pz=point[:, 1], rnorm=rnorm,
-                           condition=condition, reason=reason, residual=r, method=method,
-                           expected_force_N=expected_force, n_skipped=getattr(log, "n_skipped", 0),
-                           info=info)
+    timing, timing_source = _resolve_timing(robot, log, timing)
+    if period_s is None:
+        period_s = getattr(log, "period_s", None) or observer.regular_period(log.t)
+    cov, cov_source = None, ""
+    if quiet_window is not None and method == "dynamic" and threshold is None:
+        cov = quiet_window_covariance(robot, quiet_chunks(), quiet_window, gain_per_s, period_s,
+                                      kw.get("discretization", "exact"), timing)
+        cov_source = (f"robust estimate over the quiet window {quiet_window[0]:g}–"
+                      f"{quiet_window[1]:g} s")
+    return EstimatorStream(robot, method, gain_per_s, threshold, debounce, expected,
+                           period_s=period_s, timing=timing, timing_source=timing_source,
+                           residual_cov=cov, residual_cov_source=cov_source, **kw)
+
+
+def join_parts(parts: list, stream: EstimatorStream, n_skipped: int = 0) -> ContactEstimate:
+    """One ContactEstimate from a stream's parts (in order) and its summaries."""
+    n = stream.n
+    cat = (lambda f, shape: np.concatenate([getattr(p, f) for p in parts]) if parts
+           else np.zeros(shape))
+    ef = None
+    if stream.expected:
+        ef = np.concatenate([p.expected_force_N for p in parts]) if parts else \
+            np.zeros((0, len(stream.expected), 2))
+    info = dict(stream.info)
+    return ContactEstimate(t=cat("t", 0), contact=cat("contact", 0).astype(bool),
+                           link=cat("link", 0).astype(int), alpha=cat("alpha", 0), Fx=cat("Fx", 0),
+                           Fz=cat("Fz", 0), px=cat("px", 0), pz=cat("pz", 0), rnorm=cat("rnorm", 0),
+                           condition=cat("condition", 0), reason=cat("reason", 0).astype(np.int8),
+                           residual=cat("residual", (0, n)), method=stream.method,
+                           expected_force_N=ef, n_skipped=n_skipped, info=info,
+                           interval_list=list(stream.intervals))

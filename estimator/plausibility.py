@@ -57,39 +57,82 @@ def velocity_scale(t: np.ndarray, q: np.ndarray, dq: np.ndarray) -> tuple[float,
     return s, r
 
 
-def check_log(log) -> list[str]:
-    """Raise InputError for an implausible log; return (and warn about) what merely looks odd."""
-    src = log.source
-    found: list[str] = []
-    t = np.asarray(log.t, float)
-    base = 0 if log.floating else 3
-    q, dq = np.asarray(log.q, float)[:, base:], np.asarray(log.dq, float)[:, base:]
-    s, r = velocity_scale(t, q, dq)
-    if math.isfinite(s) and r >= MIN_CORRELATION:
-        if not 0.1 <= s <= 10:
-            raise InputError(f"{src}: velocities disagree with the angle differences by a factor "
-                             f"{s:.4g} (Δq/Δt vs logged q̇, correlation {r:.2f}): {_unit_hint(s)}; "
-                             "the log must be in s, rad, rad/s")
-        if not 0.5 <= s <= 2:
-            found.append(f"{src}: velocities disagree with the angle differences by a factor "
-                         f"{s:.3g} (correlation {r:.2f}); check the velocity filter and units")
-    if len(t) > 1:
-        dt = float(np.median(np.diff(t)))
+class Checker:
+    """The same checks on a log read in chunks: ``rows`` per chunk (angles; the velocity sums,
+    including the step across the chunk boundary), ``period`` once the period is known, and
+    ``finish`` for the velocity scale over the whole log (from running sums)."""
+
+    def __init__(self, source: str, floating: bool, n_links: int):
+        self.src, self.base, self.n = source, 0 if floating else 3, n_links
+        self.sums = np.zeros(3)            # Σ fd·mid, Σ mid·mid, Σ fd·fd
+        self.steps = 0
+        self._last = None                  # (t, q, dq) of the previous chunk's last row
+
+    def rows(self, t, q, dq):
+        t, q, dq = np.asarray(t, float), np.asarray(q, float), np.asarray(dq, float)
+        joints = q[:, 3:3 + self.n]
+        if joints.size:
+            big = np.abs(joints) > MAX_JOINT_ANGLE_RAD
+            if big.any():
+                k, j = np.argwhere(big)[0]
+                raise InputError(f"{self.src}: column 'q{j + 1}': joint angle {joints[k, j]:g} rad "
+                                 f"at t = {t[k]:g} s exceeds 2π; angles look like degrees (the log "
+                                 "must be in rad)")
+        qq, dd = q[:, self.base:], dq[:, self.base:]
+        if self._last is not None:
+            t0, q0, d0 = self._last
+            t, qq, dd = np.r_[t0, t], np.vstack([q0, qq]), np.vstack([d0, dd])
+        if len(t) > 1:
+            fd = (np.diff(qq, axis=0) / np.diff(t)[:, None]).ravel()
+            mid = (0.5 * (dd[1:] + dd[:-1])).ravel()
+            self.sums += [float(fd @ mid), float(mid @ mid), float(fd @ fd)]
+            self.steps += len(t) - 1
+        self._last = (t[-1], qq[-1:].copy(), dd[-1:].copy())
+
+    def period(self, dt: float):
         if not DT_MIN_S * (1 - 1e-6) <= dt <= DT_MAX_S * (1 + 1e-6):   # rounding of t
             hint = (" (time in milliseconds?)" if 1.0 < dt <= 1e3 else
                     " (time in µs or ns?)" if dt < DT_MIN_S else "")
-            raise InputError(f"{src}: column 't': sampling period {dt:.4g} s is outside the "
+            raise InputError(f"{self.src}: column 't': sampling period {dt:.4g} s is outside the "
                              f"plausible 10 µs–1 s{hint}; the log's time must be in seconds")
-    n = log.n_links
-    joints = np.asarray(log.q, float)[:, 3:3 + n]
-    if joints.size:
-        big = np.abs(joints) > MAX_JOINT_ANGLE_RAD
-        if big.any():
-            k, j = np.argwhere(big)[0]
-            raise InputError(f"{src}: column 'q{j + 1}': joint angle {joints[k, j]:g} rad at "
-                             f"t = {t[k]:g} s exceeds 2π; angles look like degrees (the log must "
-                             "be in rad)")
+
+    def scale(self) -> tuple[float, float]:
+        """(s, r) as ``velocity_scale`` over every step seen."""
+        fm, mm, ff = self.sums
+        if self.steps < 2 or mm == 0 or ff == 0:
+            return float("nan"), float("nan")
+        return fm / mm, fm / math.sqrt(mm * ff)
+
+    def finish(self, warn: bool = True) -> list[str]:
+        found = []
+        s, r = self.scale()
+        if math.isfinite(s) and r >= MIN_CORRELATION:
+            if not 0.1 <= s <= 10:
+                raise InputError(f"{self.src}: velocities disagree with the angle differences by a "
+                                 f"factor {s:.4g} (Δq/Δt vs logged q̇, correlation {r:.2f}): "
+                                 f"{_unit_hint(s)}; the log must be in s, rad, rad/s")
+            if not 0.5 <= s <= 2:
+                found.append(f"{self.src}: velocities disagree with the angle differences by a "
+                             f"factor {s:.3g} (correlation {r:.2f}); check the velocity filter and units")
+        if warn:
+            for msg in found:
+                warnings.warn(msg, PlausibilityWarning, stacklevel=3)
+        return found
+
+
+def check_log(log) -> list[str]:
+    """Raise InputError for an implausible log; return (and warn about) what merely looks odd.
+
+    The whole log in one chunk of ``Checker`` (sampling period: ``observer.regular_period``)."""
+    from estimator.observer import regular_period
+
+    checker = Checker(log.source, log.floating, log.n_links)
+    t = np.asarray(log.t, float)
+    if len(t) > 1:
+        checker.period(regular_period(t))
+    checker.rows(t, log.q, log.dq)
+    found = checker.finish(warn=False)
     for msg in found:
-        warnings.warn(msg, PlausibilityWarning, stacklevel=3)
+        warnings.warn(msg, PlausibilityWarning, stacklevel=2)
     log.plausibility_warnings = found
     return found

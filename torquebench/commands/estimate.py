@@ -36,6 +36,15 @@ def _count(text: str) -> int:
     return value
 
 
+def _chunk(text: str) -> int:
+    import argparse
+
+    value = _count(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {text!r}")
+    return value
+
+
 def add_arguments(parser) -> None:
     parser.add_argument("log", type=Path, metavar="LOG.csv", help="sensor log: CSV (or Parquet for .parquet) with t,[x,z,theta,]q1,q2,[dx,dz,dtheta,]dq1,dq2,tau1,tau2,Fx,Fz,My in SI units (docs/conventions.md)")
     parser.add_argument("--robot", type=Path, default=None,
@@ -74,6 +83,10 @@ def add_arguments(parser) -> None:
                         help="write t,contact,link,alpha,Fx,Fz,px,pz,rnorm per sample (s, -, -, -, N, N, m, m, -); "
                              "Parquet for .parquet, else CSV; its directory is created, an existing file is kept unless --force")
     parser.add_argument("--force", action="store_true", help="replace an existing --out file")
+    parser.add_argument("--chunk-samples", type=_chunk, default=65536, metavar="N",
+                        help="samples read, estimated and written per chunk: memory is bounded by "
+                             "this, not by the log's length; results do not depend on it "
+                             "(default: %(default)s)")
 
 
 def _floats(text, where, count=None):
@@ -117,14 +130,27 @@ def _detector_options(args, n_links):
                       encoder_counts=enc, source=src), quiet, rate
 
 
+def _peak_memory_MB() -> float:
+    """Peak resident memory of this process so far (ru_maxrss), MB."""
+    import resource
+    import sys
+
+    kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return kb / (1024.0 * 1024.0) if sys.platform == "darwin" else kb / 1024.0
+
+
 def run(args) -> int:
+    import contextlib
     import time
 
-    from estimator.log import read_log
-    from estimator.pipeline import estimate
+    from tqdm import tqdm
+
+    from estimator.log import LogReader
+    from estimator.outframe import FrameWriter
+    from estimator.pipeline import open_stream
     from estimator.robot import PAPER_LEG_TOML, load_robot
     from torquebench.errors import InputError
-    from torquebench.io import atomic_path, print_json
+    from torquebench.io import print_json
 
     start = time.perf_counter()
     if args.out is not None:
@@ -137,26 +163,43 @@ def run(args) -> int:
     from torquebench.outputs import prepare_file
     prepare_file(args.out, "--out", force=args.force, inputs=(args.log, args.robot))
     robot = load_robot(args.robot or PAPER_LEG_TOML)
-    log = read_log(args.log, robot)
     noise, quiet, rate = _detector_options(args, robot.n_links)
     timing = None
     if args.timing is not None:
         from estimator.timing import uniform
         timing = uniform(args.timing, robot.n_links, "--timing")
-    result = estimate(robot, log, method=args.method, gain_per_s=args.gain,
-                      threshold=args.threshold, debounce=args.debounce,
-                      expected_contacts="foot" if args.stance_foot else None, timing=timing,
-                      noise=noise, quiet_window=quiet, false_alarm_rate=rate)
-    if args.out is not None:
-        with atomic_path(args.out) as tmp:
-            if args.out.suffix.lower() == ".parquet":
-                result.to_frame().to_parquet(tmp, index=False)
-            else:
-                result.to_frame().to_csv(tmp, index=False, float_format="%.9g", na_rep="NaN")
+    chunk = args.chunk_samples
+    reader = LogReader(args.log, robot, chunk_samples=chunk)
+    chunks = iter(reader)
+    first = next(chunks)                          # the head: the sampling period is known
+    stream = open_stream(robot, reader, method=args.method, gain_per_s=args.gain,
+                         threshold=args.threshold, debounce=args.debounce,
+                         expected_contacts="foot" if args.stance_foot else None, timing=timing,
+                         noise=noise, quiet_window=quiet, false_alarm_rate=rate,
+                         quiet_chunks=lambda: LogReader(args.log, robot, chunk_samples=chunk))
+    with contextlib.ExitStack() as stack:
+        writer = stack.enter_context(FrameWriter(args.out)) if args.out is not None else None
+        bar = stack.enter_context(tqdm(unit=" samples", unit_scale=True, disable=None, leave=False,
+                                       desc="estimate"))
+
+        def emit(parts):
+            for part in parts:
+                if writer is not None:
+                    writer.write(part)
+                bar.update(len(part.t))
+
+        emit(stream.feed(first))
+        for c in chunks:
+            emit(stream.feed(c))
+        emit(stream.finish())
+        reader.finish()                           # whole-log plausibility (velocity units)
+    est = stream.summary()
     elapsed = time.perf_counter() - start
     summary = {"log": str(args.log), "robot": robot.name, "gain_per_s": args.gain,
-               **result.summary(),
-               "skipped_lines": log.skipped_lines[:20].tolist(), "run_time_s": elapsed}
+               "method": est.pop("method"), "samples": est.pop("samples"),
+               "skipped_samples": reader.n_skipped, **est,
+               "skipped_lines": reader.skipped_lines[:20].tolist(), "run_time_s": elapsed,
+               "chunk_samples": chunk, "peak_memory_MB": _peak_memory_MB()}
     if args.out is not None:
         summary["out"] = str(args.out)
     if args.json:
