@@ -1,8 +1,16 @@
 """Estimator speed: offline observer + dynamic localization, streaming step latency, and our
 batched M, C, G against looped pinocchio on the same states.
 
-Run: ``python benchmarks/bench_estimator.py [--samples 1000000]``. Prints figures and ratios
-against anchors measured in the same run (the machine may be shared: compare ratios).
+Run: ``python benchmarks/bench_estimator.py [--samples 1000000] [--end-to-end 2000000]
+[--ten-million]``. Prints figures and ratios against anchors measured in the same run (the machine
+may be shared: compare ratios).
+
+End to end (``bench_end_to_end``): a 2-link floating-base log of the paper leg swinging with a
+few pokes and the paper leg's sensor noise, written once (CSV with 9 significant digits, and
+Parquet) to a temporary directory; ``torquebench estimate LOG --out OUT`` timed in process
+(reading, estimating, writing), anchored by a bare ``pandas.read_csv`` of the same CSV; the peak
+resident memory of the same command in a fresh process (ru_maxrss of the child). ``--ten-million``
+adds the peak memory of a 10 M-sample log (the 2 M-sample log five times over).
 """
 
 from __future__ import annotations
@@ -156,13 +164,165 @@ def bench_vs_pinocchio(n_states: int = 20000) -> dict:
             "ratio_pinocchio_over_ours_chain_terms": t_pin / t_terms}
 
 
+def _write_log_csv(path, blocks):
+    """Write log blocks (SensorLog) as one CSV with 9 significant digits (pyarrow)."""
+    import pyarrow as pa
+    import pyarrow.csv as pc
+
+    from estimator.log import log_columns, log_to_frame
+    from estimator.outframe import round_significant
+
+    writer = None
+    for log in blocks:
+        frame = log_to_frame(log)
+        table = pa.table({c: round_significant(frame[c].to_numpy()) for c in frame.columns})
+        if writer is None:
+            cols = log_columns(log.n_links, log.floating)
+            assert list(frame.columns) == cols
+            writer = pc.CSVWriter(str(path), table.schema, write_options=pc.WriteOptions(
+                quoting_style="none", quoting_header="none"))
+        writer.write_table(table)
+    writer.close()
+
+
+def _log_blocks(n_samples: int, period_samples: int = 200_000):
+    """The bench log in blocks: 200 s of the leg swinging at 1 Hz with two pokes (link 2, α = 0.5,
+    5 N, 3 s and 20 s long), paper-leg sensor noise, repeated (continuous: whole periods)."""
+    from estimator.log import SensorLog
+    from estimator.robot import paper_leg
+    from estimator.synthetic import inverse_dynamics_log, sinusoidal_motion
+
+    robot = paper_leg()
+    T = min(period_samples, n_samples)
+    t = np.arange(T) / 1000.0
+    q, dq, ddq = sinusoidal_motion(robot, t, frequency_Hz=1.0, base_amplitude=(0.01, 0.01, 0.05))
+    active = ((t >= 20) & (t < 23)) | ((t >= 120) & (t < 140))
+    base, _ = inverse_dynamics_log(robot, t, q, dq, ddq, 2, 0.5,
+                                   5.0 * np.array([np.cos(-np.pi / 3), np.sin(-np.pi / 3)]), active=active)
+    rng = np.random.default_rng(0)
+    done = 0
+    while done < n_samples:
+        m = min(T, n_samples - done)
+        yield SensorLog(t=t[:m] + done / 1000.0, q=q[:m], dq=dq[:m],
+                        tau_Nm=base.tau_Nm[:m] + rng.normal(0, 0.005, (m, 2)),
+                        wrench=base.wrench[:m] + rng.normal(0, [0.1, 0.1, 0.01], (m, 3)))
+        done += m
+
+
+def _peak_rss_MB(argv) -> tuple[float, float]:
+    """(wall s, peak RSS MB) of ``torquebench ARGV --json`` in a fresh process (its own
+    ``peak_memory_MB``: ru_maxrss, the interpreter and imports included)."""
+    import json
+    import subprocess
+    import sys
+
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "torquebench", *argv, "--json"], capture_output=True,
+                          text=True)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise RuntimeError(proc.stderr)
+    return wall, float(json.loads(proc.stdout)["peak_memory_MB"])
+
+
+def bench_end_to_end(n_samples: int = 2_000_000, ten_million: bool = False) -> dict:
+    import contextlib
+    import io
+    import json
+    import tempfile
+    from pathlib import Path
+
+    import pandas as pd
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from estimator.log import log_to_frame
+    from torquebench.cli import main as cli
+
+    out = {"samples": n_samples}
+    with tempfile.TemporaryDirectory(prefix="bench_estimate_") as tmp:
+        tmp = Path(tmp)
+        csv, parquet = tmp / "log.csv", tmp / "log.parquet"
+        t0 = time.perf_counter()
+        _write_log_csv(csv, _log_blocks(n_samples))
+        writer = None
+        for log in _log_blocks(n_samples):
+            table = pa.Table.from_pandas(log_to_frame(log), preserve_index=False)
+            writer = writer or pq.ParquetWriter(str(parquet), table.schema)
+            writer.write_table(table)
+        writer.close()
+        out["log_writing_s"] = time.perf_counter() - t0
+        out["csv_MB"] = csv.stat().st_size / 1e6
+        out["anchor_pandas_read_csv_s"] = _best(lambda: pd.read_csv(csv, dtype=float), 1)
+
+        def run(src, dst):
+            buf = io.StringIO()
+            with contextlib.redirect_stdout(buf):
+                code = cli(["estimate", str(src), "--out", str(dst), "--force", "--json"])
+            assert code == 0
+            return json.loads(buf.getvalue())
+
+        with contextlib.redirect_stdout(io.StringIO()):         # warm-up: imports, caches
+            small = tmp / "small.csv"
+            _write_log_csv(small, _log_blocks(5000))
+            cli(["estimate", str(small), "--out", str(tmp / "warm.csv"), "--force", "--json"])
+            cli(["estimate", str(small), "--out", str(tmp / "warm.parquet"), "--force", "--json"])
+        for name, src, dst in (("csv", csv, tmp / "est.csv"), ("parquet", parquet, tmp / "est.parquet"),
+                               ("csv_no_out", csv, None)):
+            if dst is None:
+                buf = io.StringIO()
+                t0 = time.perf_counter()
+                with contextlib.redirect_stdout(buf):
+                    cli(["estimate", str(src), "--json"])
+                wall = time.perf_counter() - t0
+            else:
+                t0 = time.perf_counter()
+                summary = run(src, dst)
+                wall = time.perf_counter() - t0
+                out[f"{name}_intervals"] = len(summary["intervals"])
+            out[f"{name}_s"] = wall
+            out[f"{name}_samples_per_s"] = n_samples / wall
+        out["ratio_csv_to_read_anchor"] = out["csv_s"] / out["anchor_pandas_read_csv_s"]
+        wall, rss = _peak_rss_MB(["estimate", str(csv), "--out", str(tmp / "est2.csv"), "--force"])
+        out["csv_subprocess_s"], out["csv_peak_rss_MB"] = wall, rss
+        if ten_million:
+            big = tmp / "log10m.csv"
+            _write_log_csv(big, _log_blocks(10_000_000))
+            csv.unlink()
+            wall, rss = _peak_rss_MB(["estimate", str(big), "--out", str(tmp / "est10m.csv"), "--force"])
+            out["ten_million_s"], out["ten_million_peak_rss_MB"] = wall, rss
+    return out
+
+
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=1_000_000)
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--end-to-end", type=int, default=2_000_000, metavar="SAMPLES",
+                        help="samples of the end-to-end CLI log (0: skip)")
+    parser.add_argument("--ten-million", action="store_true",
+                        help="also the peak memory of a 10 M-sample log (a few minutes)")
+    parser.add_argument("--only", choices=["offline", "end-to-end"], default=None)
     args = parser.parse_args(argv)
-    out = {"offline": bench_offline(args.samples, args.repeat), "streaming": bench_streaming(),
-           "dynamics_vs_pinocchio": bench_vs_pinocchio()}
+    out = {}
+    if args.only != "end-to-end":
+        out = {"offline": bench_offline(args.samples, args.repeat), "streaming": bench_streaming(),
+               "dynamics_vs_pinocchio": bench_vs_pinocchio()}
+    if args.end_to_end and args.only != "offline":
+        e = out["end_to_end"] = bench_end_to_end(args.end_to_end, args.ten_million)
+        print(f"torquebench estimate LOG --out OUT, {e['samples']:,} samples ({e['csv_MB']:.0f} MB CSV, "
+              f"9 significant digits), in process:")
+        print(f"  CSV -> CSV {e['csv_s']:.2f} s = {e['csv_samples_per_s']:,.0f} samples/s; Parquet -> "
+              f"Parquet {e['parquet_s']:.2f} s = {e['parquet_samples_per_s']:,.0f}/s; CSV without --out "
+              f"{e['csv_no_out_s']:.2f} s = {e['csv_no_out_samples_per_s']:,.0f}/s (target >= 500,000/s)")
+        print(f"  anchor: pandas.read_csv of the log alone {e['anchor_pandas_read_csv_s']:.2f} s; "
+              f"estimate/anchor = {e['ratio_csv_to_read_anchor']:.2f}x")
+        print(f"  fresh process CSV -> CSV: {e['csv_subprocess_s']:.2f} s, peak RSS {e['csv_peak_rss_MB']:.0f} MB")
+        if "ten_million_s" in e:
+            print(f"  10,000,000 samples CSV -> CSV: {e['ten_million_s']:.1f} s, peak RSS "
+                  f"{e['ten_million_peak_rss_MB']:.0f} MB")
+    if args.only == "end-to-end":
+        return out
     off, st, pv = out["offline"], out["streaming"], out["dynamics_vs_pinocchio"]
     print(f"offline observer + dynamic localization, {off['samples']:,} samples (paper leg, moving, poked):")
     print(f"  observer {off['observer_s']:.3f} s, localize {off['localize_dynamic_s']:.3f} s, "

@@ -119,6 +119,14 @@ def debounce_chunk(raw: np.ndarray, debounce: int, state: DetectorState) -> np.n
     return run >= debounce + 1
 
 
+def _chi2_isf(alpha: float, dof: int) -> float:
+    """h with P(χ²_dof > h) = α: scipy.special.chdtri, what scipy.stats.chi2.isf evaluates (and
+    noise.chi2_threshold), without importing scipy.stats (seconds at start-up)."""
+    from scipy.special import chdtri
+
+    return float(chdtri(dof, alpha))
+
+
 def _sumsq_rows(xT: np.ndarray) -> np.ndarray:
     """Σ_k x_k² per sample of a link-major (n, T) array, rows added in order (batch-independent)."""
     out = xT[0] * xT[0]
@@ -370,7 +378,7 @@ class EstimatorStream:
             self.chi2 = True
             value, unit = false_alarm_rate if isinstance(false_alarm_rate, tuple) else (false_alarm_rate, "s")
             alpha = noise_mod.per_sample_rate(value, unit, self.dt)
-            self.h = noise_mod.chi2_threshold(alpha, self.n)
+            self.h = _chi2_isf(alpha, self.n)
             if residual_cov is not None:
                 self._set_R(np.asarray(residual_cov, float))
                 source = residual_cov_source

@@ -83,9 +83,12 @@ class Checker:
             t0, q0, d0 = self._last
             t, qq, dd = np.r_[t0, t], np.vstack([q0, qq]), np.vstack([d0, dd])
         if len(t) > 1:
-            fd = (np.diff(qq, axis=0) / np.diff(t)[:, None]).ravel()
-            mid = (0.5 * (dd[1:] + dd[:-1])).ravel()
-            self.sums += [float(fd @ mid), float(mid @ mid), float(fd @ fd)]
+            fd = np.diff(qq, axis=0)
+            fd /= np.diff(t)[:, None]
+            mid = dd[1:] + dd[:-1]
+            mid *= 0.5
+            self.sums += [float(np.einsum("ij,ij->", fd, mid)), float(np.einsum("ij,ij->", mid, mid)),
+                          float(np.einsum("ij,ij->", fd, fd))]
             self.steps += len(t) - 1
         self._last = (t[-1], qq[-1:].copy(), dd[-1:].copy())
 
