@@ -95,6 +95,7 @@ def _expected(robot: Robot, expected_contacts):
 
 
 STATS_SAMPLES = 65536           # the noise floors come from the contact-free samples among these
+WORK_SAMPLES = 16384            # samples per piece of work inside a chunk (cache-sized)
 
 
 @dataclass
@@ -584,12 +585,19 @@ class EstimatorStream:
         self.queue = []
         return out
 
-    def feed(self, log: SensorLog, final: bool = False) -> list:
-        """Run a chunk (a SensorLog of consecutive samples); returns the parts now ready."""
-        rows = self.obs.feed(log.t, log.q, log.dq, log.tau_meas, final=final)
-        if rows is not None:
-            self.queue.append(self._stage1(rows))
-        return self._drain(final)
+    def feed(self, log: SensorLog) -> list:
+        """Run a chunk (a SensorLog of consecutive samples); returns the parts now ready.
+
+        A long chunk is worked through in pieces of ``WORK_SAMPLES`` (cache-sized; the numbers
+        do not depend on it)."""
+        T, W = len(log.t), WORK_SAMPLES
+        tau = log.tau_meas
+        for s in range(0, T, W):
+            sl = slice(s, s + W)
+            rows = self.obs.feed(log.t[sl], log.q[sl], log.dq[sl], tau[sl])
+            if rows is not None:
+                self.queue.append(self._stage1(rows))
+        return self._drain(False)
 
     def finish(self) -> list:
         """Flush the held rows and the open episode; returns the last parts."""
