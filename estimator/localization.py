@@ -207,6 +207,9 @@ def localize_dynamic(robot: Robot, q: np.ndarray, residual: np.ndarray, *, expec
     ``ambiguity_tol`` at a point more than ``position_tol_m`` away → ambiguous_link; the free α
     beyond [−bound_tol, 1 + bound_tol] → out_of_bounds; rank-deficient with the expected
     contacts → not_identifiable.
+
+    Without expected contacts the per-sample solve runs as one compiled loop when numba is there
+    (``estimator.kernels``; the numpy form below is its reference, equal to rounding).
     """
     rob = _full(robot)
     q = np.atleast_2d(np.asarray(q, float))
@@ -217,6 +220,14 @@ def localize_dynamic(robot: Robot, q: np.ndarray, residual: np.ndarray, *, expec
         raise InputError(f"localize: q and residual must both be (T, {n}), got {q.shape}, {r.shape}")
     w = _weights(n, row_weights)
     args = (min_force_N, max_condition, ambiguity_tol, position_tol_m, bound_tol)
+    from estimator import kernels
+
+    if not expected and kernels.available():        # the same per-sample solve, compiled
+        link, alpha, force, point, condition, reason, cost = kernels.localize_dynamic(
+            rob, q, r, w, min_force_N=min_force_N, max_condition=max_condition,
+            ambiguity_tol=ambiguity_tol, position_tol_m=position_tol_m, bound_tol=bound_tol)
+        return Localization(link=link, alpha=alpha, force_N=force, point_m=point,
+                            condition=condition, reason=reason, cost=cost)
     chunk = 8192 if not expected else 4096          # cache-sized blocks (a loop over blocks)
     if len(q) > chunk:
         out = None

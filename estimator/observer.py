@@ -185,7 +185,8 @@ def momentum_terms(robot: Robot, q: np.ndarray, dq: np.ndarray, tau_meas: np.nda
                    chunk: int = 8192):
     """P = M q̇ and u = τ_meas + Cᵀ q̇ − G for every sample, shapes (T, n) each (floating coords).
 
-    Uses ``chain_terms`` (suffix sums over the chain), in chunks that stay in cache.
+    Uses ``chain_terms`` (suffix sums over the chain), in chunks that stay in cache, or the same
+    sums in one compiled loop (``estimator.kernels``, numba) when it is available.
     """
     q = np.asarray(q, float)
     dq = np.asarray(dq, float)
@@ -194,6 +195,11 @@ def momentum_terms(robot: Robot, q: np.ndarray, dq: np.ndarray, tau_meas: np.nda
     if single:
         q, dq, tau_meas = q[None], dq[None], tau_meas[None]
     T, n = q.shape
+    from estimator import kernels
+
+    if kernels.available():                # the same equations in one compiled loop
+        PT, uT = kernels.momentum_terms_T(full_robot(robot), q, dq, tau_meas)
+        return (PT[:, 0], uT[:, 0]) if single else (PT.T, uT.T)
     PT = np.empty((n, T))                  # link-major storage; returned as (T, n) views
     uT = np.empty((n, T))
     for s in range(0, T, chunk):

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimator import detection, localization as loc_mod, observer
+from estimator import detection, kernels, localization as loc_mod, observer
 from estimator import noise as noise_mod
 from estimator import timing as timing_mod
 from estimator.errors import InputError
@@ -520,8 +520,17 @@ class EstimatorStream:
         condition = np.full(T, np.nan)
         reason = np.full(T, loc_mod.NO_CONTACT, dtype=np.int8)
         expected_force = None
+        fused = False
         if self.method == "dynamic":
-            if n_sel:
+            if n_sel and not self.expected and kernels.available():
+                # one compiled pass: the fit at q(t − lag), the point at the current posture
+                w = loc_mod._weights(self.n, self.row_weights)
+                kw = {k: v for k, v in self.loc_kwargs.items() if k != "row_weights"}
+                out = kernels.localize_dynamic(self.full, rec["q_loc"][sel], r[sel], w, q[sel],
+                                               position_tol_m=0.005, bound_tol=0.05, **kw)
+                res = loc_mod.Localization(*out[:6], cost=out[6])
+                fused = True
+            elif n_sel:
                 res = loc_mod.localize_dynamic(self.robot, rec["q_loc"][sel], r[sel],
                                                expected=self.expected, **self.loc_kwargs)
             if self.expected:
@@ -536,7 +545,7 @@ class EstimatorStream:
                                          min_force_N=self.stats["force_floor"],
                                          max_condition=self.max_condition)
         if n_sel:
-            if self.method == "dynamic":    # the point at the current posture from the body coordinate α
+            if self.method == "dynamic" and not fused:    # the point at the current posture from α
                 qs = q[sel]
                 jx, jz = loc_mod._joints_link_major(self.full, qs)
                 c0 = np.clip(res.link - 1, 0, N - 1)

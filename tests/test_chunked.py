@@ -205,3 +205,20 @@ def test_memory_does_not_grow_with_the_log(tmp_path):
     chunk = 500
     p_short, p_long = _peak_bytes(short, chunk), _peak_bytes(long, chunk)
     assert p_long < 1.3 * p_short, (p_short, p_long)
+
+
+def test_compiled_kernels_match_the_numpy_reference(monkeypatch):
+    """estimator.kernels (numba) against the numpy forms: same flags and links, numbers to rounding."""
+    from estimator import kernels
+
+    assert kernels.available()                  # numba is a dependency (pyproject.toml)
+    log, _ = _poked_log()
+    fast = estimate(ROBOT, log)
+    monkeypatch.setattr(kernels, "ENABLED", False)
+    ref = estimate(ROBOT, log)
+    for f in ("contact", "link", "reason"):
+        assert np.array_equal(getattr(fast, f), getattr(ref, f)), f
+    for f in ("alpha", "Fx", "Fz", "px", "pz", "rnorm", "condition", "residual"):
+        x, y = getattr(fast, f), getattr(ref, f)
+        assert np.array_equal(np.isnan(x), np.isnan(y)), f
+        np.testing.assert_allclose(x, y, rtol=1e-9, atol=1e-12, err_msg=f)

@@ -1,0 +1,344 @@
+"""Per-sample loops compiled with numba: the observer's momentum terms and the dynamic
+localization, fused (one pass over the samples, no temporaries). Same equations as the numpy
+forms they replace (``observer.chain_terms``, ``localization.localize_dynamic``), which stay as
+the references they are tested against; ``available()`` is False without numba (the numpy forms
+are then used). Each sample is computed on its own, so a batch's results do not depend on how a
+log is cut into chunks.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+_KERNELS = None
+ENABLED = True                  # False: the numpy forms everywhere (tests compare the two)
+
+
+def available() -> bool:
+    return ENABLED and _load() is not None
+
+
+def _load():
+    global _KERNELS
+    if _KERNELS is None:
+        try:
+            _KERNELS = _compile()
+        except ImportError:
+            _KERNELS = False
+    return _KERNELS or None
+
+
+def _terms_py(q, dq, tau, m, l, rc, Irot, g, Gz, msuf, PT, uT):
+    """P = M q̇ and u = τ + Cᵀq̇ − G (observer._FastTerms) for every sample, link-major."""
+    T, n = q.shape
+    N = n - 3
+    cx = np.empty(N)
+    cz = np.empty(N)
+    vx = np.empty(N)
+    vz = np.empty(N)
+    ox = np.empty(N)
+    oz = np.empty(N)
+    vox = np.empty(N)
+    voz = np.empty(N)
+    for k in range(T):
+        phi = q[k, 2]
+        dphi = dq[k, 2]
+        jx = 0.0
+        jz = 0.0
+        vjx = dq[k, 0]
+        vjz = dq[k, 1]
+        for i in range(N):
+            phi += q[k, 3 + i]
+            dphi += dq[k, 3 + i]
+            s = math.sin(phi)
+            c = math.cos(phi)
+            ox[i] = jx
+            oz[i] = jz
+            vox[i] = vjx
+            voz[i] = vjz
+            cx[i] = jx + rc[i] * s
+            cz[i] = jz - rc[i] * c
+            vx[i] = vjx + rc[i] * dphi * c
+            vz[i] = vjz + rc[i] * dphi * s
+            jx = jx + l[i] * s
+            jz = jz - l[i] * c
+            vjx = vjx + l[i] * dphi * c
+            vjz = vjz + l[i] * dphi * s
+        for i in range(n):
+            acc = 0.0
+            for j in range(n):
+                acc += Irot[i, j] * dq[k, j]
+            PT[i, k] = acc
+            uT[i, k] = tau[k, i]
+        uT[1, k] -= Gz
+        A = 0.0
+        Bx = 0.0
+        Bz = 0.0
+        Gs = 0.0
+        for i in range(N - 1, -1, -1):
+            A += m[i] * (cx[i] * vz[i] - cz[i] * vx[i])
+            Bx += m[i] * vx[i]
+            Bz += m[i] * vz[i]
+            Gs += m[i] * cx[i]
+            Pang = A - (ox[i] * Bz - oz[i] * Bx)
+            Cang = -(vox[i] * Bz - voz[i] * Bx)
+            Gang = g * (Gs - ox[i] * msuf[i])
+            if i == 0:
+                PT[2, k] += Pang
+                uT[2, k] += Cang - Gang
+            PT[3 + i, k] += Pang
+            uT[3 + i, k] += Cang - Gang
+        PT[0, k] += Bx
+        PT[1, k] += Bz
+
+def _fit_py(rd, wr, kappa, jx, jz, c, N, out):
+    """Link c (1-based): weighted LS of (F, μ), α clipped to [0, 1] and F re-fitted there
+    (localization._fit_link). rd, wr: merged rows [x, z, hip, q_2…q_N]; out ← α_free, α,
+    Fx, Fz, cost."""
+    wx = wr[0]
+    wz = wr[1]
+    A11 = wx
+    A12 = 0.0
+    A13 = 0.0
+    A22 = wz
+    A23 = 0.0
+    A33 = 0.0
+    b1 = wx * rd[0]
+    b2 = wz * rd[1]
+    b3 = 0.0
+    for k in range(c):
+        ax = jx[c - 1] - jx[k]
+        az = jz[c - 1] - jz[k]
+        wk = wr[2 + k]
+        rk = rd[2 + k]
+        A11 += wk * az * az
+        A12 -= wk * az * ax
+        A13 -= wk * az
+        A22 += wk * ax * ax
+        A23 += wk * ax
+        A33 += wk
+        b1 -= wk * az * rk
+        b2 += wk * ax * rk
+        b3 += wk * rk
+    c11 = A22 * A33 - A23 * A23
+    c12 = A13 * A23 - A12 * A33
+    c13 = A12 * A23 - A13 * A22
+    c22 = A11 * A33 - A13 * A13
+    c23 = A12 * A13 - A11 * A23
+    c33 = A11 * A22 - A12 * A12
+    inv_det = 1.0 / (A11 * c11 + A12 * c12 + A13 * c13)
+    Fx = (c11 * b1 + c12 * b2 + c13 * b3) * inv_det
+    Fz = (c12 * b1 + c22 * b2 + c23 * b3) * inv_det
+    mu = (c13 * b1 + c23 * b2 + c33 * b3) * inv_det
+    dx = jx[c] - jx[c - 1]
+    dz = jz[c] - jz[c - 1]
+    den = dx * Fz - dz * Fx
+    alpha_free = mu / den                          # error_model="numpy": ±inf or nan
+    alpha = 0.5 if math.isnan(alpha_free) else min(max(alpha_free, 0.0), 1.0)
+    if alpha != alpha_free:
+        B11 = wx
+        B12 = 0.0
+        B22 = wz
+        d1 = wx * rd[0]
+        d2 = wz * rd[1]
+        for k in range(c):
+            bx = (jx[c - 1] - jx[k]) + alpha * dx
+            bz = (jz[c - 1] - jz[k]) + alpha * dz
+            wk = wr[2 + k]
+            rk = rd[2 + k]
+            B11 += wk * bz * bz
+            B12 -= wk * bz * bx
+            B22 += wk * bx * bx
+            d1 -= wk * rk * bz
+            d2 += wk * rk * bx
+        detB = B11 * B22 - B12 * B12
+        Fx = (B22 * d1 - B12 * d2) / detB
+        Fz = (B11 * d2 - B12 * d1) / detB
+        mu = alpha * (dx * Fz - dz * Fx)
+    ex = rd[0] - Fx
+    ez = rd[1] - Fz
+    cost2 = wx * ex * ex + wz * ez * ez + kappa
+    for k in range(c):
+        ax = jx[c - 1] - jx[k]
+        az = jz[c - 1] - jz[k]
+        e = rd[2 + k] - (ax * Fz - az * Fx + mu)
+        cost2 += wr[2 + k] * e * e
+    for k in range(2 + c, N + 2):
+        cost2 += wr[k] * rd[k] * rd[k]
+    out[0] = alpha_free
+    out[1] = alpha
+    out[2] = Fx
+    out[3] = Fz
+    out[4] = math.sqrt(max(cost2, 0.0))
+
+def _localize_py(q, r, q_now, lengths, w, min_force, max_condition, ambiguity_tol, position_tol,
+             bound_tol, link, alpha_o, force_o, point_o, cond_o, reason_o, cost_o):
+    """localization.localize_dynamic without expected contacts, per sample; the point is
+    reported at ``q_now`` (the current posture) from the body coordinate α."""
+    T, n = q.shape
+    N = n - 3
+    jx = np.empty(N + 1)
+    jz = np.empty(N + 1)
+    rd = np.empty(N + 2)
+    wr = np.empty(N + 2)
+    W0 = w[2] + w[3]
+    wr[0] = w[0]
+    wr[1] = w[1]
+    wr[2] = W0
+    for k in range(4, n):
+        wr[k - 1] = w[k]
+    res = np.empty((N, 5))
+    for t in range(T):
+        phi = q[t, 2]
+        jx[0] = 0.0
+        jz[0] = 0.0
+        for i in range(N):
+            phi += q[t, 3 + i]
+            jx[i + 1] = jx[i] + lengths[i] * math.sin(phi)
+            jz[i + 1] = jz[i] - lengths[i] * math.cos(phi)
+        rd[0] = r[t, 0]
+        rd[1] = r[t, 1]
+        rd[2] = (w[2] * r[t, 2] + w[3] * r[t, 3]) / W0
+        for k in range(4, n):
+            rd[k - 1] = r[t, k]
+        dd = r[t, 2] - r[t, 3]
+        kappa = (w[2] * w[3] / W0) * dd * dd
+        best = 0
+        for c in range(1, N + 1):
+            _fit(rd, wr, kappa, jx, jz, c, N, res[c - 1])
+            if res[c - 1, 4] < res[best, 4]:
+                best = c - 1
+        second = -1
+        for c in range(N):
+            if c != best and (second < 0 or res[c, 4] < res[second, 4]):
+                second = c
+        af = res[best, 0]
+        a = res[best, 1]
+        Fx = res[best, 2]
+        Fz = res[best, 3]
+        cost = res[best, 4]
+        sx = jx[best]
+        sz = jz[best]
+        dx = jx[best + 1] - sx
+        dz = jz[best + 1] - sz
+        px = (q[t, 0] + sx) + a * dx
+        pz = (q[t, 1] + sz) + a * dz
+        reason = 0
+        if not (af >= -bound_tol and af <= 1 + bound_tol):
+            reason = 5                                         # out_of_bounds
+        if second >= 0 and res[second, 4] - cost < ambiguity_tol:
+            a2 = res[second, 1]
+            s2x = jx[second]
+            s2z = jz[second]
+            e2x = jx[second + 1]
+            e2z = jz[second + 1]
+            p2x = (q[t, 0] + s2x) + a2 * (e2x - s2x)
+            p2z = (q[t, 1] + s2z) + a2 * (e2z - s2z)
+            far = math.hypot(p2x - px, p2z - pz) > position_tol
+            f2x = res[second, 2]
+            f2z = res[second, 3]
+            d2x = e2x - s2x
+            d2z = e2z - s2z
+            num = math.hypot(f2x, f2z) * math.hypot(d2x, d2z)
+            cr2 = abs(d2x * f2z - d2z * f2x)
+            cond2 = num / cr2
+            if not (cond2 <= max_condition):
+                far = True
+            if reason == 0 and far:
+                reason = 4                                     # ambiguous_link
+        fn = math.hypot(Fx, Fz)
+        cr = abs(dx * Fz - dz * Fx)
+        num = fn * math.hypot(dx, dz)
+        cond = num / cr
+        if math.isnan(cond):
+            cond = math.inf
+        if reason == 0 and cond > max_condition:
+            reason = 3                                         # parallel_to_link
+        if reason != 6 and not (fn >= min_force):
+            reason = 2                                         # small_force
+        link[t] = best + 1
+        force_o[t, 0] = Fx
+        force_o[t, 1] = Fz
+        cond_o[t] = cond
+        reason_o[t] = reason
+        cost_o[t] = cost
+        if reason != 0:
+            alpha_o[t] = math.nan
+            point_o[t, 0] = math.nan
+            point_o[t, 1] = math.nan
+        else:
+            alpha_o[t] = a
+            if q_now is None:
+                point_o[t, 0] = px
+                point_o[t, 1] = pz
+            else:                          # the same α at the current posture
+                phi = q_now[t, 2]
+                x0 = 0.0
+                z0 = 0.0
+                for i in range(best + 1):
+                    phi += q_now[t, 3 + i]
+                    x1 = x0 + lengths[i] * math.sin(phi)
+                    z1 = z0 - lengths[i] * math.cos(phi)
+                    if i < best:
+                        x0 = x1
+                        z0 = z1
+                point_o[t, 0] = q_now[t, 0] + x0 + a * (x1 - x0)
+                point_o[t, 1] = q_now[t, 1] + z0 + a * (z1 - z0)
+
+
+_fit = None                     # the compiled _fit_py, a global for _localize_py
+
+
+def _compile():
+    """Compile the loops (numba, cached beside this file); ImportError without numba."""
+    global _fit
+    from numba import njit
+
+    jit = njit(cache=True, nogil=True, error_model="numpy")
+    _fit = jit(_fit_py)
+    return {"terms": jit(_terms_py), "localize": jit(_localize_py)}
+
+
+
+
+def momentum_terms_T(robot, q, dq, tau):
+    """(P, u) link-major (n, T) with the compiled loop (robot: floating coordinates)."""
+    from estimator.observer import _irot
+
+    k = _load()
+    q = np.ascontiguousarray(q, float)
+    dq = np.ascontiguousarray(dq, float)
+    tau = np.ascontiguousarray(tau, float)
+    T, n = q.shape
+    m = np.asarray(robot.masses_kg, float)
+    g = float(robot.gravity_m_per_s2)
+    PT = np.empty((n, T))
+    uT = np.empty((n, T))
+    msuf = np.cumsum(m[::-1])[::-1].copy()
+    k["terms"](q, dq, tau, m, np.asarray(robot.lengths_m, float), np.asarray(robot.com_m, float),
+               _irot(robot), g, g * (float(robot.base_mass_kg) + float(m.sum())), msuf, PT, uT)
+    return PT, uT
+
+
+def localize_dynamic(robot, q, r, w, q_now=None, *, min_force_N, max_condition, ambiguity_tol,
+                     position_tol_m, bound_tol):
+    """Arrays (link, α, F, p, condition, reason, cost) of localization.localize_dynamic (no
+    expected contacts) with the compiled loop; p at ``q_now`` if given."""
+    k = _load()
+    q = np.ascontiguousarray(q, float)
+    r = np.ascontiguousarray(r, float)
+    T = len(q)
+    link = np.empty(T, np.int64)
+    alpha = np.empty(T)
+    force = np.empty((T, 2))
+    point = np.empty((T, 2))
+    cond = np.empty(T)
+    reason = np.empty(T, np.int8)
+    cost = np.empty(T)
+    k["localize"](q, r, None if q_now is None else np.ascontiguousarray(q_now, float),
+                  np.asarray(robot.lengths_m, float), np.asarray(w, float), float(min_force_N),
+                  float(max_condition), float(ambiguity_tol), float(position_tol_m), float(bound_tol),
+                  link, alpha, force, point, cond, reason, cost)
+    return link, alpha, force, point, cond, reason, cost
