@@ -68,11 +68,20 @@ def bench_offline(n_samples: int, repeat: int = 3) -> dict:
         result["est"] = estimate(robot, log, method="dynamic")
 
     stages["estimate_dynamic_s"] = _best(full, repeat, key="estimate")
+    from estimator import kernels
+
+    kernels.ENABLED = False                 # before: the numpy forms (same run, same log)
+    try:
+        stages["estimate_numpy_forms_s"] = _best(full, repeat, key="estimate_numpy")
+    finally:
+        kernels.ENABLED = True
 
     def detector_only():                  # whitening + chi-square threshold on the residual
         from estimator import noise as Nz
         R = Nz.residual_covariance(robot, log.q[:1], log.dq[:1], Nz.paper_leg_noise(), 100.0, 1e-3)[0]
-        Nz.whitened_statistic(terms["r"], R) > Nz.chi2_threshold(1e-3 / 3600, 5)
+        from estimator.pipeline import _chi2_isf, _whitened
+        Linv = np.linalg.inv(np.linalg.cholesky(R))
+        _whitened(np.ascontiguousarray(terms["r"].T), Linv) > _chi2_isf(1e-3 / 3600, 5)
 
     stages["detector_s"] = _best(detector_only, repeat)
     est = result["est"]
@@ -84,6 +93,10 @@ def bench_offline(n_samples: int, repeat: int = 3) -> dict:
     return {"samples": n_samples, "log_generation_s": gen, **stages,
             "samples_per_s": n_samples / stages["estimate_dynamic_s"],
             "samples_per_cpu_s": n_samples / CPU["estimate"],
+            "numpy_forms_samples_per_s": n_samples / stages["estimate_numpy_forms_s"],
+            "numpy_forms_samples_per_cpu_s": n_samples / CPU["estimate_numpy"],
+            "ratio_numpy_forms_over_compiled": stages["estimate_numpy_forms_s"] / stages["estimate_dynamic_s"],
+            "compiled_kernels": kernels.available(),
             "detector_samples_per_s": n_samples / stages["detector_s"],
             "observer_plus_localize_samples_per_s":
                 n_samples / (stages["observer_s"] + stages["localize_dynamic_s"]),
@@ -329,6 +342,9 @@ def main(argv=None) -> dict:
           f"whole estimate() {off['estimate_dynamic_s']:.3f} s -> {off['samples_per_s']:,.0f} samples/s wall, "
           f"{off['samples_per_cpu_s']:,.0f} per CPU-second "
           f"(observer+localize only: {off['observer_plus_localize_samples_per_s']:,.0f}/s; target >= 1,000,000/s)")
+    print(f"  before (numpy forms, kernels off): {off['numpy_forms_samples_per_s']:,.0f} samples/s wall, "
+          f"{off['numpy_forms_samples_per_cpu_s']:,.0f} per CPU-second -> compiled/numpy speed-up "
+          f"{off['ratio_numpy_forms_over_compiled']:.2f}x (compiled kernels: {off['compiled_kernels']})")
     print(f"  detector alone (whitening + chi-square test) {off['detector_s']:.3f} s -> "
           f"{off['detector_samples_per_s']:,.0f} samples/s")
     print(f"  anchor: lfilter over 5 channels {off['anchor_lfilter_5ch_s']:.3f} s; estimate/anchor = "
