@@ -224,7 +224,7 @@ def _log_blocks(n_samples: int, period_samples: int = 200_000):
 
 def _peak_rss_MB(argv) -> tuple[float, float]:
     """(wall s, peak RSS MB) of ``torquebench ARGV --json`` in a fresh process (its own
-    ``peak_memory_MB``: ru_maxrss, the interpreter and imports included)."""
+    ``peak_memory_MB``: VmHWM, the interpreter and imports included)."""
     import json
     import subprocess
     import sys

@@ -382,3 +382,44 @@ def write_log(log: SensorLog, path) -> None:
         atomic_write(path, lambda tmp: log_to_frame(log).to_parquet(tmp, index=False))
     else:
         atomic_write(path, lambda tmp: log_to_frame(log).to_csv(tmp, index=False, float_format="%.17g"))
+
+
+def prefetch(chunks, depth: int = 2):
+    """Iterate ``chunks`` (e.g. a LogReader) in a background thread, up to ``depth`` chunks
+    ahead, so that parsing the next chunk overlaps the work on this one (the C parser and
+    numpy release the GIL). Exceptions (an InputError naming a line) are re-raised here, in
+    order; memory stays bounded by ``depth`` chunks. Closing the generator stops the thread."""
+    import queue
+    import threading
+
+    q: queue.Queue = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+    done = object()
+
+    def work():
+        try:
+            for chunk in chunks:
+                while not stop.is_set():
+                    try:
+                        q.put((chunk, None), timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            q.put((done, None))
+        except BaseException as exc:          # noqa: BLE001 — handed to the consumer
+            q.put((None, exc))
+
+    thread = threading.Thread(target=work, name="log-prefetch", daemon=True)
+    thread.start()
+    try:
+        while True:
+            item, exc = q.get()
+            if exc is not None:
+                raise exc
+            if item is done:
+                return
+            yield item
+    finally:
+        stop.set()

@@ -100,3 +100,30 @@ def _empty_part():
     return ContactEstimate(t=e, contact=e.astype(bool), link=e.astype(int), alpha=e, Fx=e, Fz=e,
                            px=e, pz=e, rnorm=e, condition=e, reason=e.astype(np.int8),
                            residual=np.zeros((0, 1)))
+
+
+class BackgroundWriter:
+    """Writes a FrameWriter's parts in one background thread (formatting CSV overlaps the next
+    chunk's estimate), in order, at most ``depth`` parts queued; ``close()`` waits for the
+    last and re-raises a write error."""
+
+    def __init__(self, writer: FrameWriter, depth: int = 2):
+        from concurrent.futures import ThreadPoolExecutor
+
+        self.writer = writer
+        self.pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="frame-writer")
+        self.pending = []
+        self.depth = depth
+
+    def write(self, part) -> None:
+        self.pending.append(self.pool.submit(self.writer.write, part))
+        while len(self.pending) > self.depth:
+            self.pending.pop(0).result()
+
+    def close(self) -> None:
+        try:
+            for f in self.pending:
+                f.result()
+        finally:
+            self.pending = []
+            self.pool.shutdown(wait=True, cancel_futures=True)

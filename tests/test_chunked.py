@@ -230,3 +230,19 @@ def test_compiled_kernels_match_the_numpy_reference(monkeypatch):
         x, y = getattr(fast, f), getattr(ref, f)
         assert np.array_equal(np.isnan(x), np.isnan(y)), f
         np.testing.assert_allclose(x, y, rtol=1e-9, atol=1e-12, err_msg=f)
+
+
+def test_cli_error_after_some_chunks_leaves_no_output(tmp_path, capsys):
+    """A bad field far into the log: exit 2 and one line naming it, no output, no temp file."""
+    path = _write_poked_csv(tmp_path / "log.csv", 3000)
+    frame = pd.read_csv(path)
+    frame["tau1"] = frame["tau1"].astype(object)
+    frame.loc[2700, "tau1"] = "oops"
+    bad = tmp_path / "bad.csv"
+    frame.to_csv(bad, index=False)
+    out = tmp_path / "est.csv"
+    code = main(["estimate", str(bad), "--out", str(out), "--chunk-samples", "100"])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "line 2702" in err and "'tau1'" in err
+    assert not out.exists() and not list(tmp_path.glob(".est.csv*"))

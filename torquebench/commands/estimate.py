@@ -131,10 +131,18 @@ def _detector_options(args, n_links):
 
 
 def _peak_memory_MB() -> float:
-    """Peak resident memory of this process so far (ru_maxrss), MB."""
+    """Peak resident memory of this process so far, MB: VmHWM (Linux; ru_maxrss would carry the
+    parent's peak across fork + exec), else ru_maxrss."""
     import resource
     import sys
 
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
     kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return kb / (1024.0 * 1024.0) if sys.platform == "darwin" else kb / 1024.0
 
@@ -145,8 +153,8 @@ def run(args) -> int:
 
     from tqdm import tqdm
 
-    from estimator.log import LogReader
-    from estimator.outframe import FrameWriter
+    from estimator.log import LogReader, prefetch
+    from estimator.outframe import BackgroundWriter, FrameWriter
     from estimator.pipeline import open_stream
     from estimator.robot import PAPER_LEG_TOML, load_robot
     from torquebench.errors import InputError
@@ -178,7 +186,10 @@ def run(args) -> int:
                          noise=noise, quiet_window=quiet, false_alarm_rate=rate,
                          quiet_chunks=lambda: LogReader(args.log, robot, chunk_samples=chunk))
     with contextlib.ExitStack() as stack:
-        writer = stack.enter_context(FrameWriter(args.out)) if args.out is not None else None
+        writer = None
+        if args.out is not None:                  # formatting runs beside the next chunk's work
+            writer = BackgroundWriter(stack.enter_context(FrameWriter(args.out)))
+            stack.callback(writer.close)
         bar = stack.enter_context(tqdm(unit=" samples", unit_scale=True, disable=None, leave=False,
                                        desc="estimate"))
 
@@ -189,7 +200,7 @@ def run(args) -> int:
                 bar.update(len(part.t))
 
         emit(stream.feed(first))
-        for c in chunks:
+        for c in prefetch(chunks):                # parsing the next chunk overlaps this one
             emit(stream.feed(c))
         emit(stream.finish())
         reader.finish()                           # whole-log plausibility (velocity units)
