@@ -246,3 +246,16 @@ def test_cli_error_after_some_chunks_leaves_no_output(tmp_path, capsys):
     assert code == 2 and len(err.strip().splitlines()) == 1
     assert "line 2702" in err and "'tau1'" in err
     assert not out.exists() and not list(tmp_path.glob(".est.csv*"))
+
+
+def test_round_significant_keeps_nine_digits():
+    from estimator.outframe import round_significant
+
+    rng = np.random.default_rng(3)
+    x = rng.choice([-1, 1], 20000) * rng.uniform(1, 10, 20000) * 10.0 ** rng.integers(-13, 20, 20000)
+    y = round_significant(x)
+    assert np.all(np.abs(y - x) <= 5e-9 * np.abs(x))
+    digits = [len(repr(abs(float(v))).split("e")[0].replace(".", "").strip("0")) for v in y]
+    assert max(digits) <= 10 and np.mean(np.array(digits) <= 9) > 0.5
+    special = np.array([np.nan, np.inf, -np.inf, 0.0])
+    assert np.array_equal(round_significant(special), special, equal_nan=True)
