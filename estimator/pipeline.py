@@ -203,7 +203,8 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
              discretization: str = "exact", row_weights=None, min_force_N: float = 0.05,
              max_condition: float = 20.0, isolation_floor: float = 0.01,
              lag_compensation: bool = True, timing=None, noise=None, quiet_window=None,
-             false_alarm_rate=DEFAULT_FALSE_ALARM_RATE, cov_stride_s: float = 0.01) -> ContactEstimate:
+             false_alarm_rate=DEFAULT_FALSE_ALARM_RATE, cov_stride_s: float = 0.01,
+             detector: str = "chi2") -> ContactEstimate:
     """Run observer, detection and localization on a whole log (offline, vectorized).
 
     expected_contacts: None (→ ``log.expected_contacts``), ``"foot"`` (last link, α = 1) or
@@ -226,9 +227,12 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     no-contact covariance (estimator.noise) from ``noise`` (a NoiseModel; default the paper leg's
     sensors) or from the ``quiet_window`` (t0, t1) of the log, at ``false_alarm_rate`` = (value,
     unit) with unit 'sample', 's' or 'h' (default one per hour); ``rnorm`` is then √(rᵀR⁻¹r).
+    ``detector="cusum"``: a CUSUM on the same statistic (estimator.sequential) instead.
     """
     if method not in METHODS:
         raise InputError(f"method: unknown {method!r}; use one of {', '.join(METHODS)}")
+    if detector not in ("chi2", "cusum"):
+        raise InputError(f"detector: unknown {detector!r}; use chi2 or cusum")
     if log.n_links != robot.n_links:
         raise InputError(f"{getattr(log, 'source', 'log')}: {log.n_links} joints in the log but the "
                          f"robot '{robot.name}' has {robot.n_links} links")
@@ -261,7 +265,11 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
         contact, stat, det_info, R = _noise_detector(robot, log, r, unexp, gain_per_s, timing, noise,
                                                      quiet_window, false_alarm_rate, cov_stride_s)
         rnorm = np.sqrt(stat)
-        if debounce:
+        if detector == "cusum":       # sequential test on the same statistic (estimator.sequential)
+            from estimator import sequential
+            contact, det_info, _ = sequential.pipeline_detector(robot, log, unexp, stat, det_info, R,
+                                                                gain_per_s, timing, noise, quiet_window)
+        elif debounce:
             contact = detection.detect(rnorm, float(np.sqrt(det_info["chi2_threshold"])), debounce)
     sel = np.flatnonzero(contact)
     if sel.size == T:
