@@ -26,7 +26,8 @@ the whitened samples are NOT independent: S_z(ω) = L⁻¹ H Hᴴ L⁻ᵀ, H = d
 root does not exist below the singularity 1/(2 max λ(S_z)), θ* is that singularity.
 The prefactor A is calibrated per model by a seeded Monte Carlo of the same process (``CAL_SAMPLES``
 samples, CUSUM at thresholds with θ*h = 1…3, where alarms are frequent) and the threshold for a
-target mean time 1/α samples between alarms solves A φ(θ*h) = 1/α − (release time). The test
+target mean time 1/α samples between alarm onsets solves A φ(θ*h) = 1/α, φ(u) = e^u − 1 − u
+(the Monte Carlo counts onsets with the same release rule, so the release time is included). The test
 ``tests/test_sequential.py`` and ``reports/detection.md`` check the measured rate against the target.
 """
 
@@ -269,10 +270,25 @@ def calibrate_quiet(z: np.ndarray, a: float, drift: float | None = None,
     theta = arma_theta(a, rho1)
     lam = arma_spectrum(a, theta, n)
     key = ("arma", round(a, 12), round(theta, 6), n)
-    return calibrate(lam, lambda T: synthetic_arma_statistic(a, theta, n, T), n, drift, key, samples)
+    cal = calibrate(lam, lambda T: synthetic_arma_statistic(a, theta, n, T), n, drift, key, samples)
+    from dataclasses import replace
+
+    return replace(cal, method=f"quiet stretch: rows as independent ARMA(1,1), pole {a:.4g}, "
+                               f"θ = {theta:.3f} from the lag-1 autocorrelation {rho1:.3f}; " + cal.method)
 
 
 DETECTORS = ("chi2", "cusum")
+
+
+def model_calibration(robot, q, dq, noise, gain_per_s, dt_s: float, timing=None,
+                      drift: float | None = None) -> Calibration:
+    """Calibration for the noise model (default: the paper leg's sensors) at posture (q, q̇)."""
+    from estimator import noise as noise_mod
+
+    noise = noise_mod.paper_leg_noise() if noise is None else noise
+    a, b, B0, B1 = noise_mod.filter_terms(robot, q, dq, noise, gain_per_s, dt_s, timing)
+    R0 = noise_mod.residual_covariance(robot, q, dq, noise, gain_per_s, dt_s, timing)[0]
+    return calibrate_model(a, b, B0[0], B1[0], R0, drift)
 
 
 def pipeline_detector(robot, log, r, stat, info: dict, R, gain_per_s, timing, noise, quiet_window,
@@ -281,23 +297,18 @@ def pipeline_detector(robot, log, r, stat, info: dict, R, gain_per_s, timing, no
     false-alarm target as the chi-square detector (``info`` from it); the target rate is read as
     the mean time between alarm onsets, 1/α samples. Calibrated on the noise model at the log's
     first posture, or (``quiet_window``) on an ARMA(1,1) fit of the quiet stretch."""
-    from estimator import noise as noise_mod
     from estimator import observer
 
     n = r.shape[1]
     alpha = info["false_alarm_probability_per_sample"]
     dt = observer.regular_period(log.t)
-    Rm = R if R.ndim == 2 else np.median(R, axis=0)
     if quiet_window is not None:
         sel = (log.t >= quiet_window[0]) & (log.t <= quiet_window[1])
-        z = np.linalg.solve(np.linalg.cholesky(Rm), r[sel].T).T
+        z = np.linalg.solve(np.linalg.cholesky(R), r[sel].T).T
         a = float(np.exp(-np.min(observer.gains(robot, gain_per_s)) * dt))
         cal = calibrate_quiet(z, a, drift)
     else:
-        noise = noise_mod.paper_leg_noise() if noise is None else noise
-        a, b, B0, B1 = noise_mod.filter_terms(robot, log.q[:1], log.dq[:1], noise, gain_per_s, dt, timing)
-        R0 = noise_mod.residual_covariance(robot, log.q[:1], log.dq[:1], noise, gain_per_s, dt, timing)[0]
-        cal = calibrate_model(a, b, B0[0], B1[0], R0, drift)
+        cal = model_calibration(robot, log.q[0], log.dq[0], noise, gain_per_s, dt, timing, drift)
     h = cal.threshold(alpha)
     contact, new_state = cusum(stat, n, h, cal.drift, state)
     out = {k: v for k, v in info.items() if k != "chi2_threshold"}

@@ -146,3 +146,21 @@ def test_estimate_command_takes_the_detector(capsys, tmp_path):
     out = json.loads(capsys.readouterr().out)
     assert code == 0 and out["detector"].startswith("CUSUM") and out["cusum_threshold"] > 0
     assert out["contact_samples"] == 0
+
+
+@pytest.mark.parametrize("theta", [0.0, 1.0, -0.5])
+def test_arma_theta_is_recovered_from_the_lag1_autocorrelation(theta):
+    from scipy.signal import lfilter
+
+    a = np.exp(-0.1)
+    x = lfilter([1.0, theta], [1.0, -a], np.random.default_rng(3).standard_normal(400_000))[500:]
+    rho1 = np.corrcoef(x[1:], x[:-1])[0, 1]
+    assert S.arma_theta(a, rho1) == pytest.approx(theta, abs=0.08)
+
+
+def test_cusum_with_a_quiet_window():
+    t, q, dq, dqm, tau = _noisy(60_000, 8)
+    log = SensorLog(t=t, q=q, dq=dqm, tau_Nm=tau[:, 3:], wrench=tau[:, :3])
+    est = estimate(ROBOT, log, quiet_window=(1.0, 30.0), detector="cusum")
+    assert "quiet stretch" in est.info["cusum_calibration"]
+    assert est.contact.mean() < 1e-3
