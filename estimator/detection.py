@@ -2,8 +2,11 @@
 
 Isolation: a force on link c moves only the joints upstream of it, so the joint rows r_{q_1…q_c}
 carry it and r_{q_{c+1}…q_N} stay at zero (eq. 5). The collided link is the LAST joint row whose
-magnitude exceeds its threshold; thresholds are noise-aware, max(floor, n_σ · σ_i), with σ_i a
-robust (MAD) noise estimate of row i over samples with no detected contact.
+magnitude exceeds its threshold. Thresholds are noise-aware: σ_i z_{α/2} with σ_i = √R_ii from
+the sensor noise model's residual covariance (estimator.noise) at a per-row false-isolation
+probability α per sample (``whitened_thresholds``; streamable, no statistic over the whole log),
+or, when the user marks a quiet stretch, max(floor, n_σ · σ_i) with σ_i a robust (MAD) noise
+estimate of row i over the samples with no detected contact (``noise_thresholds``).
 """
 
 from __future__ import annotations
@@ -53,3 +56,40 @@ def isolate(joint_residual: np.ndarray, thresholds) -> np.ndarray:
     N = r.shape[-1]
     last = N - np.argmax(above[..., ::-1], axis=-1)
     return np.where(above.any(axis=-1), last, 0)
+
+
+def whitened_thresholds(R, alpha: float) -> np.ndarray:
+    """Per joint row i: σ_i z with σ_i = √R_ii (R the (N+3)² no-contact covariance of the
+    residual, estimator.noise) and z = Φ⁻¹(1 − α/2): a contact-free row exceeds it with
+    probability α per sample (two-sided Gaussian)."""
+    from scipy.stats import norm
+
+    R = np.asarray(R, float)
+    if not (np.isfinite(alpha) and 0 < alpha < 1):
+        raise InputError(f"false-alarm probability per sample must be in (0, 1), got {alpha}")
+    return np.sqrt(np.diag(R)[3:]) * float(norm.isf(alpha / 2))
+
+
+def isolation_thresholds(robot, log, r, contact, gain_per_s, timing, noise=None, quiet_window=None,
+                         false_alarm_rate=(1.0, "h"), floor: float = 0.01):
+    """(thresholds (N,), info) for eq. 5 isolation. With ``quiet_window`` the former robust path
+    (max(floor, 5 σ_i), σ_i the MAD of row i over the log's samples without detected contact);
+    otherwise noise-aware and streamable: σ_i from the sensor noise model's residual covariance
+    (estimator.noise, default the paper leg's sensors) at the log's first posture, at the per-row
+    false-isolation probability α of ``false_alarm_rate`` (whitened_thresholds)."""
+    from estimator import noise as noise_mod
+    from estimator import observer
+
+    if quiet_window is not None:
+        th = noise_thresholds(r[:, 3:], ~np.asarray(contact, bool), floor=floor)
+        return th, {"isolation_thresholds_source": "robust (MAD) σ of the log's contact-free "
+                                                   "samples, max(floor, 5 σ)"}
+    dt = observer.regular_period(log.t)
+    value, unit = false_alarm_rate if isinstance(false_alarm_rate, tuple) else (false_alarm_rate, "s")
+    alpha = noise_mod.per_sample_rate(value, unit, dt)
+    noise = noise_mod.paper_leg_noise() if noise is None else noise
+    R = noise_mod.residual_covariance(robot, log.q[:1], log.dq[:1], noise, gain_per_s, dt, timing)[0]
+    th = whitened_thresholds(R, alpha)
+    return th, {"isolation_thresholds_source": f"sensor noise model ({noise.describe()}), per-row "
+                                               f"false-isolation probability {alpha:.3g} per sample",
+                "isolation_false_alarm_probability_per_sample": alpha}

@@ -314,8 +314,10 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
             if n_sel:
                 expected_force[sel] = res.expected_force_N
     else:
-        thresholds = detection.noise_thresholds(r[:, 3:], ~contact, floor=isolation_floor)
-        info["isolation_thresholds"] = thresholds.tolist()
+        thresholds, iso_info = detection.isolation_thresholds(
+            robot, log, r, contact, gain_per_s, timing, noise, quiet_window, false_alarm_rate,
+            floor=isolation_floor)
+        info.update(iso_info, isolation_thresholds=thresholds.tolist())
         if n_sel:
             iso = detection.isolate(r[sel, 3:], thresholds)
             res = loc_mod.localize_paper(robot, log.q[sel], log.dq[sel], tau_meas[sel], iso,
