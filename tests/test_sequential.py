@@ -164,3 +164,15 @@ def test_cusum_with_a_quiet_window():
     est = estimate(ROBOT, log, quiet_window=(1.0, 30.0), detector="cusum")
     assert "quiet stretch" in est.info["cusum_calibration"]
     assert est.contact.mean() < 1e-3
+
+
+def test_cusum_on_an_extreme_statistic_saturates_without_overflow():
+    """A 100 N contact gives s ~ 1e12 (and a skipped sample NaN): the increments are clipped to the
+    cap, so the fixed-point sums cannot overflow; the alarm starts at the first sample and ends
+    about h/δ samples after the contact (the drain at −δ per sample with s = 0)."""
+    s = np.r_[np.full(1000, 1e12), np.nan, np.full(999, 1e12), np.zeros(200)]
+    alarm, st = S.cusum(s, 5, 100.0, 5.0)
+    assert alarm[:2000].all()
+    end = 2000 + np.argmin(alarm[2000:])
+    assert end - 2000 == 9             # g = 100 − 10 k with s = 0 is back at 0 on the 10th sample
+    assert not st.alarm and st.g == 0

@@ -199,6 +199,28 @@ def build(out_dir: Path, quick: bool = False) -> list[Path]:
             lines.append(f"| {scene} | {label} | {h:.1f} | {exp:.3g} | {k} | "
                          f"{(k - exp) / np.sqrt(exp):+.1f} | {flag.mean():.3g} |")
     lines += ["", f"Calibration (static): {cal['static'].method}; δ = {cal['static'].drift:g}.", ""]
+    # the threshold formula alone, on a long synthetic run of the same residual process
+    from estimator import noise as noise_mod
+    from estimator import sequential as seq
+
+    n_syn = 1_000_000 if quick else 6_000_000
+    q0 = np.array([0.0, 0.0, 0.0, 0.9, -1.6])
+    tim = [("mean", 0.0)] * 5
+    fa, fb, B0, B1 = noise_mod.filter_terms(robot, q0, 0 * q0, noise_mod.paper_leg_noise(), 100.0, dt, tim)
+    R0 = noise_mod.residual_covariance(robot, q0, 0 * q0, noise_mod.paper_leg_noise(), 100.0, dt, tim)[0]
+    s_syn = seq.synthetic_statistic(fa, fb, B0[0], B1[0], R0, n_syn, seed=2024)
+    lines += [f"The threshold formula alone, on {n_syn:,} samples of a synthetic residual of the same "
+              "model (a different seed from the calibration's):", "",
+              "| target per sample | expected alarms | alarms | measured / target | deviation σ |",
+              "|---|---|---|---|---|"]
+    for a in (1e-3, 1e-4, 1e-5):
+        flag, _ = cusum(s_syn, 5, cal["static"].threshold(a), cal["static"].drift)
+        k, exp = _onsets(flag), a * n_syn
+        lines.append(f"| {a:g} | {exp:.3g} | {k} | {k / exp:.2f} | {(k - exp) / np.sqrt(exp):+.1f} |")
+    lines += ["", "The prefactor is fitted where alarms are frequent (θ*h = 1–3) and the formula's "
+              "shape is not exact there: the measured rate differs from the target by up to about "
+              "20 % (table above); the exponent θ*, which carries the extrapolation to one per "
+              "hour, is the model's exact asymptotic (large-deviation) exponent.", ""]
     lines += ["", "## Cost of a wrong timing declaration", "",
               "Interval-mean readings declared `instant` (half a sample of skew), chi-square detector at 1/h:", ""]
     for scene in ("static", "moving"):
