@@ -267,7 +267,7 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
         rnorm = np.sqrt(stat)
         if detector == "cusum":       # sequential test on the same statistic (estimator.sequential)
             from estimator import sequential
-            contact, det_info, _ = sequential.pipeline_detector(robot, log, unexp, stat, det_info, R,
+            contact, det_info, _, _ = sequential.pipeline_detector(robot, log, unexp, stat, det_info, R,
                                                                 gain_per_s, timing, noise, quiet_window)
         elif debounce:
             contact = detection.detect(rnorm, float(np.sqrt(det_info["chi2_threshold"])), debounce)

@@ -292,17 +292,23 @@ def model_calibration(robot, q, dq, noise, gain_per_s, dt_s: float, timing=None,
 
 
 def pipeline_detector(robot, log, r, stat, info: dict, R, gain_per_s, timing, noise, quiet_window,
-                      drift: float | None = None, state: CusumState | None = None):
-    """(contact, info) of the CUSUM for estimator.pipeline: the same whitened statistic and
-    false-alarm target as the chi-square detector (``info`` from it); the target rate is read as
-    the mean time between alarm onsets, 1/α samples. Calibrated on the noise model at the log's
-    first posture, or (``quiet_window``) on an ARMA(1,1) fit of the quiet stretch."""
+                      drift: float | None = None, state: CusumState | None = None,
+                      calibration: Calibration | None = None):
+    """(contact, info, state, calibration) of the CUSUM for estimator.pipeline: the same whitened statistic
+    and false-alarm target as the chi-square detector (``info`` from it); the target rate is read
+    as the mean time between alarm onsets, 1/α samples. Calibrated on the noise model at the log's
+    first posture, or (``quiet_window``) on an ARMA(1,1) fit of the quiet stretch, unless a
+    ``calibration`` is given. A chunked caller passes the returned ``state`` and the first
+    chunk's returned calibration to the next chunk: alarms are then identical to
+    the one-shot run."""
     from estimator import observer
 
     n = r.shape[1]
     alpha = info["false_alarm_probability_per_sample"]
     dt = observer.regular_period(log.t)
-    if quiet_window is not None:
+    if calibration is not None:
+        cal = calibration
+    elif quiet_window is not None:
         sel = (log.t >= quiet_window[0]) & (log.t <= quiet_window[1])
         z = np.linalg.solve(np.linalg.cholesky(R), r[sel].T).T
         a = float(np.exp(-np.min(observer.gains(robot, gain_per_s)) * dt))
@@ -315,4 +321,4 @@ def pipeline_detector(robot, log, r, stat, info: dict, R, gain_per_s, timing, no
     out.update(detector="CUSUM on the whitened residual (chi-square increments)",
                cusum_threshold=h, cusum_drift=cal.drift, cusum_calibration=cal.method,
                false_alarm_rate_meaning="mean time between alarm onsets = 1/rate")
-    return contact, out, new_state
+    return contact, out, new_state, cal

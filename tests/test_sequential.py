@@ -176,3 +176,25 @@ def test_cusum_on_an_extreme_statistic_saturates_without_overflow():
     end = 2000 + np.argmin(alarm[2000:])
     assert end - 2000 == 9             # g = 100 − 10 k with s = 0 is back at 0 on the 10th sample
     assert not st.alarm and st.g == 0
+
+
+def test_pipeline_detector_in_chunks_equals_one_shot():
+    """The CUSUM as estimate() runs it, on a log with a held poke, fed in three chunks with the
+    state and the first chunk's calibration carried along: the same alarms as in one call."""
+    log, starts, on = _held_pokes(0.05, n_pokes=6)
+    est = estimate(ROBOT, log)                      # chi-square run: its statistic and info
+    stat = est.rnorm ** 2
+    info = {"false_alarm_probability_per_sample": est.info["false_alarm_probability_per_sample"]}
+    R = Nz.residual_covariance(ROBOT, log.q[:1], log.dq[:1], Nz.paper_leg_noise(), 100.0, 1e-3,
+                               log.timing)[0]
+    args = (100.0, log.timing, None, None)
+    whole, _, end, cal = S.pipeline_detector(ROBOT, log, est.residual, stat, info, R, *args)
+    assert whole.any()
+    parts, state = [], None
+    for a, b in ((0, 1234), (1234, 3001), (3001, len(stat))):
+        sub = SensorLog(t=log.t[a:b], q=log.q[a:b], dq=log.dq[a:b], tau_Nm=log.tau_Nm[a:b],
+                        wrench=log.wrench[a:b])
+        c, _, state, _ = S.pipeline_detector(ROBOT, sub, est.residual[a:b], stat[a:b], info, R, *args,
+                                             state=state, calibration=cal)
+        parts.append(c)
+    assert np.array_equal(np.concatenate(parts), whole) and state == end
