@@ -2,8 +2,11 @@
 
 Isolation: a force on link c moves only the joints upstream of it, so the joint rows r_{q_1…q_c}
 carry it and r_{q_{c+1}…q_N} stay at zero (eq. 5). The collided link is the LAST joint row whose
-magnitude exceeds its threshold; thresholds are noise-aware, max(floor, n_σ · σ_i), with σ_i a
-robust (MAD) noise estimate of row i over samples with no detected contact.
+magnitude exceeds its threshold. Thresholds are noise-aware: σ_i z_{α/2} with σ_i = √R_ii from
+the sensor noise model's residual covariance (estimator.noise) at a per-row false-isolation
+probability α per sample (``whitened_thresholds``; streamable, no statistic over the whole log),
+or, when the user marks a quiet stretch, max(floor, n_σ · σ_i) with σ_i a robust (MAD) noise
+estimate of row i over the samples with no detected contact (``noise_thresholds``).
 """
 
 from __future__ import annotations
@@ -53,3 +56,16 @@ def isolate(joint_residual: np.ndarray, thresholds) -> np.ndarray:
     N = r.shape[-1]
     last = N - np.argmax(above[..., ::-1], axis=-1)
     return np.where(above.any(axis=-1), last, 0)
+
+
+def whitened_thresholds(R, alpha: float) -> np.ndarray:
+    """Per joint row i: σ_i z with σ_i = √R_ii (R the (N+3)² no-contact covariance of the
+    residual, estimator.noise) and z = Φ⁻¹(1 − α/2): a contact-free row exceeds it with
+    probability α per sample (two-sided Gaussian)."""
+    from scipy.special import ndtri          # Φ⁻¹ (scipy.stats costs seconds at start-up)
+
+    R = np.asarray(R, float)
+    if not (np.isfinite(alpha) and 0 < alpha < 1):
+        raise InputError(f"false-alarm probability per sample must be in (0, 1), got {alpha}")
+    return np.sqrt(np.diag(R)[3:]) * float(-ndtri(alpha / 2))
+

@@ -116,8 +116,9 @@ def _jacobians(robot, q, dq, h=1e-6):
     return JPq, JPdq, Juq, Judq
 
 
-def residual_covariance(robot, q, dq, noise: NoiseModel, gain_per_s, dt_s: float, timing=None):
-    """Stationary no-contact covariance of the exact observer's residual, (B, n, n) (module doc)."""
+def filter_terms(robot, q, dq, noise: NoiseModel, gain_per_s, dt_s: float, timing=None):
+    """(a, b, B0, B1) of the no-contact residual r_{k+1} = a ∘ r_k + b ∘ (B0 e_{k+1} + B1 e_k),
+    e_k unit white noise (m = n + 2N channels, σ folded into B0, B1 (B, n, m)) (module doc)."""
     from estimator import observer
 
     q = np.atleast_2d(np.asarray(q, float))
@@ -141,6 +142,12 @@ def residual_covariance(robot, q, dq, noise: NoiseModel, gain_per_s, dt_s: float
     B1 = np.concatenate([np.broadcast_to(-np.diag(c0), (B, n, n)),
                          -JPdq[:, :, j] / dt_s - 0.5 * Judq[:, :, j],
                          -JPq[:, :, j] / dt_s - 0.5 * Juq[:, :, j]], axis=2) * sig
+    return a, b, B0, B1
+
+
+def residual_covariance(robot, q, dq, noise: NoiseModel, gain_per_s, dt_s: float, timing=None):
+    """Stationary no-contact covariance of the exact observer's residual, (B, n, n) (module doc)."""
+    a, b, B0, B1 = filter_terms(robot, q, dq, noise, gain_per_s, dt_s, timing)
     S0 = B0 @ B0.transpose(0, 2, 1) + B1 @ B1.transpose(0, 2, 1)
     S1 = B1 @ B0.transpose(0, 2, 1)
     num = S0 + S1 * a[None, None, :] + S1.transpose(0, 2, 1) * a[None, :, None]

@@ -25,6 +25,7 @@ import numpy as np
 
 from estimator import detection, kernels, localization as loc_mod, observer
 from estimator import noise as noise_mod
+from estimator import sequential
 from estimator import timing as timing_mod
 from estimator.errors import InputError
 from estimator.log import SensorLog
@@ -345,9 +346,16 @@ class EstimatorStream:
                  isolation_floor: float = 0.01, lag_compensation: bool = True, timing=None,
                  timing_source: str = "option", noise=None, residual_cov=None,
                  residual_cov_source: str = "", false_alarm_rate=DEFAULT_FALSE_ALARM_RATE,
-                 cov_stride_s: float = 0.01, stats_samples: int = STATS_SAMPLES):
+                 cov_stride_s: float = 0.01, stats_samples: int = STATS_SAMPLES,
+                 detector: str = "chi2", cusum_calibration=None, isolation_quiet: bool = False):
         if method not in METHODS:
             raise InputError(f"method: unknown {method!r}; use one of {', '.join(METHODS)}")
+        if detector not in sequential.DETECTORS:
+            raise InputError(f"detector: unknown {detector!r}; use one of "
+                             f"{', '.join(sequential.DETECTORS)}")
+        if detector != "chi2" and (method == "paper" or threshold is not None):
+            raise InputError(f"detector {detector}: works on the whitened residual of the dynamic "
+                             "method; not with --method paper or --threshold")
         if int(debounce) != debounce or debounce < 0:
             raise InputError(f"debounce: must be a whole number of samples ≥ 0, got {debounce}")
         self.robot, self.method, self.expected = robot, method, tuple(expected)
@@ -368,6 +376,11 @@ class EstimatorStream:
         self.R = self.Linv = None
         self.stride = None
         self._R_head = []                # posture-dependent covariances of the head's blocks
+        self.detector, self.cusum_cal = detector, cusum_calibration
+        self.noise = noise_mod.paper_leg_noise() if noise is None else noise
+        value, unit = false_alarm_rate if isinstance(false_alarm_rate, tuple) else (false_alarm_rate, "s")
+        self.alpha = noise_mod.per_sample_rate(value, unit, self.dt)
+        self.isolation_quiet, self._R_iso = isolation_quiet, None
         if method == "paper" or threshold is not None:
             threshold = 0.06 if threshold is None else threshold
             if not (np.isfinite(threshold) and threshold > 0):
@@ -377,14 +390,12 @@ class EstimatorStream:
             self.info.update(detector="paper rule ||r|| > threshold", threshold=threshold)
         else:
             self.chi2 = True
-            value, unit = false_alarm_rate if isinstance(false_alarm_rate, tuple) else (false_alarm_rate, "s")
-            alpha = noise_mod.per_sample_rate(value, unit, self.dt)
+            alpha = self.alpha
             self.h = _chi2_isf(alpha, self.n)
             if residual_cov is not None:
                 self._set_R(np.asarray(residual_cov, float))
                 source = residual_cov_source
             else:
-                self.noise = noise_mod.paper_leg_noise() if noise is None else noise
                 if not (self.noise.velocity_sigma_rad_per_s == 0 and self.noise.encoder_counts == 0):
                     self.stride = max(1, int(round(cov_stride_s / self.dt)))
                 source = "sensor noise model, " + self.noise.describe()
@@ -442,8 +453,22 @@ class EstimatorStream:
         per = L_all[(g0 + np.arange(T)) // st - blocks[0]]
         return _whitened(unexpT, per)
 
-    def _detect(self, stat):
-        """(contact, rnorm) from the statistic; the detector's state carries across chunks."""
+    def _detect(self, stat, q0, dq0):
+        """(contact, rnorm) from the statistic; the detector's state carries across chunks.
+
+        CUSUM (estimator.sequential): calibrated once, on the noise model at the log's first
+        posture (q0, q̇0) unless the quiet window gave its calibration."""
+        if self.detector == "cusum":
+            if self.cusum_cal is None:
+                self.cusum_cal = sequential.model_calibration(self.robot, q0, dq0, self.noise,
+                                                              self.gain_per_s, self.dt, self.timing)
+            if "cusum_threshold" not in self.info:
+                h = self.cusum_cal.threshold(self.alpha)
+                self.info = sequential.detector_info(self.info, h, self.cusum_cal)
+            contact, self.state.extra["cusum"] = sequential.cusum(
+                stat, self.n, self.info["cusum_threshold"], self.cusum_cal.drift,
+                self.state.extra.get("cusum"))
+            return contact, np.sqrt(stat)
         raw = stat > self.h
         contact = debounce_chunk(raw, self.debounce, self.state) if self.debounce else raw
         return contact, (np.sqrt(stat) if self.chi2 else stat)
@@ -459,7 +484,10 @@ class EstimatorStream:
         else:
             unexpT = rT
         stat = self._statistic(self.g, q, dq, unexpT)
-        contact, rnorm = self._detect(stat)
+        contact, rnorm = self._detect(stat, q[0], dq[0])
+        if self.method == "paper" and not self.isolation_quiet and self._R_iso is None:
+            self._R_iso = noise_mod.residual_covariance(self.robot, q[:1], dq[:1], self.noise,
+                                                        self.gain_per_s, self.dt, self.timing)[0]
         q_loc = q
         if self.lag is not None:
             pt, pq = (t, q) if self._past is None else (np.r_[self._past[0], t], np.vstack([self._past[1], q]))
@@ -495,9 +523,18 @@ class EstimatorStream:
         info.update(min_force_N=force_floor, ambiguity_tol=ambiguity_tol,
                     noise_floor_samples=int(min(S, self.g)))
         thresholds = None
-        if self.method == "paper":
+        if self.method == "paper" and self.isolation_quiet:
             thresholds = detection.noise_thresholds(quiet_r[:, 3:], None, floor=self.isolation_floor)
-            info["isolation_thresholds"] = thresholds.tolist()
+            info.update(isolation_thresholds=thresholds.tolist(),
+                        isolation_thresholds_source="robust (MAD) σ of the log's contact-free "
+                                                    "samples, max(floor, 5 σ)")
+        elif self.method == "paper":       # noise-aware and streamable (detection.whitened_thresholds)
+            thresholds = detection.whitened_thresholds(self._R_iso, self.alpha)
+            info.update(isolation_thresholds=thresholds.tolist(),
+                        isolation_thresholds_source=f"sensor noise model ({self.noise.describe()}), "
+                                                    f"per-row false-isolation probability "
+                                                    f"{self.alpha:.3g} per sample",
+                        isolation_false_alarm_probability_per_sample=self.alpha)
         self.info.update(info)
         self.Rm = Rm
         self.stats = {"force_floor": force_floor, "ambiguity_tol": ambiguity_tol,
@@ -640,8 +677,9 @@ def _resolve_timing(robot, log, timing):
 
 def quiet_window_covariance(robot, chunks, window, gain_per_s, period_s, discretization="exact",
                             timing=None) -> np.ndarray:
-    """Robust covariance of the residual over the contact-free window (t0, t1) (noise.quiet_covariance),
-    from an observer-only pass over the log's chunks (stops after t1): the first of two passes."""
+    """(R, r) : the robust covariance of the residual over the contact-free window (t0, t1)
+    (noise.quiet_covariance) and the window's residual rows, from an observer-only pass over the
+    log's chunks (stops after t1): the first of two passes."""
     t0, t1 = window
     K = observer.gains(robot, gain_per_s)
     run = _ObserverRun(robot, K, float(period_s), discretization, timing)
@@ -659,7 +697,7 @@ def quiet_window_covariance(robot, chunks, window, gain_per_s, period_s, discret
                 break
     t = np.concatenate(ts) if ts else np.zeros(0)
     r = np.concatenate(rs) if rs else np.zeros((0, K.size))
-    return noise_mod.quiet_covariance(r, t, t0, t1, gain_per_s, float(period_s))
+    return noise_mod.quiet_covariance(r, t, t0, t1, gain_per_s, float(period_s)), r
 
 
 def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=100.0,
@@ -668,7 +706,8 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
              max_condition: float = 20.0, isolation_floor: float = 0.01,
              lag_compensation: bool = True, timing=None, noise=None, quiet_window=None,
              false_alarm_rate=DEFAULT_FALSE_ALARM_RATE, cov_stride_s: float = 0.01,
-             stats_samples: int = STATS_SAMPLES, chunk_samples: int | None = None) -> ContactEstimate:
+             stats_samples: int = STATS_SAMPLES, chunk_samples: int | None = None,
+             detector: str = "chi2") -> ContactEstimate:
     """Run observer, detection and localization on a whole log (offline, vectorized).
 
     ``EstimatorStream`` on the log in one chunk (or in chunks of ``chunk_samples``: the same
@@ -696,6 +735,9 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     no-contact covariance (estimator.noise) from ``noise`` (a NoiseModel; default the paper leg's
     sensors) or from the ``quiet_window`` (t0, t1) of the log, at ``false_alarm_rate`` = (value,
     unit) with unit 'sample', 's' or 'h' (default one per hour); ``rnorm`` is then √(rᵀR⁻¹r).
+    ``detector="cusum"``: a CUSUM on the same statistic (estimator.sequential) instead. ``paper``
+    isolates on rows whitened by the noise model (detection.whitened_thresholds) at the per-row
+    probability of ``false_alarm_rate``; with a ``quiet_window``, on the robust σ of the stretch.
     """
     if log.n_links != robot.n_links:
         raise InputError(f"{getattr(log, 'source', 'log')}: {log.n_links} joints in the log but the "
@@ -706,7 +748,7 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
                          isolation_floor=isolation_floor, lag_compensation=lag_compensation,
                          timing=timing, noise=noise, quiet_window=quiet_window,
                          quiet_chunks=lambda: [log], false_alarm_rate=false_alarm_rate,
-                         cov_stride_s=cov_stride_s, stats_samples=stats_samples)
+                         cov_stride_s=cov_stride_s, stats_samples=stats_samples, detector=detector)
     T = len(log.t)
     step = T if not chunk_samples else int(chunk_samples)
     parts = []
@@ -735,15 +777,20 @@ def open_stream(robot, log, method="dynamic", gain_per_s=100.0, threshold=None, 
     timing, timing_source = _resolve_timing(robot, log, timing)
     if period_s is None:
         period_s = getattr(log, "period_s", None) or observer.regular_period(log.t)
-    cov, cov_source = None, ""
+    cov, cov_source, cal = None, "", None
     if quiet_window is not None and method == "dynamic" and threshold is None:
-        cov = quiet_window_covariance(robot, quiet_chunks(), quiet_window, gain_per_s, period_s,
-                                      kw.get("discretization", "exact"), timing)
+        cov, r_quiet = quiet_window_covariance(robot, quiet_chunks(), quiet_window, gain_per_s,
+                                               period_s, kw.get("discretization", "exact"), timing)
         cov_source = (f"robust estimate over the quiet window {quiet_window[0]:g}–"
                       f"{quiet_window[1]:g} s")
+        if kw.get("detector") == "cusum":         # CUSUM calibrated on the stretch's correlation
+            z = np.linalg.solve(np.linalg.cholesky(cov), r_quiet.T).T
+            a = float(np.exp(-np.min(observer.gains(robot, gain_per_s)) * period_s))
+            cal = sequential.calibrate_quiet(z, a)
     return EstimatorStream(robot, method, gain_per_s, threshold, debounce, expected,
                            period_s=period_s, timing=timing, timing_source=timing_source,
-                           residual_cov=cov, residual_cov_source=cov_source, **kw)
+                           residual_cov=cov, residual_cov_source=cov_source, cusum_calibration=cal,
+                           isolation_quiet=quiet_window is not None and method == "paper", **kw)
 
 
 def join_parts(parts: list, stream: EstimatorStream, n_skipped: int = 0) -> ContactEstimate:

@@ -5,10 +5,11 @@ instantaneous states and interval-mean forces, the issue's noise: FT σ 0.1 N, 0
 joint torque σ 0.005 N·m, declared ``mean``). Scenes: static (joints held, base still) and moving
 (base shaking at 10 Hz, joints swinging). Measured when the report is built:
 
-* empirical false-alarm rate of the chi-square detector on 10⁶ contact-free samples per scene;
-* ROC: P(detect within 20 ms) against false alarms per hour, pokes 0.5–10 N, chi-square detector
-  vs the paper rule ‖r‖ > ε (whose false-alarm axis is measured on the contact-free log);
-* detection delay against magnitude at one false alarm per hour;
+* empirical false-alarm rate of the chi-square detector and of the CUSUM (estimator.sequential)
+  on 10⁶ contact-free samples per scene;
+* ROC: P(detect within 20 ms) against false alarms per hour, pokes 0.02–10 N, chi-square detector,
+  CUSUM and the paper rule ‖r‖ > ε (whose false-alarm axis is measured on the contact-free log);
+* detection delay against magnitude at one false alarm per hour, chi-square vs CUSUM;
 * the cost of a wrong timing declaration.
 """
 
@@ -23,7 +24,8 @@ from torquebench.io import atomic_path, write_text_atomic
 
 SUB, RATE = 5, 1000.0
 SIGMA = np.array([0.1, 0.1, 0.01, 0.005, 0.005])
-MAGNITUDES_N = (0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 3.0, 5.0, 10.0)
+MAGNITUDES_N = (0.02, 0.03, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 3.0, 5.0, 10.0)
+ROC_MAGNITUDES_N = (0.02, 0.05, 0.1, 0.2)
 WINDOW_S = 0.020
 
 
@@ -86,6 +88,27 @@ def _stats(robot, log):
     return est.rnorm ** 2, paper, est.info["chi2_dof"]
 
 
+def _calibration(robot, log):
+    """The CUSUM calibration the pipeline uses for these logs (paper leg noise, declared timing)."""
+    from estimator import observer, sequential
+    from estimator.noise import paper_leg_noise
+
+    return sequential.model_calibration(robot, log.q[0], log.dq[0], paper_leg_noise(), 100.0,
+                                        observer.regular_period(log.t), log.timing)
+
+
+def _onsets(flag) -> int:
+    f = np.asarray(flag, np.int8)
+    return int(np.count_nonzero(np.diff(f) == 1) + f[0])
+
+
+def _first(flag_win) -> np.ndarray:
+    """Samples from the poke onset to the first flag (1-based), NaN when none in the window."""
+    first = np.argmax(flag_win, axis=1).astype(float) + 1
+    first[~flag_win.any(axis=1)] = np.nan
+    return first
+
+
 def _save(fig, path: Path) -> Path:
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
@@ -101,6 +124,7 @@ def build(out_dir: Path, quick: bool = False) -> list[Path]:
 
     from estimator.pipeline import estimate
     from estimator.robot import paper_leg
+    from estimator.sequential import cusum
 
     robot = paper_leg()
     out_dir = Path(out_dir)
@@ -108,27 +132,37 @@ def build(out_dir: Path, quick: bool = False) -> list[Path]:
     start = time.perf_counter()
     n_quiet_s = 100.0 if quick else 1000.0
     dt = 1.0 / RATE
+    a_1h = dt / 3600
     lines = ["# Contact detection against sensor noise", "",
              "Paper leg, simulated (inverse dynamics on a 5 kHz grid, 1 kHz log, forces read as "
              "interval means and declared `mean`), noise FT σ = 0.1 N, 0.1 N, 0.01 N·m, joint torque "
-             "σ = 0.005 N·m; observer K = 100 /s. Detector: chi-square on the residual whitened by "
-             "its covariance predicted from the noise model (`estimator/noise.py`); paper rule: "
-             "‖r‖ > ε. Built by `torquebench report --only detection`.", ""]
+             "σ = 0.005 N·m; observer K = 100 /s. Detectors on the residual whitened by its covariance "
+             "predicted from the noise model (`estimator/noise.py`), s_k = r_kᵀR⁻¹r_k: **chi-square** "
+             "(flag s_k > h, P(χ²_n > h) = α per sample; the default) and **CUSUM** "
+             "(`estimator/sequential.py`: g_k = min(h, max(0, g_{k−1} + s_k − n − δ)), δ = n, alarm "
+             "from g = h until g = 0; h from the target mean time between alarm onsets, using the "
+             "large-deviation exponent of the serially correlated residual and a Monte Carlo "
+             "prefactor); paper rule: ‖r‖ > ε. Built by `torquebench report --only detection`.", ""]
     paths = []
     # --------------------------------------------------------------- false alarms, contact free
     lines += ["## False alarms on contact-free logs", "",
               f"{int(n_quiet_s * RATE):,} samples per scene (100 s "
               "segments, the first 0.2 s of each dropped). Expected count = target × samples.", "",
+              "### Chi-square detector (target = flagged fraction per sample)", "",
               "Sampling σ of the flagged fraction: √(α/n_eff), n_eff = samples·(1 − a)/(1 + a) with "
-              "a = exp(−KΔt) (the residual's correlation time); the last column is the deviation "
-              "in those σ.", "",
-              "| scene | target per sample | expected flagged | flagged | flagged fraction | deviation σ |",
-              "|---|---|---|---|---|---|"]
+              "a = exp(−KΔt) (the residual's correlation time); the deviation is in those σ. Flagged "
+              "samples come in runs (the residual is correlated), so alarm onsets are fewer than "
+              "flagged samples: the onsets column is what a user counts as false alarms.", "",
+              "| scene | target per sample | expected flagged | flagged | flagged fraction | deviation σ | onsets |",
+              "|---|---|---|---|---|---|---|"]
     quiet = {}
+    cal = {}
     for scene in ("static", "moving"):
         parts, wrong = [], []
         for seg in range(int(np.ceil(n_quiet_s / 100.0))):      # 100 s segments: bounded memory
             log = simulated_log(robot, 100.0, scene, seed=(11 if scene == "static" else 1011) + seg)
+            if seg == 0:
+                cal[scene] = _calibration(robot, log)
             s, paper, n = _stats(robot, log)
             parts.append((s[200:], paper[200:]))
             if seg == 0:
@@ -139,47 +173,97 @@ def build(out_dir: Path, quick: bool = False) -> list[Path]:
         quiet[scene + "_wrong"] = wrong[0]
         ac = np.exp(-100.0 * dt)
         n_eff = len(s) * (1 - ac) / (1 + ac)
-        for a in (1e-2, 1e-3, 1e-4, dt / 3600):
-            k = int((s > chi2.isf(a, n)).sum())
+        for a in (1e-2, 1e-3, 1e-4, a_1h):
+            flag = s > chi2.isf(a, n)
+            k = int(flag.sum())
             dev = (k / len(s) - a) / np.sqrt(a / n_eff)
             lines.append(f"| {scene} | {a:.3g}{' (1/h)' if a < 1e-6 else ''} | {a * len(s):.3g} | {k} | "
-                         f"{k / len(s):.3g} | {dev:+.1f} |")
+                         f"{k / len(s):.3g} | {dev:+.1f} | {_onsets(flag)} |")
         lines.append(f"| {scene} | paper ε = 0.06 | – | {int((paper > 0.06).sum())} | "
-                     f"{(paper > 0.06).mean():.3g} | – |")
+                     f"{(paper > 0.06).mean():.3g} | – | {_onsets(paper > 0.06)} |")
+    lines += ["", "### CUSUM (target = mean time between alarm onsets)", "",
+              "Same statistic and logs. Sampling σ of the count: √expected (alarm onsets are separated "
+              "by regeneration points g = 0, so the count is close to Poisson); deviation in those σ. "
+              "The 1/h row cannot be checked on 10⁶ samples (0.28 expected): its threshold is the "
+              "same formula extrapolated from the rows above.", "",
+              "| scene | target | threshold h (χ² units) | expected alarms | alarms | deviation σ | flagged fraction |",
+              "|---|---|---|---|---|---|---|"]
+    for scene in ("static", "moving"):
+        s, _, n = quiet[scene]
+        c = cal[scene]
+        for rate_s, label in ((1.0, "1/s"), (0.1, "0.1/s"), (0.01, "0.01/s"), (1 / 3600, "1/h")):
+            h = c.threshold(rate_s * dt)
+            flag, _ = cusum(s, n, h, c.drift)
+            k = _onsets(flag)
+            exp = rate_s * dt * len(s)
+            lines.append(f"| {scene} | {label} | {h:.1f} | {exp:.3g} | {k} | "
+                         f"{(k - exp) / np.sqrt(exp):+.1f} | {flag.mean():.3g} |")
+    lines += ["", f"Calibration (static): {cal['static'].method}; δ = {cal['static'].drift:g}.", ""]
+    # the threshold formula alone, on a long synthetic run of the same residual process
+    from estimator import noise as noise_mod
+    from estimator import sequential as seq
+
+    n_syn = 1_000_000 if quick else 6_000_000
+    q0 = np.array([0.0, 0.0, 0.0, 0.9, -1.6])
+    tim = [("mean", 0.0)] * 5
+    fa, fb, B0, B1 = noise_mod.filter_terms(robot, q0, 0 * q0, noise_mod.paper_leg_noise(), 100.0, dt, tim)
+    R0 = noise_mod.residual_covariance(robot, q0, 0 * q0, noise_mod.paper_leg_noise(), 100.0, dt, tim)[0]
+    s_syn = seq.synthetic_statistic(fa, fb, B0[0], B1[0], R0, n_syn, seed=2024)
+    lines += [f"The threshold formula alone, on {n_syn:,} samples of a synthetic residual of the same "
+              "model (a different seed from the calibration's):", "",
+              "| target per sample | expected alarms | alarms | measured / target | deviation σ |",
+              "|---|---|---|---|---|"]
+    worst = 0.0
+    for a in (1e-3, 1e-4, 1e-5):
+        flag, _ = cusum(s_syn, 5, cal["static"].threshold(a), cal["static"].drift)
+        k, exp = _onsets(flag), a * n_syn
+        worst = max(worst, abs(k / exp - 1))
+        lines.append(f"| {a:g} | {exp:.3g} | {k} | {k / exp:.2f} | {(k - exp) / np.sqrt(exp):+.1f} |")
+    lines += ["", "The prefactor is fitted where alarms are frequent (θ*h = 1–3) and the formula's "
+              f"shape is not exact there: the measured rate differs from the target by up to "
+              f"{100 * worst:.0f} % (table above), more than the sampling error at 10⁻⁴; the exponent θ*, which carries the extrapolation to one per "
+              "hour, is the model's exact asymptotic (large-deviation) exponent.", ""]
     lines += ["", "## Cost of a wrong timing declaration", "",
-              "Interval-mean readings declared `instant` (half a sample of skew), detector at 1/h:", ""]
+              "Interval-mean readings declared `instant` (half a sample of skew), chi-square detector at 1/h:", ""]
     for scene in ("static", "moving"):
         lines.append(f"- {scene}: {100 * quiet[scene + '_wrong']:.3g} % of contact-free samples flagged "
                      f"(correctly declared: "
-                     f"{100 * (quiet[scene][0] > chi2.isf(dt / 3600, quiet[scene][2])).mean():.3g} %)")
+                     f"{100 * (quiet[scene][0] > chi2.isf(a_1h, quiet[scene][2])).mean():.3g} %)")
     # --------------------------------------------------------------- ROC and delay
     n_pokes = 20 if quick else 60
     T = 500 * n_pokes + 250
-    roc = {}
-    delays = {}
+    w = int(WINDOW_S * RATE)
+    on = 100
+    roc, delays = {}, {}
+    fa_h = np.logspace(-1, 4, 60)
+    fa_cusum = np.logspace(-1, 4, 16)
     for scene in ("static", "moving"):
-        s_q, p_q, n = quiet[scene]
+        c = cal[scene]
+        h_1h = c.threshold(a_1h)
+        h_grid = np.array([c.threshold(f * dt / 3600) for f in fa_cusum])
         for mag in MAGNITUDES_N:
             F, starts = _pokes(T, mag, seed=int(mag * 10))
             log = simulated_log(robot, T / RATE, scene, force_N=F, seed=int(mag * 100) + 1)
-            s, paper, _ = _stats(robot, log)
-            w = int(WINDOW_S * RATE)
+            s, paper, n = _stats(robot, log)
             win = starts[:, None] + np.arange(1, w + 1)[None]
+            held = starts[:, None] + np.arange(1, on + 1)[None]
             smax, pmax = s[win].max(axis=1), paper[win].max(axis=1)
-            roc[(scene, mag)] = (smax, pmax)
-            h = chi2.isf(dt / 3600, n)
-            first = np.argmax(s[win] > h, axis=1).astype(float) + 1
-            first[~(s[win] > h).any(axis=1)] = np.nan
-            delays[(scene, mag)] = first * dt
-    fa_h = np.logspace(-1, 4, 60)
+            pd_cusum = None
+            if mag in ROC_MAGNITUDES_N:
+                pd_cusum = np.array([cusum(s, n, hh, c.drift)[0][win].any(axis=1).mean() for hh in h_grid])
+            roc[(scene, mag)] = (smax, pmax, pd_cusum)
+            h = chi2.isf(a_1h, n)
+            flag_c, _ = cusum(s, n, h_1h, c.drift)
+            delays[(scene, mag)] = (_first(s[held] > h) * dt, _first(flag_c[held]) * dt)
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
     for ax, scene in zip(axes, ("static", "moving")):
         s_q, p_q, n = quiet[scene]
         p_sorted = np.sort(p_q)[::-1]
-        for i, mag in enumerate(MAGNITUDES_N):
-            smax, pmax = roc[(scene, mag)]
+        for i, mag in enumerate(ROC_MAGNITUDES_N):
+            smax, pmax, pd_cusum = roc[(scene, mag)]
             hs = chi2.isf(np.clip(fa_h * dt / 3600, 1e-300, 1), n)
             ax.semilogx(fa_h, (smax[:, None] > hs[None]).mean(axis=0), color=f"C{i}", label=f"{mag:g} N")
+            ax.semilogx(fa_cusum, pd_cusum, color=f"C{i}", ls=":", marker=".")
             # paper rule: thresholds from the contact-free ‖r‖ (FA measurable down to 1/log length)
             k = np.clip((fa_h * dt / 3600 * len(p_sorted)).astype(int), 0, len(p_sorted) - 1)
             ok = fa_h * dt / 3600 * len(p_sorted) >= 1
@@ -189,46 +273,67 @@ def build(out_dir: Path, quick: bool = False) -> list[Path]:
         ax.axvline(1.0, color="k", lw=0.7)
         ax.set_ylim(-0.02, 1.02)
         ax.set_title(f"{scene}: P(detect within 20 ms)")
-        ax.set_xlabel("false alarms per hour (flagged contact-free samples)")
+        ax.set_xlabel("false alarms per hour (target of the threshold)")
         ax.grid(True, which="both", alpha=0.3)
     axes[0].set_ylabel("detection probability")
-    axes[0].legend(title="poke (solid: chi-square, dashed: ‖r‖ > ε)", fontsize=8)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8,
+               title="poke (solid: chi-square, dotted: CUSUM, dashed: ‖r‖ > ε)")
+    fig.subplots_adjust(bottom=0.3)
     paths.append(_save(fig, out_dir / "detection_roc.png"))
     plt.close(fig)
-    fig, ax = plt.subplots(figsize=(6, 4))
     lines += ["", "## ROC and delay", "", "![ROC](detection_roc.png)", "",
-              f"{n_pokes} pokes per magnitude (random direction, link 2, α = 0.5, 100 ms each; the "
+              f"{n_pokes} pokes per magnitude (random direction, link 2, α = 0.5, held 100 ms; the "
               "grid goes below the issue's 0.5 N because every poke ≥ 0.5 N is detected at once). "
-              "The chi-square curves use the false-alarm rate the threshold is set for (validated "
-              "above); the paper rule's axis is measured on the contact-free log. Detection at one "
-              "false alarm per hour, within 20 ms of the poke's onset:", "",
-              "| scene | poke N | P(detect ≤ 20 ms) chi-square 1/h | median delay ms | paper ε = 0.06: P(≤ 20 ms) |",
-              "|---|---|---|---|---|"]
+              "The chi-square and CUSUM curves use the false-alarm rate their thresholds are set for "
+              "(validated above; for the chi-square detector that is the flagged fraction, an upper "
+              "bound on its alarm onsets, which favours it in this comparison); the paper rule's axis "
+              "is measured on the contact-free log. At one false alarm per hour (delay from the "
+              "poke's onset; 'held' = within the 100 ms the poke lasts):", "",
+              "| scene | poke N | chi-square P(≤ 20 ms) | P(held) | median delay ms (detected) | CUSUM P(≤ 20 ms) | "
+              "P(held) | median delay ms (detected) | paper ε = 0.06: P(≤ 20 ms) |",
+              "|---|---|---|---|---|---|---|---|---|"]
     smallest = {}
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
     for scene, ls in (("static", "-"), ("moving", "--")):
-        med = []
+        med = {0: [], 1: []}
         for mag in MAGNITUDES_N:
-            d = delays[(scene, mag)]
-            pdet = float(np.isfinite(d).mean())
-            md = float(np.nanmedian(d)) * 1e3 if np.isfinite(d).any() else float("nan")
-            med.append(md)
-            pp = float((roc[(scene, mag)][1] > 0.06).mean())
-            lines.append(f"| {scene} | {mag:g} | {pdet:.2f} | {md:.1f} | {pp:.2f} |")
-            if pdet >= 0.95 and scene not in smallest:
-                smallest[scene] = mag
-        ax.plot(MAGNITUDES_N, med, ls, marker="o", label=scene)
+            row = [scene, f"{mag:g}"]
+            for j in (0, 1):
+                d = delays[(scene, mag)][j]
+                p20 = float((d <= WINDOW_S + 1e-12).mean())
+                md = float(np.nanmedian(d)) * 1e3 if np.isfinite(d).any() else float("nan")
+                med[j].append(md)
+                row += [f"{p20:.2f}", f"{float(np.isfinite(d).mean()):.2f}", f"{md:.1f}"]
+                if j == 0 and p20 >= 0.95 and scene not in smallest:
+                    smallest[scene] = mag
+            row.append(f"{float((roc[(scene, mag)][1] > 0.06).mean()):.2f}")
+            lines.append("| " + " | ".join(row) + " |")
+        ax.plot(MAGNITUDES_N, med[0], ls, marker="o", color="C0", label=f"chi-square, {scene}")
+        ax.plot(MAGNITUDES_N, med[1], ls, marker="s", color="C3", label=f"CUSUM, {scene}")
     ax.set_xscale("log")
     ax.set_xlabel("poke magnitude N")
     ax.set_ylabel("median detection delay ms (1 false alarm/h)")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend()
+    ax.legend(fontsize=8)
     paths.append(_save(fig, out_dir / "detection_delay.png"))
     plt.close(fig)
     lines += ["", "![delay](detection_delay.png)", ""]
     for scene in ("static", "moving"):
         lines.append(f"- Smallest poke of the grid detected within 20 ms in ≥ 95 % of trials at one "
-                     f"false alarm per hour, {scene}: "
+                     f"false alarm per hour (chi-square), {scene}: "
                      f"{smallest.get(scene, float('nan')):g} N (grid {', '.join(map(str, MAGNITUDES_N))} N).")
+    h_s = cal["static"].threshold(a_1h)
+    lines += ["", "### Which detector by default", "",
+              f"At one false alarm per hour the CUSUM threshold is h = {h_s:.0f} χ² units with drift δ = "
+              f"{cal['static'].drift:g}: it accumulates evidence, so it finds more of the smallest held "
+              "pokes (the 'P(held)' columns at 0.02–0.03 N), but for pokes ≥ 0.05 N its median delay is "
+              "longer than the chi-square test's, and its alarm lasts about h/δ samples "
+              f"(≈ {h_s / cal['static'].drift:.0f} ms) after the contact ends, while the residual's own "
+              "decay ends the chi-square flag. The default stays `--detector chi2`; use `--detector "
+              "cusum` to catch small persistent contacts (light leaning, a cable) at the same false-alarm "
+              "rate. `tests/test_sequential.py` checks both claims on held 0.02 N pokes and the CUSUM's "
+              "alarm count at a measurable rate."]
     lines += ["", f"Built in {time.perf_counter() - start:.0f} s{' (quick)' if quick else ''}."]
     md = out_dir / "detection.md"
     write_text_atomic(md, "\n".join(lines) + "\n")

@@ -1,0 +1,200 @@
+"""CUSUM on the whitened residual (estimator.sequential): the recursion against a plain loop, chunked
+runs equal to one-shot runs, the spectral model against the closed-form covariance, the measured
+false-alarm rate against its target, and small persistent pokes against the chi-square detector."""
+
+import json
+
+import numpy as np
+import pytest
+
+from estimator import noise as Nz
+from estimator import sequential as S
+from estimator import timing
+from estimator.errors import InputError
+from estimator.log import SensorLog
+from estimator.pipeline import estimate
+from estimator.robot import paper_leg
+
+from test_noise_detection import NOISE, _noisy
+
+ROBOT = paper_leg()
+Q0 = np.array([0.0, 0.0, 0.0, 0.9, -1.6])
+
+
+def _loop(s, n, h, delta):
+    """Reference: g = min(h, max(0, g + s − n − δ)), alarm from g = h until g = 0, in floats."""
+    g, on, out = 0.0, False, []
+    for x in s:
+        g = g + x - n - delta
+        if not on and g >= h:
+            on, g = True, h
+        elif on and g <= 0:
+            on, g = False, 0.0
+        g = min(h, max(0.0, g))
+        out.append(on)
+    return np.array(out)
+
+
+def _stat(T, seed, shift_every=None):
+    rng = np.random.default_rng(seed)
+    s = rng.chisquare(5, T)
+    if shift_every:           # persistent shifts so that alarms start and end many times
+        s += 12.0 * ((np.arange(T) // shift_every) % 3 == 1)
+    return s
+
+
+def test_cusum_matches_the_plain_recursion():
+    s = _stat(20_000, 1, shift_every=700)
+    alarm, st = S.cusum(s, 5, 40.0, 5.0)
+    ref = _loop(s, 5, 40.0, 5.0)
+    onsets = np.count_nonzero(np.diff(ref.astype(int)) == 1)
+    assert onsets > 5                  # the comparison exercises starts and ends
+    assert np.array_equal(alarm, ref)
+    assert st.alarm == ref[-1]
+
+
+@pytest.mark.parametrize("cuts", [(1,), (7, 8, 9), (333, 5000, 5001, 12_345), tuple(range(0, 20_000, 997))])
+def test_cusum_chunked_equals_one_shot(cuts):
+    s = _stat(20_000, 2, shift_every=450)
+    whole, end = S.cusum(s, 5, 35.0)
+    parts, state = [], None
+    for a, b in zip((0, *cuts), (*cuts, len(s))):
+        al, state = S.cusum(s[a:b], 5, 35.0, state=state)
+        parts.append(al)
+    assert np.array_equal(np.concatenate(parts), whole)
+    assert state == end
+
+
+def test_cusum_bad_parameters_are_input_errors():
+    with pytest.raises(InputError, match="threshold"):
+        S.cusum(np.ones(3), 5, 0.0)
+    with pytest.raises(InputError, match="drift"):
+        S.cusum(np.ones(3), 5, 10.0, drift=-1.0)
+    with pytest.raises(InputError, match="detector"):
+        t, q, dq, dqm, tau = _noisy(500, 1)
+        estimate(ROBOT, SensorLog(t=t, q=q, dq=dqm, tau_Nm=tau[:, 3:], wrench=tau[:, :3]),
+                 detector="glr")
+
+
+@pytest.mark.parametrize("declared", ["instant", "mean"])
+def test_spectral_model_integrates_to_the_closed_form_covariance(declared):
+    """(1/2π)∫ S_z(ω) dω = I: the transfer-function model of the residual and the closed-form
+    Lyapunov covariance are two derivations of the same noise; they must agree on every row."""
+    tim = timing.uniform(declared, 2)
+    a, b, B0, B1 = Nz.filter_terms(ROBOT, Q0, 0 * Q0, NOISE, 100.0, 1e-3, tim)
+    R = Nz.residual_covariance(ROBOT, Q0, 0 * Q0, NOISE, 100.0, 1e-3, tim)[0]
+    Sz = S.spectral_matrix(a, b, B0[0], B1[0], R)
+    assert np.allclose(Sz.mean(axis=0), np.eye(5), atol=1e-6)
+    lam = S.whitened_spectrum(a, b, B0[0], B1[0], R)
+    # the correlated residual has a smaller large-deviation exponent than independent samples
+    th = S.exponent(lam, 5, 5.0)
+    th_iid = S.exponent(np.ones((16, 5)), 5, 5.0)
+    # Wald's root for independent χ²_5: −(5/2) log(1 − 2θ) = 10 θ
+    assert -2.5 * np.log1p(-2 * th_iid) == pytest.approx(10 * th_iid, rel=1e-9)
+    assert th < th_iid / 5
+
+
+def test_cusum_false_alarm_rate_matches_target():
+    """600 s of contact-free noise (static leg, velocity noise, instantaneous readings): the number
+    of alarm onsets at 0.1/s is the target within 3 Poisson σ."""
+    t, q, dq, dqm, tau = _noisy(600_000, 21)
+    log = SensorLog(t=t, q=q, dq=dqm, tau_Nm=tau[:, 3:], wrench=tau[:, :3])
+    est = estimate(ROBOT, log, noise=NOISE, false_alarm_rate=(0.1, "s"), detector="cusum")
+    c = est.contact[200:]
+    k = int(np.count_nonzero(np.diff(c.astype(np.int8)) == 1))
+    expected = 0.1 * len(c) * 1e-3
+    print(f"CUSUM at 0.1/s: {k} alarms, {expected:.1f} expected; h = {est.info['cusum_threshold']:.1f}")
+    assert est.info["detector"].startswith("CUSUM")
+    assert abs(k - expected) < 3 * np.sqrt(expected)
+
+
+def _held_pokes(magnitude, n_pokes=40, on=300, period=800, seed=4):
+    from torquebench.reports.detection import simulated_log
+
+    T = period * n_pokes + period // 2
+    rng = np.random.default_rng(seed)
+    starts = np.arange(period // 2, T - on, period)
+    F = np.zeros((T, 2))
+    for s0, ang in zip(starts, rng.uniform(0, 2 * np.pi, len(starts))):
+        F[s0:s0 + on] = magnitude * np.array([np.cos(ang), np.sin(ang)])
+    return simulated_log(ROBOT, T / 1000.0, "static", force_N=F, seed=seed + 1), starts, on
+
+
+def test_cusum_detects_small_persistent_pokes_sooner_than_chi2():
+    """0.02 N held for 300 ms on the paper leg's noise, both at one false alarm per hour: the CUSUM
+    detects more of the pokes and its median delay (misses counted as 300 ms) is shorter."""
+    log, starts, on = _held_pokes(0.02)
+    delays = {}
+    for det in ("chi2", "cusum"):
+        c = estimate(ROBOT, log, detector=det).contact[starts[:, None] + np.arange(on)[None]]
+        delays[det] = np.where(c.any(axis=1), np.argmax(c, axis=1), on)
+        print(det, "detected", (delays[det] < on).mean(), "median delay ms", np.median(delays[det]))
+    assert (delays["cusum"] < on).mean() > (delays["chi2"] < on).mean()
+    assert np.median(delays["cusum"]) < np.median(delays["chi2"])
+
+
+def test_estimate_command_takes_the_detector(capsys, tmp_path):
+    from torquebench.cli import main
+
+    t, q, dq, dqm, tau = _noisy(3000, 5)
+    log = SensorLog(t=t, q=q, dq=dqm, tau_Nm=tau[:, 3:], wrench=tau[:, :3], floating=True)
+    from estimator.sim.output import log_csv
+
+    path = tmp_path / "quiet.csv"
+    path.write_text(log_csv(log))
+    code = main(["estimate", str(path), "--detector", "cusum", "--velocity-sigma", "0.002", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and out["detector"].startswith("CUSUM") and out["cusum_threshold"] > 0
+    assert out["contact_samples"] == 0
+
+
+@pytest.mark.parametrize("theta", [0.0, 1.0, -0.5])
+def test_arma_theta_is_recovered_from_the_lag1_autocorrelation(theta):
+    from scipy.signal import lfilter
+
+    a = np.exp(-0.1)
+    x = lfilter([1.0, theta], [1.0, -a], np.random.default_rng(3).standard_normal(400_000))[500:]
+    rho1 = np.corrcoef(x[1:], x[:-1])[0, 1]
+    assert S.arma_theta(a, rho1) == pytest.approx(theta, abs=0.08)
+
+
+def test_cusum_with_a_quiet_window():
+    t, q, dq, dqm, tau = _noisy(60_000, 8)
+    log = SensorLog(t=t, q=q, dq=dqm, tau_Nm=tau[:, 3:], wrench=tau[:, :3])
+    est = estimate(ROBOT, log, quiet_window=(1.0, 30.0), detector="cusum")
+    assert "quiet stretch" in est.info["cusum_calibration"]
+    assert est.contact.mean() < 1e-3
+
+
+def test_cusum_on_an_extreme_statistic_saturates_without_overflow():
+    """A 100 N contact gives s ~ 1e12 (and a skipped sample NaN): the increments are clipped to the
+    cap, so the fixed-point sums cannot overflow; the alarm starts at the first sample and ends
+    about h/δ samples after the contact (the drain at −δ per sample with s = 0)."""
+    s = np.r_[np.full(1000, 1e12), np.nan, np.full(999, 1e12), np.zeros(200)]
+    alarm, st = S.cusum(s, 5, 100.0, 5.0)
+    assert alarm[:2000].all()
+    end = 2000 + np.argmin(alarm[2000:])
+    assert end - 2000 == 9             # g = 100 − 10 k with s = 0 is back at 0 on the 10th sample
+    assert not st.alarm and st.g == 0
+
+
+def test_pipeline_detector_in_chunks_equals_one_shot():
+    """The CUSUM as estimate() runs it, on a log with a held poke, fed in three chunks with the
+    state and the first chunk's calibration carried along: the same alarms as in one call."""
+    log, starts, on = _held_pokes(0.05, n_pokes=6)
+    est = estimate(ROBOT, log)                      # chi-square run: its statistic and info
+    stat = est.rnorm ** 2
+    info = {"false_alarm_probability_per_sample": est.info["false_alarm_probability_per_sample"]}
+    R = Nz.residual_covariance(ROBOT, log.q[:1], log.dq[:1], Nz.paper_leg_noise(), 100.0, 1e-3,
+                               log.timing)[0]
+    args = (100.0, log.timing, None, None)
+    whole, _, end, cal = S.pipeline_detector(ROBOT, log, est.residual, stat, info, R, *args)
+    assert whole.any()
+    parts, state = [], None
+    for a, b in ((0, 1234), (1234, 3001), (3001, len(stat))):
+        sub = SensorLog(t=log.t[a:b], q=log.q[a:b], dq=log.dq[a:b], tau_Nm=log.tau_Nm[a:b],
+                        wrench=log.wrench[a:b])
+        c, _, state, _ = S.pipeline_detector(ROBOT, sub, est.residual[a:b], stat[a:b], info, R, *args,
+                                             state=state, calibration=cal)
+        parts.append(c)
+    assert np.array_equal(np.concatenate(parts), whole) and state == end
