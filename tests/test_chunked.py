@@ -12,6 +12,7 @@ from estimator.log import LogReader, read_log, write_log
 from estimator.noise import NoiseModel
 from estimator.pipeline import DetectorState, debounce_chunk, estimate
 from estimator.detection import detect
+from estimator.errors import InputError
 from estimator.robot import paper_leg
 from estimator.synthetic import inverse_dynamics_log, sinusoidal_motion
 from torquebench.cli import main
@@ -65,7 +66,11 @@ def _same_intervals(a, b):
     {"expected_contacts": [(2, 1.0)], "threshold": 0.3},
     {"timing": "delay:0.0023"},
     {"timing": "mean", "quiet_window": (0.02, 0.48)},
-], ids=["chi2", "chi2-posture", "paper", "debounce", "expected", "delay", "mean-quiet"])
+    {"detector": "cusum"},                                      # sequential test, state carried
+    {"detector": "cusum", "quiet_window": (0.02, 0.48)},        # calibrated on the stretch
+    {"method": "paper", "quiet_window": (0.02, 0.48)},          # robust isolation thresholds
+], ids=["chi2", "chi2-posture", "paper", "debounce", "expected", "delay", "mean-quiet", "cusum",
+        "cusum-quiet", "paper-quiet"])
 def test_chunks_of_any_size_give_the_one_shot_numbers(kw):
     log, _ = _poked_log()
     ref = estimate(ROBOT, log, stats_samples=400, **kw)
@@ -259,3 +264,12 @@ def test_round_significant_keeps_nine_digits():
     assert max(digits) <= 10 and np.mean(np.array(digits) <= 9) > 0.5
     special = np.array([np.nan, np.inf, -np.inf, 0.0])
     assert np.array_equal(round_significant(special), special, equal_nan=True)
+
+
+@pytest.mark.parametrize("kw", [{"method": "paper"}, {"threshold": 0.3}])
+def test_cusum_refuses_the_paper_rule(kw):
+    """The CUSUM runs on the whitened residual; with the paper's ‖r‖ > ε it would be ignored
+    silently, so it is refused by name."""
+    log, _ = _poked_log()
+    with pytest.raises(InputError, match="detector cusum"):
+        estimate(ROBOT, log, detector="cusum", **kw)
