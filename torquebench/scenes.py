@@ -86,6 +86,27 @@ class ChainSpec:
 
 
 @dataclass(frozen=True)
+class PredictionSpec:
+    """A posture-grid localization-error prediction (what `propagate` asks): contact (link, α),
+    force (magnitude, direction from +x), ``grid`` postures per joint over [0, π], Monte Carlo
+    ``draws`` and ``seed``, sample rate, observer gain, FT noise σ (Fx, Fz, My); an optional
+    given joint-torque σ (else the sensor chain's) and gain error (else the calibration's)."""
+
+    link: int
+    alpha: float
+    magnitude_N: float
+    direction_rad: float
+    grid: int = 10
+    draws: int = 500
+    seed: int = 0
+    sample_rate_Hz: float = 1000.0
+    gain_per_s: float = 100.0
+    ft_noise: tuple = (0.1, 0.1, 0.01)
+    torque_noise_Nm: float | None = None
+    gain_error: float | None = None
+
+
+@dataclass(frozen=True)
 class Scene:
     name: str
     kind: str
@@ -96,6 +117,8 @@ class Scene:
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
     chain: ChainSpec = field(default_factory=ChainSpec)
     robot: Robot | None = None
+    prediction: PredictionSpec | None = None
+    max_run_time_s: float = 600.0          # a run limit, not an input: not part of any cache key
 
 
 def _resolve_robot(f: _Fields, data: dict) -> Robot:
@@ -437,6 +460,25 @@ def scene_path(name: str) -> Path:
     if not cand.is_file():
         raise InputError(f"--scene: no scene {name!r} (looked for {cand})")
     return cand
+
+
+def prediction_scene(robot: Robot, chain: ChainSpec, prediction: PredictionSpec,
+                     name: str = "propagate") -> Scene:
+    """A scene with no simulation that asks for a posture-grid prediction (built by `propagate`
+    from its options)."""
+    return Scene(name, "prediction", Path(f"<{name} options>"), "", None, None,
+                 chain=chain, robot=robot, prediction=prediction)
+
+
+def with_seed(scene: Scene, seed: int | None) -> Scene:
+    """A copy whose sensor-noise seed (dynamic or static scene) is ``seed`` (None: unchanged)."""
+    if seed is None:
+        return scene
+    if scene.sim is not None:
+        return replace(scene, sim=replace(scene.sim, sensors=replace(scene.sim.sensors, seed=seed)))
+    if scene.static is not None:
+        return replace(scene, static=replace(scene.static, sensors=replace(scene.static.sensors, seed=seed)))
+    return scene
 
 
 def with_overrides(scene: Scene, **kw) -> Scene:
