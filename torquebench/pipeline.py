@@ -18,12 +18,14 @@
 
 The graph is built backwards from the requested outputs; a stage whose result the scene gives
 (a ``strain_per_Nm``, a calibration file, a recorded log) is not run. Stage results are cached
-on disk (torquebench.cache) under a key of the stage, its canonical inputs and the code version.
+on disk (torquebench.cache) under a key of the stage, its canonical inputs, its upstream keys and
+the code version: this file and the source of the domain packages the stage calls (STAGE_CODE).
 Heavy packages are imported inside the stage functions only.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -35,9 +37,47 @@ import numpy as np
 
 from userio.errors import InputError
 
-# the code version in every cache key: this file's content (any edit to a stage invalidates)
+# the code version in every cache key: this file's content (any edit to a stage invalidates) and
+# the source of the packages the stage calls (STAGE_CODE, closed over PACKAGE_IMPORTS)
 CODE_VERSION = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
+SOURCE_ROOT = Path(__file__).resolve().parents[1]       # where bridge/, flexure/, ... sit
+PACKAGE_IMPORTS = {"bridge": (), "flexure": ("bridge",), "calibration": ("bridge",),
+                   "estimator": ("bridge",)}              # which domain packages import which
+STAGE_CODE = {
+    "flexure_fem": ("flexure",), "sensor_chain": ("bridge",),
+    "calibration_session": ("calibration", "bridge"), "calibration_fit": ("calibration",),
+    "simulation": ("estimator",), "raw_counts": ("estimator", "bridge"),
+    "calibrated_torques": ("calibration", "bridge"), "estimates": ("estimator",),
+    "localization_error": (), "predicted_error": ("estimator",),
+    "sensor_log": ("estimator", "bridge"), "static_holds": ("estimator",),
+    "paper_scores": ("estimator", "torquebench/reports/reproduction.py"),
+    "error_map": ("estimator", "calibration"),
+}
 METHODS = ("dynamic", "paper")
+
+
+@functools.lru_cache(maxsize=None)
+def source_hash(rel: str) -> str:
+    """SHA-256 of the ``*.py`` files under SOURCE_ROOT/rel (a package directory or one file):
+    their relative paths and contents, in sorted order. Computed once per process."""
+    root = SOURCE_ROOT / rel
+    files = sorted(f for f in root.rglob("*.py") if "__pycache__" not in f.parts) if root.is_dir() \
+        else [root]
+    h = hashlib.sha256()
+    for f in files:
+        h.update(f.relative_to(SOURCE_ROOT).as_posix().encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()[:16]
+
+
+def stage_code(stage: str) -> dict:
+    """{package: source hash} of every package ``stage`` calls, with the packages they import."""
+    todo, seen = list(STAGE_CODE.get(stage, ())), set()
+    while todo:
+        pkg = todo.pop()
+        if pkg not in seen:
+            seen.add(pkg)
+            todo.extend(PACKAGE_IMPORTS.get(pkg, ()))
+    return {pkg: source_hash(pkg) for pkg in sorted(seen)}
 
 
 @dataclass(frozen=True)
@@ -597,8 +637,8 @@ def plan(scene, outputs=None, cache=None, seed=None, force=False) -> list[Step]:
 
 
 def _key(stage, params, upstream) -> str:
-    blob = json.dumps({"stage": stage, "params": params, "up": upstream, "code": CODE_VERSION},
-                      sort_keys=True, default=str)
+    blob = json.dumps({"stage": stage, "params": params, "up": upstream, "code": CODE_VERSION,
+                       "packages": stage_code(stage)}, sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:32]
 
 
