@@ -175,7 +175,8 @@ def _params(scene, stage: str, seed) -> dict:
                 "cal": _file_hash(c.calibration_file)}
     if stage == "raw_counts":
         return {"gain": c.true_gain_factor, "seed": seed, "log": _file_hash(c.log_file),
-                "cols": c.counts_columns, "ft": repr(getattr(scene.sim, "sensors", None))}
+                "cols": c.counts_columns, "unit": c.reading_unit,
+                "ft": repr(getattr(scene.sim, "sensors", None))}
     if stage == "calibrated_torques":
         return {"cal": _file_hash(c.calibration_file)}
     if stage in ("estimates", "localization_error", "predicted_error"):
@@ -327,8 +328,11 @@ def _read_counts_log(scene):
         if log.valid_mask is not None:
             codes = codes[log.valid_mask]
         out["counts"] = codes
-        from bridge.adc import code_limits
-        out["rails"] = code_limits(24)
+        if c.reading_unit == "counts":                    # ADC codes: the rails are flagged
+            from bridge.adc import code_limits
+            out["rails"] = code_limits(24)
+        else:                                             # mV readings: only non-finite ones
+            out["rails"] = (-math.inf, math.inf)
     return out
 
 

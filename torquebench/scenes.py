@@ -70,8 +70,9 @@ class ChainSpec:
     gain over its model: 1.05 = 5 % more sensitive than calibrated, for validation);
     ``[calibration]``: ``file`` (a stored calibration JSON) or a simulated loading session
     (``masses_g``, ``lever_arm_m``, ``repeats``, ``n_avg``, ``seed``) fitted with emcee;
-    ``[source]``: ``log`` (a recorded CSV, optionally with raw ADC ``counts_columns``) or, when
-    absent, the simulation of the scene's top-level keys; ``[outputs] want = [...]``.
+    ``[source]``: ``log`` (a recorded CSV, optionally with raw sensor ``counts_columns`` holding
+    ``reading_unit`` "counts" (ADC codes, the default) or "mV", which a stored calibration must
+    read) or, when absent, the simulation of the scene's top-level keys; ``[outputs] want = [...]``.
     """
 
     flexure_design: Path | None = None
@@ -83,6 +84,7 @@ class ChainSpec:
     log_file: Path | None = None
     counts_columns: tuple = ()
     outputs: tuple = ()
+    reading_unit: str = "counts"             # what counts_columns hold: raw ADC "counts" or "mV"
 
 
 @dataclass(frozen=True)
@@ -370,7 +372,7 @@ def _chain_spec(f: _Fields, data: dict, kind: str) -> ChainSpec:
                    "n_avg": f.integer(ca, "n_avg", "calibration", 256, lo=1),
                    "seed": f.integer(ca, "seed", "calibration", 0, lo=0)}
     so = f.table(data, "source")
-    f.known(so, {"log", "counts_columns"}, "source")
+    f.known(so, {"log", "counts_columns", "reading_unit"}, "source")
     log_file = _file(f, so, "log", "source", "samples") if "log" in so else None
     cols = so.get("counts_columns", [])
     if not isinstance(cols, list) or not all(isinstance(c, str) for c in cols):
@@ -379,6 +381,20 @@ def _chain_spec(f: _Fields, data: dict, kind: str) -> ChainSpec:
         raise f.err("source.counts_columns", "counts columns need a recorded log (source.log)")
     if cols and cal_file is None and session is None:
         raise f.err("source.counts_columns", "raw ADC counts need a [calibration] to become torques")
+    unit = f.choice(so, "reading_unit", "source", ("counts", "mV"), "counts")
+    if "reading_unit" in so and not cols:
+        raise f.err("source.reading_unit", "says what source.counts_columns hold; there are none")
+    if cols and session is not None and unit != "counts":
+        raise f.err("source.reading_unit", f"the simulated calibration session reads ADC counts, "
+                    f"but source.counts_columns hold {unit!r}")
+    if cols and cal_file is not None:
+        from calibration.store import read_document
+
+        cal_unit = read_document(cal_file).get("reading_unit")
+        if cal_unit != unit:
+            raise f.err("calibration.file", f"{cal_file.name} converts readings in {cal_unit!r}, but "
+                        f"source.counts_columns hold {unit!r} (source.reading_unit); give a "
+                        f"calibration fitted to {unit!r} readings or set source.reading_unit")
     out = f.table(data, "outputs")
     f.known(out, {"want"}, "outputs")
     want = out.get("want", [])
@@ -389,7 +405,7 @@ def _chain_spec(f: _Fields, data: dict, kind: str) -> ChainSpec:
             raise f.err("outputs.want", f"unknown output {w!r}{_nearest(w, OUTPUTS)} "
                         f"(known: {', '.join(OUTPUTS)})")
     return ChainSpec(design, spn, sensor_file, gain, cal_file, session, log_file, tuple(cols),
-                     tuple(want))
+                     tuple(want), unit)
 
 
 def _nearest(key, allowed) -> str:
