@@ -85,6 +85,9 @@ class ChainSpec:
     counts_columns: tuple = ()
     outputs: tuple = ()
     reading_unit: str = "counts"             # what counts_columns hold: raw ADC "counts" or "mV"
+    report_areas: tuple | None = None        # [outputs] reports (None: every area the scene feeds)
+    report_dir: Path | None = None           # [outputs] dir (None: ./out/<scene name>)
+    regenerate_shipped: bool = False         # [outputs] regenerate_shipped: may write reports/
 
 
 @dataclass(frozen=True)
@@ -328,7 +331,7 @@ def _static(f: _Fields, data: dict, robot: Robot, name: str, kind: str) -> Stati
 
 
 OUTPUTS = ("sensitivity", "noise_budget", "flexure", "calibration", "estimates",
-           "localization_error", "predicted_error")
+           "localization_error", "predicted_error", "report")
 SESSION_KEYS = {"masses_g", "lever_arm_m", "repeats", "n_avg", "seed"}
 
 
@@ -396,7 +399,7 @@ def _chain_spec(f: _Fields, data: dict, kind: str) -> ChainSpec:
                         f"source.counts_columns hold {unit!r} (source.reading_unit); give a "
                         f"calibration fitted to {unit!r} readings or set source.reading_unit")
     out = f.table(data, "outputs")
-    f.known(out, {"want"}, "outputs")
+    f.known(out, {"want", "reports", "dir", "regenerate_shipped"}, "outputs")
     want = out.get("want", [])
     if not isinstance(want, list) or not all(isinstance(w, str) for w in want):
         raise f.err("outputs.want", f"expected a list of output names, got {want!r}")
@@ -404,8 +407,54 @@ def _chain_spec(f: _Fields, data: dict, kind: str) -> ChainSpec:
         if w not in OUTPUTS:
             raise f.err("outputs.want", f"unknown output {w!r}{_nearest(w, OUTPUTS)} "
                         f"(known: {', '.join(OUTPUTS)})")
+    areas, report_dir, shipped = _report_fields(f, out, "report" in want)
     return ChainSpec(design, spn, sensor_file, gain, cal_file, session, log_file, tuple(cols),
-                     tuple(want), unit)
+                     tuple(want), unit, areas, report_dir, shipped)
+
+
+def report_areas_available() -> list[str]:
+    """The report builders: every module torquebench/reports/<area>.py (not imported here)."""
+    import pkgutil
+
+    import torquebench.reports
+
+    return sorted(i.name for i in pkgutil.iter_modules(torquebench.reports.__path__)
+                  if not i.name.startswith("_"))
+
+
+def _report_fields(f: _Fields, out: dict, wanted: bool):
+    """[outputs] reports / dir / regenerate_shipped: which builders, and where they write."""
+    given = sorted(set(out) & {"reports", "dir", "regenerate_shipped"})
+    if given and not wanted:
+        raise f.err(f"outputs.{given[0]}", "is about reports, but outputs.want has no \"report\"")
+    areas = None
+    if "reports" in out:
+        areas = out["reports"]
+        known = report_areas_available()
+        if not isinstance(areas, list) or not areas or not all(isinstance(a, str) for a in areas):
+            raise f.err("outputs.reports", f"expected a non-empty list of report areas, got {areas!r}")
+        for a in areas:
+            if a not in known:
+                raise f.err("outputs.reports", f"unknown report area {a!r}{_nearest(a, known)} "
+                            f"(known: {', '.join(known)})")
+        areas = tuple(dict.fromkeys(areas))
+    shipped = out.get("regenerate_shipped", False)
+    if not isinstance(shipped, bool):
+        raise f.err("outputs.regenerate_shipped", f"expected true or false, got {shipped!r}")
+    shipped_dir = (REPO_ROOT / "reports").resolve()
+    if "dir" in out:
+        report_dir = Path(f.string(out, "dir", "outputs"))
+        if shipped and report_dir.resolve() != shipped_dir:
+            raise f.err("outputs.regenerate_shipped", f"writes the shipped {shipped_dir}; "
+                        "drop outputs.dir or this flag")
+    else:
+        report_dir = shipped_dir if shipped else None
+    if report_dir is not None and report_dir.resolve() == shipped_dir and not shipped:
+        raise f.err("outputs.dir", f"{report_dir} is the shipped reports directory; set "
+                    "outputs.regenerate_shipped = true to replace the shipped reports")
+    if report_dir is not None and report_dir.exists() and not report_dir.is_dir():
+        raise f.err("outputs.dir", f"{report_dir} exists and is not a directory")
+    return areas, report_dir, shipped
 
 
 def _nearest(key, allowed) -> str:
