@@ -106,3 +106,12 @@ def test_reproduce_scores_equal_the_reproduction_modules_own_run(cache_dir):
     scene = load_scene(SCENES / "paper_fixed_link2.toml")
     steps = {s.stage.name: s.action for s in P.plan(scene, ["paper_scores"], Cache(cache_dir))}
     assert steps["paper_scores"] == "cached" and steps["sensor_log"] == "cached"
+
+
+def test_simulate_refuses_a_scene_that_reads_a_recorded_log(tmp_path, cache_dir, capsys):
+    (tmp_path / "l.csv").write_text("t,q1,q2,dq1,dq2,tau1,tau2,Fx,Fz,My\n")
+    scene = tmp_path / "s.toml"
+    scene.write_text('robot = "paper_leg.toml"\n[source]\nlog = "l.csv"\n')
+    assert main(["simulate", str(scene), "--out", str(tmp_path / "x.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "s.toml: source.log: the scene reads a recorded log" in err and err.count("\n") == 1

@@ -44,6 +44,9 @@ def scene_from_args(args, max_run_time_s: float):
     from torquebench.scenes import load_scene, with_overrides, with_seed
 
     scene = with_seed(load_scene(args.scene), args.seed)
+    if scene.sim is None and scene.static is None:
+        raise InputError(f"{args.scene}: source.log: the scene reads a recorded log; there is "
+                         "nothing to simulate")
     if scene.sim is not None:
         if args.integrator is not None:
             from estimator.sim.config import INTEGRATORS
