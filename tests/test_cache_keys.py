@@ -81,3 +81,17 @@ def test_source_hash_is_computed_once_per_process(source_copy):
     for _ in range(5):
         P.stage_code("estimates")
     assert P.source_hash.cache_info().hits >= before + 5
+
+
+def test_package_import_table_covers_the_imports_in_the_source():
+    """PACKAGE_IMPORTS (which domain package imports which) must hold every import the source
+    really makes, or an edit would reach a stage without changing its key."""
+    import re
+
+    for pkg in P.PACKAGE_IMPORTS:
+        found = set()
+        for f in (ROOT / pkg).rglob("*.py"):
+            found |= set(re.findall(r"^\s*(?:from|import)\s+(bridge|flexure|calibration|estimator)\b",
+                                    f.read_text(), re.M))
+        assert found - {pkg} <= set(P.PACKAGE_IMPORTS[pkg]), (pkg, found)
+    assert set(P.STAGE_CODE) | {"report"} == {s.name for s in P.STAGES}
