@@ -148,24 +148,37 @@ def test_output_nothing_can_produce_is_refused(tmp_path):
     assert r.returncode == 2 and "nothing in the scene can produce 'calibration'" in r.stderr
 
 
+CAL_MV = ROOT / "calibration/data/paper_link1_cal.json"       # a stored calibration reading mV
+
+
 def test_log_only_scene_imports_no_heavy_packages(tmp_path, cache):
-    """strain_per_Nm + a calibration file + a recorded log with counts: no FEM, no emcee."""
+    """strain_per_Nm + a calibration file + a recorded log with raw readings: no FEM, no emcee.
+    The readings are the stored (mV) calibration's forward model of the torques, so the
+    calibrated torques must come back."""
+    import calibration
     scene = load_scene(ROOT / "scenes" / "paper_floating_link2.toml")
     arts, _ = P.execute(scene, ["estimates"], cache)
     rd = arts["readings"]
+    tau = arts["torques"]["tau_Nm"]
+    cal = calibration.load(CAL_MV)
+    a, b = cal.coef_mean[:2]
+    torque_per_reading = float(cal.torque(np.array([b + a]))[0] - cal.torque(np.array([b]))[0]) / a
+    mv = b + tau / torque_per_reading
     import pandas as pd
     cols = {"t": rd["t"], "x": rd["q"][:, 0], "z": rd["q"][:, 1], "theta": rd["q"][:, 2],
             "q1": rd["q"][:, 3], "q2": rd["q"][:, 4], "dx": rd["dq"][:, 0], "dz": rd["dq"][:, 1],
             "dtheta": rd["dq"][:, 2], "dq1": rd["dq"][:, 3], "dq2": rd["dq"][:, 4],
-            "tau1": arts["torques"]["tau_Nm"][:, 0], "tau2": arts["torques"]["tau_Nm"][:, 1],
+            "tau1": tau[:, 0], "tau2": tau[:, 1],
             "Fx": rd["wrench"][:, 0], "Fz": rd["wrench"][:, 1], "My": rd["wrench"][:, 2],
-            "counts1": rd["counts"][:, 0], "counts2": rd["counts"][:, 1]}
+            "mV1": mv[:, 0], "mV2": mv[:, 1]}
     pd.DataFrame(cols).to_csv(tmp_path / "log.csv", index=False)
     (tmp_path / "scene.toml").write_text(
         'robot = "paper_leg.toml"\n[flexure]\nstrain_per_Nm = 5.7e-4\n'
-        f'[calibration]\nfile = "{ROOT / "calibration/data/paper_link1_cal.json"}"\n'
-        '[source]\nlog = "log.csv"\ncounts_columns = ["counts1", "counts2"]\n'
+        f'[calibration]\nfile = "{CAL_MV}"\n'
+        '[source]\nlog = "log.csv"\ncounts_columns = ["mV1", "mV2"]\nreading_unit = "mV"\n'
         '[outputs]\nwant = ["estimates"]\n')
+    back, _ = P.execute(load_scene(tmp_path / "scene.toml"), None, Cache(tmp_path / "c0"))
+    np.testing.assert_allclose(back["torques"]["tau_Nm"], tau, rtol=1e-6, atol=1e-9)
     code = ("import sys, json\nfrom torquebench import pipeline as P\nfrom torquebench.cache import Cache\n"
             "from torquebench.scenes import load_scene\n"
             f"s = load_scene({str(tmp_path / 'scene.toml')!r})\n"
@@ -178,6 +191,31 @@ def test_log_only_scene_imports_no_heavy_packages(tmp_path, cache):
     assert out["heavy"] == []
     assert "flexure_fem" not in out["stages"] and "calibration_fit" not in out["stages"]
     assert "simulation" not in out["stages"] and "estimates" in out["stages"]
+
+
+@pytest.mark.parametrize("source, field", [
+    ('counts_columns = ["c1", "c2"]\n', "calibration.file"),                 # counts vs an mV calibration
+    ('counts_columns = ["c1", "c2"]\nreading_unit = "counts"\n', "calibration.file"),
+])
+def test_stored_calibration_reading_unit_must_match_the_counts_columns(tmp_path, source, field):
+    (tmp_path / "log.csv").write_text("t,q1,q2,dq1,dq2,tau1,tau2,Fx,Fz,My,c1,c2\n")
+    (tmp_path / "scene.toml").write_text(
+        f'robot = "paper_leg.toml"\n[calibration]\nfile = "{CAL_MV}"\n'
+        f'[source]\nlog = "log.csv"\n{source}')
+    r = _cli("run", str(tmp_path / "scene.toml"), "--explain")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert f"scene.toml: {field}: paper_link1_cal.json converts readings in 'mV'" in r.stderr
+    assert "source.counts_columns hold 'counts' (source.reading_unit)" in r.stderr
+
+
+def test_simulated_session_reads_counts_so_mV_columns_are_refused(tmp_path):
+    (tmp_path / "log.csv").write_text("t,q1,q2,dq1,dq2,tau1,tau2,Fx,Fz,My,c1,c2\n")
+    (tmp_path / "scene.toml").write_text(
+        'robot = "paper_leg.toml"\n[calibration]\nmasses_g = [10, 100, 1000]\n'
+        '[source]\nlog = "log.csv"\ncounts_columns = ["c1", "c2"]\nreading_unit = "mV"\n')
+    r = _cli("run", str(tmp_path / "scene.toml"), "--explain")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "source.reading_unit: the simulated calibration session reads ADC counts" in r.stderr
 
 
 def test_simulator_bridge_sensor_takes_the_given_chain():

@@ -59,3 +59,13 @@ def test_bad_vary_and_executor_are_input_errors():
         parse_vary(["poke.1.alpha"])
     with pytest.raises(InputError, match="--executor"):
         run_sweep(SCENE, VARY, OUT, "threads:2", None)
+
+
+def test_shared_upstream_stages_are_computed_once_before_fanning_out(tmp_path):
+    """Only the seed varies: the first point runs alone and computes the simulation (and sensor
+    chain) every point shares; no worker computes them again. The noise (raw_counts) is per point."""
+    info = {}
+    rows = run_sweep(SCENE, parse_vary(["sensors.seed=1,2,3"]), OUT, "processes:2", str(tmp_path), info=info)
+    assert "simulation" in info["shared_stages"] and "raw_counts" not in info["shared_stages"]
+    assert [r["stages"]["simulation"] for r in rows] == ["run", "cached", "cached"]
+    assert [r["stages"]["raw_counts"] for r in rows] == ["run", "run", "run"]

@@ -10,15 +10,24 @@
     estimates          torques                     → estimates (observer + localizer, per method)
     localization_error estimates, truth            → localization_error (collision-phase scores)
     predicted_error    chain, calibration, truth   → predicted_error (Monte Carlo, same sensor/posture)
+    sensor_log         truth, chain (bridge model) → log (the simulator's own sensor model: `simulate`)
+    static_holds       the static scene's holds    → static_log (Table IV / posture sweep equilibria)
+    paper_scores       log (dynamic scenes)        → paper_scores (the reproduction's scores: `reproduce`)
+    error_map          chain, calibration          → error_map (MC + first order over a posture grid:
+                                                     `propagate`)
+    report             what the scene computes     → report (the report builders whose inputs the
+                                                     scene has, + a summary, into [outputs].dir)
 
 The graph is built backwards from the requested outputs; a stage whose result the scene gives
 (a ``strain_per_Nm``, a calibration file, a recorded log) is not run. Stage results are cached
-on disk (torquebench.cache) under a key of the stage, its canonical inputs and the code version.
+on disk (torquebench.cache) under a key of the stage, its canonical inputs, its upstream keys and
+the code version: this file and the source of the domain packages the stage calls (STAGE_CODE).
 Heavy packages are imported inside the stage functions only.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -30,9 +39,47 @@ import numpy as np
 
 from userio.errors import InputError
 
-# the code version in every cache key: this file's content (any edit to a stage invalidates)
+# the code version in every cache key: this file's content (any edit to a stage invalidates) and
+# the source of the packages the stage calls (STAGE_CODE, closed over PACKAGE_IMPORTS)
 CODE_VERSION = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
+SOURCE_ROOT = Path(__file__).resolve().parents[1]       # where bridge/, flexure/, ... sit
+PACKAGE_IMPORTS = {"bridge": (), "flexure": ("bridge",), "calibration": ("bridge",),
+                   "estimator": ("bridge",)}              # which domain packages import which
+STAGE_CODE = {
+    "flexure_fem": ("flexure",), "sensor_chain": ("bridge",),
+    "calibration_session": ("calibration", "bridge"), "calibration_fit": ("calibration",),
+    "simulation": ("estimator",), "raw_counts": ("estimator", "bridge"),
+    "calibrated_torques": ("calibration", "bridge"), "estimates": ("estimator",),
+    "localization_error": (), "predicted_error": ("estimator",),
+    "sensor_log": ("estimator", "bridge"), "static_holds": ("estimator",),
+    "paper_scores": ("estimator", "torquebench/reports/reproduction.py"),
+    "error_map": ("estimator", "calibration"),
+}
 METHODS = ("dynamic", "paper")
+
+
+@functools.lru_cache(maxsize=None)
+def source_hash(rel: str) -> str:
+    """SHA-256 of the ``*.py`` files under SOURCE_ROOT/rel (a package directory or one file):
+    their relative paths and contents, in sorted order. Computed once per process."""
+    root = SOURCE_ROOT / rel
+    files = sorted(f for f in root.rglob("*.py") if "__pycache__" not in f.parts) if root.is_dir() \
+        else [root]
+    h = hashlib.sha256()
+    for f in files:
+        h.update(f.relative_to(SOURCE_ROOT).as_posix().encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()[:16]
+
+
+def stage_code(stage: str) -> dict:
+    """{package: source hash} of every package ``stage`` calls, with the packages they import."""
+    todo, seen = list(STAGE_CODE.get(stage, ())), set()
+    while todo:
+        pkg = todo.pop()
+        if pkg not in seen:
+            seen.add(pkg)
+            todo.extend(PACKAGE_IMPORTS.get(pkg, ()))
+    return {pkg: source_hash(pkg) for pkg in sorted(seen)}
 
 
 @dataclass(frozen=True)
@@ -57,7 +104,21 @@ STAGES = (
           "errors against the truth over the collision phase"),
     Stage("predicted_error", ("chain", "calibration?", "truth?"), "predicted_error",
           "Monte Carlo localization error for this sensor and posture"),
+    Stage("sensor_log", ("truth", "chain?"), "log",
+          "the simulator's sensor model on the truth (the log `simulate` writes)"),
+    Stage("static_holds", (), "static_log", "static equilibrium holds of a static scene"),
+    Stage("paper_scores", ("log?",), "paper_scores", "the paper reproduction's scores of the scene"),
+    Stage("error_map", ("chain?", "calibration?"), "error_map",
+          "Monte Carlo + first-order localization error over a posture grid"),
+    Stage("report", ("chain?", "flexure?", "calibration?", "estimates?", "localization_error?",
+                     "predicted_error?", "paper_scores?"), "report",
+          "the report builders whose inputs the scene has, into the scene's output directory"),
 )
+# what each report builder (torquebench/reports/<area>.py) is about: the area runs as part of a
+# scene's report only when the scene computes that artifact; None: not about one scene
+REPORT_INPUTS = {"bridge": "chain", "flexure": "flexure", "fem": "flexure",
+                 "calibration": "calibration", "estimator": "estimates", "detection": "estimates",
+                 "reproduction": "paper_scores", "stability": None, "error_vs_runtime": None}
 BY_GIVES = {s.gives: s for s in STAGES}
 ALIASES = {"sensitivity": "chain", "noise_budget": "chain"}
 DEFAULT_OUTPUTS = ("localization_error", "predicted_error")
@@ -105,16 +166,27 @@ def _params(scene, stage: str, seed) -> dict:
     """The canonical inputs a stage reads from the scene (part of its cache key)."""
     c = scene.chain
     if stage == "flexure_fem":
-        return {"design": Path(c.flexure_design).read_text()}
+        return {"design": _file_hash(c.flexure_design)}
     if stage == "sensor_chain":
-        return {"spn": c.strain_per_Nm, "sensor": Path(c.sensor_file).read_text() if c.sensor_file else None}
+        return {"spn": c.strain_per_Nm, "sensor": _file_hash(c.sensor_file)}
     if stage == "calibration_session":
         return {"session": c.session}
-    if stage == "simulation":
-        return {"sim": repr(scene.sim).replace(f"seed={scene.sim.sensors.seed}", "seed=-")}
+    if stage == "simulation":        # noise-free: the sensors' noise model is not an input
+        return {"sim": repr(_quiet(scene.sim))}
+    if stage == "sensor_log":
+        return {"sensors": repr(scene.sim.sensors), "base": scene.sim.base}
+    if stage == "static_holds":
+        return {"static": repr(scene.static)}
+    if stage == "paper_scores":
+        return {"name": scene.name, "est": repr(scene.estimator),
+                "scene": repr(scene.sim.pokes) if scene.sim is not None else repr(scene.static)}
+    if stage == "error_map":
+        return {"prediction": repr(scene.prediction), "robot": repr(scene.robot),
+                "cal": _file_hash(c.calibration_file)}
     if stage == "raw_counts":
         return {"gain": c.true_gain_factor, "seed": seed, "log": _file_hash(c.log_file),
-                "cols": c.counts_columns, "ft": repr(getattr(scene.sim, "sensors", None))}
+                "cols": c.counts_columns, "unit": c.reading_unit,
+                "ft": repr(getattr(scene.sim, "sensors", None))}
     if stage == "calibrated_torques":
         return {"cal": _file_hash(c.calibration_file)}
     if stage in ("estimates", "localization_error", "predicted_error"):
@@ -123,7 +195,14 @@ def _params(scene, stage: str, seed) -> dict:
 
 
 def _file_hash(p):
-    return hashlib.sha256(Path(p).read_bytes()).hexdigest() if p else None
+    """SHA-256 of a file's bytes (None: no file; an unreadable file keys as such and its reader
+    reports it in one line when the stage runs)."""
+    if not p:
+        return None
+    try:
+        return hashlib.sha256(Path(p).read_bytes()).hexdigest()
+    except OSError as exc:
+        return f"unreadable: {p}: {type(exc).__name__}"
 
 
 # ---------------------------------------------------------------- the stage functions
@@ -192,17 +271,25 @@ def load_calibration(scene):
     return calibration.load(scene.chain.calibration_file)
 
 
-def run_simulation(scene, inp):
-    """Noise-free run (sensor noise is drawn by raw_counts, so seeds reuse this stage)."""
+def _quiet(cfg):
+    """The scene's SimConfig with noise-free sensors at its sample rate (the integration reads
+    only the rate; every sensor model is applied to the sampled truth afterwards)."""
     from dataclasses import replace
 
-    from estimator.sim import simulate
     from estimator.sim.config import Sensors
 
-    cfg = scene.sim
     quiet = Sensors(sample_rate_Hz=cfg.sensors.sample_rate_Hz, torque_model="gaussian",
                     torque_noise_Nm=0.0, ft_noise=[0.0, 0.0, 0.0], seed=0)
-    res = simulate(replace(cfg, sensors=quiet))
+    return replace(cfg, sensors=quiet)
+
+
+def run_simulation(scene, inp):
+    """Noise-free run (sensor noise is drawn by raw_counts or sensor_log, so seeds reuse this
+    stage); refused before integrating when predicted to take longer than scene.max_run_time_s."""
+    from estimator.sim import simulate
+
+    cfg = scene.sim
+    res = simulate(_quiet(cfg), max_run_time_s=scene.max_run_time_s)
     return {"t": res.t, "q": res.q, "dq": res.dq, "tau_Nm": res.tau_Nm, "wrench": res.wrench,
             "truth": res.truth, "floating": cfg.base == "floating", "stats": res.stats}
 
@@ -251,8 +338,11 @@ def _read_counts_log(scene):
         if log.valid_mask is not None:
             codes = codes[log.valid_mask]
         out["counts"] = codes
-        from bridge.adc import code_limits
-        out["rails"] = code_limits(24)
+        if c.reading_unit == "counts":                    # ADC codes: the rails are flagged
+            from bridge.adc import code_limits
+            out["rails"] = code_limits(24)
+        else:                                             # mV readings: only non-finite ones
+            out["rails"] = (-math.inf, math.inf)
     return out
 
 
@@ -340,11 +430,159 @@ def run_predicted_error(scene, inp, draws=2000):
     return out
 
 
+def run_sensor_log(scene, inp):
+    """The log `simulate` writes: estimator.sim.sensors.measure(scene sensors, sampled truth) —
+    encoders, gaussian or bridge/ADC torque (through the scene's one sensor chain), FT noise;
+    a fixed or rigid base logs zero base columns. Returns {log, truth, stats}."""
+    from estimator.log import SensorLog
+    from estimator.sim.sensors import measure
+
+    cfg, tr = scene.sim, inp["truth"]
+    chain = inp.get("chain") if cfg.sensors.torque_model == "bridge" else None
+    q, dq, tau, W = measure(cfg.sensors, tr["q"], tr["dq"], tr["tau_Nm"], tr["wrench"], 3, chain=chain)
+    if cfg.base != "floating":
+        q[:, :3] = 0.0
+        dq[:, :3] = 0.0
+    log = SensorLog(t=tr["t"], q=q, dq=dq, tau_Nm=tau, wrench=W, floating=cfg.base == "floating")
+    return {"log": log, "truth": tr["truth"], "stats": tr["stats"]}
+
+
+def run_static_holds(scene, inp):
+    """Static equilibria (estimator.sim.static.static_hold_log): every point held for hold_s
+    after a 0.3 s no-load tare. Returns {log, truth, stats}."""
+    from estimator.sim.static import static_hold_log
+
+    st = scene.static
+    start = time.perf_counter()
+    pts = st.points
+    log, truth, _ = static_hold_log(st.robot, np.array([p.q_rad for p in pts]),
+                                    np.array([p.link for p in pts]), np.array([p.alpha for p in pts]),
+                                    np.array([p.force_N for p in pts]), st.sensors, st.hold_s,
+                                    tare_s=0.3)
+    return {"log": log, "truth": truth,
+            "stats": {"integrator": "static", "run_time_s": time.perf_counter() - start,
+                      "points": len(pts)}}
+
+
+def run_paper_scores(scene, inp):
+    """The paper reproduction's scores (torquebench.reports.reproduction): a dynamic scene's
+    simulated log through both methods, or a static scene's holds."""
+    from types import SimpleNamespace
+
+    from torquebench.reports import reproduction as rr
+
+    if scene.sim is None:
+        return rr.evaluate_static(scene)
+    lg = inp["log"]
+    res = SimpleNamespace(t=lg["log"].t, truth=lg["truth"], log=lg["log"], stats=lg["stats"])
+    return rr.evaluate_dynamic(scene, res)
+
+
+def run_error_map(scene, inp):
+    """Localization error over the posture grid q ∈ [0, π]^n (estimator.uncertainty): Monte Carlo
+    and first order, per method, with σ_τ from the sensor chain (or given), the calibration's
+    relative slope std as a gain error (or given) and the FT noise."""
+    from estimator.uncertainty import SensorNoise, first_order, monte_carlo
+
+    pr, robot = scene.prediction, scene.robot
+    sigma_tau = pr.torque_noise_Nm if pr.torque_noise_Nm is not None else inp["chain"].noise_std_Nm
+    gain_error = pr.gain_error
+    if gain_error is None and inp.get("calibration") is not None:
+        cal = inp["calibration"]
+        i = list(cal.coef_names).index("slope")
+        gain_error = math.sqrt(cal.coef_cov[i, i]) / abs(cal.coef_mean[i])
+    noise = SensorNoise(torque_std_Nm=sigma_tau, wrench_std=list(pr.ft_noise),
+                        torque_gain_rel_std=gain_error or 0.0, sample_rate_Hz=pr.sample_rate_Hz,
+                        gain_per_s=pr.gain_per_s)
+    force = pr.magnitude_N * np.array([math.cos(pr.direction_rad), math.sin(pr.direction_rad)])
+    axes = [np.linspace(0.0, math.pi, pr.grid)] * robot.n_links
+    postures = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, robot.n_links)
+    out = {"noise": noise, "axes": axes, "postures": len(postures), "methods": {}, "maps": {}}
+    for method in METHODS:
+        mc = monte_carlo(robot, postures, pr.link, pr.alpha, force, noise, draws=pr.draws,
+                         rng=pr.seed, method=method)
+        fo = first_order(robot, postures, pr.link, pr.alpha, force, noise, method=method)
+        usable = mc.flagged_fraction < 0.05
+        pos = mc.position_rms_m[usable]
+        ratio = mc.position_rms_m[usable] / fo.position_rms_m[usable]
+        worst = int(np.flatnonzero(usable)[np.argmax(mc.position_p95_m[usable])]) if pos.size else None
+        out["methods"][method] = {
+            "position_rms_median_m": float(np.median(pos)) if pos.size else None,
+            "position_rms_median_m_error_estimate":
+                float(np.median(mc.position_rms_se_m[usable])) if pos.size else None,
+            "position_rms_median_m_error_method":
+                f"Monte Carlo standard error (1 sigma, delta method), median over postures, {pr.draws} draws",
+            "position_rms_max_m": float(np.max(pos)) if pos.size else None,
+            "position_p95_max_m": float(np.max(mc.position_p95_m[usable])) if pos.size else None,
+            "position_p95_max_m_error_estimate":
+                float(mc.position_p95_se_m[worst]) if pos.size else None,
+            "position_p95_max_m_error_method":
+                f"Monte Carlo standard error (1 sigma) of the 95th percentile at the worst posture, "
+                f"from the binomial spread of order statistics, {pr.draws} draws",
+            "force_rms_median_N": float(np.median(mc.force_rms_N[usable])) if pos.size else None,
+            "flagged_postures": int((~usable).sum()),
+            "monte_carlo_over_first_order_median": float(np.median(ratio)) if pos.size else None,
+        }
+        out["maps"][method] = np.where(usable, mc.position_rms_m, np.nan)
+    return out
+
+
+def run_report(scene, inp):
+    """The chosen report builders' ``build(out_dir)`` into the scene's output directory, and
+    ``<scene>.md``: what this scene computed (sensor, calibration, measured vs predicted error)."""
+    import importlib
+
+    from userio.files import write_text_atomic
+
+    out_dir = report_dir(scene)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    have = {k for k, v in inp.items() if v is not None}
+    areas, _ = report_areas(scene, have)
+    written = {}
+    for area in areas:
+        written[area] = [str(p) for p in importlib.import_module(f"torquebench.reports.{area}").build(out_dir)]
+    summary = out_dir / f"{scene.name}.md"
+    write_text_atomic(summary, scene_summary(scene, inp))
+    return {"dir": str(out_dir), "areas": areas, "written": written, "summary": str(summary)}
+
+
+def scene_summary(scene, arts) -> str:
+    """Markdown: the figures this scene computed."""
+    L = [f"# Scene {scene.name}", "", scene.description or "", "",
+         f"Generated by `torquebench run {scene.path}`.", ""]
+    ch = arts.get("chain")
+    if ch is not None:
+        L += ["## Sensor", "", f"- strain per N·m: {ch.strain_per_Nm:.4g}",
+              f"- torque noise σ_τ: {ch.noise_std_Nm:.4g} N·m per sample", ""]
+    fx = arts.get("flexure")
+    if fx:
+        L += ["## Flexure (FEM)", ""] + [f"- {k}: {v}" for k, v in fx.items()
+                                          if not k.endswith("_error_method")] + [""]
+    cal = arts.get("calibration")
+    if cal is not None:
+        L += ["## Calibration", "", f"- slope: {cal.coef_mean[0]:.6g} ± {cal.coef_cov[0, 0] ** 0.5:.2g} "
+              f"{cal.reading_unit}/g (posterior 1σ)", f"- offset: {cal.coef_mean[1]:.6g} {cal.reading_unit}", ""]
+    me, pr = arts.get("localization_error"), arts.get("predicted_error")
+    if me or pr:
+        L += ["## Localization error (collision phase)", "",
+              "| method | measured RMS | predicted RMS (MC, 1σ) | predicted p95 |", "|---|---|---|---|"]
+        mm = lambda v: f"{v * 1e3:.2f} mm" if v is not None else "—"   # noqa: E731
+        for m in METHODS:
+            a, b = (me or {}).get(m, {}), (pr or {}).get(m, {})
+            e = b.get("position_rms_m_error_estimate")
+            L.append(f"| {m} | {mm(a.get('position_error_rms_m'))} | {mm(b.get('position_rms_m'))}"
+                     + (f" ± {e * 1e3:.2f} mm" if e is not None else "") + f" | {mm(b.get('position_p95_m'))} |")
+        L.append("")
+    return "\n".join(L)
+
+
 RUNNERS = {"flexure_fem": run_flexure_fem, "sensor_chain": run_sensor_chain,
            "calibration_session": run_calibration_session, "calibration_fit": run_calibration_fit,
            "simulation": run_simulation, "raw_counts": run_raw_counts,
            "calibrated_torques": run_calibrated_torques, "estimates": run_estimates,
-           "localization_error": run_localization_error, "predicted_error": run_predicted_error}
+           "localization_error": run_localization_error, "predicted_error": run_predicted_error,
+           "sensor_log": run_sensor_log, "static_holds": run_static_holds,
+           "paper_scores": run_paper_scores, "error_map": run_error_map, "report": run_report}
 
 
 # ---------------------------------------------------------------- the graph
@@ -375,12 +613,77 @@ def _feasible(scene, art: str) -> str | None:
         return "no poke in the scene"
     if art == "torques" and c.log_file is None and scene.sim is None:
         return "no source"
+    if art == "log" and scene.sim is None:
+        return "not a dynamic simulation" + (" (a recorded log is read as it is)" if c.log_file else "")
+    if art == "static_log" and scene.static is None:
+        return "not a static scene (static_loading or posture_sweep)"
+    if art == "paper_scores" and scene.sim is None and scene.static is None:
+        return "no simulated scene to score"
+    if art == "error_map" and scene.prediction is None:
+        return "no posture-grid prediction settings (`propagate` builds them from its options)"
     return None
+
+
+def report_dir(scene) -> Path:
+    """Where the scene's reports go: [outputs].dir, else ./out/<scene name> (never the shipped
+    reports/ unless [outputs].regenerate_shipped)."""
+    d = scene.chain.report_dir
+    return Path(d) if d is not None else Path("out") / scene.name
+
+
+def report_areas(scene, have: set) -> tuple[list[str], list[tuple[str, str]]]:
+    """(areas to build, [(area, why not)]): an area runs when the scene computes what it is
+    about (``have``: the artifacts the other outputs need); an area listed in [outputs].reports
+    whose input the scene cannot produce is an error."""
+    from torquebench.scenes import report_areas_available
+
+    chosen = scene.chain.report_areas
+    run, skipped = [], []
+    for area in report_areas_available():
+        art = REPORT_INPUTS.get(area)
+        if chosen is not None and area not in chosen:
+            skipped.append((area, "not in outputs.reports"))
+            continue
+        if art is None:
+            if chosen is not None:
+                raise InputError(f"{scene.path}: outputs.reports: {area!r} is not about one scene; "
+                                 f"run `torquebench report --only {area}`")
+            skipped.append((area, "not about one scene"))
+            continue
+        if chosen is not None:
+            why = None if art == "calibration" and scene.chain.calibration_file else _feasible(scene, art)
+            if why:
+                raise InputError(f"{scene.path}: outputs.reports: {area!r} needs {art}, which this "
+                                 f"scene cannot produce ({why})")
+            run.append(area)
+        elif art in have:
+            run.append(area)
+        else:
+            skipped.append((area, f"the scene computes no {art}"))
+    return run, skipped
+
+
+def _uses(scene, stage: str, art: str) -> bool:
+    """Whether ``stage`` reads its declared input ``art`` for this scene (some inputs depend on
+    the scene: the bridge chain only for a bridge torque model, a calibration only when no gain
+    error is given, ...)."""
+    if stage == "sensor_log" and art == "chain":
+        return scene.sim.sensors.torque_model == "bridge"
+    if stage == "error_map" and art == "chain":
+        return scene.prediction.torque_noise_Nm is None
+    if stage == "error_map" and art == "calibration":
+        return scene.prediction.gain_error is None and scene.chain.calibration_file is not None
+    if stage == "paper_scores" and art == "log":
+        return scene.sim is not None
+    if stage == "report":
+        return False                     # its inputs are planned by report_areas
+    return True
 
 
 def plan(scene, outputs=None, cache=None, seed=None, force=False) -> list[Step]:
     """Steps in execution order, built backwards from ``outputs``."""
     default = DEFAULT_OUTPUTS if scene.sim is not None else ("estimates",) if scene.chain.log_file \
+        else ("error_map",) if scene.prediction is not None \
         else ("sensitivity",)          # a static scene: the sensor model only (run by `reproduce`)
     wants = [ALIASES.get(o, o) for o in (outputs or scene.chain.outputs or default)]
     for w in wants:
@@ -404,6 +707,8 @@ def plan(scene, outputs=None, cache=None, seed=None, force=False) -> list[Step]:
         for n in st.needs:
             opt = n.endswith("?")
             n = n.rstrip("?")
+            if not _uses(scene, st.name, n):
+                continue
             if n == "truth" and scene.chain.log_file is not None and art == "readings":
                 continue
             if opt and (given(scene, n) or _feasible(scene, n)):
@@ -411,7 +716,13 @@ def plan(scene, outputs=None, cache=None, seed=None, force=False) -> list[Step]:
             visit(n, f"needed by {st.name}")
 
     for w in wants:
-        visit(w, "requested output")
+        if w != "report":
+            visit(w, "requested output")
+    if "report" in wants:
+        areas, _ = report_areas(scene, set(needed))
+        needed["report"] = "requested output"
+        for art in sorted({REPORT_INPUTS[a] for a in areas}):
+            visit(art, "needed by report")
     seed = scene_seed(scene) if seed is None else seed
     steps, keys = [], {}
     for st in STAGES:
@@ -424,7 +735,15 @@ def plan(scene, outputs=None, cache=None, seed=None, force=False) -> list[Step]:
             continue
         if st.gives == "readings" and scene.chain.log_file is not None:
             pass
-        up = [keys.get(n.rstrip("?"), "") for n in st.needs]
+        if st.name == "report":          # writes files: always runs, never cached
+            areas, skipped = report_areas(scene, set(needed) - {"report"})
+            why = "; ".join(f"{a} ({r})" for a, r in skipped)
+            steps.append(Step(st, "run", f"{needed[st.gives]}; builders: {', '.join(areas) or 'none'}"
+                              f" + the scene summary, into {report_dir(scene)}"
+                              + (f"; not run: {why}" if why else "")))
+            continue
+        up = [keys.get(n.rstrip("?"), "") if _uses(scene, st.name, n.rstrip("?")) else ""
+              for n in st.needs]
         key = _key(st.name, _params(scene, st.name, seed), up)
         keys[st.gives] = key
         if cache is not None and not force and cache.has(key):
@@ -435,8 +754,8 @@ def plan(scene, outputs=None, cache=None, seed=None, force=False) -> list[Step]:
 
 
 def _key(stage, params, upstream) -> str:
-    blob = json.dumps({"stage": stage, "params": params, "up": upstream, "code": CODE_VERSION},
-                      sort_keys=True, default=str)
+    blob = json.dumps({"stage": stage, "params": params, "up": upstream, "code": CODE_VERSION,
+                       "packages": stage_code(stage)}, sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:32]
 
 
@@ -451,7 +770,7 @@ def execute(scene, outputs=None, cache=None, seed=None, force=False, counter=Non
     steps = plan(scene, outputs, cache, seed, force)
     arts, timing = {}, []
     if any(s.stage.gives == "calibration" and s.action == "skip" and scene.chain.calibration_file
-           for s in steps) and _wanted_cal(steps):
+           for s in steps) and _wanted_cal(scene, steps):
         arts["calibration"] = load_calibration(scene)
     for s in steps:
         if s.action == "skip":
@@ -467,13 +786,13 @@ def execute(scene, outputs=None, cache=None, seed=None, force=False, counter=Non
             value = fn(scene, inp, seed) if s.stage.name == "raw_counts" else fn(scene, inp)
             if counter is not None:
                 counter[s.stage.name] = counter.get(s.stage.name, 0) + 1
-            if cache is not None:
+            if cache is not None and s.key:
                 cache.put(s.key, value)
         arts[s.stage.gives] = value
         timing.append((s.stage.name, s.action, time.perf_counter() - t0))
     return arts, timing
 
 
-def _wanted_cal(steps):
+def _wanted_cal(scene, steps):
     return any(s.action != "skip" and "calibration" in [n.rstrip("?") for n in s.stage.needs]
-               for s in steps)
+               and _uses(scene, s.stage.name, "calibration") for s in steps)

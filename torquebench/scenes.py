@@ -70,8 +70,9 @@ class ChainSpec:
     gain over its model: 1.05 = 5 % more sensitive than calibrated, for validation);
     ``[calibration]``: ``file`` (a stored calibration JSON) or a simulated loading session
     (``masses_g``, ``lever_arm_m``, ``repeats``, ``n_avg``, ``seed``) fitted with emcee;
-    ``[source]``: ``log`` (a recorded CSV, optionally with raw ADC ``counts_columns``) or, when
-    absent, the simulation of the scene's top-level keys; ``[outputs] want = [...]``.
+    ``[source]``: ``log`` (a recorded CSV, optionally with raw sensor ``counts_columns`` holding
+    ``reading_unit`` "counts" (ADC codes, the default) or "mV", which a stored calibration must
+    read) or, when absent, the simulation of the scene's top-level keys; ``[outputs] want = [...]``.
     """
 
     flexure_design: Path | None = None
@@ -83,6 +84,31 @@ class ChainSpec:
     log_file: Path | None = None
     counts_columns: tuple = ()
     outputs: tuple = ()
+    reading_unit: str = "counts"             # what counts_columns hold: raw ADC "counts" or "mV"
+    report_areas: tuple | None = None        # [outputs] reports (None: every area the scene feeds)
+    report_dir: Path | None = None           # [outputs] dir (None: ./out/<scene name>)
+    regenerate_shipped: bool = False         # [outputs] regenerate_shipped: may write reports/
+
+
+@dataclass(frozen=True)
+class PredictionSpec:
+    """A posture-grid localization-error prediction (what `propagate` asks): contact (link, α),
+    force (magnitude, direction from +x), ``grid`` postures per joint over [0, π], Monte Carlo
+    ``draws`` and ``seed``, sample rate, observer gain, FT noise σ (Fx, Fz, My); an optional
+    given joint-torque σ (else the sensor chain's) and gain error (else the calibration's)."""
+
+    link: int
+    alpha: float
+    magnitude_N: float
+    direction_rad: float
+    grid: int = 10
+    draws: int = 500
+    seed: int = 0
+    sample_rate_Hz: float = 1000.0
+    gain_per_s: float = 100.0
+    ft_noise: tuple = (0.1, 0.1, 0.01)
+    torque_noise_Nm: float | None = None
+    gain_error: float | None = None
 
 
 @dataclass(frozen=True)
@@ -96,6 +122,8 @@ class Scene:
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
     chain: ChainSpec = field(default_factory=ChainSpec)
     robot: Robot | None = None
+    prediction: PredictionSpec | None = None
+    max_run_time_s: float = 600.0          # a run limit, not an input: not part of any cache key
 
 
 def _resolve_robot(f: _Fields, data: dict) -> Robot:
@@ -303,7 +331,7 @@ def _static(f: _Fields, data: dict, robot: Robot, name: str, kind: str) -> Stati
 
 
 OUTPUTS = ("sensitivity", "noise_budget", "flexure", "calibration", "estimates",
-           "localization_error", "predicted_error")
+           "localization_error", "predicted_error", "report")
 SESSION_KEYS = {"masses_g", "lever_arm_m", "repeats", "n_avg", "seed"}
 
 
@@ -347,7 +375,7 @@ def _chain_spec(f: _Fields, data: dict, kind: str) -> ChainSpec:
                    "n_avg": f.integer(ca, "n_avg", "calibration", 256, lo=1),
                    "seed": f.integer(ca, "seed", "calibration", 0, lo=0)}
     so = f.table(data, "source")
-    f.known(so, {"log", "counts_columns"}, "source")
+    f.known(so, {"log", "counts_columns", "reading_unit"}, "source")
     log_file = _file(f, so, "log", "source", "samples") if "log" in so else None
     cols = so.get("counts_columns", [])
     if not isinstance(cols, list) or not all(isinstance(c, str) for c in cols):
@@ -356,8 +384,22 @@ def _chain_spec(f: _Fields, data: dict, kind: str) -> ChainSpec:
         raise f.err("source.counts_columns", "counts columns need a recorded log (source.log)")
     if cols and cal_file is None and session is None:
         raise f.err("source.counts_columns", "raw ADC counts need a [calibration] to become torques")
+    unit = f.choice(so, "reading_unit", "source", ("counts", "mV"), "counts")
+    if "reading_unit" in so and not cols:
+        raise f.err("source.reading_unit", "says what source.counts_columns hold; there are none")
+    if cols and session is not None and unit != "counts":
+        raise f.err("source.reading_unit", f"the simulated calibration session reads ADC counts, "
+                    f"but source.counts_columns hold {unit!r}")
+    if cols and cal_file is not None:
+        from calibration.store import read_document
+
+        cal_unit = read_document(cal_file).get("reading_unit")
+        if cal_unit != unit:
+            raise f.err("calibration.file", f"{cal_file.name} converts readings in {cal_unit!r}, but "
+                        f"source.counts_columns hold {unit!r} (source.reading_unit); give a "
+                        f"calibration fitted to {unit!r} readings or set source.reading_unit")
     out = f.table(data, "outputs")
-    f.known(out, {"want"}, "outputs")
+    f.known(out, {"want", "reports", "dir", "regenerate_shipped"}, "outputs")
     want = out.get("want", [])
     if not isinstance(want, list) or not all(isinstance(w, str) for w in want):
         raise f.err("outputs.want", f"expected a list of output names, got {want!r}")
@@ -365,8 +407,54 @@ def _chain_spec(f: _Fields, data: dict, kind: str) -> ChainSpec:
         if w not in OUTPUTS:
             raise f.err("outputs.want", f"unknown output {w!r}{_nearest(w, OUTPUTS)} "
                         f"(known: {', '.join(OUTPUTS)})")
+    areas, report_dir, shipped = _report_fields(f, out, "report" in want)
     return ChainSpec(design, spn, sensor_file, gain, cal_file, session, log_file, tuple(cols),
-                     tuple(want))
+                     tuple(want), unit, areas, report_dir, shipped)
+
+
+def report_areas_available() -> list[str]:
+    """The report builders: every module torquebench/reports/<area>.py (not imported here)."""
+    import pkgutil
+
+    import torquebench.reports
+
+    return sorted(i.name for i in pkgutil.iter_modules(torquebench.reports.__path__)
+                  if not i.name.startswith("_"))
+
+
+def _report_fields(f: _Fields, out: dict, wanted: bool):
+    """[outputs] reports / dir / regenerate_shipped: which builders, and where they write."""
+    given = sorted(set(out) & {"reports", "dir", "regenerate_shipped"})
+    if given and not wanted:
+        raise f.err(f"outputs.{given[0]}", "is about reports, but outputs.want has no \"report\"")
+    areas = None
+    if "reports" in out:
+        areas = out["reports"]
+        known = report_areas_available()
+        if not isinstance(areas, list) or not areas or not all(isinstance(a, str) for a in areas):
+            raise f.err("outputs.reports", f"expected a non-empty list of report areas, got {areas!r}")
+        for a in areas:
+            if a not in known:
+                raise f.err("outputs.reports", f"unknown report area {a!r}{_nearest(a, known)} "
+                            f"(known: {', '.join(known)})")
+        areas = tuple(dict.fromkeys(areas))
+    shipped = out.get("regenerate_shipped", False)
+    if not isinstance(shipped, bool):
+        raise f.err("outputs.regenerate_shipped", f"expected true or false, got {shipped!r}")
+    shipped_dir = (REPO_ROOT / "reports").resolve()
+    if "dir" in out:
+        report_dir = Path(f.string(out, "dir", "outputs"))
+        if shipped and report_dir.resolve() != shipped_dir:
+            raise f.err("outputs.regenerate_shipped", f"writes the shipped {shipped_dir}; "
+                        "drop outputs.dir or this flag")
+    else:
+        report_dir = shipped_dir if shipped else None
+    if report_dir is not None and report_dir.resolve() == shipped_dir and not shipped:
+        raise f.err("outputs.dir", f"{report_dir} is the shipped reports directory; set "
+                    "outputs.regenerate_shipped = true to replace the shipped reports")
+    if report_dir is not None and report_dir.exists() and not report_dir.is_dir():
+        raise f.err("outputs.dir", f"{report_dir} exists and is not a directory")
+    return areas, report_dir, shipped
 
 
 def _nearest(key, allowed) -> str:
@@ -437,6 +525,25 @@ def scene_path(name: str) -> Path:
     if not cand.is_file():
         raise InputError(f"--scene: no scene {name!r} (looked for {cand})")
     return cand
+
+
+def prediction_scene(robot: Robot, chain: ChainSpec, prediction: PredictionSpec,
+                     name: str = "propagate") -> Scene:
+    """A scene with no simulation that asks for a posture-grid prediction (built by `propagate`
+    from its options)."""
+    return Scene(name, "prediction", Path(f"<{name} options>"), "", None, None,
+                 chain=chain, robot=robot, prediction=prediction)
+
+
+def with_seed(scene: Scene, seed: int | None) -> Scene:
+    """A copy whose sensor-noise seed (dynamic or static scene) is ``seed`` (None: unchanged)."""
+    if seed is None:
+        return scene
+    if scene.sim is not None:
+        return replace(scene, sim=replace(scene.sim, sensors=replace(scene.sim.sensors, seed=seed)))
+    if scene.static is not None:
+        return replace(scene, static=replace(scene.static, sensors=replace(scene.static.sensors, seed=seed)))
+    return scene
 
 
 def with_overrides(scene: Scene, **kw) -> Scene:

@@ -3,7 +3,10 @@
 Each point is (scene path, {dotted key: value}); it runs the stage graph with the shared cache,
 so an interrupted sweep resumes from the cache and points sharing upstream stages reuse them.
 Seeds come from the scene (and the point's own overrides), never from the executor: results are
-identical whatever runs them. A failing point returns its error; the others are kept.
+identical whatever runs them. A failing point returns its error; the others are kept. Before
+fanning out, the first point runs alone in this process: it computes the stages whose key is the
+same at every point (the shared upstream prefix, e.g. the simulation when only the seed varies)
+and imports what the stages need; forked workers inherit both.
 Executors: ``local`` (in process), ``processes:N`` (process pool), ``dask://HOST:PORT``
 (dask.distributed, the optional extra ``[dask]``).
 """
@@ -55,29 +58,80 @@ def run_point(scene_path: str, overrides: dict, outputs, cache_dir) -> dict:
         return {"point": overrides, "error": f"{type(exc).__name__}: {exc}"}
 
 
-def run_sweep(scene_path, vary, outputs=None, executor="processes:2", cache_dir=None) -> list[dict]:
+def shared_stages(scene_path, pts: list[dict], outputs) -> tuple[list[str], dict | None]:
+    """The stages whose key is the same at every point that loads (a key covers the stage's
+    inputs and its upstream keys, so these form the shared upstream prefix), and the first point
+    that loads (None if none does)."""
+    from torquebench import pipeline as P
+    from torquebench.scenes import load_scene
+
+    keysets, first = [], None
+    for p in pts:
+        try:
+            steps = P.plan(load_scene(scene_path, p), outputs, None)
+        except Exception:             # a failing point is reported when it runs
+            continue
+        first = p if first is None else first
+        keysets.append({s.stage.gives: s.key for s in steps if s.key})
+    if len(keysets) < 2:
+        return [], first
+    return [P.BY_GIVES[a].name for a, k in keysets[0].items()
+            if all(ks.get(a) == k for ks in keysets[1:])], first
+
+
+def run_sweep(scene_path, vary, outputs=None, executor="processes:2", cache_dir=None,
+              info: dict | None = None) -> list[dict]:
+    """Rows per point, in the order of the grid. Before fanning out, the first point that loads
+    runs alone in this process: it computes the stages every point shares (``info``, if given,
+    receives their names as ``shared_stages``) and imports what a point needs, which forked
+    workers then inherit instead of each computing and importing it on an empty cache."""
     pts = points(vary)
     args = [(str(scene_path), p, outputs, cache_dir) for p in pts]
     if executor == "local":
         return [run_point(*a) for a in args]
-    if executor.startswith("processes"):
-        _, _, n = executor.partition(":")
+    if not (executor.startswith("processes") or executor.startswith("dask://")):
+        raise InputError(f"--executor: expected local, processes:N or dask://HOST:PORT, got {executor!r}")
+    workers = _workers(executor) if executor.startswith("processes") else None
+    if workers is None:
         try:
-            workers = int(n) if n else 2
-        except ValueError:
-            raise InputError(f"--executor: expected processes:N, got {executor!r}") from None
-        if workers < 1:
-            raise InputError(f"--executor: N must be ≥ 1, got {workers}")
-        from concurrent.futures import ProcessPoolExecutor
-
-        with ProcessPoolExecutor(workers) as pool:
-            return list(pool.map(run_point, *zip(*args)))
-    if executor.startswith("dask://"):
-        try:
-            from distributed import Client
+            import distributed  # noqa: F401
         except ImportError:
             raise InputError("--executor dask://: dask.distributed is not installed "
                              "(pip install -e .[dask])") from None
+    shared, first = shared_stages(str(scene_path), pts, outputs)
+    if info is not None:
+        info["shared_stages"] = shared
+    rows = [None] * len(pts)
+    if first is not None and len(pts) > 1:
+        if shared:
+            import sys
+            print(f"sweep: the first point runs alone: it computes the stages every point shares "
+                  f"({', '.join(shared)})", file=sys.stderr)
+        i = pts.index(first)
+        rows[i] = run_point(*args[i])
+    rest = [i for i, r in enumerate(rows) if r is None]
+    todo = list(zip(*(args[i] for i in rest)))
+    if workers is not None:
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(workers) as pool:
+            done = list(pool.map(run_point, *todo)) if rest else []
+    else:
+        from distributed import Client
+
         with Client(executor.removeprefix("dask://"), timeout=10) as client:
-            return client.gather(client.map(run_point, *zip(*args), pure=False))
-    raise InputError(f"--executor: expected local, processes:N or dask://HOST:PORT, got {executor!r}")
+            done = client.gather(client.map(run_point, *todo, pure=False)) if rest else []
+    for i, r in zip(rest, done):
+        rows[i] = r
+    return rows
+
+
+def _workers(executor: str) -> int:
+    _, _, n = executor.partition(":")
+    try:
+        workers = int(n) if n else 2
+    except ValueError:
+        raise InputError(f"--executor: expected processes:N, got {executor!r}") from None
+    if workers < 1:
+        raise InputError(f"--executor: N must be ≥ 1, got {workers}")
+    return workers

@@ -1,6 +1,7 @@
 """`torquebench propagate`: what contact-localization error will this sensor design give on the leg?
 
-Composes the packages: a sensor configuration (bridge/ADC, ``scenes/paper_sensor.toml``) and a
+A view over the stage graph (torquebench.pipeline: sensor_chain → error_map): the options make a
+scene. A sensor configuration (bridge/ADC, ``scenes/paper_sensor.toml``) and a
 strain per N·m (given, or from the bridge default) give the joint-torque noise σ_τ; a calibration
 file gives the slope uncertainty (a systematic gain error); the FT sensor noise is Table II's.
 ``estimator.uncertainty`` then propagates them through the localizer over a grid of postures
@@ -69,39 +70,32 @@ def add_arguments(parser) -> None:
     parser.add_argument("--png", type=Path, help="write a heat map of the position error (m) over the posture grid; directory created, an existing file is never replaced")
 
 
-def sensor_noise_from_args(args):
-    """(SensorNoise, provenance dict) from the command line."""
-    from bridge.chain import SensorChain, paper_chain
-    from bridge.config import load_sensor_config
-    from estimator.uncertainty import SensorNoise
-
+def provenance_from_args(args) -> dict:
+    """Where σ_τ and the gain error come from, as the command line says."""
     provenance = {}
     if args.torque_noise_Nm is not None:
-        sigma_tau = args.torque_noise_Nm
         provenance["torque_noise_source"] = "--torque-noise-Nm"
+    elif args.sensor is not None:
+        provenance["torque_noise_source"] = f"bridge chain of {args.sensor}"
     else:
-        if args.sensor is not None:
-            config, spn = load_sensor_config(args.sensor)
-            spn = args.strain_per_Nm or spn
-            chain = SensorChain(config, spn) if spn else SensorChain(config)
-            provenance["torque_noise_source"] = f"bridge chain of {args.sensor}"
-        else:
-            chain = paper_chain(args.strain_per_Nm)
-            provenance["torque_noise_source"] = "bridge chain of the paper's sensor"
-        sigma_tau = chain.noise_std_Nm
-        provenance["strain_per_Nm"] = chain.strain_per_Nm
-    gain_error = args.gain_error
-    if gain_error is None and args.calibration is not None:
-        import calibration
+        provenance["torque_noise_source"] = "bridge chain of the paper's sensor"
+    return provenance
 
-        model = calibration.load(args.calibration)
-        i = list(model.coef_names).index("slope")
-        gain_error = math.sqrt(model.coef_cov[i, i]) / abs(model.coef_mean[i])
-        provenance["gain_error_source"] = str(args.calibration)
-    noise = SensorNoise(torque_std_Nm=sigma_tau, wrench_std=_floats(args.ft_noise, 3, "--ft-noise"),
-                        torque_gain_rel_std=gain_error or 0.0, sample_rate_Hz=args.rate,
-                        gain_per_s=args.gain)
-    return noise, provenance
+
+def scene_from_args(args, robot, link, alpha, magnitude, direction):
+    """The prediction scene of the command line: robot, [sensor] file, strain per N·m and
+    calibration file as the chain's inputs, and the posture-grid settings."""
+    from torquebench.scenes import ChainSpec, PredictionSpec, prediction_scene
+
+    if args.sensor is not None and not Path(args.sensor).is_file():
+        raise InputError(f"--sensor: {args.sensor}: file not found")
+    chain = ChainSpec(strain_per_Nm=args.strain_per_Nm, sensor_file=args.sensor,
+                      calibration_file=args.calibration)
+    pred = PredictionSpec(link=link, alpha=alpha, magnitude_N=magnitude, direction_rad=direction,
+                          grid=args.grid, draws=args.draws, seed=args.seed, sample_rate_Hz=args.rate,
+                          gain_per_s=args.gain, ft_noise=tuple(_floats(args.ft_noise, 3, "--ft-noise")),
+                          torque_noise_Nm=args.torque_noise_Nm, gain_error=args.gain_error)
+    return prediction_scene(robot, chain, pred)
 
 
 def run(args) -> int:
@@ -110,7 +104,8 @@ def run(args) -> int:
     seed(args.seed)                              # negative seeds → exit 2
     _finite_args(args)
     from estimator.robot import load_robot, paper_leg
-    from estimator.uncertainty import first_order, monte_carlo
+    from torquebench import pipeline as P
+    from torquebench.cache import Cache
     from torquebench.io import print_json
 
     robot = load_robot(args.robot) if args.robot else paper_leg()
@@ -133,43 +128,21 @@ def run(args) -> int:
         raise InputError("--png: the heat map is drawn for two-link robots only")
     from torquebench.outputs import prepare_file
     prepare_file(args.png, "--png", force_flag=None)
-    noise, provenance = sensor_noise_from_args(args)
-    force = magnitude * np.array([math.cos(direction), math.sin(direction)])
-    axes = [np.linspace(0.0, math.pi, args.grid)] * robot.n_links
-    postures = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, robot.n_links)
+    scene = scene_from_args(args, robot, link, alpha, magnitude, direction)
+    arts, _ = P.execute(scene, ["error_map"], Cache())       # sensor_chain → error_map (stage graph)
+    em = arts["error_map"]
+    noise, axes, maps = em["noise"], em["axes"], em["maps"]
+    provenance = provenance_from_args(args)
+    if "chain" in arts:
+        provenance["strain_per_Nm"] = arts["chain"].strain_per_Nm
+    if args.gain_error is None and args.calibration is not None:
+        provenance["gain_error_source"] = str(args.calibration)
 
     results = {"torque_noise_std_Nm": float(noise.torque_std_Nm[0]),
                "gain_error_rel_std": float(noise.torque_gain_rel_std[0]),
-               "ft_noise": noise.wrench_std.tolist(), "postures": len(postures),
+               "ft_noise": noise.wrench_std.tolist(), "postures": em["postures"],
                "contact": {"link": link, "alpha": alpha, "force_N": magnitude, "direction_rad": direction},
-               **provenance, "methods": {}}
-    maps = {}
-    for method in ("dynamic", "paper"):
-        mc = monte_carlo(robot, postures, link, alpha, force, noise, draws=args.draws,
-                         rng=args.seed, method=method)
-        fo = first_order(robot, postures, link, alpha, force, noise, method=method)
-        usable = mc.flagged_fraction < 0.05
-        pos = mc.position_rms_m[usable]
-        ratio = mc.position_rms_m[usable] / fo.position_rms_m[usable]
-        worst = int(np.flatnonzero(usable)[np.argmax(mc.position_p95_m[usable])]) if pos.size else None
-        results["methods"][method] = {
-            "position_rms_median_m": float(np.median(pos)) if pos.size else None,
-            "position_rms_median_m_error_estimate":
-                float(np.median(mc.position_rms_se_m[usable])) if pos.size else None,
-            "position_rms_median_m_error_method":
-                f"Monte Carlo standard error (1 sigma, delta method), median over postures, {args.draws} draws",
-            "position_rms_max_m": float(np.max(pos)) if pos.size else None,
-            "position_p95_max_m": float(np.max(mc.position_p95_m[usable])) if pos.size else None,
-            "position_p95_max_m_error_estimate":
-                float(mc.position_p95_se_m[worst]) if pos.size else None,
-            "position_p95_max_m_error_method":
-                f"Monte Carlo standard error (1 sigma) of the 95th percentile at the worst posture, "
-                f"from the binomial spread of order statistics, {args.draws} draws",
-            "force_rms_median_N": float(np.median(mc.force_rms_N[usable])) if pos.size else None,
-            "flagged_postures": int((~usable).sum()),
-            "monte_carlo_over_first_order_median": float(np.median(ratio)) if pos.size else None,
-        }
-        maps[method] = np.where(usable, mc.position_rms_m, np.nan)
+               **provenance, "methods": dict(em["methods"])}
     if args.png:
         _heat_map(args.png, maps, axes)
         results["png"] = str(args.png)
@@ -179,7 +152,7 @@ def run(args) -> int:
     print(f"σ_τ = {results['torque_noise_std_Nm']:.4g} N·m ({provenance.get('torque_noise_source')}), "
           f"gain error {results['gain_error_rel_std']:.3g}, σ_FT = {results['ft_noise']}")
     print(f"contact: link {link}, α = {alpha}, |F| = {magnitude} N at {direction:.3f} rad; "
-          f"{len(postures)} postures × {args.draws} draws")
+          f"{results['postures']} postures × {args.draws} draws")
     print(f"{'method':8s} {'median |p| RMS':>15s} {'max |p| RMS':>12s} {'max p95':>9s} "
           f"{'median |F| RMS':>15s} {'flagged':>8s} {'MC/1st-order':>13s}")
     for method, m in results["methods"].items():

@@ -20,7 +20,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("scene", type=Path, help="scene TOML (e.g. scenes/end_to_end.toml)")
     parser.add_argument("--only", nargs="+", metavar="OUTPUT", default=None,
                         help="outputs to compute (localization_error, predicted_error, calibration, "
-                             "sensitivity, noise_budget, flexure, estimates)")
+                             "sensitivity, noise_budget, flexure, estimates, report) (default: the "
+                             "scene's [outputs] want)")
     parser.add_argument("--explain", action="store_true", help="print the plan; run nothing")
     parser.add_argument("--force", action="store_true", help="ignore cached results")
     parser.add_argument("--seed", type=int, default=None, help="sensor-noise seed (default: the scene's)")
@@ -54,6 +55,8 @@ def summarize(arts: dict) -> dict:
         out["measured"] = arts["localization_error"]
     if "predicted_error" in arts:
         out["predicted"] = arts["predicted_error"]
+    if "report" in arts:
+        out["report"] = arts["report"]
     return out
 
 
@@ -97,6 +100,9 @@ def run(args) -> int:
             pe = pr.get("position_rms_m_error_estimate")
             pred = f"{f(pr.get('position_rms_m'))} ± {pe * 1e3:.2f} mm" if pe is not None else "—"
             print(f"{m:8s} {f(me):>21s} {pred:>22s} {f(pr.get('position_p95_m')):>14s}")
+    if "report" in out:
+        r = out["report"]
+        print(f"report: {r['summary']}" + (f" + {', '.join(r['areas'])} in {r['dir']}" if r["areas"] else ""))
     if "flagged_samples" in out:
         print(f"saturated/out-of-range samples kept out of detection: {out['flagged_samples']}")
     return 0

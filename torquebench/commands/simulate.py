@@ -1,9 +1,12 @@
-"""`torquebench simulate SCENE.toml --out LOG.csv`: run a scene, write the log and its truth."""
+"""`torquebench simulate SCENE.toml --out LOG.csv`: run a scene, write the log and its truth.
+
+A view over the stage graph (torquebench.pipeline): the scene (with the command line's overrides)
+asks for the ``log`` (simulation → sensor_log) or, for a static scene, the ``static_log``
+(static_holds); results come from the stage cache when the same scene was run before."""
 
 from __future__ import annotations
 
 import sys
-import time
 from pathlib import Path
 
 from torquebench.errors import InputError
@@ -34,46 +37,36 @@ def truth_path(out: Path) -> Path:
     return out.with_name(out.stem + ".truth" + (out.suffix or ".csv"))
 
 
-def run_scene(scene, seed=None, integrator=None, duration=None, max_run_time_s=600.0):
-    """(SensorLog, truth dict, stats) of a dynamic or static scene."""
+def scene_from_args(args, max_run_time_s: float):
+    """The scene file with the command line's overrides (seed, integrator, duration, run limit)."""
     from dataclasses import replace
 
-    from estimator.sim import simulate
-    from estimator.sim.static import static_hold_log
-    import numpy as np
+    from torquebench.scenes import load_scene, with_overrides, with_seed
 
+    scene = with_seed(load_scene(args.scene), args.seed)
+    if scene.sim is None and scene.static is None:
+        raise InputError(f"{args.scene}: source.log: the scene reads a recorded log; there is "
+                         "nothing to simulate")
     if scene.sim is not None:
-        cfg = scene.sim
-        if seed is not None:
-            cfg = replace(cfg, sensors=replace(cfg.sensors, seed=seed))
-        if integrator is not None:
+        if args.integrator is not None:
             from estimator.sim.config import INTEGRATORS
-            if integrator not in INTEGRATORS:
-                raise InputError(f"--integrator: must be one of {', '.join(INTEGRATORS)}, got {integrator!r}")
-            cfg = replace(cfg, integrator=integrator)
-        if duration is not None:
-            if not (duration > 0 and duration < float("inf")):
-                raise InputError(f"--duration: must be > 0, got {duration}")
-            cfg = replace(cfg, duration_s=duration)
-        res = simulate(cfg, max_run_time_s=max_run_time_s)
-        return res.log, res.truth, res.stats
-    st = scene.static
-    sensors = st.sensors if seed is None else replace(st.sensors, seed=seed)
-    start = time.perf_counter()
-    pts = st.points
-    log, truth, _ = static_hold_log(st.robot, np.array([p.q_rad for p in pts]),
-                                    np.array([p.link for p in pts]), np.array([p.alpha for p in pts]),
-                                    np.array([p.force_N for p in pts]), sensors, st.hold_s,
-                                    tare_s=0.3)
-    return log, truth, {"integrator": "static", "run_time_s": time.perf_counter() - start,
-                        "points": len(pts)}
+            if args.integrator not in INTEGRATORS:
+                raise InputError(f"--integrator: must be one of {', '.join(INTEGRATORS)}, "
+                                 f"got {args.integrator!r}")
+            scene = with_overrides(scene, integrator=args.integrator)
+        if args.duration is not None:
+            if not (args.duration > 0 and args.duration < float("inf")):
+                raise InputError(f"--duration: must be > 0, got {args.duration}")
+            scene = with_overrides(scene, duration_s=args.duration)
+    return replace(scene, max_run_time_s=max_run_time_s)
 
 
 def run(args) -> int:
     from estimator.sim.output import log_csv, truth_csv
     from torquebench.io import print_json
+    from torquebench import pipeline as P
+    from torquebench.cache import Cache
     from torquebench.outputs import prepare_file
-    from torquebench.scenes import load_scene
     from userio.errors import finite, seed
     from userio.files import plan_outputs, write_files_atomic
 
@@ -91,8 +84,10 @@ def run(args) -> int:
     if tol is not None:
         finite(tol, "--error-tolerance", positive=True)
     max_run = finite(getattr(args, "max_run_time", 600.0), "--max-run-time", positive=True)
-    scene = load_scene(args.scene)
-    log, truth, stats = run_scene(scene, args.seed, args.integrator, args.duration, max_run)
+    scene = scene_from_args(args, max_run)
+    want = "log" if scene.sim is not None else "static_log"    # the stage graph: simulation → sensor_log
+    arts, _ = P.execute(scene, [want], Cache())
+    log, truth, stats = (arts[want][k] for k in ("log", "truth", "stats"))
     write_files_atomic([(out, log_csv(log)), (tpath, truth_csv(truth))])   # log + truth: a set
     summary = {"scene": scene.name, "log": str(out), "truth": str(tpath), "samples": len(log.t),
                "duration_s": float(log.t[-1]) if len(log.t) else 0.0,

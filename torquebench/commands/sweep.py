@@ -26,12 +26,13 @@ def run(args) -> int:
     from torquebench.sweep import parse_vary, run_sweep
 
     path = scene_path(str(args.scene))
+    info = {}
     rows = run_sweep(path, parse_vary(args.vary), args.only, args.executor,
-                     str(args.cache_dir) if args.cache_dir else None)
+                     str(args.cache_dir) if args.cache_dir else None, info=info)
     failed = [r for r in rows if "error" in r]
     if args.json:
         print_json({"scene": str(path), "executor": args.executor, "points": rows,
-                    "failed_points": len(failed)})
+                    "failed_points": len(failed), "shared_stages": info.get("shared_stages", [])})
         return 0
     for r in rows:
         pt = ", ".join(f"{k}={v}" for k, v in r["point"].items())
