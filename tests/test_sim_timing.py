@@ -74,3 +74,21 @@ def test_a_declared_log_keeps_its_declaration():
 
     table = tomllib.loads(text)["timing"]
     assert table["Fx"] == "mean" and table["tau2"] == "delay:0.0005"
+
+
+
+def test_simulate_command_writes_the_declaration_with_the_log(tmp_path, capsys):
+    """`torquebench simulate` writes log, truth and timing declaration as one set, and `estimate`
+    on that log reads the declaration (no --timing needed)."""
+    import json
+
+    from torquebench.cli import main
+
+    out = tmp_path / "sim" / "log.csv"
+    assert main(["simulate", "scenes/paper_fixed_link2.toml", "--out", str(out), "--json",
+                 "--duration", "0.3"]) == 0
+    sim = json.loads(capsys.readouterr().out)
+    timing = tmp_path / "sim" / "log.timing.toml"
+    assert sim["timing"] == str(timing) and 'default = "instant"' in timing.read_text()
+    assert main(["estimate", str(out), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["timing_source"] == "log declaration"

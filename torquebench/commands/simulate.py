@@ -11,7 +11,7 @@ from pathlib import Path
 
 from torquebench.errors import InputError
 
-HELP = "simulate a scene file: write a sensor log CSV (docs/conventions.md) and LOG.truth.csv beside it"
+HELP = "simulate a scene file: write a sensor log CSV (docs/conventions.md), LOG.truth.csv and its sensor timing LOG.timing.toml beside it"
 EXAMPLES = """\
 torquebench simulate scenes/paper_floating_link1.toml --out out/floating_link1.csv
 torquebench simulate scenes/paper_fixed_link2.toml --out out/fixed_link2.csv --seed 7 --duration 1.0 --json
@@ -20,7 +20,7 @@ torquebench simulate scenes/paper_fixed_link2.toml --out out/fixed_link2.csv --s
 
 def add_arguments(parser) -> None:
     parser.add_argument("scene", type=Path, help="scene TOML file (docs/conventions.md), e.g. scenes/paper_floating_link1.toml")
-    parser.add_argument("--out", type=Path, required=True, help="sensor log CSV to write (SI units); LOG.truth.csv is written beside it; directory created, existing files kept unless --force")
+    parser.add_argument("--out", type=Path, required=True, help="sensor log CSV to write (SI units); LOG.truth.csv and LOG.timing.toml are written beside it; directory created, existing files kept unless --force")
     parser.add_argument("--integrator", default=None,
                         help="integrator: RK45, DOP853, Radau, BDF, LSODA or RK4 (default: the scene's [integrator] method)")
     parser.add_argument("--seed", type=int, default=None, help="sensor-noise seed (default: the scene's [sensors] seed)")
@@ -62,7 +62,7 @@ def scene_from_args(args, max_run_time_s: float):
 
 
 def run(args) -> int:
-    from estimator.sim.output import log_csv, truth_csv
+    from estimator.sim.output import log_files, timing_path
     from torquebench.io import print_json
     from torquebench import pipeline as P
     from torquebench.cache import Cache
@@ -74,9 +74,11 @@ def run(args) -> int:
     if args.duration is not None:
         finite(args.duration, "--duration", positive=True)
     out, tpath = Path(args.out), truth_path(Path(args.out))
-    for p in (out, tpath):
+    timing_file = timing_path(out)
+    for p in (out, tpath, timing_file):
         prepare_file(p, "--out", force=args.force, inputs=(args.scene,))   # mkdir, --force
-    plan_outputs({"scene": args.scene}, {"--out": out, "truth (--out with .truth.csv)": tpath})
+    plan_outputs({"scene": args.scene}, {"--out": out, "truth (--out with .truth.csv)": tpath,
+                                         "timing (--out with .timing.toml)": timing_file})
     if out.suffix == ".toml":
         raise InputError(f"--out: {out} looks like a scene/robot file; refusing to overwrite it "
                          "with a log (the log is a CSV)")
@@ -88,8 +90,9 @@ def run(args) -> int:
     want = "log" if scene.sim is not None else "static_log"    # the stage graph: simulation → sensor_log
     arts, _ = P.execute(scene, [want], Cache())
     log, truth, stats = (arts[want][k] for k in ("log", "truth", "stats"))
-    write_files_atomic([(out, log_csv(log)), (tpath, truth_csv(truth))])   # log + truth: a set
-    summary = {"scene": scene.name, "log": str(out), "truth": str(tpath), "samples": len(log.t),
+    write_files_atomic(log_files(out, log, truth, tpath))     # log + truth + timing: a set
+    summary = {"scene": scene.name, "log": str(out), "truth": str(tpath),
+               "timing": str(timing_file), "samples": len(log.t),
                "duration_s": float(log.t[-1]) if len(log.t) else 0.0,
                "contact_samples": int((truth["link"] > 0).sum()), **stats}
     est = summary.get("q_rad_error_estimate")
@@ -101,7 +104,7 @@ def run(args) -> int:
         print_json(summary)
     else:
         print(f"{scene.name}: {summary['samples']} samples, {summary['contact_samples']} in contact "
-              f"→ {out} (+ {tpath.name}); {stats.get('integrator')} in {stats['run_time_s']:.2f} s"
+              f"→ {out} (+ {tpath.name}, {timing_file.name}); {stats.get('integrator')} in {stats['run_time_s']:.2f} s"
               + (f"; integration error ± {stats['q_rad_error_estimate']:.2g} rad"
                  if "q_rad_error_estimate" in stats else ""),
               file=sys.stdout)
