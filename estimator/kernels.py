@@ -20,6 +20,25 @@ def available() -> bool:
     return ENABLED and _load() is not None
 
 
+def warm() -> bool:
+    """Compile the loops once on a two-sample paper leg (numba writes them to its cache beside
+    this file, so the first estimate does not pay the compile); False without numba."""
+    if not available():
+        return False
+    from estimator.localization import _weights
+    from estimator.observer import full_robot
+    from estimator.robot import paper_leg
+
+    robot = full_robot(paper_leg())
+    q = np.zeros((2, 5))
+    PT, uT = momentum_terms_T(robot, q, q, q)
+    for q_now in (q, None):         # the estimator passes the current posture; localize alone not
+        localize_dynamic(robot, q, uT.T + 1.0, _weights(5, None), q_now, min_force_N=0.05,
+                         max_condition=20.0, ambiguity_tol=1e-3, position_tol_m=0.005,
+                         bound_tol=0.05)
+    return True
+
+
 def _load():
     global _KERNELS
     if _KERNELS is None:
