@@ -66,13 +66,18 @@ def test_observer_rows_trade_delay_against_noise():
 
 def test_observer_detection_delay_is_below_one_sample_far_above_threshold_and_ln2_over_K_near_it():
     """7 N is far above the threshold: detected on the first sample holding it (< Δt, not "0").
-    At twice the threshold the statistic crosses half its final value: ln 2 / K (first-order lag)."""
+    At twice the threshold the noise-free statistic crosses half its final value at ln 2 / K
+    (first-order lag); with noise, no later."""
     rows, _ = evr.observer_rows(quick=True)
     for r in rows:
         assert "first sample" in r["delay_7N"]
-    slow = {r["setting"]: r for r in rows}["K = 30 1/s @ 1000 Hz"]
-    assert abs(slow["delay_2x_threshold_s"] - np.log(2) / 30) < 0.3 * np.log(2) / 30
-    assert 0.0 < slow["force_2x_threshold_N"] < 0.5
+    for r in rows:
+        dt = 1.0 / float(r["family"].split()[0])
+        # noise-free: the lag's crossing of half its final value, to within one sample
+        assert abs(r["delay_2x_noise_free_s"] - r["ln2_over_K_s"]) <= dt + 1e-9, r["setting"]
+        # with noise the statistic only gets an extra push: never later than one sample after that
+        assert r["delay_2x_threshold_s"] <= r["delay_2x_noise_free_s"] + dt + 1e-9, r["setting"]
+        assert 0.0 < r["force_2x_threshold_N"] < 0.5
 
 
 def test_localizer_rows_dynamic_beats_paper_on_the_moving_leg():
@@ -105,6 +110,6 @@ def test_fem_section_quick_has_the_contract_and_p1_error_falls_with_refinement(t
         assert f"### Flexure FEM, paper disc: {fig}" in text
     assert "Cheapest setting for a target" in text and "QUICK mode" in text
     rows = [ln for ln in lines if ln.startswith("| P1, h × ")]
-    assert len(rows) == 8
-    values = [float(ln.split("|")[-2]) for ln in rows[:4]]              # gauge strain, coarse → fine
+    assert len(rows) == 6
+    values = [float(ln.split("|")[-2]) for ln in rows[:3]]              # gauge strain, coarse → fine
     assert values == sorted(values)                                     # P1 too stiff, rising to the limit

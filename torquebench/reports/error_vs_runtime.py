@@ -311,7 +311,7 @@ def propagation_section(out_dir: Path, quick: bool = False):
 
 
 # ------------------------------------------------------------------ observer and localizer
-def _static_step_log(rate_Hz: float, seed: int = 3, force_N: float = 7.0):
+def _static_step_log(rate_Hz: float, seed: int = 3, force_N: float = 7.0, noisy: bool = True):
     """Fixed-base leg held still; a 7 N poke on link 2 (α = 0.6) switches on at t = 0.5 s for 1 s."""
     from estimator.robot import paper_leg
     from estimator.sim.config import Sensors
@@ -319,10 +319,14 @@ def _static_step_log(rate_Hz: float, seed: int = 3, force_N: float = 7.0):
 
     robot = paper_leg(floating=False)
     F = force_N * np.array([np.cos(-np.pi / 3), np.sin(-np.pi / 3)])
-    sensors = Sensors(sample_rate_Hz=rate_Hz, torque_noise_Nm=0.0133, ft_noise=np.array([0.1, 0.1, 0.01]),
+    k = 1.0 if noisy else 0.0
+    sensors = Sensors(sample_rate_Hz=rate_Hz, torque_noise_Nm=0.0133 * k, ft_noise=k * np.array([0.1, 0.1, 0.01]),
                       seed=seed)
     log, truth, _ = static_hold_log(robot, np.array([[0.5, -1.0]]), 2, 0.6, F, sensors, 1.0, tare_s=0.5)
     return robot, log, truth, F
+
+
+NEAR_SEEDS = 5          # noise realizations behind the near-threshold delay (median)
 
 
 def _first_detection_delay(est, log, t_on: float) -> float:
@@ -359,9 +363,15 @@ def observer_rows(quick: bool = False) -> tuple[list[dict], dict]:
             # near the threshold: the force whose steady statistic is 2 × the threshold
             thr = float(np.sqrt(raw.info["chi2_threshold"]))
             f2 = 2.0 * thr / (r_ss / mag)
-            robot2, log2, truth2, _ = _static_step_log(rate, force_N=f2)
-            near = estimate(robot2, log2, "dynamic", g, lag_compensation=False)
-            delay2 = _first_detection_delay(near, log2, float(log2.t[np.argmax(truth2["link"] > 0)]))
+            delays2 = []
+            for seed in range(11, 11 + NEAR_SEEDS):
+                robot2, log2, truth2, _ = _static_step_log(rate, seed=seed, force_N=f2)
+                near = estimate(robot2, log2, "dynamic", g, lag_compensation=False)
+                delays2.append(_first_detection_delay(near, log2, float(log2.t[np.argmax(truth2["link"] > 0)])))
+            delay2 = float(np.nanmedian(delays2))
+            robot2, log2, truth2, _ = _static_step_log(rate, force_N=f2, noisy=False)
+            clean = estimate(robot2, log2, "dynamic", g, lag_compensation=False)
+            delay2_clean = _first_detection_delay(clean, log2, float(log2.t[np.argmax(truth2["link"] > 0)]))
             Fe = np.stack([est.Fx[late], est.Fz[late]], 1)
             ok = np.all(np.isfinite(Fe), 1)
             dF = Fe[ok] - F
@@ -373,6 +383,7 @@ def observer_rows(quick: bool = False) -> tuple[list[dict], dict]:
                          "delay_7N": (f"< Δt = {dt * 1e3:.3g} ms (first sample)" if delay < 0.5 * dt
                                       else f"{delay * 1e3:.3g} ms"),
                          "force_2x_threshold_N": f2, "delay_2x_threshold_s": delay2,
+                         "delay_2x_noise_free_s": delay2_clean,
                          "ln2_over_K_s": float(np.log(2.0) / g),
                          "rise_90pct_s": t90, "bias_rel": bias, "noise_rel": noise, "K_dt": g / rate})
     return rows, {}
@@ -393,9 +404,11 @@ def observer_section(out_dir: Path, quick: bool = False):
                           "first sample that holds the force: the delay is less than one sample period, whatever "
                           "the gain (the former report printed this as 0). Where the delay is informative, near "
                           "the threshold: `delay_2x_threshold_s` is the crossing delay of a poke of "
-                          "`force_2x_threshold_N` (the force whose steady statistic is twice the threshold); a "
+                          "`force_2x_threshold_N` (the force whose steady statistic is twice the threshold), median "
+                          f"over {NEAR_SEEDS} noise realizations; a "
                           "first-order lag crosses half its final value at ln 2 / K (`ln2_over_K_s`), plus up to "
-                          "one sample, minus what the noise adds (one noise realization). `rise_90pct_s` (‖r‖ "
+                          "one sample: `delay_2x_noise_free_s` is that crossing on the same log without sensor noise (the "
+                          "detector's threshold unchanged). With noise the statistic crosses earlier (the noise adds to it). `rise_90pct_s` (‖r‖ "
                           "reaching 90 % of its steady value, ≈ 2.3/K) shows the gain's effect at any force. "
                           "Higher gain: shorter delay, more noise; the bias is the localizer's, not the "
                           "observer's (static)."])
