@@ -95,6 +95,8 @@ def test_fem_extrapolation_recovers_the_limit_and_the_order_and_bounds_oscillati
         ex = extrapolate(n, 5.0 + 0.3 * h ** p)
         assert ex["value"] == pytest.approx(5.0, rel=1e-9) and ex["order"] == pytest.approx(p, rel=1e-6)
         assert ex["uncertainty"] == pytest.approx(0.3, rel=1e-6)        # the whole correction
+    fast = extrapolate(n, [5.2, 5.01, 5.009])              # change ratio 190: order clipped at 4
+    assert fast["value"] == 5.009 and fast["uncertainty"] == pytest.approx(1.25 * 0.19)
     osc = extrapolate(n, [5.1, 4.9, 5.0])
     assert np.isnan(osc["order"]) and osc["value"] == 5.0 and osc["uncertainty"] == pytest.approx(0.25)
 

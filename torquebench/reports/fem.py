@@ -202,8 +202,10 @@ def extrapolate(dofs, values) -> dict:
     size: coarse levels are held up by the geometry's own features, so h_factor overstates them).
 
     Observed order p (flexure.convergence.observed_order: (q1 − q2)/(q2 − q3) = (h1^p − h2^p)/(h2^p − h3^p),
-    clipped to [0.5, 4]); limit R = q3 + (q3 − q2)/((h2/h3)^p − 1); its uncertainty u = |R − q3| (the
-    whole correction: a bound, not 1σ). Oscillating levels: R = q3, u = 1.25 max(|q1 − q2|, |q2 − q3|)."""
+    in [0.5, 4]); limit R = q3 + (q3 − q2)/((h2/h3)^p − 1); its uncertainty u = |R − q3| (the
+    whole correction: a bound, not 1σ). Oscillating levels, or an order at a bound of [0.5, 4]
+    (not asymptotic: the correction would be over- or under-stated): R = q3,
+    u = 1.25 max(|q1 − q2|, |q2 − q3|)."""
     from flexure.convergence import P_RANGE, observed_order
 
     n = np.asarray(dofs, float)
@@ -216,12 +218,15 @@ def extrapolate(dofs, values) -> dict:
         return {"value": float(q[-1]), "uncertainty": 1.25 * float(max(abs(q[0] - q[1]), abs(q[1] - q[2]))),
                 "order": math.nan, "finest": float(q[-1]), "dofs": n.astype(int).tolist(),
                 "method": "oscillating levels: finest value, 1.25 × the largest change (a bound)"}
+    if p <= P_RANGE[0] + 1e-9 or p >= P_RANGE[1] - 1e-9:
+        return {"value": float(q[-1]), "uncertainty": 1.25 * float(max(abs(q[0] - q[1]), abs(q[1] - q[2]))),
+                "order": float(p), "finest": float(q[-1]), "dofs": n.astype(int).tolist(),
+                "method": ("order outside [0.5, 4] (levels not in the asymptotic range): finest value, "
+                           "1.25 × the largest change (a bound)")}
     R = float(q[2] + (q[2] - q[1]) / ((h[1] / h[2]) ** p - 1.0))
-    clipped = p <= P_RANGE[0] + 1e-9 or p >= P_RANGE[1] - 1e-9
     return {"value": R, "uncertainty": abs(R - float(q[2])), "order": float(p), "finest": float(q[-1]),
             "dofs": n.astype(int).tolist(),
-            "method": (f"Richardson from 3 levels, observed order {p:.2f} in h ∝ DOFs^(−1/3)"
-                       + (" (clipped: outside [0.5, 4])" if clipped else "") + "; ± the whole correction")}
+            "method": f"Richardson from 3 levels, observed order {p:.2f} in h ∝ DOFs^(−1/3); ± the whole correction"}
 
 
 def _references(rows: list[dict]) -> dict:
@@ -265,7 +270,7 @@ def fem_section(rows: list[dict], out_dir: Path, quick: bool = False) -> tuple[l
              + (" QUICK mode: paper disc, P1 on coarse levels only; the reference (P1 levels) is then NOT converged." if quick else ""),
              "", "Reference for each figure: Richardson extrapolation of the three finest P2 levels with "
              "the observed order (h ∝ DOFs^(−1/3)); its uncertainty is the whole extrapolation step (or, "
-             "for oscillating levels, 1.25 × the largest change), so the finest P2 level's own error is "
+             "for oscillating levels or an order outside [0.5, 4], the finest value ± 1.25 × the largest change), so the finest P2 level's own error is "
              "at most that uncertainty by construction. Cross-check: the P1 levels, an independent "
              "element family, should extrapolate to the same limit within the two uncertainties; when P1's "
              f"own extrapolation is uncertain by more than {CROSS_CHECK_MAX_REL:.0%} (P1 far from its "
