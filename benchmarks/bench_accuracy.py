@@ -3,7 +3,7 @@
     python benchmarks/bench_accuracy.py [--quick] [--only NAME ...] [--write-report DIR]
 
 Runs every error-vs-run-time sweep (simulators, calibration, uncertainty propagation, the flexure
-FEM: P1/P2 × 6 mesh levels × 2 geometries, ~25 min on a loaded 2-core machine) and prints the rows
+FEM: P1 × 6 and P2 × 5 mesh levels × 2 geometries, 20 min measured on a loaded 2-core machine) and prints the rows
 (setting, wall time, error) of each; --write-report also writes reports/error_vs_runtime.md with
 every section (which runs the sweeps again). Timings are wall time on whatever machine runs it: compare
 them within one run, never against a number from another machine.
