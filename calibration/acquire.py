@@ -4,8 +4,10 @@ Every chunk read from the port is appended to ``RAW.part`` and flushed *before* 
 a parser failure loses nothing; on success the file is fsynced and renamed to ``RAW``.
 A guided static-loading session prompts for each mass, drains what arrived while the user was
 placing it, discards a settling period, then averages a window of samples that passes the
-settling test |mean(2nd half) − mean(1st half)| ≤ max(4·2σ/√W, tol) (white noise: 4σ of the
-difference), sliding forward until it does or ``max_wait`` samples have passed.
+settling test |mean(2nd half) − mean(1st half)| ≤ max(4·2σ√(τ/W), tol) (4 standard errors of the
+difference; τ the noise's integrated autocorrelation time, 1 for white noise), sliding forward
+until it does or ``max_wait`` samples have passed. Every figure of a window (mean, noise, step)
+carries its standard error with the autocorrelation taken into account (:func:`window_stats`).
 """
 
 from __future__ import annotations
@@ -129,13 +131,87 @@ def _collect(reader: Reader, n: int, channel: int, idle_timeout_s: float, clock)
     return np.concatenate(out)[:n] if out else np.zeros(0)
 
 
-def settled_mean(x: np.ndarray, tol: float = 0.0) -> tuple[bool, float, float]:
-    """(settled, mean, std) of a window; settled per the module docstring."""
+def autocorr_times(x: np.ndarray, c: float = 5.0) -> tuple[float, float, bool]:
+    """(τ, τ₂, resolved): integrated autocorrelation times of ``x`` for its mean and its variance.
+
+    ρ_k from the FFT autocovariance, τ = 1 + 2 Σ_{k=1}^{M} ρ_k and τ₂ = 1 + 2 Σ_{k=1}^{M} ρ_k², with
+    Sokal's window M = the smallest lag ≥ c·τ(M). Then Var(mean) = σ² τ / n and, for Gaussian
+    noise, Var(s²) ≈ 2 σ⁴ τ₂ / n. Both are clipped at 1 (never more than n independent samples).
+    ``resolved`` is False when no such M exists below n/2 or n < 50 τ (τ then underestimated)."""
+    x = np.asarray(x, float)
+    n = x.size
+    if n < 8:
+        return 1.0, 1.0, False
+    y = x - x.mean()
+    f = np.fft.rfft(y, n=2 * n)
+    acov = np.fft.irfft(f * np.conjugate(f))[:n]
+    if acov[0] <= 0:
+        return 1.0, 1.0, False
+    rho = acov / acov[0]
+    tau = 2.0 * np.cumsum(rho) - 1.0                 # τ(M) = 1 + 2 Σ_{k=1}^{M} ρ_k
+    ok = np.arange(n) >= c * tau
+    m = int(np.argmax(ok)) if ok[: n // 2].any() else n // 2
+    resolved = bool(ok[: n // 2].any())
+    t1 = float(tau[m])
+    t2 = float(2.0 * np.sum(rho[: m + 1] ** 2) - 1.0)
+    return max(t1, 1.0), max(t2, 1.0), resolved and n >= 50 * t1
+
+
+def _detrend(x: np.ndarray) -> np.ndarray:
+    """Residuals of the least-squares line through ``x`` (the noise, without a slow drift)."""
+    t = np.arange(x.size, dtype=float)
+    return x - np.polyval(np.polyfit(t, x, 1), t)
+
+
+def window_stats(x: np.ndarray, tol: float = 0.0) -> dict:
+    """Mean reading, its noise and the settling test of one window, each with its error estimate.
+
+    τ, τ₂ (:func:`autocorr_times`) of the window give the standard errors of the mean and of the
+    noise; a drift inflates them, which is honest (a drifting mean is not a stable figure). The
+    settling test takes σ_d, τ_d of the linearly detrended window instead, so a drift is not
+    mistaken for correlated noise (which would widen the limit and let the ramp through).
+
+        mean      x̄ ± s √(τ/W)                        (standard error, 1σ; n_eff = W/τ)
+        noise     s ± s √(τ₂ / (2W))                   (standard error of the std, 1σ, Gaussian)
+        step      |x̄₂ − x̄₁| (window halves), SE_step = 2 σ_d √(τ_d/W)
+        settled   step ≤ max(4 SE_step, tol)           (white noise: 8σ/√W, the former test)
+
+    τ estimated from the window itself is biased low when the window holds fewer than ~100 τ
+    samples (``autocorr_resolved`` False): the standard errors are then underestimates.
+    """
+    x = np.asarray(x, float)
     w = x.size
     h = w // 2
     sd = float(np.std(x, ddof=1))
+    tau, tau2, resolved = autocorr_times(x)
+    resolved = resolved and w >= 100 * tau
+    r = _detrend(x)
+    sd_d = float(np.std(r, ddof=2)) if w > 2 else sd
+    tau_d, _, _ = autocorr_times(r)
     step = abs(float(x[h:].mean() - x[:h].mean()))
-    return step <= max(8.0 * sd / np.sqrt(w), tol), float(x.mean()), sd
+    se_step = 2.0 * sd_d * np.sqrt(tau_d / w)
+    threshold = max(4.0 * se_step, tol)
+    note = "" if resolved else "; window < 100 τ: τ and so this error are underestimated"
+    return {
+        "settled": bool(step <= threshold), "mean": float(x.mean()), "std": sd,
+        "mean_se": float(sd * np.sqrt(tau / w)),
+        "mean_se_method": (f"standard error of the mean, 1σ: s √(τ/n), n = {w} samples, integrated "
+                           f"autocorrelation time τ = {tau:.3g} samples (n_eff = {w / tau:.0f}; FFT "
+                           f"autocorrelation, Sokal window){note}"),
+        "std_se": float(sd * np.sqrt(tau2 / (2.0 * w))),
+        "std_se_method": (f"standard error of the standard deviation, 1σ: s √(τ₂/(2n)), τ₂ = 1 + 2Σρ² = "
+                          f"{tau2:.3g} (Gaussian noise){note}"),
+        "step": step, "step_se": float(se_step), "threshold": float(threshold),
+        "step_se_method": (f"standard error of the difference of the window halves' means, 1σ: 2 σ_d √(τ_d/n) "
+                           f"(detrended window, τ_d = {tau_d:.3g}); settled when step ≤ max(4 SE, tolerance)"),
+        "autocorr_time": float(tau), "n_effective": float(w / tau), "autocorr_resolved": resolved,
+    }
+
+
+def settled_mean(x: np.ndarray, tol: float = 0.0) -> tuple[bool, float, float]:
+    """(settled, mean, std) of a window; settled per :func:`window_stats`."""
+    s = window_stats(x, tol)
+    return s["settled"], s["mean"], s["std"]
 
 
 def guided_session(reader: Reader, masses_g, *, settle_samples: int, window_samples: int,
@@ -171,17 +247,20 @@ def guided_session(reader: Reader, masses_g, *, settle_samples: int, window_samp
             _collect(reader, settle_samples, channel, idle_timeout_s, clock)
             x = _collect(reader, window_samples, channel, idle_timeout_s, clock)
             waited = 0
-            ok, mean, sd = settled_mean(x, tol_counts)
-            while not ok and waited < max_wait:
+            st = window_stats(x, tol_counts)
+            while not st["settled"] and waited < max_wait:
                 step = max(window_samples // 4, 1)
                 x = np.concatenate([x[step:], _collect(reader, step, channel, idle_timeout_s, clock)])
                 waited += step
-                ok, mean, sd = settled_mean(x, tol_counts)
-            print(f"  {mass:g} g {direction}: mean {mean:.1f} counts, std {sd:.1f}"
+                st = window_stats(x, tol_counts)
+            ok, mean, sd = st["settled"], st["mean"], st["std"]
+            print(f"  {mass:g} g {direction}: mean {mean:.1f} ± {st['mean_se']:.2g} counts, noise "
+                  f"{sd:.1f} ± {st['std_se']:.2g} counts (τ = {st['autocorr_time']:.3g} samples), step "
+                  f"{st['step']:.2g} ± {st['step_se']:.2g} (limit {st['threshold']:.2g})"
                   + ("" if ok else "  (NOT settled; recorded with settled=0)"), file=out)
             rows.append({"mass_g": mass, "reading": mean, "direction": direction, "repeat": rep,
                          "timestamp": clock() - t0, "settled": int(ok), "std": sd,
-                         "n_samples": int(x.size)})
+                         "n_samples": int(x.size), "stats": st})
     return rows
 
 

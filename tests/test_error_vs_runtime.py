@@ -4,6 +4,7 @@ import importlib
 import pkgutil
 
 import numpy as np
+import pytest
 
 import torquebench.reports as reports
 from torquebench.reports import error_vs_runtime as evr
@@ -63,7 +64,54 @@ def test_observer_rows_trade_delay_against_noise():
     assert fast["noise_rel"] > slow["noise_rel"]
 
 
+def test_observer_detection_delay_is_below_one_sample_far_above_threshold_and_ln2_over_K_near_it():
+    """7 N is far above the threshold: detected on the first sample holding it (< Δt, not "0").
+    At twice the threshold the noise-free statistic crosses half its final value at ln 2 / K
+    (first-order lag); with noise, no later."""
+    rows, _ = evr.observer_rows(quick=True)
+    for r in rows:
+        assert "first sample" in r["delay_7N"]
+    for r in rows:
+        dt = 1.0 / float(r["family"].split()[0])
+        # noise-free: the lag's crossing of half its final value, to within one sample
+        assert abs(r["delay_2x_noise_free_s"] - r["ln2_over_K_s"]) <= dt + 1e-9, r["setting"]
+        # with noise the statistic only gets an extra push: never later than one sample after that
+        assert r["delay_2x_threshold_s"] <= r["delay_2x_noise_free_s"] + dt + 1e-9, r["setting"]
+        assert 0.0 < r["force_2x_threshold_N"] < 0.5
+
+
 def test_localizer_rows_dynamic_beats_paper_on_the_moving_leg():
     rows, _ = evr.localizer_rows(quick=True)
     by = {r["family"]: r["error"] for r in rows}
     assert by["dynamic (moving)"] < 0.2 * by["paper (moving)"]
+
+
+def test_fem_extrapolation_recovers_the_limit_and_the_order_and_bounds_oscillation():
+    from torquebench.reports.fem import extrapolate
+
+    n = np.array([1.2e4, 3.5e4, 9.8e4])
+    h = (n / n[-1]) ** (-1 / 3)
+    for p in (0.9, 2.0, 3.0):
+        ex = extrapolate(n, 5.0 + 0.3 * h ** p)
+        assert ex["value"] == pytest.approx(5.0, rel=1e-9) and ex["order"] == pytest.approx(p, rel=1e-6)
+        assert ex["uncertainty"] == pytest.approx(0.3, rel=1e-6)        # the whole correction
+    fast = extrapolate(n, [5.2, 5.01, 5.009])              # change ratio 190: order clipped at 4
+    assert fast["value"] == 5.009 and fast["uncertainty"] == pytest.approx(1.25 * 0.19)
+    osc = extrapolate(n, [5.1, 4.9, 5.0])
+    assert np.isnan(osc["order"]) and osc["value"] == 5.0 and osc["uncertainty"] == pytest.approx(0.25)
+
+
+def test_fem_section_quick_has_the_contract_and_p1_error_falls_with_refinement(tmp_path):
+    from torquebench.reports.fem import error_vs_runtime_section
+
+    lines, pngs = error_vs_runtime_section(tmp_path, quick=True)
+    text = "\n".join(lines)
+    assert lines[0].startswith("## Flexure FEM")
+    assert len(pngs) == 2 and all(p.stat().st_size > 1000 for p in pngs)
+    for fig in ("gauge strain per N·m", "torsional stiffness"):
+        assert f"### Flexure FEM, paper disc: {fig}" in text
+    assert "Cheapest setting for a target" in text and "QUICK mode" in text
+    rows = [ln for ln in lines if ln.startswith("| P1, h × ")]
+    assert len(rows) == 6
+    values = [float(ln.split("|")[-2]) for ln in rows[:3]]              # gauge strain, coarse → fine
+    assert values == sorted(values)                                     # P1 too stiff, rising to the limit

@@ -41,6 +41,9 @@ def add_arguments(parser) -> None:
                         help="guided: sensor name written into the session CSV (default: %(default)s)")
     parser.add_argument("--lever-arm-m", type=float, default=None,
                         help="guided: lever arm in m from the joint axis to the hanging masses, written into the session CSV (default: not recorded)")
+    parser.add_argument("--tolerance-counts", type=float, default=None,
+                        help="guided: warn when a load step's mean reading has a standard error above this, "
+                             "in ADC counts (default: no check)")
     parser.add_argument("--force", action="store_true", help="replace existing output files")
 
 
@@ -59,7 +62,8 @@ def run(args) -> int:
 
     for name, v, hi in (("--duration-s", args.duration_s, 1e7), ("--idle-timeout-s", args.idle_timeout_s,
                         3600.0), ("--rate-hz", args.rate_hz, 1e7), ("--settle-s", args.settle_s, 3600.0),
-                        ("--window-s", args.window_s, 3600.0), ("--lever-arm-m", args.lever_arm_m, 100.0)):
+                        ("--window-s", args.window_s, 3600.0), ("--lever-arm-m", args.lever_arm_m, 100.0),
+                        ("--tolerance-counts", args.tolerance_counts, 1e12)):
         if v is not None:
             finite(v, name, positive=name != "--settle-s", nonneg=True, hi=hi)
     for name, v in (("--baud", args.baud), ("--repeats", args.repeats), ("--frames", args.frames)):
@@ -124,9 +128,54 @@ def run(args) -> int:
     write_files_atomic(files, overwrite=args.force)      # decoded CSV + session: all or none
     written += [str(p) for p, _ in files]
     st = reader.parser.stats.as_dict()
+    steps, warnings = load_steps(rows or [], args.tolerance_counts)
     if args.json:
-        print_json({**st, "written": written, "readings": len(rows) if rows else 0})
+        out = {**st, "written": written, "readings": len(rows) if rows else 0}
+        if rows is not None:
+            out.update(load_steps=steps, warnings=warnings)
+        print_json(out)
     else:
         print(f"{st['frames']} frames, {st['corrupted']} corrupted, {st['lost']} lost, "
               f"{st['garbage_bytes']} garbage bytes of {st['bytes']}; wrote {', '.join(written)}")
+        for s in steps:
+            print(f"{s['mass_g']:g} g {s['direction']}: reading {s['reading_counts']:.2f} ± "
+                  f"{s['reading_counts_error_estimate']:.2g} counts, noise {s['noise_std_counts']:.2f} ± "
+                  f"{s['noise_std_counts_error_estimate']:.2g} counts, settling step "
+                  f"{s['settle_step_counts']:.2g} ± {s['settle_step_counts_error_estimate']:.2g} counts "
+                  f"(limit {s['settle_limit_counts']:.2g}; {'settled' if s['settled'] else 'NOT settled'})")
+        for w in warnings:
+            print(f"warning: {w}")
     return 0
+
+
+def load_steps(rows: list[dict], tolerance_counts: float | None) -> tuple[list[dict], list[str]]:
+    """JSON rows of a guided session (each figure with ``_error_estimate``/``_error_method``, 1σ)
+    and the warnings: unsettled steps, windows too short to resolve the noise's correlation, and
+    standard errors above ``--tolerance-counts``."""
+    steps, warnings = [], []
+    for r in rows:
+        s = r["stats"]
+        steps.append({
+            "mass_g": r["mass_g"], "direction": r["direction"], "repeat": r["repeat"],
+            "n_samples": r["n_samples"],
+            "reading_counts": s["mean"], "reading_counts_error_estimate": s["mean_se"],
+            "reading_counts_error_method": s["mean_se_method"],
+            "noise_std_counts": s["std"], "noise_std_counts_error_estimate": s["std_se"],
+            "noise_std_counts_error_method": s["std_se_method"],
+            "settle_step_counts": s["step"], "settle_step_counts_error_estimate": s["step_se"],
+            "settle_step_counts_error_method": s["step_se_method"],
+            "settle_limit_counts": s["threshold"], "settled": bool(s["settled"]),
+            "autocorr_time_samples": s["autocorr_time"], "n_effective": s["n_effective"],
+        })
+        where = f"{r['mass_g']:g} g {r['direction']} (repeat {r['repeat'] + 1})"
+        if not s["settled"]:
+            warnings.append(f"{where}: not settled (step {s['step']:.3g} counts > limit {s['threshold']:.3g}); "
+                            "recorded with settled=0")
+        if not s["autocorr_resolved"]:
+            warnings.append(f"{where}: the window holds only {s['n_effective']:.0f} independent samples "
+                            f"(τ = {s['autocorr_time']:.3g}): its error estimates are underestimates; "
+                            "use a longer --window-s")
+        if tolerance_counts is not None and s["mean_se"] > tolerance_counts:
+            warnings.append(f"{where}: reading standard error {s['mean_se']:.3g} counts exceeds "
+                            f"--tolerance-counts {tolerance_counts:g}")
+    return steps, warnings

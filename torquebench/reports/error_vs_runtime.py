@@ -63,7 +63,8 @@ def section(title: str, rows: list[dict], out_dir: Path, slug: str, *, error_lab
     for target in TARGETS:
         r = cheapest(rows, target)
         if target < 2 * resolution:
-            lines.append(f"| {target:.1%} | not resolvable: the reference is known to ±{resolution:.2g} | — | — |")
+            lines.append(f"| {target:.1%} | not resolvable: the reference is known to ±{resolution:.2g} "
+                         f"({resolution:.2%}) | — | — |")
             continue
         lines.append(f"| {target:.1%} | " + (f"{r['setting']} | {_fmt_t(r['time_s'])} | {r['error']:.3g} |"
                                               if r else "none reached | — | — |"))
@@ -310,22 +311,36 @@ def propagation_section(out_dir: Path, quick: bool = False):
 
 
 # ------------------------------------------------------------------ observer and localizer
-def _static_step_log(rate_Hz: float, seed: int = 3):
+def _static_step_log(rate_Hz: float, seed: int = 3, force_N: float = 7.0, noisy: bool = True):
     """Fixed-base leg held still; a 7 N poke on link 2 (α = 0.6) switches on at t = 0.5 s for 1 s."""
     from estimator.robot import paper_leg
     from estimator.sim.config import Sensors
     from estimator.sim.static import static_hold_log
 
     robot = paper_leg(floating=False)
-    F = 7.0 * np.array([np.cos(-np.pi / 3), np.sin(-np.pi / 3)])
-    sensors = Sensors(sample_rate_Hz=rate_Hz, torque_noise_Nm=0.0133, ft_noise=np.array([0.1, 0.1, 0.01]),
+    F = force_N * np.array([np.cos(-np.pi / 3), np.sin(-np.pi / 3)])
+    k = 1.0 if noisy else 0.0
+    sensors = Sensors(sample_rate_Hz=rate_Hz, torque_noise_Nm=0.0133 * k, ft_noise=k * np.array([0.1, 0.1, 0.01]),
                       seed=seed)
     log, truth, _ = static_hold_log(robot, np.array([[0.5, -1.0]]), 2, 0.6, F, sensors, 1.0, tare_s=0.5)
     return robot, log, truth, F
 
 
+NEAR_SEEDS = 5          # noise realizations behind the near-threshold delay (median)
+
+
+def _first_detection_delay(est, log, t_on: float) -> float:
+    det = est.contact & (log.t >= t_on)
+    return float(log.t[np.argmax(det)] - t_on) if det.any() else float("nan")
+
+
 def observer_rows(quick: bool = False) -> tuple[list[dict], dict]:
-    """Gain × sample rate: detection delay, steady-state force bias and noise (pipeline `dynamic`)."""
+    """Gain × sample rate: detection delay, steady-state force bias and noise (pipeline `dynamic`).
+
+    Two detection delays: for the 7 N poke the statistic crosses the threshold on the first sample
+    that holds the force (the delay is then < one sample period Δt, reported as such); for a poke
+    sized so that the steady whitened residual is twice the threshold, the crossing delay is
+    informative: a first-order lag r(t) = r_ss (1 − e^{−Kt}) crosses r_ss/2 at t = ln 2 / K."""
     from estimator.pipeline import estimate
 
     gains_ = (30.0, 300.0) if quick else (10.0, 30.0, 100.0, 300.0, 1000.0)
@@ -333,27 +348,44 @@ def observer_rows(quick: bool = False) -> tuple[list[dict], dict]:
     rows = []
     for rate in rates:
         robot, log, truth, F = _static_step_log(rate)
+        dt = 1.0 / rate
         on = truth["link"] > 0
         t_on = float(log.t[np.argmax(on)])
         late = on & (log.t > t_on + 0.5)
+        mag = float(np.linalg.norm(F))
         for g in gains_:
             est, wall = _timed(estimate, robot, log, "dynamic", g)
             raw = estimate(robot, log, "dynamic", g, lag_compensation=False)
-            det = raw.contact & (log.t >= t_on)
-            delay = float(log.t[np.argmax(det)] - t_on) if det.any() else float("nan")
+            delay = _first_detection_delay(raw, log, t_on)
             r_ss = float(np.median(raw.rnorm[late]))
             rise = (log.t >= t_on) & (raw.rnorm >= 0.9 * r_ss)
             t90 = float(log.t[np.argmax(rise)] - t_on) if rise.any() else float("nan")
+            # near the threshold: the force whose steady statistic is 2 × the threshold
+            thr = float(np.sqrt(raw.info["chi2_threshold"]))
+            f2 = 2.0 * thr / (r_ss / mag)
+            delays2 = []
+            for seed in range(11, 11 + NEAR_SEEDS):
+                robot2, log2, truth2, _ = _static_step_log(rate, seed=seed, force_N=f2)
+                near = estimate(robot2, log2, "dynamic", g, lag_compensation=False)
+                delays2.append(_first_detection_delay(near, log2, float(log2.t[np.argmax(truth2["link"] > 0)])))
+            delay2 = float(np.nanmedian(delays2))
+            robot2, log2, truth2, _ = _static_step_log(rate, force_N=f2, noisy=False)
+            clean = estimate(robot2, log2, "dynamic", g, lag_compensation=False)
+            delay2_clean = _first_detection_delay(clean, log2, float(log2.t[np.argmax(truth2["link"] > 0)]))
             Fe = np.stack([est.Fx[late], est.Fz[late]], 1)
             ok = np.all(np.isfinite(Fe), 1)
             dF = Fe[ok] - F
-            mag = float(np.linalg.norm(F))
             bias = float(np.linalg.norm(dF.mean(0))) / mag if ok.any() else float("nan")
             noise = float(np.sqrt(np.mean(np.sum((dF - dF.mean(0)) ** 2, 1)))) / mag if ok.any() else float("nan")
             err = float(np.sqrt(np.mean(np.sum(dF ** 2, 1)))) / mag if ok.any() else float("nan")
             rows.append({"setting": f"K = {g:g} 1/s @ {rate:g} Hz", "family": f"{rate:g} Hz", "time_s": wall,
-                         "error": err, "detection_delay_s": delay, "rise_90pct_s": t90, "bias_rel": bias, "noise_rel": noise,
-                         "K_dt": g / rate})
+                         "error": err,
+                         "delay_7N": (f"< Δt = {dt * 1e3:.3g} ms (first sample)" if delay < 0.5 * dt
+                                      else f"{delay * 1e3:.3g} ms"),
+                         "force_2x_threshold_N": f2, "delay_2x_threshold_s": delay2,
+                         "delay_2x_noise_free_s": delay2_clean,
+                         "ln2_over_K_s": float(np.log(2.0) / g),
+                         "rise_90pct_s": t90, "bias_rel": bias, "noise_rel": noise, "K_dt": g / rate})
     return rows, {}
 
 
@@ -364,12 +396,20 @@ def observer_section(out_dir: Path, quick: bool = False):
                    reference="the exact applied force (static hold: F is known exactly)",
                    notes=["Fixed-base paper leg held at q = (0.5, −1.0) rad, Table II sensor noise; a 7 N poke on "
                           "link 2 at α = 0.6 switches on after a 0.5 s tare. `estimator.pipeline.estimate` "
-                          "(`dynamic`, exact discretization). Error, bias and noise over the contact window's "
-                          "last 0.5 s; detection delay from the force step to the first detected sample with the "
-                          "pipeline's lag compensation off (with it on, the reported onset is shifted back by the "
-                          "observer lag, so it reads ≈ 0); at this force (|τ_ext| ≫ threshold) detection is immediate, so "
-                          "`rise_90pct_s` (time for ‖r‖ to reach 90 % of its steady value, ≈ 2.3/K) shows the "
-                          "gain's effect. "
+                          "(`dynamic`, exact discretization, chi-square detector at 1 false alarm per hour). "
+                          "Error, bias and noise over the contact window's last 0.5 s.",
+                          "Detection delay, from the force step to the first detected sample, with the pipeline's "
+                          "lag compensation off (with it on, the reported onset is shifted back by the observer lag). "
+                          "`delay_7N`: the 7 N poke's statistic is far above the threshold, so it crosses on the "
+                          "first sample that holds the force: the delay is less than one sample period, whatever "
+                          "the gain (the former report printed this as 0). Where the delay is informative, near "
+                          "the threshold: `delay_2x_threshold_s` is the crossing delay of a poke of "
+                          "`force_2x_threshold_N` (the force whose steady statistic is twice the threshold), median "
+                          f"over {NEAR_SEEDS} noise realizations; a "
+                          "first-order lag crosses half its final value at ln 2 / K (`ln2_over_K_s`), plus up to "
+                          "one sample: `delay_2x_noise_free_s` is that crossing on the same log without sensor noise (the "
+                          "detector's threshold unchanged). With noise the statistic crosses earlier (the noise adds to it). `rise_90pct_s` (‖r‖ "
+                          "reaching 90 % of its steady value, ≈ 2.3/K) shows the gain's effect at any force. "
                           "Higher gain: shorter delay, more noise; the bias is the localizer's, not the "
                           "observer's (static)."])
 

@@ -150,3 +150,160 @@ def build(out_dir: Path) -> list[Path]:
          "![error against DOFs and time](fem_convergence.png)\n"]
     md = write_text_atomic(out_dir / "fem_convergence.md", "\n".join(L))
     return [md, png]
+
+
+# ------------------------------------------------------------------ error against run time (flexure designs)
+#: the two geometries of the error-vs-run-time section: (scene file, overrides)
+FEM_GEOMETRIES = {
+    "paper disc": ("paper_disc.toml", {}),
+    "thick disc, 0.5 mm gauges": ("paper_disc.toml", {"thickness_mm": 5.0, "fillet_radius_mm": 0.0,
+                                                      "gauges.grid_length_mm": 0.5,
+                                                      "gauges.grid_width_mm": 0.5}),
+}
+#: mesh levels: the design's whole size function × f (flexure.analysis.analyze's h_factor). Below
+#: f = 2 the DOFs barely fall (the geometry's own features hold the size), so P2 starts at 2.
+FEM_FACTORS = {1: (4.0, 2.0, math.sqrt(2.0), 1.0, 1 / math.sqrt(2.0), 0.5),
+               2: (2.0, math.sqrt(2.0), 1.0, 1 / math.sqrt(2.0), 0.5)}
+FEM_QUICK = {"paper disc": {1: (4.0, 2.0, 1.0)}}
+FEM_FIGURES = {"gauge_strain_per_Nm": "gauge strain per N·m", "torsional_stiffness_Nm_per_rad": "torsional stiffness"}
+
+
+def fem_levels(quick: bool = False, progress: bool = True, on_row=None) -> list[dict]:
+    """Analyse every geometry × element order × mesh level: one row per analysis with its wall time
+    (``analyze``'s total: meshing, assembly, the six load cases, read-out) and the figures. The
+    cheapest run first (P1, then P2 coarse to fine); ``on_row(rows)`` after each."""
+    import sys
+
+    from flexure.analysis import analyze
+    from flexure.design import load_design
+    from torquebench.io import REPO_ROOT
+
+    plan = FEM_QUICK if quick else {g: FEM_FACTORS for g in FEM_GEOMETRIES}
+    todo = sorted(((g, o, f) for g, orders in plan.items() for o, fs in orders.items() for f in fs),
+                  key=lambda x: (x[1], -x[2]))
+    from tqdm import tqdm
+    rows = []
+    for g, order, f in tqdm(todo, desc="error_vs_runtime: flexure FEM", file=sys.stderr, disable=not progress,
+                            leave=False):
+        scene, overrides = FEM_GEOMETRIES[g]
+        res, _ = analyze(load_design(REPO_ROOT / "scenes" / scene, overrides), order=order, h_factor=f)
+        rows.append({"geometry": g, "order": order, "h_factor": f, "dofs": int(res["dofs"]),
+                     "time_s": float(res["total_s"]), "warnings": list(res["warnings"]),
+                     **{k: float(res[k]) for k in FEM_FIGURES}})
+        if on_row:
+            on_row(rows)
+    order = {(g, o, f): i for i, (g, o, f) in enumerate((g, o, f) for g, orders in plan.items()
+                                                          for o, fs in orders.items() for f in fs)}
+    return sorted(rows, key=lambda r: order[(r["geometry"], r["order"], r["h_factor"])])
+
+
+def extrapolate(dofs, values) -> dict:
+    """Richardson extrapolation from the three finest levels, h ∝ DOFs^(−1/3) (the levels' real
+    size: coarse levels are held up by the geometry's own features, so h_factor overstates them).
+
+    Observed order p (flexure.convergence.observed_order: (q1 − q2)/(q2 − q3) = (h1^p − h2^p)/(h2^p − h3^p),
+    in [0.5, 4]); limit R = q3 + (q3 − q2)/((h2/h3)^p − 1); its uncertainty u = |R − q3| (the
+    whole correction: a bound, not 1σ). Oscillating levels, or an order at a bound of [0.5, 4]
+    (not asymptotic: the correction would be over- or under-stated): R = q3,
+    u = 1.25 max(|q1 − q2|, |q2 − q3|)."""
+    from flexure.convergence import P_RANGE, observed_order
+
+    n = np.asarray(dofs, float)
+    q = np.asarray(values, float)
+    idx = np.argsort(n)[-3:]
+    n, q = n[idx], q[idx]
+    h = (n / n[-1]) ** (-1.0 / 3.0)
+    p = observed_order(h, q)
+    if math.isnan(p):
+        return {"value": float(q[-1]), "uncertainty": 1.25 * float(max(abs(q[0] - q[1]), abs(q[1] - q[2]))),
+                "order": math.nan, "finest": float(q[-1]), "dofs": n.astype(int).tolist(),
+                "method": "oscillating levels: finest value, 1.25 × the largest change (a bound)"}
+    if p <= P_RANGE[0] + 1e-9 or p >= P_RANGE[1] - 1e-9:
+        return {"value": float(q[-1]), "uncertainty": 1.25 * float(max(abs(q[0] - q[1]), abs(q[1] - q[2]))),
+                "order": float(p), "finest": float(q[-1]), "dofs": n.astype(int).tolist(),
+                "method": ("order outside [0.5, 4] (levels not in the asymptotic range): finest value, "
+                           "1.25 × the largest change (a bound)")}
+    R = float(q[2] + (q[2] - q[1]) / ((h[1] / h[2]) ** p - 1.0))
+    return {"value": R, "uncertainty": abs(R - float(q[2])), "order": float(p), "finest": float(q[-1]),
+            "dofs": n.astype(int).tolist(),
+            "method": f"Richardson from 3 levels, observed order {p:.2f} in h ∝ DOFs^(−1/3); ± the whole correction"}
+
+
+def _references(rows: list[dict]) -> dict:
+    """(geometry, figure) → reference (from P2, else P1) and the other order's extrapolation."""
+    out = {}
+    for g in dict.fromkeys(r["geometry"] for r in rows):
+        for key in FEM_FIGURES:
+            ext = {}
+            for order in (1, 2):
+                lv = [r for r in rows if r["geometry"] == g and r["order"] == order]
+                if len(lv) >= 3:
+                    ext[order] = extrapolate([r["dofs"] for r in lv], [r[key] for r in lv])
+            if ext:
+                ref = ext.get(2) or ext[1]
+                out[(g, key)] = {"ref": ref, "ref_order": 2 if 2 in ext else 1, "other": ext.get(1) if 2 in ext else None}
+    return out
+
+
+#: a cross-check whose own uncertainty exceeds this (relative) says nothing
+CROSS_CHECK_MAX_REL = 0.10
+
+
+def error_vs_runtime_section(out_dir: Path, quick: bool = False) -> tuple[list[str], list[Path]]:
+    """Flexure FEM: P1/P2 × mesh level (gmsh) on two geometries; gauge strain and stiffness error
+    against wall time, errors against the Richardson limit of the finest P2 levels."""
+    return fem_section(fem_levels(quick), out_dir, quick)
+
+
+def fem_section(rows: list[dict], out_dir: Path, quick: bool = False) -> tuple[list[str], list[Path]]:
+    """The Markdown and PNGs of :func:`error_vs_runtime_section` from ``fem_levels`` rows."""
+    from torquebench.reports.error_vs_runtime import section
+
+    refs = _references(rows)
+    lines = ["## Flexure FEM (P1 and P2 × mesh size, gmsh; two geometries)", "",
+             "`flexure.analysis.analyze` on the design's gmsh mesh with every element size × f "
+             f"(f = {', '.join(f'{f:.3g}' for f in sorted({r['h_factor'] for r in rows}, reverse=True))}), "
+             "P1 (4-node) and P2 (10-node) tetrahedra. Wall time = the whole analysis a user waits for "
+             "(meshing, assembly, the six load cases, gauge read-out). Geometries: `scenes/paper_disc.toml` "
+             "(2.2 mm, fillets, 1.5 mm gauges) and the same disc 5 mm thick without fillets with 0.5 mm "
+             "gauges (`tests/test_fem_thick_disc.py`)."
+             + (" QUICK mode: paper disc, P1 on coarse levels only; the reference (P1 levels) is then NOT converged." if quick else ""),
+             "", "Reference for each figure: Richardson extrapolation of the three finest P2 levels with "
+             "the observed order (h ∝ DOFs^(−1/3)); its uncertainty is the whole extrapolation step (or, "
+             "for oscillating levels or an order outside [0.5, 4], the finest value ± 1.25 × the largest change), so the finest P2 level's own error is "
+             "at most that uncertainty by construction. Cross-check: the P1 levels, an independent "
+             "element family, should extrapolate to the same limit within the two uncertainties; when P1's "
+             f"own extrapolation is uncertain by more than {CROSS_CHECK_MAX_REL:.0%} (P1 far from its "
+             "asymptotic range) the cross-check is reported as not informative. "
+             "Targets below twice the reference's uncertainty are reported as not resolvable.", "",
+             "| geometry | figure | finest level (DOFs) | reference | ± (relative) | how | P1 extrapolates to | agree? |",
+             "|---|---|---|---|---|---|---|---|"]
+    for (g, key), rr in refs.items():
+        ref, other = rr["ref"], rr["other"]
+        rel = ref["uncertainty"] / abs(ref["value"])
+        if other is not None:
+            agree = abs(other["value"] - ref["value"]) <= other["uncertainty"] + ref["uncertainty"]
+            o_rel = other["uncertainty"] / abs(other["value"])
+            o = (f"{other['value']:.5g} ± {o_rel:.2%}",
+                 "not informative (P1 too uncertain)" if o_rel > CROSS_CHECK_MAX_REL else
+                 "yes" if agree else f"no ({abs(other['value'] / ref['value'] - 1):.2%} apart): not shown converged")
+        else:
+            o = ("—", "—")
+        lines.append(f"| {g} | {FEM_FIGURES[key]} | {ref['finest']:.5g} ({ref['dofs'][-1]:,}) | {ref['value']:.5g} | "
+                     f"{rel:.2%} | P{rr['ref_order']}: {ref['method']} | {o[0]} | {o[1]} |")
+    lines.append("")
+    pngs: list[Path] = []
+    for (g, key), rr in refs.items():
+        R = rr["ref"]["value"]
+        sel = [r for r in rows if r["geometry"] == g]
+        srows = [{"setting": f"P{r['order']}, h × {r['h_factor']:.3g}", "family": f"P{r['order']}",
+                  "time_s": r["time_s"], "error": abs(r[key] / R - 1), "dofs": r["dofs"], "value": r[key]}
+                 for r in sel]
+        slug = "fem_" + ("paper" if g.startswith("paper") else "thick") + ("_strain" if "strain" in key else "_stiffness")
+        sec, p = section(f"Flexure FEM, {g}: {FEM_FIGURES[key]}", srows, out_dir, slug,
+                         error_label=f"relative {FEM_FIGURES[key]} error", resolution=rr["ref"]["uncertainty"] / abs(R),
+                         reference=f"{R:.6g} (P{rr['ref_order']} Richardson limit, ± {rr['ref']['uncertainty'] / abs(R):.2%})")
+        sec[0] = "#" + sec[0]
+        lines += sec
+        pngs += p
+    return lines, pngs
