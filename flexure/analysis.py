@@ -55,7 +55,7 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
                max_elements: float | None = None):
     """Mesh of the design (P1/P2), finer at the gauges: a swept or tetgen mesh of the parametric
     profile, or tetgen on the surface of an STL (repaired if need be) or a STEP solid (gmsh)."""
-    from flexure.geometry import load_stl, profile
+    from flexure.geometry import extrude, load_stl, profile
     from flexure.meshing import MAX_ELEMENTS, mesh_design_surface
 
     size = size or design.size
@@ -67,6 +67,7 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
     if design.kind == "spoke_disc":
         qs = design.segments_per_quarter or SEGMENTS.get(size, 3)
         poly = profile(design.disc, qs)
+        _check_gauges(design, extrude(poly, design.disc.thickness))
         return mesh_design_surface(poly, design.disc.thickness, size, centres, extent, design.disc.thickness,
                                    order, gauge_width=gw, mesher=design.mesher, h_factor=h_factor,
                                    max_elements=cap)
@@ -78,6 +79,7 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
                          size_for=lambda scale: size_field(size, scale, centres, extent, gw, h_factor))
     else:
         surf = load_stl(design.file_path, design.file_unit_m, where=where)
+    _check_gauges(design, surf)
     scale = float(np.ptp(surf.points, axis=0).min())
     if design.kind == "step" and design.mesher == "gmsh":     # mesh the exact solid, not its triangles
         from flexure.gmsh_mesh import mesh_step
@@ -89,6 +91,13 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
         return MeshResult(mesh, surf, mesh_report(mesh, size, "gmsh", None, field))
     return mesh_design_surface(surf, None, size, centres, extent, scale, order, gauge_width=gw,
                                mesher=design.mesher, h_factor=h_factor, max_elements=cap)
+
+
+def _check_gauges(design: Design, surface) -> None:
+    """Every gauge grid on a face of the solid, before meshing (InputError naming the gauge)."""
+    from flexure.surface_check import check_gauges
+
+    check_gauges(surface.points, surface.faces, design.gauges, f"{design.path}: gauges")
 
 
 def _selections(design: Design, mesh):
@@ -244,6 +253,9 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
         warnings.append("ill_conditioned")
     if not np.isfinite(info["residual_norm"]) or info["residual_norm"] > fsolve.RESIDUAL_LIMIT:
         warnings.append("large_residual")
+    repairs = (mres.surface.info.get("repairs") if mres.surface is not None else None) or []
+    if repairs:                                    # a repair changes the geometry: say so
+        warnings.append(f"the surface was repaired before meshing ({', '.join(repairs)}); check the result")
 
     readings = read(design.gauges, lambda p: strain_at(mesh, U, p))        # (g, cases)
     eps = bridge_strains(design.gauges, readings)                           # (cases, 4)
