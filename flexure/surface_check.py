@@ -174,8 +174,10 @@ def check_gauges(points: np.ndarray, faces: np.ndarray, gauges, where: str) -> N
     nrm = _normals(tri)
     lo, hi = points.min(axis=0), points.max(axis=0)
     for g in gauges:
-        c, a, b, n = g.frame()
         name = f"gauge {g.name or g.arm} (arm {g.arm})"
+        if not np.all(np.isfinite(np.concatenate([g.centre_m, g.axis, g.normal]))):
+            raise InputError(f"{where}: {name}: centre, axis and normal must be finite numbers")
+        c, a, b, n = g.frame()
         size = max(g.length_m, g.width_m)
         tol = GAUGE_TOL * size
         cmm = np.round(c * 1e3, 3).tolist()

@@ -132,6 +132,7 @@ def test_open_stl_exit_2(capsys, tmp_path, no_meshing):
     ({"centre_mm": [100.0, 0.0, 2.2]}, "off the part (outside its bounding box)"),
     ({"centre_mm": [15.5, 0.0, 2.2], "normal": [1.0, 0.0, 0.0], "axis": [0.0, 1.0, 0.0]}, "90° from the surface normal"),
     ({"centre_mm": [15.5, 1.2, 2.2]}, "overhangs its face"),                  # too near the spoke's edge
+    ({"centre_mm": [float("nan"), 0.0, 2.2]}, "must be finite numbers"),
 ])
 def test_misplaced_gauge_exit_2_names_the_gauge(capsys, tmp_path, disc_stl, no_meshing, change, needle):
     p = _design(tmp_path, disc_stl, _paper_gauges(**change))
