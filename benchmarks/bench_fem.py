@@ -200,7 +200,8 @@ def paper_disc_torque_only(design, size: str) -> tuple[float, float]:
     """The torque case alone, end to end (mesh → assembly → solve → gauges): (seconds, ε_ref)."""
     from flexure.analysis import _selections, _solve_cases, build_mesh
     from flexure.fem import stiffness_matrix
-    from flexure.gauges import bridge_strains, read, strain_at
+    from flexure.gauges import bridge_strains, read
+    from flexure.post import strain_at
 
     t0 = time.perf_counter()
     mesh = build_mesh(design, size).mesh

@@ -31,7 +31,8 @@ import numpy as np
 
 from flexure.design import Design, load_design
 from flexure.errors import InputError
-from flexure.gauges import bridge_strains, read, strain_at
+from flexure.gauges import bridge_strains, read
+from flexure.post import element_nodal_strains, nodal_average, strain_at, stress_from_strain, von_mises
 
 CASES = ("Mz", "Fx", "Fy", "Fz", "Mx", "My")
 CROSSTALK_KEYS = {"Fx": "Fx_per_N", "Fy": "Fy_per_N", "Fz": "Fz_per_N", "Mx": "Mx_per_Nm", "My": "My_per_Nm"}
@@ -55,7 +56,7 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
                max_elements: float | None = None):
     """Mesh of the design (P1/P2), finer at the gauges: a swept or tetgen mesh of the parametric
     profile, or tetgen on the surface of an STL (repaired if need be) or a STEP solid (gmsh)."""
-    from flexure.geometry import load_stl, profile
+    from flexure.geometry import extrude, load_stl, profile
     from flexure.meshing import MAX_ELEMENTS, mesh_design_surface
 
     size = size or design.size
@@ -67,9 +68,10 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
     if design.kind == "spoke_disc":
         qs = design.segments_per_quarter or SEGMENTS.get(size, 3)
         poly = profile(design.disc, qs)
+        _check_gauges(design, extrude(poly, design.disc.thickness))
         return mesh_design_surface(poly, design.disc.thickness, size, centres, extent, design.disc.thickness,
                                    order, gauge_width=gw, mesher=design.mesher, h_factor=h_factor,
-                                   max_elements=cap)
+                                   max_elements=cap, exact_disc=design.disc)
     where = f"{design.path}: geometry.file"
     if design.kind == "step":
         from flexure.cad import load_step
@@ -78,6 +80,7 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
                          size_for=lambda scale: size_field(size, scale, centres, extent, gw, h_factor))
     else:
         surf = load_stl(design.file_path, design.file_unit_m, where=where)
+    _check_gauges(design, surf)
     scale = float(np.ptp(surf.points, axis=0).min())
     if design.kind == "step" and design.mesher == "gmsh":     # mesh the exact solid, not its triangles
         from flexure.gmsh_mesh import mesh_step
@@ -89,6 +92,13 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
         return MeshResult(mesh, surf, mesh_report(mesh, size, "gmsh", None, field))
     return mesh_design_surface(surf, None, size, centres, extent, scale, order, gauge_width=gw,
                                mesher=design.mesher, h_factor=h_factor, max_elements=cap)
+
+
+def _check_gauges(design: Design, surface) -> None:
+    """Every gauge grid on a face of the solid, before meshing (InputError naming the gauge)."""
+    from flexure.surface_check import check_gauges
+
+    check_gauges(surface.points, surface.faces, design.gauges, f"{design.path}: gauges")
 
 
 def _selections(design: Design, mesh):
@@ -114,43 +124,6 @@ def _selections(design: Design, mesh):
     if len(fixed) < 3:
         raise InputError(f"{design.path}: loads.fixed: no surface nodes selected to hold the flexure")
     return load, fixed
-
-
-def element_nodal_strain(mesh, u: np.ndarray, chunk: int = 20000) -> np.ndarray:
-    """ε at every element's own nodes (m, nn, 3, 3) (discontinuous, for peak stresses)."""
-    from flexure.fem import tet_shape
-
-    nn = mesh.tets.shape[1]
-    ref = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
-    if nn == 10:
-        e = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])
-        ref = np.vstack([ref, 0.5 * (ref[e[:, 0]] + ref[e[:, 1]])])
-    _, dN = tet_shape(mesh.order, ref)                          # (nn_eval, nn, 3)
-    out = np.empty((len(mesh.tets), nn, 3, 3))
-    for s in range(0, len(mesh.tets), chunk):
-        t = mesh.tets[s:s + chunk]
-        x = mesh.points[t[:, :4]]
-        Jinv = np.linalg.inv(np.transpose(x[:, 1:] - x[:, :1], (0, 2, 1)))
-        G = np.einsum("paj,eji->epai", dN, Jinv)                   # (e, p, a, 3)
-        grad = np.einsum("eai,epaj->epij", u[t], G)
-        out[s:s + chunk] = 0.5 * (grad + np.swapaxes(grad, -1, -2))
-    return out
-
-
-def von_mises_from_strain(eps: np.ndarray, material) -> np.ndarray:
-    """σ = λ tr ε I + 2μ ε;  σ_vM = √(3/2 s:s), s = σ − tr σ/3 I."""
-    lam, mu = material.lame_lambda_Pa, material.shear_modulus_Pa
-    tr = np.trace(eps, axis1=-2, axis2=-1)
-    sig = 2 * mu * eps + (lam * tr)[..., None, None] * np.eye(3)
-    s = sig - (np.trace(sig, axis1=-2, axis2=-1) / 3)[..., None, None] * np.eye(3)
-    return np.sqrt(1.5 * np.einsum("...ij,...ij->...", s, s))
-
-
-def _nodal_average(mesh, values: np.ndarray) -> np.ndarray:
-    idx = mesh.tets.ravel()
-    tot = np.bincount(idx, weights=values.ravel(), minlength=len(mesh.points))
-    cnt = np.bincount(idx, minlength=len(mesh.points))
-    return tot / np.maximum(cnt, 1)
 
 
 #: CG tolerance of the design analysis: on the paper disc 1e-8 and 1e-10 give gauge strains,
@@ -244,6 +217,9 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
         warnings.append("ill_conditioned")
     if not np.isfinite(info["residual_norm"]) or info["residual_norm"] > fsolve.RESIDUAL_LIMIT:
         warnings.append("large_residual")
+    repairs = (mres.surface.info.get("repairs") if mres.surface is not None else None) or []
+    if repairs:                                    # a repair changes the geometry: say so
+        warnings.append(f"the surface was repaired before meshing ({', '.join(repairs)}); check the result")
 
     readings = read(design.gauges, lambda p: strain_at(mesh, U, p))        # (g, cases)
     eps = bridge_strains(design.gauges, readings)                           # (cases, 4)
@@ -265,8 +241,8 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
     stiffness = float(1.0 / theta[2, 0]) if theta[2, 0] != 0 else math.nan
 
     u_rated = U[:, :, 0] * T
-    eps_nodes = element_nodal_strain(mesh, u_rated)
-    vm_elem = von_mises_from_strain(eps_nodes, design.material)
+    eps_nodes = element_nodal_strains(mesh, u_rated)
+    vm_elem = von_mises(stress_from_strain(eps_nodes, design.material))
     max_vm = float(vm_elem.max())
     ev = np.linalg.eigvalsh(eps_nodes)
     gmax = 0.5 * (ev[..., 2] - ev[..., 0])
@@ -318,7 +294,7 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
         results["nan_reason"] = ", ".join(warnings)
     if not good_ref and not flagged:
         results["nan_reason"] = "bridge output not positive under positive torque (check gauge arms)"
-    fields = Fields(mesh, u_rated, _nodal_average(mesh, vm_elem), _nodal_average(mesh, gmax),
+    fields = Fields(mesh, u_rated, nodal_average(mesh, vm_elem), nodal_average(mesh, gmax),
                     design.gauges, fixed_nodes, load_nodes)
     return results, fields
 

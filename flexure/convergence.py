@@ -12,7 +12,8 @@ and the error of the finest answer is estimated as the grid convergence index (R
 
 p is clipped to [0.5, 4]. Oscillatory convergence (the two changes of opposite sign) has no
 order: e = F_s · max(|Q_1 − Q_2|, |Q_2 − Q_3|), stated as such. The estimate is a bound-like
-figure (not a 1σ); ``tests/test_fem_error_estimate.py`` checks it brackets the true error.
+figure (not a 1σ); ``tests/test_fem_reference.py`` checks it brackets the true error against
+independent scikit-fem references.
 """
 
 from __future__ import annotations

@@ -5,7 +5,8 @@ surface with outward normal n. Its reading is the axial strain averaged over the
 
     ε_g = (1/LW) ∫∫ aᵀ ε(c + s a + t b) a ds dt,
 
-evaluated with a tensor Gauss–Legendre rule (points moved a hair inside the solid).
+evaluated with a tensor Gauss–Legendre rule (points moved a hair inside the solid); the strain
+at the points comes from the one evaluator, ``flexure.post.strain_at``.
 Bridge arms follow bridge.wheatstone's "full_bending" convention:
 V_o/V_ex ≈ GF/4 (ε1 − ε2 + ε3 − ε4).
 """
@@ -84,52 +85,3 @@ def bridge_strains(gauges: list[Gauge], readings: np.ndarray) -> np.ndarray:
         raise InputError(f"gauges: need exactly one gauge on each bridge arm 1–4, got arms {arms}")
     order = np.argsort(arms)
     return np.moveaxis(np.asarray(readings)[order], 0, -1)
-
-
-# ----------------------------------------------------------------------------- strain evaluation
-def locate(mesh, points: np.ndarray, k_candidates: int = 24):
-    """Element index (k,) and barycentric coordinates (k,4) of points; InputError if outside."""
-    from scipy.spatial import cKDTree
-
-    x = mesh.points[mesh.tets[:, :4]]
-    cen = x.mean(1)
-    tree = mesh._cache.get("centroid_tree")
-    if tree is None:
-        tree = mesh._cache["centroid_tree"] = cKDTree(cen)
-    kc = min(k_candidates, len(cen))
-    _, cand = tree.query(points, k=kc)
-    cand = cand.reshape(len(points), kc)
-    T = np.transpose(x[:, 1:] - x[:, :1], (0, 2, 1))            # (m,3,3) columns x_i − x_0
-    Tinv = mesh._cache.get("bary_inv")
-    if Tinv is None:
-        Tinv = mesh._cache["bary_inv"] = np.linalg.inv(T)
-    lam = np.einsum("kcij,kcj->kci", Tinv[cand], points[:, None, :] - x[cand, 0])
-    bary = np.concatenate([1 - lam.sum(-1, keepdims=True), lam], axis=-1)   # (k,c,4)
-    score = bary.min(-1)
-    best = score.argmax(1)
-    rows = np.arange(len(points))
-    if (score[rows, best] < -1e-6).any():
-        bad = points[score[rows, best] < -1e-6][0]
-        raise InputError(f"gauge: sample point {np.round(bad * 1e3, 3).tolist()} mm lies outside the "
-                         "mesh (is the gauge on the surface?)")
-    return cand[rows, best], bary[rows, best]
-
-
-def strain_at(mesh, u: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """ε(x) = sym(Σ_a u_a ⊗ ∇N_a(x)) at points (k,3) → (k,3,3); u (n,3) or (n,3,cases) → (k,cases,3,3).
-
-    Straight-sided tetrahedra: ξ = barycentric (L1, L2, L3); ∇_x N = J⁻ᵀ ∇_ξ N, J from the vertices.
-    """
-    from flexure.fem import tet_shape
-
-    elem, bary = locate(mesh, points)
-    _, dN = tet_shape(mesh.order, bary[:, 1:])                    # (k,nn,3)
-    x = mesh.points[mesh.tets[elem, :4]]
-    J = np.transpose(x[:, 1:] - x[:, :1], (0, 2, 1))              # J_ik = ∂x_i/∂ξ_k
-    G = np.einsum("kaj,kji->kai", dN, np.linalg.inv(J))            # ∂N_a/∂x_i = Σ_j ∂N_a/∂ξ_j (J⁻¹)_ji
-    ue = u[mesh.tets[elem]]                                       # (k,nn,3[,c])
-    if ue.ndim == 3:
-        grad = np.einsum("kai,kaj->kij", ue, G)
-        return 0.5 * (grad + np.swapaxes(grad, -1, -2))
-    grad = np.einsum("kaic,kaj->kcij", ue, G)
-    return 0.5 * (grad + np.swapaxes(grad, -1, -2))

@@ -244,4 +244,6 @@ def load_stl(path: str | Path, unit_m: float = 1e-3, repair: bool = True, where:
     surf = Surface(np.asarray(tm.vertices, float) * unit_m, np.asarray(tm.faces, np.int64),
                    source=str(path), info={"repairs": repaired})
     check_watertight(surf, f"{where} {path}")
+    from flexure.surface_check import check_solid
+    check_solid(surf.points, surf.faces, f"{where}: {path}")
     return surf

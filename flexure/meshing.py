@@ -277,8 +277,10 @@ def size_field(size: str, h_scale: float, gauge_centres, gauge_extent: float,
 def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gauge_centres: np.ndarray,
                         gauge_extent: float, h_scale: float, order: int = 1,
                         gauge_width: float | None = None, mesher: str = "sweep",
-                        h_factor: float = 1.0, max_elements: float = MAX_ELEMENTS) -> MeshResult:
+                        h_factor: float = 1.0, max_elements: float = MAX_ELEMENTS, exact_disc=None) -> MeshResult:
     """Mesh an extruded profile (shapely polygon + thickness) or a closed Surface (user STL).
+    With ``exact_disc`` (a geometry.SpokeDisc) the gmsh mesher meshes that disc's exact solid
+    (true circles and fillets, flexure.gmsh_mesh.mesh_spoke_disc) instead of the polygon.
 
     h_far = SIZES[size].far · h_scale (the thickness); h_gauge = SIZES[size].gauge · gauge width,
     within ``gauge_extent`` of each gauge centre, graded outwards. A profile is swept through
@@ -315,7 +317,8 @@ def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gau
             surface = surface_or_poly
             mesh = gmsh_mesh.mesh_surface(surface, field, order)
         else:
-            mesh = gmsh_mesh.mesh_extrusion(surface_or_poly, thickness, field, order)
+            mesh = (gmsh_mesh.mesh_spoke_disc(exact_disc, field, order) if exact_disc is not None else
+                    gmsh_mesh.mesh_extrusion(surface_or_poly, thickness, field, order))
     elif mesher == "tetgen":
         surface = surface_or_poly if is_surface else extrude_graded(surface_or_poly, thickness, field)
         mesh = tetrahedralize(surface, h_far, s["minratio"], s["mindihedral"], order)

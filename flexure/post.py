@@ -1,4 +1,5 @@
-"""Post-processing: strains, stresses, von Mises; point location and strain at arbitrary points.
+"""Post-processing, the one evaluator: strains, stresses, von Mises; point location and strain at
+arbitrary points (the gauges' read-out goes through ``strain_at``).
 
 Displacement gradient H_ij = Σ_a u_ai ∂N_a/∂x_j; small strain ε = (H + Hᵀ)/2 (tensor, not
 engineering shear); stress σ = λ tr(ε) I + 2μ ε; von Mises σ_vm = √(3/2 s:s), s = σ − tr(σ)/3 I.
@@ -19,16 +20,19 @@ REF_NODES = np.vstack([_REF_VERTS, 0.5 * (_REF_VERTS[[0, 1, 0, 0, 1, 2]] + _REF_
 
 
 def _as_u(mesh: Mesh, u) -> np.ndarray:
+    """Displacements as (n,3), or (n,3,cases) for several load cases at once."""
     u = np.asarray(u, dtype=np.float64)
     if u.shape == (mesh.n_dofs,):
         u = u.reshape(-1, 3)
-    if u.shape != (mesh.n_nodes, 3):
-        raise InputError(f"post: displacement must have shape ({mesh.n_nodes}, 3), got {u.shape}")
+    if u.shape[:2] != (mesh.n_nodes, 3) or u.ndim not in (2, 3):
+        raise InputError(f"post: displacement must have shape ({mesh.n_nodes}, 3) or "
+                         f"({mesh.n_nodes}, 3, cases), got {u.shape}")
     return u
 
 
 def gradient_at(mesh: Mesh, u, elements: np.ndarray, xi: np.ndarray) -> np.ndarray:
-    """Displacement gradients (k,3,3) at reference points ξ (k,3) of ``elements`` (k,)."""
+    """Displacement gradients (k,3,3) at reference points ξ (k,3) of ``elements`` (k,);
+    (k,cases,3,3) for u of shape (n,3,cases)."""
     u = _as_u(mesh, u)
     elements = np.asarray(elements, dtype=np.int64)
     xi = np.asarray(xi, dtype=np.float64).reshape(-1, 3)
@@ -36,7 +40,10 @@ def gradient_at(mesh: Mesh, u, elements: np.ndarray, xi: np.ndarray) -> np.ndarr
     X = mesh.points[mesh.tets[elements]]                     # (k,nn,3)
     J = np.einsum("kai,kaj->kij", X, dN)
     G = np.einsum("kaj,kji->kai", dN, np.linalg.inv(J))      # ∂N_a/∂x_i
-    return np.einsum("kac,kaj->kcj", u[mesh.tets[elements]], G)
+    ue = u[mesh.tets[elements]]
+    if ue.ndim == 3:
+        return np.einsum("kac,kaj->kcj", ue, G)
+    return np.einsum("kacl,kaj->klcj", ue, G)
 
 
 def strain_from_gradient(H: np.ndarray) -> np.ndarray:
@@ -79,13 +86,30 @@ def element_stresses(mesh: Mesh, u, material, at: str = "quadrature") -> np.ndar
     return stress_from_strain(element_strains(mesh, u, at), material)
 
 
-def nodal_strains(mesh: Mesh, u) -> np.ndarray:
-    """Nodal strains (n,3,3): each element's strain evaluated at its own nodes, volume-weighted mean."""
+def element_nodal_strains(mesh: Mesh, u, chunk: int = 20000) -> np.ndarray:
+    """ε at every element's own nodes (m,nn,3,3): discontinuous across elements (peak stresses)."""
     u = _as_u(mesh, u)
     nn = mesh.tets.shape[1]
     _, dN = tet_shape(mesh.order, REF_NODES[:nn])
-    G, det = physical_gradients(mesh.points[mesh.tets], dN)
-    eps = strain_from_gradient(np.einsum("eac,eqaj->eqcj", u[mesh.tets], G))   # (m,nn,3,3)
+    out = np.empty((mesh.n_elements, nn, 3, 3))
+    for s in range(0, mesh.n_elements, chunk):
+        t = mesh.tets[s:s + chunk]
+        G, _ = physical_gradients(mesh.points[t], dN)
+        out[s:s + chunk] = strain_from_gradient(np.einsum("eac,eqaj->eqcj", u[t], G))
+    return out
+
+
+def nodal_average(mesh: Mesh, values: np.ndarray) -> np.ndarray:
+    """Plain mean over the elements sharing each node of element-nodal scalars (m,nn) → (n,)."""
+    idx = mesh.tets.ravel()
+    tot = np.bincount(idx, weights=np.asarray(values, float).ravel(), minlength=mesh.n_nodes)
+    return tot / np.maximum(np.bincount(idx, minlength=mesh.n_nodes), 1)
+
+
+def nodal_strains(mesh: Mesh, u) -> np.ndarray:
+    """Nodal strains (n,3,3): each element's strain evaluated at its own nodes, volume-weighted mean."""
+    nn = mesh.tets.shape[1]
+    eps = element_nodal_strains(mesh, u)                                        # (m,nn,3,3)
     w = np.broadcast_to(np.abs(mesh.signed_volumes())[:, None], (mesh.n_elements, nn))
     idx = mesh.tets.ravel()
     out = np.zeros((mesh.n_nodes, 9))
@@ -158,7 +182,9 @@ def _newton_xi(mesh: Mesh, elem, xi, pts, iters: int = 4):
 
 
 def strain_at(mesh: Mesh, u, points) -> np.ndarray:
-    """Strain tensors (k,3,3) at arbitrary points inside (or on the surface of) the mesh."""
+    """Strain tensors (k,3,3) at arbitrary points inside (or on the surface of) the mesh;
+    (k,cases,3,3) for u of shape (n,3,cases). The one strain evaluator of the project: gauges
+    (flexure.gauges.read), reports and benchmarks use it; tests/test_fem_skfem.py checks it."""
     elem, xi = locate(mesh, points)
     return strain_from_gradient(gradient_at(mesh, u, elem, xi))
 

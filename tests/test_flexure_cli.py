@@ -32,8 +32,14 @@ def test_json_keys_vtu_and_png(capsys, tmp_path):
     assert data["vtu"] == str(vtu) and data["png"] == str(png)
     for k in ("gauge_strain_per_Nm", "sensitivity_mV_per_V_per_Nm", "torsional_stiffness_Nm_per_rad",
               "safety_factor"):                           # error estimate beside every FEM figure
-        assert 0 < data[f"{k}_error_estimate"] < 0.5 * abs(data[k]), k
         assert "mesh levels" in data[f"{k}_error_method"], k
+        if k != "torsional_stiffness_Nm_per_rad":
+            assert 0 < data[f"{k}_error_estimate"] < 0.5 * abs(data[k]), k
+    # P1 locks: its stiffness (2234 N·m/rad measured) is far above P2's, and its estimate must say
+    # so: at least the distance to the scikit-fem P2 value at h × 0.5 (1755.8, itself still above
+    # the converged stiffness; tests/test_fem_reference.py), which bounds P1's true error from below
+    k = data["torsional_stiffness_Nm_per_rad"]
+    assert k > 1755.8 and data["torsional_stiffness_Nm_per_rad_error_estimate"] >= k - 1755.8
     assert [lv["h_factor"] for lv in data["discretization_levels"]] == pytest.approx([2, 2 ** 0.5, 1])
 
 

@@ -10,7 +10,7 @@ from flexure.analysis import analyze, build_mesh
 from flexure.design import load_design
 from flexure.errors import InputError
 from flexure.fem import stiffness_matrix
-from flexure.geometry import SpokeDisc, check_watertight, load_stl, spoke_disc_surface
+from flexure.geometry import SpokeDisc, check_watertight, load_stl, profile, spoke_disc_surface
 from torquebench.io import shipped
 
 PAPER_DISC = shipped("scenes", "paper_disc.toml")
@@ -132,7 +132,12 @@ def test_mesh_quality_report_and_refinement_at_the_gauges(paper):
     design, res, fields = paper
     m = res["mesh"]
     assert m["n_inverted"] == 0 and m["min_dihedral_deg"] > 1.0 and m["max_aspect_ratio"] < 50
-    assert m["total_volume_m3"] == pytest.approx(spoke_disc_surface(design.disc, 3).volume, rel=1e-9)
+    # the exact solid (true circles, flexure.gmsh_mesh.mesh_spoke_disc), its curved faces meshed by
+    # chords: the volume is the exact one (a 64-segments-per-quarter profile) to the chords' error,
+    # 0.59 % measured at the coarse size (bolt holes of 3.2 mm on h_far = 2.2 mm), and more than the
+    # fine polygon's by exactly that (inscribed holes leave material)
+    exact = profile(design.disc, 64).area * design.disc.thickness
+    assert 0 < m["total_volume_m3"] / exact - 1 < 0.01
     mesh = fields.mesh
     f = mesh.boundary_faces()[:, :3]
     top = f[np.all(mesh.points[f, 2] > design.disc.thickness * (1 - 1e-9), axis=1)]   # gauge face
@@ -143,7 +148,7 @@ def test_mesh_quality_report_and_refinement_at_the_gauges(paper):
     near, far = edge[d < 1e-3].mean(), edge[d > 12e-3].mean()      # far: where h = h_far
     assert near == pytest.approx(res["mesh"]["h_gauge_m"], rel=0.3)
     assert res["mesh"]["mesher"] == "gmsh"                  # the default: graded isotropic volume mesh
-    assert m["n_slivers"] == 0 and m["min_dihedral_deg"] > 5.0
+    assert m["n_slivers"] == 0 and m["min_dihedral_deg"] > 10.0      # 11.4° measured (6.0° on the polygon)
     assert near < 0.6 * far                                # graded: finer under the gauges
 
 
