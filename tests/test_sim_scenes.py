@@ -80,7 +80,7 @@ def test_simulate_cli_writes_log_and_truth(tmp_path):
     on = truth.link.values > 0
     assert on.sum() == summary["contact_samples"] == 101   # t = 0.5 … 0.6 inclusive
     assert np.allclose(np.hypot(truth.Fx[on], truth.Fz[on]), 7.0)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["leg.csv", "leg.truth.csv"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["leg.csv", "leg.timing.toml", "leg.truth.csv"]
 
 
 def test_simulate_cli_reads_back_through_the_estimator(tmp_path):
