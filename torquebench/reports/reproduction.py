@@ -96,10 +96,13 @@ def _stats(err, mask):
     return {"mean": e.mean(0).tolist(), "std": e.std(0).tolist(), "n": int(len(e))}
 
 
-def evaluate_dynamic(scene, res, *, with_traces=True) -> dict:
-    """Estimate a simulated dynamic scene with both methods (+ filtered dynamic) and score them."""
+def evaluate_dynamic(scene, res, *, with_traces=True, chain=None) -> dict:
+    """Estimate a simulated dynamic scene with both methods (+ filtered dynamic) and score them.
+    The detector knows the log's sensor noise (pipeline.scene_noise_model, readings="log";
+    ``chain``: the scene's sensor chain for a bridge torque model, else built from the scene)."""
     from estimator.pipeline import estimate
-    from torquebench.pipeline import collision_phase_mask
+    from torquebench.pipeline import collision_phase_mask, scene_noise_model
+    from userio.errors import InputError
 
     cfg = scene.sim
     K = scene.estimator.gain_per_s
@@ -115,9 +118,16 @@ def evaluate_dynamic(scene, res, *, with_traces=True) -> dict:
            "methods": {}, "sim": res.stats}
     traces = {"t": t, "F_true": np.hypot(truth["Fx"], truth["Fz"]), "alpha_true": truth["alpha"],
               "link_true": truth["link"]}
+    try:
+        noise = scene_noise_model(scene, chain, readings="log")
+    except InputError:
+        if scene.estimator.threshold is None:
+            raise
+        noise = None                      # the scene's own ε: the paper rule, as before
     for method in ("paper", "dynamic"):
         start = time.perf_counter()
-        est = estimate(robot, res.log, method=method, gain_per_s=K, threshold=scene.estimator.threshold)
+        est = estimate(robot, res.log, method=method, gain_per_s=K, threshold=scene.estimator.threshold,
+                       noise=noise, false_alarm_rate=scene.estimator.false_alarm_rate)
         run_s = time.perf_counter() - start
         F = np.column_stack([est.Fx, est.Fz])
         p = np.column_stack([est.px, est.pz])
