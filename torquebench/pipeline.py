@@ -137,6 +137,16 @@ def collision_phase_mask(t, pokes, gain_per_s: float) -> np.ndarray:
     return phase
 
 
+def contact_free_mask(t, pokes, gain_per_s: float) -> np.ndarray:
+    """Samples with no contact and no residual of one: outside [t_on, t_off + ramp + 10/K) of
+    every poke (10 observer time constants: the residual's decay is below e⁻¹⁰ of the step)."""
+    t = np.asarray(t)
+    free = np.ones(t.shape, bool)
+    for p in pokes:
+        free &= ~((t >= p.t_on_s) & (t < p.t_off_s + p.ramp_s + 10.0 / gain_per_s))
+    return free
+
+
 def collision_phase_errors(est, truth, pokes, gain_per_s: float) -> dict:
     """Mean/RMS |p̂ − p| and mean |F̂ − F| over the collision phase (collision_phase_mask), over
     the samples with a finite estimate; the one scoring function of demo, run and the reports."""
