@@ -82,3 +82,15 @@ def test_bad_false_alarm_rate_is_one_line_naming_the_field(tmp_path, rate, messa
         load_scene(p)
     assert "estimator.false_alarm_rate" in str(exc.value) and message in str(exc.value)
     assert "\n" not in str(exc.value)
+
+
+def test_simulated_log_noise_is_the_bridge_chain_or_the_gaussian_sigma(tmp_path):
+    """The log `simulate` writes (readings="log"): bridge → the chain's noise_std_Nm (what
+    estimator.sim.sensors.measure draws through it), gaussian → sensors.torque_noise_Nm."""
+    scene = load_scene(DEMO)
+    chain = P.run_sensor_chain(scene, {})
+    assert P.scene_noise_model(scene, chain, readings="log").torque_sigma_Nm[0] == chain.noise_std_Nm
+    p = _scene_text(tmp_path, 'torque_model = "bridge"', 'torque_model = "gaussian"\ntorque_noise_Nm = 0.02\n#')
+    gauss = load_scene(p)
+    noise = P.scene_noise_model(gauss, None, readings="log")
+    assert noise.torque_sigma_Nm[0] == 0.02 and "torque_noise_Nm" in noise.source
