@@ -99,7 +99,8 @@ STAGES = (
     Stage("raw_counts", ("truth", "chain"), "readings", "joint torques as raw ADC counts + FT noise"),
     Stage("calibrated_torques", ("readings", "calibration?", "chain?"), "torques",
           "counts → torque through the fitted calibration"),
-    Stage("estimates", ("readings", "torques"), "estimates", "momentum observer + localizer"),
+    Stage("estimates", ("readings", "torques", "chain?", "calibration?"), "estimates",
+          "momentum observer + detector (at the scene's sensor noise) + localizer"),
     Stage("localization_error", ("estimates", "truth"), "localization_error",
           "errors against the truth over the collision phase"),
     Stage("predicted_error", ("chain", "calibration?", "truth?"), "predicted_error",
@@ -107,7 +108,7 @@ STAGES = (
     Stage("sensor_log", ("truth", "chain?"), "log",
           "the simulator's sensor model on the truth (the log `simulate` writes)"),
     Stage("static_holds", (), "static_log", "static equilibrium holds of a static scene"),
-    Stage("paper_scores", ("log?",), "paper_scores", "the paper reproduction's scores of the scene"),
+    Stage("paper_scores", ("log?", "chain?"), "paper_scores", "the paper reproduction's scores of the scene"),
     Stage("error_map", ("chain?", "calibration?"), "error_map",
           "Monte Carlo + first-order localization error over a posture grid"),
     Stage("report", ("chain?", "flexure?", "calibration?", "estimates?", "localization_error?",
@@ -134,6 +135,16 @@ def collision_phase_mask(t, pokes, gain_per_s: float) -> np.ndarray:
         if p.t_off_s > p.t_on_s:
             phase |= (t >= p.t_on_s + p.ramp_s + 5.0 / gain_per_s) & (t < p.t_off_s)
     return phase
+
+
+def contact_free_mask(t, pokes, gain_per_s: float) -> np.ndarray:
+    """Samples with no contact and no residual of one: outside [t_on, t_off + ramp + 10/K) of
+    every poke (10 observer time constants: the residual's decay is below e⁻¹⁰ of the step)."""
+    t = np.asarray(t)
+    free = np.ones(t.shape, bool)
+    for p in pokes:
+        free &= ~((t >= p.t_on_s) & (t < p.t_off_s + p.ramp_s + 10.0 / gain_per_s))
+    return free
 
 
 def collision_phase_errors(est, truth, pokes, gain_per_s: float) -> dict:
@@ -367,7 +378,81 @@ def run_calibrated_torques(scene, inp):
     return {"tau_Nm": tau, "tau_std_Nm": tau_std, "flagged": flagged}
 
 
+def _torque_from_counts(scene) -> bool:
+    """Whether the estimates' torques are the simulated ADC codes of the sensor chain (a simulated
+    scene's raw_counts, whatever [sensors].torque_model says), read back through the calibration."""
+    return scene.sim is not None
+
+
+def scene_noise_model(scene, chain=None, calibration=None, readings: str = "counts"):
+    """The estimator's NoiseModel (estimator.noise) for the readings the scene's estimates see,
+    with ``source`` naming where every σ came from; None when the scene states no sensors (a
+    recorded log without counts columns: the estimator's own default then applies and says so).
+
+    σ_τ per sample: torques read from ADC counts (every simulated scene's raw_counts, whatever
+    [sensors].torque_model says) carry the chain's white noise
+    σ_c = σ_τ,true · counts_per_Nm,true (true chain = the chain at true_gain_factor × strain),
+    read back through the reader's slope: σ_τ = σ_c / (counts per N·m of the calibration, or of
+    the nominal chain without one). The calibration's slope uncertainty is NOT white noise: it
+    scales every sample of a run by the same factor (a bias of the torque, not a per-sample
+    scatter), so it does not enter the detector's covariance (it enters predicted_error).
+    readings="log": the log `simulate` writes (sensor_log): σ_τ = the chain's noise_std_Nm for
+    torque_model "bridge" (estimator.sim.sensors.measure reads through ``chain``), else
+    sensors.torque_noise_Nm.
+    FT σ, joint-rate σ and encoder counts: the scene's [sensors] (what raw_counts draws).
+    Raises InputError when a σ is zero (a zero-noise channel cannot be whitened)."""
+    from dataclasses import replace
+
+    from estimator.noise import NoiseModel
+
+    sim = scene.sim
+    if sim is None:                       # a recorded log states no sensor noise
+        return None
+    parts = []
+    if readings == "log":
+        if sim.sensors.torque_model == "bridge":
+            chain = chain if chain is not None else run_sensor_chain(scene, {})
+            sigma_tau = chain.noise_std_Nm
+            parts.append(f"τ σ {sigma_tau:.3g} N·m = the bridge chain's noise_std_Nm")
+        else:
+            sigma_tau = sim.sensors.torque_noise_Nm
+            parts.append("τ σ from sensors.torque_noise_Nm")
+    elif chain is not None:
+        true = replace(chain, strain_per_Nm=chain.strain_per_Nm * scene.chain.true_gain_factor)
+        sigma_counts = true.noise_std_Nm * abs(true.counts_per_Nm)
+        if calibration is not None:
+            read = np.asarray(calibration.torque(np.array([0.0, 1.0])), float)
+            per_count, by = abs(read[1] - read[0]), "the fitted calibration"
+        else:
+            per_count, by = 1.0 / abs(chain.counts_per_Nm), "the nominal chain"
+        sigma_tau = sigma_counts * per_count
+        parts.append(f"τ σ {sigma_tau:.3g} N·m = sensor chain noise {sigma_counts:.3g} counts "
+                     f"(gain factor {scene.chain.true_gain_factor:g}) read through {by}")
+    else:
+        sigma_tau = sim.sensors.torque_noise_Nm
+        parts.append("τ σ from sensors.torque_noise_Nm")
+    sensors = sim.sensors
+    parts.append("FT σ from sensors.ft_noise")
+    if sensors.velocity_noise_rad_per_s:
+        parts.append("q̇ σ from sensors.velocity_noise_rad_per_s")
+    if sensors.encoder_counts:
+        parts.append("encoder quantization from sensors.encoder_counts")
+    sigmas = [sigma_tau, *np.asarray(sensors.ft_noise, float)]
+    if not all(np.isfinite(v) and v > 0 for v in sigmas):
+        raise InputError(f"{scene.path}: sensors: a zero σ (τ σ {sigma_tau:g} N·m, ft_noise "
+                         f"{np.asarray(sensors.ft_noise).tolist()}) cannot whiten the residual "
+                         "for the chi-square detector; give every σ > 0 or set [estimator] threshold")
+    return NoiseModel(torque_sigma_Nm=[sigma_tau], ft_sigma=sensors.ft_noise,
+                      velocity_sigma_rad_per_s=sensors.velocity_noise_rad_per_s,
+                      encoder_counts=sensors.encoder_counts,
+                      source=f"scene {scene.name}: " + "; ".join(parts))
+
+
 def run_estimates(scene, inp):
+    """Observer + detector + localizer per method. The detector knows the scene's sensor noise
+    (scene_noise_model): ``dynamic`` without [estimator].threshold → chi-square at
+    [estimator].false_alarm_rate; ``paper`` → ε = 0.06 (or the threshold), its isolation rows
+    whitened by the same noise model. A scene that sets threshold gets ‖r‖ > threshold for both."""
     from estimator.log import SensorLog
     from estimator.pipeline import estimate
 
@@ -378,9 +463,17 @@ def run_estimates(scene, inp):
     log = SensorLog(t=rd["t"][keep], q=rd["q"][keep], dq=rd["dq"][keep], tau_Nm=tau[keep],
                     wrench=rd["wrench"][keep], floating=rd["floating"], source=str(scene.path))
     e = scene.estimator
-    out = {"kept": keep, "flagged_samples": int((~keep).sum())}
+    try:
+        noise = scene_noise_model(scene, inp.get("chain"), inp.get("calibration"))
+    except InputError:
+        if e.threshold is None:
+            raise
+        noise = None                      # the scene's own ε: the paper rule, as before
+    out = {"kept": keep, "flagged_samples": int((~keep).sum()),
+           "noise_source": noise.describe() if noise is not None else None}
     for m in METHODS:
-        out[m] = estimate(robot, log, method=m, gain_per_s=e.gain_per_s, threshold=e.threshold)
+        out[m] = estimate(robot, log, method=m, gain_per_s=e.gain_per_s, threshold=e.threshold,
+                          noise=noise, false_alarm_rate=e.false_alarm_rate)
     return out
 
 
@@ -475,7 +568,7 @@ def run_paper_scores(scene, inp):
         return rr.evaluate_static(scene)
     lg = inp["log"]
     res = SimpleNamespace(t=lg["log"].t, truth=lg["truth"], log=lg["log"], stats=lg["stats"])
-    return rr.evaluate_dynamic(scene, res)
+    return rr.evaluate_dynamic(scene, res, chain=inp.get("chain"))
 
 
 def run_error_map(scene, inp):
@@ -673,8 +766,12 @@ def _uses(scene, stage: str, art: str) -> bool:
         return scene.prediction.torque_noise_Nm is None
     if stage == "error_map" and art == "calibration":
         return scene.prediction.gain_error is None and scene.chain.calibration_file is not None
+    if stage == "estimates" and art in ("chain", "calibration"):
+        return _torque_from_counts(scene)        # σ_τ of the torques read from counts
     if stage == "paper_scores" and art == "log":
         return scene.sim is not None
+    if stage == "paper_scores" and art == "chain":    # σ_τ of a bridge log for the detector
+        return scene.sim is not None and scene.sim.sensors.torque_model == "bridge"
     if stage == "report":
         return False                     # its inputs are planned by report_areas
     return True

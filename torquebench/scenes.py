@@ -32,9 +32,15 @@ KINDS = ("dynamic", "static_loading", "posture_sweep")
 
 @dataclass(frozen=True)
 class EstimatorSettings:
+    """[estimator]: threshold None → ``dynamic`` detects with the chi-square test at
+    ``false_alarm_rate`` (value, unit 'sample' | 's' | 'h') on the residual whitened by the scene's
+    sensor noise (pipeline.scene_noise_model); ``paper`` keeps ε = 0.06. A threshold given → the
+    paper's rule ‖r‖ > threshold for both methods."""
+
     method: str = "dynamic"
     gain_per_s: float = 100.0
-    threshold: float = 0.06
+    threshold: float | None = None
+    false_alarm_rate: tuple = (1.0, "h")
 
 
 @dataclass(frozen=True)
@@ -166,12 +172,24 @@ def _sensors(f: _Fields, data: dict) -> Sensors:
 
 
 def _estimator(f: _Fields, data: dict) -> EstimatorSettings:
+    from estimator.noise import parse_rate, per_sample_rate
+
     t = f.table(data, "estimator")
-    f.known(t, {"method", "gain_per_s", "threshold"}, "estimator")
+    f.known(t, {"method", "gain_per_s", "threshold", "false_alarm_rate"}, "estimator")
+    where = f"{f.path}: estimator.false_alarm_rate"
+    raw = t.get("false_alarm_rate", "1/h")
+    if isinstance(raw, bool) or not isinstance(raw, (str, int, float)):
+        raise f.err("estimator.false_alarm_rate", f"expected a rate like \"1/h\", got {raw!r}")
+    rate = parse_rate(str(raw), where)
+    rate_Hz = f.number(data.get("sensors", {}) if isinstance(data.get("sensors"), dict) else {},
+                       "sample_rate_Hz", "sensors", 1000.0, positive=True)
+    per_sample_rate(*rate, 1.0 / rate_Hz, where)           # (0, 1) per sample, or one line
     return EstimatorSettings(
         method=f.choice(t, "method", "estimator", ("dynamic", "paper"), "dynamic"),
         gain_per_s=f.number(t, "gain_per_s", "estimator", 100.0, positive=True),
-        threshold=f.number(t, "threshold", "estimator", 0.06, positive=True))
+        threshold=f.number(t, "threshold", "estimator", None, positive=True) if "threshold" in t
+        else None,
+        false_alarm_rate=rate)
 
 
 def _poke(f: _Fields, p: dict, where: str, n_links: int, duration: float) -> Poke:

@@ -51,6 +51,8 @@ def summarize(arts: dict) -> dict:
             out["calibration"]["slope_mean_monte_carlo_standard_error_counts_per_g"] = sd / (n / tau) ** 0.5
     if "torques" in arts:
         out["flagged_samples"] = int(arts["torques"]["flagged"].any(axis=-1).sum())
+    if "estimates" in arts:     # what the detector took as the sensor noise (None: estimator default)
+        out["residual_noise_source"] = arts["estimates"].get("noise_source")
     if "localization_error" in arts:
         out["measured"] = arts["localization_error"]
     if "predicted_error" in arts:
@@ -91,6 +93,8 @@ def run(args) -> int:
     if "calibration" in out:
         c = out["calibration"]
         print(f"calibration: slope {c['slope_counts_per_g']:.5g} ± {c['slope_counts_per_g_error_estimate']:.2g} counts/g")
+    if out.get("residual_noise_source"):
+        print(f"detector noise: {out['residual_noise_source']}")
     if "measured" in out or "predicted" in out:
         print(f"{'method':8s} {'measured RMS |p| err':>21s} {'predicted RMS':>22s} {'predicted p95':>14s}")
         for m in P.METHODS:
