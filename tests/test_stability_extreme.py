@@ -9,35 +9,23 @@ import pytest
 from calibration.fit import fit_session
 from calibration.session import read_session
 from calibration.simulate import PAPER_MASSES_G, SessionSpec, simulate_session
-from flexure.bc import Problem
 from flexure.convergence import richardson
 from flexure.material import Material
-from flexure.mesh import cylinder_mesh
-from flexure.solve import solve
 from torquebench.cli import main
 from torquebench.io import REPO_ROOT
 
 # ------------------------------------------------------------------ ν → 0.5
-A_IN, B_OUT, H, PRESS = 0.01, 0.02, 0.002, 10e6
+from test_fem_validation import A_IN, lame      # the Lamé thick cylinder of the FEM validation
 
 
 def lame_bore_hoop_strain(order: int, k: int, nu: float):
     """Quarter thick cylinder in plane strain (u_z = 0 on both faces), internal pressure: the hoop
     strain u_r/r at the bore, FEM and exact (Lamé: u_r = (1+ν)/E a²p/(b²−a²) ((1−2ν) r + b²/r)),
     and the solver's warnings. Plane strain makes ν → 0.5 incompressible: the locking test."""
-    mat = Material(70e9, nu, 250e6, "near-incompressible")
-    m = cylinder_mesh(A_IN, B_OUT, H, 2 * k, 4 * k, 1, theta_span=np.pi / 2, order=order)
-    p = Problem(m, mat)
-    p.fix(m.select_nodes(lambda x: (x[:, 2] < 1e-12) | (x[:, 2] > H - 1e-12)), components=2)
-    p.fix(m.select_nodes(lambda x: np.abs(x[:, 1]) < 1e-12), components=1)
-    p.fix(m.select_nodes(lambda x: np.abs(x[:, 0]) < 1e-12), components=0)
-    p.add_pressure(m.select_faces(lambda x: np.hypot(x[:, 0], x[:, 1]) < A_IN * (1 + 1e-9)), PRESS)
-    s = solve(p)
-    r = np.hypot(m.points[:, 0], m.points[:, 1])
-    bore = r < A_IN * (1 + 1e-9)
-    ur = (s.u[bore, 0] * m.points[bore, 0] + s.u[bore, 1] * m.points[bore, 1]) / r[bore]
-    exact = (1 + nu) / mat.E_Pa * A_IN ** 2 * PRESS / (B_OUT ** 2 - A_IN ** 2) * ((1 - 2 * nu) + B_OUT ** 2 / A_IN ** 2)
-    return float(np.mean(ur / A_IN)), exact, m.n_dofs, s.info["warnings"]
+    m, s, ur, ur_exact, _ = lame(order, k, Material(70e9, nu, 250e6, "near-incompressible"))
+    bore = np.hypot(m.points[:, 0], m.points[:, 1]) < A_IN * (1 + 1e-9)
+    return (float(np.mean(ur[bore] / A_IN)), float(np.mean(ur_exact[bore]) / A_IN), m.n_dofs,
+            s.info["warnings"])
 
 
 def test_near_incompressible_p2_stays_within_its_error_estimate_while_p1_locks():
