@@ -115,3 +115,12 @@ def test_fem_section_quick_has_the_contract_and_p1_error_falls_with_refinement(t
     assert len(rows) == 6
     values = [float(ln.split("|")[-2]) for ln in rows[:3]]              # gauge strain, coarse → fine
     assert values == sorted(values)                                     # P1 too stiff, rising to the limit
+    # the second mesher is a setting of ours; scikit-fem is an outside point, listed apart, never starred
+    assert sum(ln.startswith("| P1 tetgen, h × 4") for ln in lines) == 2
+    outside = [ln for ln in lines if ln.startswith("| scikit-fem P2 (same mesh), h × 4 |")]
+    assert len(outside) == 2 and not any("★" in ln for ln in outside)
+    all_settings = text.split("All settings")[1].split("Outside point")[0]
+    assert "scikit-fem" not in all_settings
+    # P2 on the coarsest mesh reads more strain than P1 on the finest (P1 is too stiff)
+    sk_strain = float(outside[0].split("|")[5])
+    assert sk_strain > max(values)
