@@ -5,8 +5,8 @@
                                         [--fem-rows OLD.json ...] [--splice-fem-section FILE.md]
 
 Runs every error-vs-run-time sweep (simulators, calibration, uncertainty propagation, the flexure
-FEM: gmsh P1 × 6 and P2 × 5 mesh levels × 2 geometries, tetgen P2 × 4 and scikit-fem P2 × 2 on the
-paper disc, ≈ 25 min on a loaded 2-core machine) and prints the rows (setting, wall time, error) of
+FEM: gmsh P1 × 6 and P2 × 5 mesh levels and tetgen P2 × 4 on 2 geometries, scikit-fem P2 × 2 on
+the paper disc and × 1 on the thick one, ≈ 17 min measured on a loaded 2-core machine) and prints the rows (setting, wall time, error) of
 each; --write-report also writes reports/error_vs_runtime.md with every section (which runs the
 sweeps again). --splice-fem-section replaces only the flexure FEM section of an existing
 error_vs_runtime.md (and its PNGs, beside it) with the one built from this run's FEM rows, leaving
@@ -25,9 +25,10 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 
-def splice_fem_section(md: Path, rows: list[dict], seconds: float, quick: bool = False) -> list[Path]:
+def splice_fem_section(md: Path, rows: list[dict], seconds: float, quick: bool = False, runs: int = 1) -> list[Path]:
     """Replace the flexure FEM section of ``md`` (from its "## Flexure FEM" heading through the
-    "_(section built in … s)_" line after it) with the one built from ``rows``."""
+    "_(section built in … s)_" line after it) with the one built from ``rows`` (measured in ``runs``
+    separate runs: said in the section, since the machine's load differs between them)."""
     from torquebench.reports import fem
     from userio.files import write_text_atomic
 
@@ -36,6 +37,10 @@ def splice_fem_section(md: Path, rows: list[dict], seconds: float, quick: bool =
     end = text.index("_(section built in", start)
     end = text.index("\n", end) + 1 if "\n" in text[end:] else len(text)
     lines, pngs = fem.fem_section(rows, md.parent, quick)
+    if runs > 1:
+        lines[3:3] = ["", f"These rows were measured in {runs} separate runs, then merged (`--fem-rows`), "
+                      "on a shared machine whose load varied between them: compare wall times across those "
+                      "runs (here: across meshers) only to within about a factor of 2.", ""]
     new = "\n".join(lines + [f"_(section built in {seconds:.1f} s)_", ""])
     write_text_atomic(md, text[:start] + new + text[end:])
     return [md, *pngs]
@@ -84,7 +89,8 @@ def main(argv=None) -> int:
         if "fem" not in out:
             ap.error("--splice-fem-section needs the fem sweep")
         out["written"] = [str(p) for p in splice_fem_section(args.splice_fem_section, out["fem"]["rows"],
-                                                             out["fem"]["info"]["sweep_s"], args.quick)]
+                                                             out["fem"]["info"]["sweep_s"], args.quick,
+                                                             runs=1 + len(args.fem_rows))]
     if args.write_report:
         out["written"] = [str(p) for p in evr.build(args.write_report, quick=args.quick)]
     json.dump(out, sys.stdout, indent=1, default=float)

@@ -173,7 +173,9 @@ FEM_PLAN = {
     "paper disc": {("gmsh", 1): FEM_FACTORS[1], ("gmsh", 2): FEM_FACTORS[2],
                    ("tetgen", 2): (2.0, math.sqrt(2.0), 1.0, 1 / math.sqrt(2.0)),
                    ("scikit-fem", 2): (1.0, 1 / math.sqrt(2.0))},
-    "thick disc, 0.5 mm gauges": {("gmsh", 1): FEM_FACTORS[1], ("gmsh", 2): FEM_FACTORS[2]},
+    "thick disc, 0.5 mm gauges": {("gmsh", 1): FEM_FACTORS[1], ("gmsh", 2): FEM_FACTORS[2],
+                                  ("tetgen", 2): (2.0, math.sqrt(2.0), 1.0, 1 / math.sqrt(2.0)),
+                                  ("scikit-fem", 2): (1.0,)},
 }
 FEM_QUICK = {"paper disc": {("gmsh", 1): (4.0, 2.0, 1.0), ("tetgen", 1): (4.0,), ("scikit-fem", 2): (4.0,)}}
 FEM_FIGURES = {"gauge_strain_per_Nm": "gauge strain per N·m", "torsional_stiffness_Nm_per_rad": "torsional stiffness"}
