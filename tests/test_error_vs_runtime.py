@@ -115,3 +115,35 @@ def test_fem_section_quick_has_the_contract_and_p1_error_falls_with_refinement(t
     assert len(rows) == 6
     values = [float(ln.split("|")[-2]) for ln in rows[:3]]              # gauge strain, coarse → fine
     assert values == sorted(values)                                     # P1 too stiff, rising to the limit
+    # the second mesher is a setting of ours; scikit-fem is an outside point, listed apart, never starred
+    assert sum(ln.startswith("| P1 tetgen, h × 4") for ln in lines) == 2
+    outside = [ln for ln in lines if ln.startswith("| scikit-fem P2 (same mesh), h × 4 |")]
+    assert len(outside) == 2 and not any("★" in ln for ln in outside)
+    all_settings = text.split("All settings")[1].split("Outside point")[0]
+    assert "scikit-fem" not in all_settings
+    # P2 on the coarsest mesh reads more strain than P1 on the finest (P1 is too stiff)
+    sk_strain = float(outside[0].split("|")[5])
+    assert sk_strain > max(values)
+
+
+def test_splicing_the_fem_section_leaves_the_other_sections_alone(tmp_path):
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_accuracy.py"
+    spec = importlib.util.spec_from_file_location("_bench_accuracy", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    md = tmp_path / "error_vs_runtime.md"
+    md.write_text("# E\n\n## A\n\nkeep A\n_(section built in 1.0 s)_\n\n## Flexure FEM (old)\n\nstale\n"
+                  "_(section built in 9.0 s)_\n\n## Z\n\nkeep Z\n")
+    rows = [{"geometry": "paper disc", "mesher": m, "order": 2, "h_factor": f, "dofs": int(n), "time_s": t,
+             "gauge_strain_per_Nm": 5.0 + 0.3 * (n / 4e4) ** (-2 / 3), "torsional_stiffness_Nm_per_rad": 1700.0 + n / 1e4}
+            for m, f, n, t in (("gmsh", 2.0, 1e4, 10.0), ("gmsh", 1.0, 2e4, 20.0), ("gmsh", 0.5, 4e4, 40.0),
+                               ("tetgen", 1.0, 3e4, 15.0), ("scikit-fem", 1.0, 2e4, 12.0))]
+    bench.splice_fem_section(md, rows, 42.0, runs=2)
+    text = md.read_text()
+    assert text.startswith("# E\n\n## A\n\nkeep A\n_(section built in 1.0 s)_\n\n## Flexure FEM (P1 and P2")
+    assert "stale" not in text and "9.0 s" not in text and text.endswith("_(section built in 42.0 s)_\n\n## Z\n\nkeep Z\n")
+    assert "measured in 2 separate runs" in text and "| P2 tetgen, h × 1 ★ |" in text
+    assert "| scikit-fem P2 (same mesh), h × 1 | 20,000 |" in text

@@ -164,37 +164,69 @@ FEM_GEOMETRIES = {
 #: f = 2 the DOFs barely fall (the geometry's own features hold the size), so P2 starts at 2.
 FEM_FACTORS = {1: (4.0, 2.0, math.sqrt(2.0), 1.0, 1 / math.sqrt(2.0), 0.5),
                2: (2.0, math.sqrt(2.0), 1.0, 1 / math.sqrt(2.0), 0.5)}
-FEM_QUICK = {"paper disc": {1: (4.0, 2.0, 1.0)}}
+#: the meshers compared: "gmsh" (the default: the exact OpenCASCADE solid), "tetgen" (the design's
+#: ``mesher = "tetgen"``: the polygonal profile's surface, graded from it) and "scikit-fem" (an outside
+#: point: benchmarks/fem_reference.py, scikit-fem's own P2 assembly, BCs and AMG-CG on our gmsh P1 mesh)
+MESHERS = ("gmsh", "tetgen", "scikit-fem")
+#: geometry → (mesher, order) → h factors; the reference of every figure is the gmsh P2 levels' limit
+FEM_PLAN = {
+    "paper disc": {("gmsh", 1): FEM_FACTORS[1], ("gmsh", 2): FEM_FACTORS[2],
+                   ("tetgen", 2): (2.0, math.sqrt(2.0), 1.0, 1 / math.sqrt(2.0)),
+                   ("scikit-fem", 2): (1.0, 1 / math.sqrt(2.0))},
+    "thick disc, 0.5 mm gauges": {("gmsh", 1): FEM_FACTORS[1], ("gmsh", 2): FEM_FACTORS[2],
+                                  ("tetgen", 2): (2.0, math.sqrt(2.0), 1.0, 1 / math.sqrt(2.0)),
+                                  ("scikit-fem", 2): (1.0,)},
+}
+FEM_QUICK = {"paper disc": {("gmsh", 1): (4.0, 2.0, 1.0), ("tetgen", 1): (4.0,), ("scikit-fem", 2): (4.0,)}}
 FEM_FIGURES = {"gauge_strain_per_Nm": "gauge strain per N·m", "torsional_stiffness_Nm_per_rad": "torsional stiffness"}
+OUTSIDE = "scikit-fem"
 
 
-def fem_levels(quick: bool = False, progress: bool = True, on_row=None) -> list[dict]:
-    """Analyse every geometry × element order × mesh level: one row per analysis with its wall time
-    (``analyze``'s total: meshing, assembly, the six load cases, read-out) and the figures. The
-    cheapest run first (P1, then P2 coarse to fine); ``on_row(rows)`` after each."""
+def _scikit_fem_row(design, h_factor: float) -> dict:
+    """scikit-fem P2 on our gmsh P1 mesh × h_factor (benchmarks/fem_reference.py): the torque case only."""
+    import importlib.util
+
+    from torquebench.io import REPO_ROOT
+
+    path = REPO_ROOT / "benchmarks" / "fem_reference.py"
+    spec = importlib.util.spec_from_file_location("_fem_reference", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    ref = mod.reference(design, h_factor)
+    return {"dofs": int(ref["dofs"]), "time_s": float(ref["seconds"]), "warnings": [],
+            "cg_iterations": int(ref["cg_iterations"]), **{k: float(ref[k]) for k in FEM_FIGURES}}
+
+
+def fem_levels(quick: bool = False, progress: bool = True, on_row=None, meshers=MESHERS) -> list[dict]:
+    """Analyse every geometry × mesher × element order × mesh level of the plan (only ``meshers``):
+    one row per analysis with its wall time (``analyze``'s total: meshing, assembly, the six load
+    cases, read-out; for scikit-fem its meshing, assembly, the torque case and read-out) and the
+    figures. The cheapest run first (P1, then P2 coarse to fine); ``on_row(rows)`` after each."""
     import sys
 
     from flexure.analysis import analyze
     from flexure.design import load_design
     from torquebench.io import REPO_ROOT
 
-    plan = FEM_QUICK if quick else {g: FEM_FACTORS for g in FEM_GEOMETRIES}
-    todo = sorted(((g, o, f) for g, orders in plan.items() for o, fs in orders.items() for f in fs),
-                  key=lambda x: (x[1], -x[2]))
+    plan = FEM_QUICK if quick else FEM_PLAN
+    todo = [(g, m, o, f) for g, runs in plan.items() for (m, o), fs in runs.items() for f in fs if m in meshers]
+    rank = {k: i for i, k in enumerate(todo)}
     from tqdm import tqdm
     rows = []
-    for g, order, f in tqdm(todo, desc="error_vs_runtime: flexure FEM", file=sys.stderr, disable=not progress,
-                            leave=False):
+    for g, mesher, order, f in tqdm(sorted(todo, key=lambda x: (x[2], -x[3])), desc="error_vs_runtime: flexure FEM",
+                                    file=sys.stderr, disable=not progress, leave=False):
         scene, overrides = FEM_GEOMETRIES[g]
-        res, _ = analyze(load_design(REPO_ROOT / "scenes" / scene, overrides), order=order, h_factor=f)
-        rows.append({"geometry": g, "order": order, "h_factor": f, "dofs": int(res["dofs"]),
-                     "time_s": float(res["total_s"]), "warnings": list(res["warnings"]),
-                     **{k: float(res[k]) for k in FEM_FIGURES}})
+        if mesher == OUTSIDE:
+            row = _scikit_fem_row(load_design(REPO_ROOT / "scenes" / scene, overrides), f)
+        else:
+            design = load_design(REPO_ROOT / "scenes" / scene, {**overrides, "mesh.mesher": mesher})
+            res, _ = analyze(design, order=order, h_factor=f)
+            row = {"dofs": int(res["dofs"]), "time_s": float(res["total_s"]), "warnings": list(res["warnings"]),
+                   **{k: float(res[k]) for k in FEM_FIGURES}}
+        rows.append({"geometry": g, "mesher": mesher, "order": order, "h_factor": f, **row})
         if on_row:
             on_row(rows)
-    order = {(g, o, f): i for i, (g, o, f) in enumerate((g, o, f) for g, orders in plan.items()
-                                                          for o, fs in orders.items() for f in fs)}
-    return sorted(rows, key=lambda r: order[(r["geometry"], r["order"], r["h_factor"])])
+    return sorted(rows, key=lambda r: rank[(r["geometry"], r["mesher"], r["order"], r["h_factor"])])
 
 
 def extrapolate(dofs, values) -> dict:
@@ -230,8 +262,9 @@ def extrapolate(dofs, values) -> dict:
 
 
 def _references(rows: list[dict]) -> dict:
-    """(geometry, figure) → reference (from P2, else P1) and the other order's extrapolation."""
+    """(geometry, figure) → reference (from gmsh P2, else gmsh P1) and the other order's extrapolation."""
     out = {}
+    rows = [r for r in rows if r.get("mesher", "gmsh") == "gmsh"]
     for g in dict.fromkeys(r["geometry"] for r in rows):
         for key in FEM_FIGURES:
             ext = {}
@@ -250,25 +283,85 @@ CROSS_CHECK_MAX_REL = 0.10
 
 
 def error_vs_runtime_section(out_dir: Path, quick: bool = False) -> tuple[list[str], list[Path]]:
-    """Flexure FEM: P1/P2 × mesh level (gmsh) on two geometries; gauge strain and stiffness error
-    against wall time, errors against the Richardson limit of the finest P2 levels."""
+    """Flexure FEM: P1/P2 × mesh level × mesher (gmsh, tetgen) on two geometries, scikit-fem as an
+    outside point; gauge strain and stiffness error against wall time, errors against the
+    Richardson limit of the finest gmsh P2 levels."""
     return fem_section(fem_levels(quick), out_dir, quick)
+
+
+def _setting(r: dict) -> tuple[str, str]:
+    """(setting label, plot family) of a row."""
+    m = r.get("mesher", "gmsh")
+    if m == OUTSIDE:
+        return f"scikit-fem P{r['order']} (same mesh), h × {r['h_factor']:.3g}", f"scikit-fem P{r['order']} (outside point)"
+    if m == "gmsh":
+        return f"P{r['order']}, h × {r['h_factor']:.3g}", f"P{r['order']}"
+    return f"P{r['order']} {m}, h × {r['h_factor']:.3g}", f"P{r['order']} {m}"
+
+
+def _plot_outside(ours: list[dict], outside: list[dict], path: Path, title: str, error_label: str) -> None:
+    """Redraw the section's plot: the outside points as black stars (not on the Pareto front); the
+    level that is itself the reference (error 0 by construction) is left out of the log axes."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from torquebench.reports.error_vs_runtime import TARGETS, pareto_front
+    from userio.files import atomic_path
+
+    ours = [r for r in ours if r["error"] > 0]
+    fig, ax = plt.subplots(figsize=(6.4, 4.4), constrained_layout=True)
+    for fam in dict.fromkeys(r["family"] for r in ours):
+        sel = [r for r in ours if r["family"] == fam]
+        ax.loglog([r["time_s"] for r in sel], [max(r["error"], 1e-16) for r in sel], "o-", label=fam, alpha=0.8)
+    t = np.array([r["time_s"] for r in ours])
+    e = np.array([max(r["error"], 1e-16) for r in ours])
+    f = pareto_front(t, e)
+    ax.step(t[f], e[f], where="post", color="k", lw=2, alpha=0.35, label="Pareto front (our settings)")
+    if outside:
+        ax.loglog([r["time_s"] for r in outside], [max(r["error"], 1e-16) for r in outside], "k*", ms=12,
+                  ls="none", label=outside[0]["family"])
+    for target in TARGETS:
+        ax.axhline(target, color="grey", lw=0.6, ls=":")
+    ax.set(xlabel="wall time [s]", ylabel=error_label, title=title)
+    ax.legend(fontsize=8)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=100)
+    plt.close(fig)
 
 
 def fem_section(rows: list[dict], out_dir: Path, quick: bool = False) -> tuple[list[str], list[Path]]:
     """The Markdown and PNGs of :func:`error_vs_runtime_section` from ``fem_levels`` rows."""
-    from torquebench.reports.error_vs_runtime import section
+    from torquebench.reports.error_vs_runtime import _fmt_t, section
 
+    rows = sorted(rows, key=lambda r: (MESHERS.index(r.get("mesher", "gmsh")), r["order"], -r["h_factor"]))
     refs = _references(rows)
-    lines = ["## Flexure FEM (P1 and P2 × mesh size, gmsh; two geometries)", "",
-             "`flexure.analysis.analyze` on the design's gmsh mesh with every element size × f "
-             f"(f = {', '.join(f'{f:.3g}' for f in sorted({r['h_factor'] for r in rows}, reverse=True))}), "
-             "P1 (4-node) and P2 (10-node) tetrahedra. Wall time = the whole analysis a user waits for "
+    tet = sorted({r["h_factor"] for r in rows if r.get("mesher") == "tetgen"}, reverse=True)
+    sk = sorted({r["h_factor"] for r in rows if r.get("mesher") == OUTSIDE}, reverse=True)
+    gm = sorted({r["h_factor"] for r in rows if r.get("mesher", "gmsh") == "gmsh"}, reverse=True)
+    lines = ["## Flexure FEM (P1 and P2 × mesh size × mesher; two geometries; scikit-fem as an outside point)", "",
+             "`flexure.analysis.analyze` on the design's mesh with every element size × f, "
+             "P1 (4-node) and P2 (10-node) tetrahedra. Meshers: gmsh (the default; the exact OpenCASCADE "
+             f"solid with true circles and fillets; f = {', '.join(f'{f:.3g}' for f in gm)})"
+             + (f" and tetgen (the design with `mesher = \"tetgen\"`: the polygonal profile, "
+                "3 segments per quarter circle at the design's size `coarse`, meshed from its surface; "
+                f"f = {', '.join(f'{f:.3g}' for f in tet)}; its error against the gmsh reference includes "
+                "the polygon's geometry error, which no mesh refinement removes)" if tet else "") + ". "
+             "Wall time = the whole analysis a user waits for "
              "(meshing, assembly, the six load cases, gauge read-out). Geometries: `scenes/paper_disc.toml` "
              "(2.2 mm, fillets, 1.5 mm gauges) and the same disc 5 mm thick without fillets with 0.5 mm "
              "gauges (`tests/test_fem_thick_disc.py`)."
-             + (" QUICK mode: paper disc, P1 on coarse levels only; the reference (P1 levels) is then NOT converged." if quick else ""),
-             "", "Reference for each figure: Richardson extrapolation of the three finest P2 levels with "
+             + (f" Outside point of comparison: scikit-fem P2 (`benchmarks/fem_reference.py`: scikit-fem's own "
+                "assembly, boundary conditions (the bore turned rigidly, equal to our coupling under a pure "
+                "torque by symmetry) and pyamg-preconditioned CG) on our gmsh P1 mesh at the same f, so at "
+                "the same DOF count as our P2 level; its wall time is meshing + assembly + the torque case "
+                "only (one right-hand side, not six) + read-out. It is plotted as black stars and listed "
+                "separately: not one of our settings, so not on the Pareto front and not in the "
+                f"cheapest-setting tables (f = {', '.join(f'{f:.3g}' for f in sk)})." if sk else "")
+             + (" QUICK mode: paper disc, gmsh P1 on coarse levels, one tetgen P1 and one scikit-fem P2 level "
+                "only; the reference (gmsh P1 levels) is then NOT converged." if quick else ""),
+             "", "Reference for each figure: Richardson extrapolation of the three finest gmsh P2 levels with "
              "the observed order (h ∝ DOFs^(−1/3)); its uncertainty is the whole extrapolation step (or, "
              "for oscillating levels or an order outside [0.5, 4], the finest value ± 1.25 × the largest change), so the finest P2 level's own error is "
              "at most that uncertainty by construction. Cross-check: the P1 levels, an independent "
@@ -290,20 +383,39 @@ def fem_section(rows: list[dict], out_dir: Path, quick: bool = False) -> tuple[l
         else:
             o = ("—", "—")
         lines.append(f"| {g} | {FEM_FIGURES[key]} | {ref['finest']:.5g} ({ref['dofs'][-1]:,}) | {ref['value']:.5g} | "
-                     f"{rel:.2%} | P{rr['ref_order']}: {ref['method']} | {o[0]} | {o[1]} |")
+                     f"{rel:.2%} | P{rr['ref_order']} gmsh: {ref['method']} | {o[0]} | {o[1]} |")
     lines.append("")
     pngs: list[Path] = []
     for (g, key), rr in refs.items():
         R = rr["ref"]["value"]
-        sel = [r for r in rows if r["geometry"] == g]
-        srows = [{"setting": f"P{r['order']}, h × {r['h_factor']:.3g}", "family": f"P{r['order']}",
-                  "time_s": r["time_s"], "error": abs(r[key] / R - 1), "dofs": r["dofs"], "value": r[key]}
-                 for r in sel]
+        srows, outside = [], []
+        for r in (r for r in rows if r["geometry"] == g):
+            setting, family = _setting(r)
+            row = {"setting": setting, "family": family, "time_s": r["time_s"], "error": abs(r[key] / R - 1),
+                   "dofs": r["dofs"], "value": r[key]}
+            (outside if r.get("mesher") == OUTSIDE else srows).append((r, row))
         slug = "fem_" + ("paper" if g.startswith("paper") else "thick") + ("_strain" if "strain" in key else "_stiffness")
-        sec, p = section(f"Flexure FEM, {g}: {FEM_FIGURES[key]}", srows, out_dir, slug,
-                         error_label=f"relative {FEM_FIGURES[key]} error", resolution=rr["ref"]["uncertainty"] / abs(R),
-                         reference=f"{R:.6g} (P{rr['ref_order']} Richardson limit, ± {rr['ref']['uncertainty'] / abs(R):.2%})")
+        title = f"Flexure FEM, {g}: {FEM_FIGURES[key]}"
+        label = f"relative {FEM_FIGURES[key]} error"
+        sec, p = section(title, [x for _, x in srows], out_dir, slug, error_label=label,
+                         resolution=rr["ref"]["uncertainty"] / abs(R),
+                         reference=f"{R:.6g} (gmsh P{rr['ref_order']} Richardson limit, ± {rr['ref']['uncertainty'] / abs(R):.2%})")
         sec[0] = "#" + sec[0]
+        sec.insert(4, "The finest gmsh P2 level is the reference's own finest value (error 0 by construction): "
+                      "listed, not plotted." if any(x["error"] == 0 for _, x in srows) else "")
+        _plot_outside([x for _, x in srows], [x for _, x in outside], p[0], title, label)
+        if outside:
+            sec = sec[:-1] + ["", "Outside point of comparison (★ in the plot is not ours; not on the Pareto front):", "",
+                              "| setting | DOFs | wall time | " + label + " | value | our P2 on the same mesh: DOFs, wall time (six load cases), value | relative difference |",
+                              "|---|---|---|---|---|---|---|"]
+            for r, x in outside:
+                mine = [q for q in rows if q["geometry"] == g and q.get("mesher", "gmsh") == "gmsh"
+                        and q["order"] == r["order"] and q["h_factor"] == r["h_factor"]]
+                ours = (f"{mine[0]['dofs']:,}, {_fmt_t(mine[0]['time_s'])}, {mine[0][key]:.6g} | "
+                        f"{abs(r[key] / mine[0][key] - 1):.1e}") if mine else "not run | —"
+                sec.append(f"| {x['setting']} | {x['dofs']:,} | {_fmt_t(x['time_s'])} | {x['error']:.3g} | "
+                           f"{x['value']:.6g} | {ours} |")
+            sec.append("")
         lines += sec
         pngs += p
     return lines, pngs
