@@ -47,13 +47,15 @@ def cheapest(rows: list[dict], target: float):
 
 
 def section(title: str, rows: list[dict], out_dir: Path, slug: str, *, error_label: str,
-            reference: str, notes: list[str] = (), resolution: float = 0.0) -> tuple[list[str], list[Path]]:
+            reference: str, notes: list[str] = (), resolution: float = 0.0,
+            outside=()) -> tuple[list[str], list[Path]]:
     """Markdown + PNG for one family; rows: dict(setting, family, time_s, error[, extra]).
 
     ``resolution``: the reference's own uncertainty; a target below 2× it is reported as not
-    resolvable instead of "reached".
+    resolvable instead of "reached". ``outside``: rows of an outside point of comparison, drawn
+    apart (not in the tables or on the Pareto front).
     """
-    png = _plot(rows, out_dir / f"error_vs_runtime_{slug}.png", title, error_label)
+    png = _plot(rows, out_dir / f"error_vs_runtime_{slug}.png", title, error_label, outside)
     t = np.array([r["time_s"] for r in rows])
     e = np.array([r["error"] for r in rows])
     front = set(pareto_front(t, e).tolist())
@@ -87,7 +89,10 @@ def _fmt_t(s: float) -> str:
     return f"{s * 1e3:.3g} ms" if s < 1 else f"{s:.3g} s"
 
 
-def _plot(rows, path: Path, title: str, error_label: str) -> Path:
+def _plot(rows, path: Path, title: str, error_label: str, outside=()) -> Path:
+    """Error against wall time, log–log, with the Pareto front of ``rows``; ``outside`` rows (an
+    outside point of comparison) as black stars, not on the front. A row with error 0 (the
+    reference's own level) cannot sit on log axes: it is listed in the tables, not drawn."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -95,6 +100,7 @@ def _plot(rows, path: Path, title: str, error_label: str) -> Path:
 
     from userio.files import atomic_path
 
+    rows = [r for r in rows if not r["error"] == 0]
     fig, ax = plt.subplots(figsize=(6.4, 4.4), constrained_layout=True)
     for fam in dict.fromkeys(r["family"] for r in rows):
         sel = [r for r in rows if r["family"] == fam]
@@ -103,7 +109,11 @@ def _plot(rows, path: Path, title: str, error_label: str) -> Path:
     t = np.array([r["time_s"] for r in rows])
     e = np.array([max(r["error"], 1e-16) for r in rows])
     f = pareto_front(t, e)
-    ax.step(t[f], e[f], where="post", color="k", lw=2, alpha=0.35, label="Pareto front")
+    ax.step(t[f], e[f], where="post", color="k", lw=2, alpha=0.35,
+            label="Pareto front (our settings)" if outside else "Pareto front")
+    if outside:
+        ax.loglog([r["time_s"] for r in outside], [max(r["error"], 1e-16) for r in outside], "k*",
+                  ms=12, ls="none", label=outside[0]["family"])
     for target in TARGETS:
         ax.axhline(target, color="grey", lw=0.6, ls=":")
     ax.set(xlabel="wall time [s]", ylabel=error_label, title=title)

@@ -299,38 +299,6 @@ def _setting(r: dict) -> tuple[str, str]:
     return f"P{r['order']} {m}, h × {r['h_factor']:.3g}", f"P{r['order']} {m}"
 
 
-def _plot_outside(ours: list[dict], outside: list[dict], path: Path, title: str, error_label: str) -> None:
-    """Redraw the section's plot: the outside points as black stars (not on the Pareto front); the
-    level that is itself the reference (error 0 by construction) is left out of the log axes."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from torquebench.reports.error_vs_runtime import TARGETS, pareto_front
-    from userio.files import atomic_path
-
-    ours = [r for r in ours if r["error"] > 0]
-    fig, ax = plt.subplots(figsize=(6.4, 4.4), constrained_layout=True)
-    for fam in dict.fromkeys(r["family"] for r in ours):
-        sel = [r for r in ours if r["family"] == fam]
-        ax.loglog([r["time_s"] for r in sel], [max(r["error"], 1e-16) for r in sel], "o-", label=fam, alpha=0.8)
-    t = np.array([r["time_s"] for r in ours])
-    e = np.array([max(r["error"], 1e-16) for r in ours])
-    f = pareto_front(t, e)
-    ax.step(t[f], e[f], where="post", color="k", lw=2, alpha=0.35, label="Pareto front (our settings)")
-    if outside:
-        ax.loglog([r["time_s"] for r in outside], [max(r["error"], 1e-16) for r in outside], "k*", ms=12,
-                  ls="none", label=outside[0]["family"])
-    for target in TARGETS:
-        ax.axhline(target, color="grey", lw=0.6, ls=":")
-    ax.set(xlabel="wall time [s]", ylabel=error_label, title=title)
-    ax.legend(fontsize=8)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=100)
-    plt.close(fig)
-
-
 def fem_section(rows: list[dict], out_dir: Path, quick: bool = False) -> tuple[list[str], list[Path]]:
     """The Markdown and PNGs of :func:`error_vs_runtime_section` from ``fem_levels`` rows."""
     from torquebench.reports.error_vs_runtime import _fmt_t, section
@@ -399,11 +367,11 @@ def fem_section(rows: list[dict], out_dir: Path, quick: bool = False) -> tuple[l
         label = f"relative {FEM_FIGURES[key]} error"
         sec, p = section(title, [x for _, x in srows], out_dir, slug, error_label=label,
                          resolution=rr["ref"]["uncertainty"] / abs(R),
-                         reference=f"{R:.6g} (gmsh P{rr['ref_order']} Richardson limit, ± {rr['ref']['uncertainty'] / abs(R):.2%})")
+                         reference=f"{R:.6g} (gmsh P{rr['ref_order']} Richardson limit, ± {rr['ref']['uncertainty'] / abs(R):.2%})",
+                         outside=[x for _, x in outside])
         sec[0] = "#" + sec[0]
         sec.insert(4, "The finest gmsh P2 level is the reference's own finest value (error 0 by construction): "
                       "listed, not plotted." if any(x["error"] == 0 for _, x in srows) else "")
-        _plot_outside([x for _, x in srows], [x for _, x in outside], p[0], title, label)
         if outside:
             sec = sec[:-1] + ["", "Outside point of comparison (★ in the plot is not ours; not on the Pareto front):", "",
                               "| setting | DOFs | wall time | " + label + " | value | our P2 on the same mesh: DOFs, wall time (six load cases), value | relative difference |",
