@@ -291,35 +291,6 @@ def model_calibration(robot, q, dq, noise, gain_per_s, dt_s: float, timing=None,
     return calibrate_model(a, b, B0[0], B1[0], R0, drift)
 
 
-def pipeline_detector(robot, log, r, stat, info: dict, R, gain_per_s, timing, noise, quiet_window,
-                      drift: float | None = None, state: CusumState | None = None,
-                      calibration: Calibration | None = None):
-    """(contact, info, state, calibration) of the CUSUM for estimator.pipeline: the same whitened statistic
-    and false-alarm target as the chi-square detector (``info`` from it); the target rate is read
-    as the mean time between alarm onsets, 1/α samples. Calibrated on the noise model at the log's
-    first posture, or (``quiet_window``) on an ARMA(1,1) fit of the quiet stretch, unless a
-    ``calibration`` is given. A chunked caller passes the returned ``state`` and the first
-    chunk's returned calibration to the next chunk: alarms are then identical to
-    the one-shot run."""
-    from estimator import observer
-
-    n = r.shape[1]
-    alpha = info["false_alarm_probability_per_sample"]
-    dt = observer.regular_period(log.t)
-    if calibration is not None:
-        cal = calibration
-    elif quiet_window is not None:
-        sel = (log.t >= quiet_window[0]) & (log.t <= quiet_window[1])
-        z = np.linalg.solve(np.linalg.cholesky(R), r[sel].T).T
-        a = float(np.exp(-np.min(observer.gains(robot, gain_per_s)) * dt))
-        cal = calibrate_quiet(z, a, drift)
-    else:
-        cal = model_calibration(robot, log.q[0], log.dq[0], noise, gain_per_s, dt, timing, drift)
-    h = cal.threshold(alpha)
-    contact, new_state = cusum(stat, n, h, cal.drift, state)
-    return contact, detector_info(info, h, cal), new_state, cal
-
-
 def detector_info(info: dict, h: float, cal: Calibration) -> dict:
     """The chi-square detector's ``info`` turned into the CUSUM's (threshold, drift, calibration)."""
     out = {k: v for k, v in info.items() if k != "chi2_threshold"}

@@ -178,23 +178,12 @@ def test_cusum_on_an_extreme_statistic_saturates_without_overflow():
     assert not st.alarm and st.g == 0
 
 
-def test_pipeline_detector_in_chunks_equals_one_shot():
-    """The CUSUM as estimate() runs it, on a log with a held poke, fed in three chunks with the
-    state and the first chunk's calibration carried along: the same alarms as in one call."""
+def test_cusum_in_chunks_equals_one_shot_on_a_held_poke_log():
+    """The CUSUM as estimate() runs it, on a log with held pokes, fed in chunks of 1234 samples
+    (state and calibration carried by the stream): the same alarms as in one call."""
     log, starts, on = _held_pokes(0.05, n_pokes=6)
-    est = estimate(ROBOT, log)                      # chi-square run: its statistic and info
-    stat = est.rnorm ** 2
-    info = {"false_alarm_probability_per_sample": est.info["false_alarm_probability_per_sample"]}
-    R = Nz.residual_covariance(ROBOT, log.q[:1], log.dq[:1], Nz.paper_leg_noise(), 100.0, 1e-3,
-                               log.timing)[0]
-    args = (100.0, log.timing, None, None)
-    whole, _, end, cal = S.pipeline_detector(ROBOT, log, est.residual, stat, info, R, *args)
-    assert whole.any()
-    parts, state = [], None
-    for a, b in ((0, 1234), (1234, 3001), (3001, len(stat))):
-        sub = SensorLog(t=log.t[a:b], q=log.q[a:b], dq=log.dq[a:b], tau_Nm=log.tau_Nm[a:b],
-                        wrench=log.wrench[a:b])
-        c, _, state, _ = S.pipeline_detector(ROBOT, sub, est.residual[a:b], stat[a:b], info, R, *args,
-                                             state=state, calibration=cal)
-        parts.append(c)
-    assert np.array_equal(np.concatenate(parts), whole) and state == end
+    whole = estimate(ROBOT, log, detector="cusum")
+    chunked = estimate(ROBOT, log, detector="cusum", chunk_samples=1234)
+    assert whole.contact.any()
+    assert np.array_equal(chunked.contact, whole.contact)
+    assert chunked.info["cusum_threshold"] == whole.info["cusum_threshold"]
