@@ -3,16 +3,14 @@ error that accounts for the autocorrelation of the samples (effective sample siz
 
 import io
 import json
-import os
 import sys
-import threading
-import time
 
 import numpy as np
 import pytest
 from scipy.signal import lfilter
 
 from calibration.acquire import autocorr_times, window_stats
+from pty_device import pty_device
 from torquebench.cli import main
 
 
@@ -68,47 +66,10 @@ def test_a_window_too_short_for_the_correlation_is_flagged():
     assert not s["autocorr_resolved"] and "underestimated" in s["mean_se_method"]
 
 
-class _AR1Device(threading.Thread):
-    """Two-channel frame stream on a pty: a constant level plus AR(1) noise (a = 0.8, τ = 9)."""
-
-    def __init__(self, fd, level, a=0.8, sigma=20.0):
-        super().__init__(daemon=True)
-        self.fd, self.level, self.a, self.sigma = fd, level, a, sigma
-        self.stop, self.seq = threading.Event(), 0
-
-    def run(self):
-        from calibration.frames import encode_frames
-        rng = np.random.default_rng(0)
-        zi = np.zeros((1, 2))
-        os.set_blocking(self.fd, False)
-        pending = b""
-        while not self.stop.is_set():
-            if not pending:
-                e = rng.normal(0.0, self.sigma, (200, 2))
-                noise, zi = lfilter([1.0], [1.0, -self.a], e, axis=0, zi=zi)
-                pending = b"\xa5junk" + encode_frames(np.arange(self.seq, self.seq + 200),
-                                                      np.round(self.level + noise))
-                self.seq += 200
-            try:
-                pending = pending[os.write(self.fd, pending):]
-            except BlockingIOError:
-                time.sleep(0.005)
-                continue
-            except OSError:
-                return
-            time.sleep(0.005)
-
-
 @pytest.fixture
 def ar1_device():
-    master, slave = os.openpty()
-    dev = _AR1Device(master, 20000.0)
-    dev.start()
-    yield os.ttyname(slave)
-    dev.stop.set()
-    os.close(slave)
-    dev.join(2)
-    os.close(master)
+    with pty_device(20000.0, a=0.8, block=200) as tty:
+        yield tty
 
 
 def test_acquire_guided_json_carries_error_estimates(ar1_device, tmp_path, capsys, monkeypatch):

@@ -2,15 +2,13 @@
 
 import io
 import json
-import os
 import subprocess
 import sys
-import threading
-import time
 
 import numpy as np
 import pytest
 
+from pty_device import pty_device
 from torquebench.cli import main
 from torquebench.io import REPO_ROOT
 
@@ -83,41 +81,10 @@ def test_apply_rejects_tampered_calibration(tmp_path):
     assert p.returncode == 2 and "content hash mismatch" in p.stderr
 
 
-class _Device(threading.Thread):
-    def __init__(self, fd, level):
-        super().__init__(daemon=True)
-        self.fd, self.level, self.stop, self.seq = fd, level, threading.Event(), 0
-
-    def run(self):
-        from calibration.frames import encode_frames
-        rng = np.random.default_rng(0)
-        os.set_blocking(self.fd, False)
-        pending = b""
-        while not self.stop.is_set():
-            if not pending:
-                x = np.round(self.level + rng.normal(0, 20, (100, 2)))
-                pending = b"\xa5junk" + encode_frames(np.arange(self.seq, self.seq + 100), x)
-                self.seq += 100
-            try:
-                pending = pending[os.write(self.fd, pending):]    # partial writes continue
-            except BlockingIOError:           # reader not keeping up: the pty buffer is full
-                time.sleep(0.005)
-                continue
-            except OSError:
-                return
-            time.sleep(0.005)
-
-
 @pytest.fixture
 def device():
-    master, slave = os.openpty()
-    dev = _Device(master, 12345.0)
-    dev.start()
-    yield os.ttyname(slave)
-    dev.stop.set()
-    os.close(slave)                     # unblocks a writer stuck on a full pty buffer
-    dev.join(2)
-    os.close(master)
+    with pty_device(12345.0) as tty:
+        yield tty
 
 
 def test_acquire_records_raw_and_decodes(device, tmp_path, capsys):
