@@ -7,6 +7,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from torquebench import pipeline as P
@@ -95,3 +96,35 @@ def test_package_import_table_covers_the_imports_in_the_source():
                                     f.read_text(), re.M))
         assert found - {pkg} <= set(P.PACKAGE_IMPORTS[pkg]), (pkg, found)
     assert set(P.STAGE_CODE) | {"report"} == {s.name for s in P.STAGES}
+
+
+def test_the_files_a_design_names_are_part_of_its_key(tmp_path):
+    """Editing the STL (or STEP) part or the bridge sensor a design names re-runs the FEM."""
+    design = tmp_path / "part.toml"
+    design.write_text('[geometry]\nkind = "stl"\nfile = "part.stl"\n[bridge]\nsensor = "s.toml"\n')
+    (tmp_path / "part.stl").write_text("solid a\nendsolid a\n")
+    (tmp_path / "s.toml").write_text("[bridge]\n")
+    before = P._design_hash(design)
+    (tmp_path / "part.stl").write_text("solid b\nendsolid b\n")
+    after_part = P._design_hash(design)
+    (tmp_path / "s.toml").write_text("[bridge]\nexcitation_V = 5.0\n")
+    after_sensor = P._design_hash(design)
+    assert before["design"] == after_part["design"] == after_sensor["design"]
+    assert before != after_part != after_sensor
+
+
+def test_scene_values_key_exactly_not_by_their_printed_form():
+    """repr() of an array keeps 8 digits and elides long arrays; the key must not."""
+    from dataclasses import replace
+
+    from estimator.robot import paper_leg
+
+    robot = paper_leg()
+    nudged = replace(robot, masses_kg=robot.masses_kg * (1 + 1e-12))
+    assert repr(robot) == repr(nudged)                    # the printed form cannot tell them apart
+    assert P._canon(robot) != P._canon(nudged)
+    long_a, long_b = np.zeros(5000), np.zeros(5000)
+    long_b[2500] = 1.0
+    assert repr(long_a) == repr(long_b)
+    assert P._canon(long_a) != P._canon(long_b)
+    assert P._canon(robot) == P._canon(replace(robot))   # equal values, equal keys

@@ -177,32 +177,58 @@ def _params(scene, stage: str, seed) -> dict:
     """The canonical inputs a stage reads from the scene (part of its cache key)."""
     c = scene.chain
     if stage == "flexure_fem":
-        return {"design": _file_hash(c.flexure_design)}
+        return {"design": _design_hash(c.flexure_design)}
     if stage == "sensor_chain":
         return {"spn": c.strain_per_Nm, "sensor": _file_hash(c.sensor_file)}
     if stage == "calibration_session":
         return {"session": c.session}
     if stage == "simulation":        # noise-free: the sensors' noise model is not an input
-        return {"sim": repr(_quiet(scene.sim))}
+        return {"sim": _canon(_quiet(scene.sim))}
     if stage == "sensor_log":
-        return {"sensors": repr(scene.sim.sensors), "base": scene.sim.base}
+        return {"sensors": _canon(scene.sim.sensors), "base": scene.sim.base}
     if stage == "static_holds":
-        return {"static": repr(scene.static)}
+        return {"static": _canon(scene.static)}
     if stage == "paper_scores":
-        return {"name": scene.name, "est": repr(scene.estimator),
-                "scene": repr(scene.sim.pokes) if scene.sim is not None else repr(scene.static)}
+        return {"name": scene.name, "est": _canon(scene.estimator),
+                "scene": _canon(scene.sim.pokes) if scene.sim is not None else _canon(scene.static)}
     if stage == "error_map":
-        return {"prediction": repr(scene.prediction), "robot": repr(scene.robot),
+        return {"prediction": _canon(scene.prediction), "robot": _canon(scene.robot),
                 "cal": _file_hash(c.calibration_file)}
     if stage == "raw_counts":
         return {"gain": c.true_gain_factor, "seed": seed, "log": _file_hash(c.log_file),
                 "cols": c.counts_columns, "unit": c.reading_unit,
-                "ft": repr(getattr(scene.sim, "sensors", None))}
+                "ft": _canon(getattr(scene.sim, "sensors", None))}
     if stage == "calibrated_torques":
         return {"cal": _file_hash(c.calibration_file)}
     if stage in ("estimates", "localization_error", "predicted_error"):
-        return {"est": repr(scene.estimator), "poke": repr(scene.sim.pokes if scene.sim else None)}
+        return {"est": _canon(scene.estimator), "poke": _canon(scene.sim.pokes if scene.sim else None)}
     return {}
+
+
+def _canon(x):
+    """A scene value as exact, JSON-able data for a cache key: dataclasses field by field, arrays
+    by dtype, shape and a hash of their bytes, floats by ``repr`` (round-trip exact). ``repr`` of a
+    numpy array keeps 8 digits and elides long arrays, so two different inputs could share a key."""
+    import dataclasses
+
+    if dataclasses.is_dataclass(x) and not isinstance(x, type):
+        return {"type": type(x).__name__,
+                **{f.name: _canon(getattr(x, f.name)) for f in dataclasses.fields(x)}}
+    if isinstance(x, np.ndarray):
+        a = np.ascontiguousarray(x)
+        return {"dtype": a.dtype.str, "shape": list(a.shape),
+                "sha256": hashlib.sha256(a.tobytes()).hexdigest()}
+    if isinstance(x, dict):
+        return {str(k): _canon(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_canon(v) for v in x]
+    if isinstance(x, np.generic):
+        return _canon(x.item())
+    if isinstance(x, float):
+        return repr(x)
+    if x is None or isinstance(x, (str, int, bool)):
+        return x
+    return repr(x)
 
 
 def _file_hash(p):
@@ -214,6 +240,25 @@ def _file_hash(p):
         return hashlib.sha256(Path(p).read_bytes()).hexdigest()
     except OSError as exc:
         return f"unreadable: {p}: {type(exc).__name__}"
+
+
+def _design_hash(p):
+    """Hash of a flexure design file and of the files it names (``[geometry] file``, the STL or
+    STEP part, and ``[bridge] sensor``, paths relative to the design): editing the part re-runs
+    the FEM as editing the design does. The design is parsed here only for those two names;
+    ``load_design`` validates it when the stage runs."""
+    import tomllib
+
+    key = {"design": _file_hash(p)}
+    try:
+        raw = tomllib.loads(Path(p).read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return key                                 # the stage's own reader names the problem
+    for table, field in (("geometry", "file"), ("bridge", "sensor")):
+        name = raw.get(table, {}).get(field) if isinstance(raw.get(table), dict) else None
+        if isinstance(name, str):
+            key[f"{table}.{field}"] = _file_hash(Path(p).parent / name)
+    return key
 
 
 # ---------------------------------------------------------------- the stage functions
