@@ -108,6 +108,51 @@ def test_cusum_false_alarm_rate_matches_target():
     assert abs(k - expected) < 3 * np.sqrt(expected)
 
 
+def _paper_leg_model():
+    tim = timing.uniform("mean", 2)
+    a, b, B0, B1 = Nz.filter_terms(ROBOT, Q0, 0 * Q0, NOISE, 100.0, 1e-3, tim)
+    R = Nz.residual_covariance(ROBOT, Q0, 0 * Q0, NOISE, 100.0, 1e-3, tim)[0]
+    return a, b, B0[0], B1[0], R
+
+
+def test_cusum_threshold_meets_its_rate_on_an_independent_synthetic_run():
+    """The threshold for 1e-3 alarm onsets per sample, on 1.5e6 samples of the residual model drawn
+    with a seed other than the calibration's: the onset count is the target within 3σ, σ the
+    Poisson error of the count and the calibration's own stated error combined."""
+    model = _paper_leg_model()
+    cal = S.calibrate_model(*model)
+    alpha, T = 1e-3, 1_500_000
+    h = cal.threshold(alpha)
+    assert cal.rate(h) == pytest.approx(alpha, rel=1e-6)
+    s = S.synthetic_statistic(*model, T, seed=99)
+    alarm, _ = S.cusum(s, 5, h, cal.drift)
+    k = int(np.count_nonzero(np.diff(alarm.astype(np.int8)) == 1) + alarm[0])
+    expected = alpha * T
+    sigma = expected * np.hypot(1 / np.sqrt(expected), cal.rate_rel_error(h))
+    print(f"h = {h:.2f}: {k} onsets, {expected:.0f} expected, σ = {sigma:.0f}, "
+          f"calibration error {100 * cal.rate_rel_error(h):.1f} %")
+    assert cal.rate_rel_error(h) < 0.03
+    assert abs(k - expected) < 3 * sigma
+
+
+def test_cusum_calibration_is_seeded_and_its_rate_decreases_with_the_threshold():
+    """Two calibrations of the same model are identical (seeded, cached or not); the rate falls
+    monotonically with h over the whole range down to the splitting floor and beyond it
+    (θ* extrapolation), and the thresholds for 1e-2 … 1e-9 per sample increase."""
+    model = _paper_leg_model()
+    a = S.calibrate(model, 5, samples=200_000, particles=1500, rate_floor=1e-6)
+    b = S.calibrate(model, 5, samples=200_000, particles=1500, rate_floor=1e-6)
+    assert np.array_equal(a.log_nu, b.log_nu) and a.retrigger == b.retrigger
+    hs = np.linspace(0.5, 2 * a.h_grid[-1], 400)
+    assert np.all(np.diff(a.rate(hs)) <= 0)
+    th = [a.threshold(x) for x in (1e-2, 1e-3, 1e-4, 1e-6, 1e-9)]
+    assert np.all(np.diff(th) > 0)
+    # beyond the floor the slope is θ*
+    h1, h2 = a.h_grid[-1] + 10, a.h_grid[-1] + 60
+    nu1, nu2 = a._nu(h1), a._nu(h2)
+    assert np.log(nu1 / nu2) == pytest.approx(50 * a.theta, rel=1e-9)
+
+
 def _held_pokes(magnitude, n_pokes=40, on=300, period=800, seed=4):
     from torquebench.reports.detection import simulated_log
 
