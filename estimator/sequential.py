@@ -19,8 +19,8 @@ are resampled and run on until they reach the next level or fall back to 0) carr
 down to ``RATE_FLOOR`` at the cost of a few levels instead of 1/rate samples. The alarm's own
 duration and the re-triggering after a release are measured too (``Calibration`` doc); the
 threshold for a target rate α solves rate(h) = α. The calibration's 1σ error of the rate at h
-(``Calibration.rate_rel_error``) comes from its own counts (Poisson at the free run's top
-level, binomial per splitting level).
+(``Calibration.rate_rel_error``) comes from its own counts: Poisson at the free run's top
+level, and the spread of ``REPLICAS`` independent splitting chains above it.
 
 Why not an asymptotic formula: the increments x_k = s_k − n − δ are a quadratic form of a
 correlated Gaussian process; their large-deviation exponent θ*, the positive root of
@@ -47,7 +47,8 @@ from estimator.errors import InputError
 
 QUANTUM = 2.0 ** -20          # fixed-point step of the CUSUM, in χ² units
 CAL_SAMPLES = 2_000_000       # free-run Monte Carlo samples of the calibration
-CAL_PARTICLES = 12000         # particles per splitting level
+CAL_PARTICLES = 12000         # particles per splitting level (all replicas)
+REPLICAS = 8                  # independent splitting chains (their spread is the error estimate)
 FREE_RATE = 3e-3              # excursion rate per sample up to which the free run's counts are used
 RETRIGGER_RATES = (1e-2, 5e-3, 3e-3)   # f where κ is fitted on the detector's own onset counts
 RATE_FLOOR = 1e-8             # splitting down to this rate per sample; θ* extrapolation below
@@ -234,6 +235,130 @@ def _stage(z, w, g, h_up, At, C0, C1, n, delta, rng, cap=None):
     return gmax, ok, zs, ws, gs, steps
 
 
+def _stage_py(z, w, g, h_up, cap, At, C0, C1, shift, seed, out_max, out_ok, out_z, out_w, out_g,
+              out_steps):
+    """``_stage`` one particle at a time (compiled with numba; its own seeded generator)."""
+    np.random.seed(seed)
+    N, n = z.shape
+    m = C0.shape[1]
+    e = np.empty(m)
+    zn = np.empty(n)
+    for i in range(N):
+        zi = z[i].copy()
+        wi = w[i].copy()
+        gi = g[i]
+        gmax = gi
+        k = 0
+        while True:
+            k += 1
+            for j in range(m):
+                e[j] = np.random.standard_normal()
+            s = 0.0
+            for r in range(n):
+                acc = wi[r]
+                for c in range(n):
+                    acc += At[r, c] * zi[c]
+                for j in range(m):
+                    acc += C0[r, j] * e[j]
+                zn[r] = acc
+                s += acc * acc
+            for r in range(n):
+                zi[r] = zn[r]
+                acc = 0.0
+                for j in range(m):
+                    acc += C1[r, j] * e[j]
+                wi[r] = acc
+            gi = gi + s - shift
+            if gi > cap:
+                gi = cap
+            if gi > gmax:
+                gmax = gi
+            if gi >= h_up:
+                out_ok[i] = True
+                out_z[i] = zi
+                out_w[i] = wi
+                out_g[i] = gi
+                break
+            if gi <= 0.0 or k >= 100_000_000:
+                break
+        out_max[i] = gmax
+        out_steps[i] = k
+
+
+def _onset_counts_py(x, hs, out):
+    """Alarm onsets of the capped CUSUM (module doc, in floats) with increments x at each threshold
+    of ``hs`` at once (compiled with numba)."""
+    K = hs.shape[0]
+    g = np.zeros(K)
+    on = np.zeros(K, np.bool_)
+    for t in range(x.shape[0]):
+        xt = x[t]
+        for j in range(K):
+            gj = g[j] + xt
+            if on[j]:
+                if gj <= 0.0:
+                    on[j] = False
+                    gj = 0.0
+                elif gj > hs[j]:
+                    gj = hs[j]
+            else:
+                if gj <= 0.0:
+                    gj = 0.0
+                elif gj >= hs[j]:
+                    on[j] = True
+                    out[j] += 1
+                    gj = hs[j]
+            g[j] = gj
+
+
+_NB = None
+
+
+def _compiled():
+    """The numba-compiled loops (cached beside this file), or False without numba."""
+    global _NB
+    if _NB is None:
+        try:
+            from numba import njit
+        except ImportError:
+            _NB = False
+        else:
+            jit = njit(cache=True, nogil=True)
+            _NB = {"stage": jit(_stage_py), "onsets": jit(_onset_counts_py)}
+    return _NB
+
+
+def _run_stage(z, w, g, h_up, At, C0, C1, n, delta, rng, cap=None):
+    """``_stage`` compiled when numba is there (seeded from ``rng``), else the numpy form."""
+    nb = _compiled()
+    if not nb:
+        return _stage(z, w, g, h_up, At, C0, C1, n, delta, rng, cap=cap)
+    N = len(g)
+    out = (np.empty(N), np.zeros(N, bool), np.zeros_like(z), np.zeros_like(w), np.zeros(N), np.zeros(N))
+    nb["stage"](np.ascontiguousarray(z), np.ascontiguousarray(w), np.asarray(g, float), float(h_up),
+                np.inf if cap is None else float(cap), np.ascontiguousarray(At),
+                np.ascontiguousarray(C0), np.ascontiguousarray(C1), float(n + delta),
+                int(rng.integers(0, 2 ** 31 - 1)), *out)
+    return out
+
+
+def onset_counts(s, n: int, h, drift: float) -> np.ndarray:
+    """Alarm onsets of the CUSUM on the statistic ``s`` at each threshold of ``h`` (floats; the
+    detector itself runs in fixed point)."""
+    hs = np.atleast_1d(np.asarray(h, float))
+    x = np.asarray(s, float) - n - drift
+    nb = _compiled()
+    if not nb:
+        out = []
+        for hh in hs:
+            alarm, _ = cusum(s, n, hh, drift)
+            out.append(int(np.count_nonzero(np.diff(alarm.astype(np.int8)) == 1) + alarm[0]))
+        return np.array(out)
+    out = np.zeros(hs.size, np.int64)
+    nb["onsets"](x, hs, out)
+    return out
+
+
 @dataclass(frozen=True)
 class Calibration:
     """The CUSUM's false-alarm rate as a function of its threshold, measured on the noise model.
@@ -259,7 +384,7 @@ class Calibration:
     theta: float
     h_grid: np.ndarray          # thresholds (χ² units), increasing
     log_nu: np.ndarray          # log ν(h) on h_grid
-    var_log_nu: np.ndarray      # sampling variance of log ν(h) (binomial per level, Poisson at h0)
+    var_log_nu: np.ndarray      # sampling variance of log ν(h) (Poisson ≤ h0, spread of the replicas above)
     D_h: np.ndarray             # levels where the alarm duration was measured
     D: np.ndarray               # mean alarm duration there (samples)
     retrigger: float            # κ (samples): onsets re-triggered right after a release, per onset / f
@@ -312,9 +437,10 @@ def calibrate(model, n: int, drift: float | None = None, key=None, lam=None,
     """Calibration (class doc) of the CUSUM on the residual ``model`` = (a, b, B0, B1, R), seeded.
 
     Free run of ``samples`` samples: ν(h) counted up to h0 where ν = ``FREE_RATE``, and the states
-    at which excursions first reach h0. Then levels h_{i+1} = h_i + log(5)/θ*: ``particles`` states
+    at which excursions first reach h0. Then levels from h_1 = h0 + log(5)/θ*: ``particles`` states (``REPLICAS`` chains)
     drawn from those that reached h_i run until they reach h_{i+1} or fall to 0, down to
-    ν < ``rate_floor``. The alarm duration D is measured from the states at each level."""
+    ν < ``rate_floor`` (the next spacing from the last level's slope, about 1/5 getting through).
+    The alarm duration D is measured from the states at each level."""
     delta = float(n) * DEFAULT_DRIFT if drift is None else float(drift)
     ck = None if key is None else (key, delta, samples, particles, rate_floor, seed)
     if ck is not None and ck in _CACHE:
@@ -345,52 +471,66 @@ def calibrate(model, n: int, drift: float | None = None, key=None, lam=None,
     hs, lnu, var = [h_free], [np.log(cnt / samples)], [1.0 / cnt]
     nu0, var0 = ent.size / samples, 1.0 / ent.size
     step_h = np.log(5.0) / theta
-    zi, wi, gi, h = z[ent], w[ent], g[ent], h0
-    D_h, D = [], []
-    levels = 0
+    # REPLICAS independent splitting chains from the same entrance pool: ν is their mean, and its
+    # error their spread (resampled particles share ancestors, so a binomial error per level
+    # would understate it), plus the Poisson error of the free run's count at h0
+    per = max(particles // REPLICAS, 50)
+    pools = [(z[ent], w[ent], g[ent])] * REPLICAS
+    prod = np.ones(REPLICAS)
+    h, D_h, D, levels = h0, [], [], 0
     while True:
-        pick = rng.integers(0, gi.size, particles)
-        nd = min(particles, 2000)
+        picks = [rng.integers(0, pl[2].size, per) for pl in pools]
+        zi = np.concatenate([pl[0][k] for pl, k in zip(pools, picks)])
+        wi = np.concatenate([pl[1][k] for pl, k in zip(pools, picks)])
+        gi = np.concatenate([pl[2][k] for pl, k in zip(pools, picks)])
+        nd = min(zi.shape[0], 500)           # D is a small correction (ν D ≤ a few %)
         D_h.append(h)
-        D.append(float(_stage(zi[pick[:nd]], wi[pick[:nd]], np.full(nd, h), np.inf,
-                              At, C0, C1, n, delta, rng, cap=h)[5].mean()))
-        if nu0 <= rate_floor:
+        D.append(float(_run_stage(zi[:nd], wi[:nd], np.full(nd, h), np.inf,
+                                  At, C0, C1, n, delta, rng, cap=h)[5].mean()))
+        if nu0 * prod.mean() <= rate_floor:
             break
-        gmax, ok, zs, ws, gs, _ = _stage(zi[pick], wi[pick], gi[pick], h + step_h, At, C0, C1, n,
-                                         delta, rng)
-        gmax = np.sort(gmax)
+        gmax, ok, zs, ws, gs, _ = _run_stage(zi, wi, gi, h + step_h, At, C0, C1, n, delta, rng)
         hh = np.linspace(h, h + step_h, 33)[1:]
-        frac = (particles - np.searchsorted(gmax, hh, "left")) / particles
-        if frac[-1] * particles < 10:
-            raise InputError("cusum calibration: the splitting lost its particles (too few reached "
-                             "the next level); the residual's noise model is degenerate?")
+        curves, pools, p_level = [], [], []
+        for r in range(REPLICAS):
+            sl = slice(r * per, (r + 1) * per)
+            gm = np.sort(gmax[sl])
+            frac = (per - np.searchsorted(gm, hh, "left")) / per
+            if frac[-1] * per < 5:
+                raise InputError("cusum calibration: the splitting lost its particles (too few "
+                                 "reached the next level); the residual's noise model is degenerate?")
+            curves.append(prod[r] * frac)
+            p_level.append(frac[-1])
+            okr = ok[sl]
+            pools.append((zs[sl][okr], ws[sl][okr], gs[sl][okr]))
+        curves = np.array(curves)
+        mean = curves.mean(axis=0)
         hs.append(hh)
-        lnu.append(np.log(nu0 * frac))
-        var.append(var0 + (1 - frac) / (frac * particles))
-        zi, wi, gi = zs[ok], ws[ok], gs[ok]
-        nu0, var0, h = nu0 * frac[-1], var[-1][-1], h + step_h
+        lnu.append(np.log(nu0 * mean))
+        var.append(var0 + curves.var(axis=0, ddof=1) / (REPLICAS * mean ** 2))
+        prod = curves[:, -1]
+        h += step_h
         levels += 1
+        # next spacing from this level's slope, so that about 1/5 of the particles get through
+        step_h = np.log(5.0) / max(-np.log(np.mean(p_level)) / step_h, theta)
     h_grid = np.concatenate(hs)
     cal = Calibration(
         n=n, drift=delta, theta=theta, h_grid=h_grid, log_nu=np.concatenate(lnu),
         var_log_nu=np.concatenate(var), D_h=np.array(D_h), D=np.array(D), retrigger=0.0, method="")
     # κ from the real detector's onsets on the free run (weighted least squares of k/(T f) − 1 = κ f)
     s = np.diff(np.r_[0.0, S]) + n + delta
-    num = den = 0.0
-    for f_target in RETRIGGER_RATES:
-        hk = cal.threshold(f_target)
-        f = float(cal.rate(hk))
-        alarm, _ = cusum(s, n, hk, delta)
-        k = int(np.count_nonzero(np.diff(alarm.astype(np.int8)) == 1) + alarm[0])
-        wgt = samples * f                     # 1/var of k/(T f) − 1 (Poisson count)
-        num += wgt * f * (k / (samples * f) - 1)
-        den += wgt * f * f
+    hk = np.array([cal.threshold(f) for f in RETRIGGER_RATES])
+    f = cal.rate(hk)
+    k = onset_counts(s, n, hk, delta)
+    wgt = samples * f                         # 1/var of k/(T f) − 1 (Poisson count)
+    num, den = float(np.sum(wgt * f * (k / (samples * f) - 1))), float(np.sum(wgt * f * f))
     cal = replace(cal, retrigger=max(num / den, 0.0))
     cal = replace(
         cal,
         method=(f"alarm rate measured on a seeded Monte Carlo of the same process: {samples:,} "
                 f"free-run samples (excursions counted up to a rate of {FREE_RATE:g} per sample), "
-                f"then multilevel splitting ({levels} levels of {particles} particles) down to "
+                f"then multilevel splitting ({levels} levels, {REPLICAS} independent chains of "
+                f"{per} particles) down to "
                 f"{rate_floor:g} per sample; below that, extrapolated with the exponent θ* = "
                 f"{theta:.4g} from the whitened residual's spectrum (conservative); re-triggering "
                 f"κ = {cal.retrigger:.3g} samples fitted on the detector's onsets in the free run"))
