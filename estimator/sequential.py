@@ -168,7 +168,8 @@ def state_model(a, b, B0, B1, R):
 
         z_k = Ã z_{k−1} + C0 e_k + w_{k−1},   w_k = C1 e_k,
 
-    Ã = L⁻¹ diag(a) L, C0 = L⁻¹ diag(b) B0, C1 = L⁻¹ diag(b) B1 (r_k = a r_{k−1} + b (B0 e_k + B1 e_{k−1}))."""
+    Ã = L⁻¹ diag(a) L, C0 = L⁻¹ diag(b) B0, C1 = L⁻¹ diag(b) B1
+    (r_k = a r_{k−1} + b (B0 e_k + B1 e_{k−1}))."""
     L = np.linalg.cholesky(R)
     Li = np.linalg.inv(L)
     return Li @ (np.asarray(a)[:, None] * L), Li @ (b[:, None] * B0), Li @ (b[:, None] * B1), Li
@@ -195,7 +196,8 @@ def synthetic_statistic(a, b, B0, B1, R, T: int, seed: int = 0) -> np.ndarray:
 
 
 def arma_model(a: float, theta: float, n: int):
-    """(a, b, B0, B1, R) of n independent unit-variance ARMA(1,1) rows x_k = a x_{k−1} + c (e_k + θ e_{k−1})."""
+    """(a, b, B0, B1, R) of n independent unit-variance ARMA(1,1) rows
+    x_k = a x_{k−1} + c (e_k + θ e_{k−1})."""
     c = np.sqrt((1 - a ** 2) / (1 + 2 * a * theta + theta ** 2))
     return np.full(n, a), np.ones(n), c * np.eye(n), c * theta * np.eye(n), np.eye(n)
 
@@ -384,7 +386,7 @@ class Calibration:
     theta: float
     h_grid: np.ndarray          # thresholds (χ² units), increasing
     log_nu: np.ndarray          # log ν(h) on h_grid
-    var_log_nu: np.ndarray      # sampling variance of log ν(h) (Poisson ≤ h0, spread of the replicas above)
+    var_log_nu: np.ndarray      # sampling variance of log ν(h): Poisson ≤ h0, replicas' spread above
     D_h: np.ndarray             # levels where the alarm duration was measured
     D: np.ndarray               # mean alarm duration there (samples)
     retrigger: float            # κ (samples): onsets re-triggered right after a release, per onset / f
@@ -408,7 +410,8 @@ class Calibration:
         return f * (1 + self.retrigger * f)
 
     def rate_rel_error(self, h) -> float:
-        """Relative 1σ sampling error of ``rate(h)`` (from the calibration's own counts)."""
+        """Relative 1σ sampling error of ``rate(h)`` (from the calibration's own counts; above the
+        last level, that level's error: the θ* extrapolation's own bias is conservative)."""
         return float(np.sqrt(np.interp(min(h, self.h_grid[-1]), self.h_grid, self.var_log_nu)))
 
     def arl(self, h: float) -> float:
@@ -437,8 +440,9 @@ def calibrate(model, n: int, drift: float | None = None, key=None, lam=None,
     """Calibration (class doc) of the CUSUM on the residual ``model`` = (a, b, B0, B1, R), seeded.
 
     Free run of ``samples`` samples: ν(h) counted up to h0 where ν = ``FREE_RATE``, and the states
-    at which excursions first reach h0. Then levels from h_1 = h0 + log(5)/θ*: ``particles`` states (``REPLICAS`` chains)
-    drawn from those that reached h_i run until they reach h_{i+1} or fall to 0, down to
+    at which excursions first reach h0. Then levels from h_1 = h0 + log(5)/θ*: ``particles``
+    states (``REPLICAS`` chains) drawn from those that reached h_i run until they reach h_{i+1}
+    or fall to 0, down to
     ν < ``rate_floor`` (the next spacing from the last level's slope, about 1/5 getting through).
     The alarm duration D is measured from the states at each level."""
     delta = float(n) * DEFAULT_DRIFT if drift is None else float(drift)
@@ -591,4 +595,9 @@ def detector_info(info: dict, h: float, cal: Calibration) -> dict:
     out.update(detector="CUSUM on the whitened residual (chi-square increments)",
                cusum_threshold=h, cusum_drift=cal.drift, cusum_calibration=cal.method,
                false_alarm_rate_meaning="mean time between alarm onsets = 1/rate")
+    if "false_alarm_rate_per_s" in out:
+        out["false_alarm_rate_per_s_error_estimate"] = out["false_alarm_rate_per_s"] * cal.rate_rel_error(h)
+        out["false_alarm_rate_per_s_error_method"] = (
+            "1σ of the alarm rate at the CUSUM threshold from its Monte Carlo calibration (Poisson "
+            f"count of the free run, spread of {REPLICAS} independent splitting chains)")
     return out

@@ -226,6 +226,9 @@ def test_estimate_command_takes_the_detector(capsys, tmp_path):
     out = json.loads(capsys.readouterr().out)
     assert code == 0 and out["detector"].startswith("CUSUM") and out["cusum_threshold"] > 0
     assert out["contact_samples"] == 0
+    # the calibration's 1σ on the rate it sets (issue 12's error-estimate convention)
+    assert 0 < out["false_alarm_rate_per_s_error_estimate"] < 0.2 * out["false_alarm_rate_per_s"]
+    assert "splitting" in out["false_alarm_rate_per_s_error_method"]
 
 
 @pytest.mark.parametrize("theta", [0.0, 1.0, -0.5])
