@@ -440,10 +440,11 @@ def calibrate(model, n: int, drift: float | None = None, key=None, lam=None,
     """Calibration (class doc) of the CUSUM on the residual ``model`` = (a, b, B0, B1, R), seeded.
 
     Free run of ``samples`` samples: ν(h) counted up to h0 where ν = ``FREE_RATE``, and the states
-    at which excursions first reach h0. Then levels from h_1 = h0 + log(5)/θ*: ``particles``
+    at which excursions first reach h0. Then levels from h0 (spacing log(5)/slope): ``particles``
     states (``REPLICAS`` chains) drawn from those that reached h_i run until they reach h_{i+1}
     or fall to 0, down to
-    ν < ``rate_floor`` (the next spacing from the last level's slope, about 1/5 getting through).
+    ν < ``rate_floor`` (each spacing from the last slope of log ν, about 1/5 getting through; halved
+    and run again when a chain keeps fewer than 5 particles).
     The alarm duration D is measured from the states at each level."""
     delta = float(n) * DEFAULT_DRIFT if drift is None else float(drift)
     ck = None if key is None else (key, delta, samples, particles, rate_floor, seed)
@@ -474,7 +475,9 @@ def calibrate(model, n: int, drift: float | None = None, key=None, lam=None,
     cnt = ex_max.size - np.searchsorted(ex_max, h_free, "left")
     hs, lnu, var = [h_free], [np.log(cnt / samples)], [1.0 / cnt]
     nu0, var0 = ent.size / samples, 1.0 / ent.size
-    step_h = np.log(5.0) / theta
+    # first spacing from the free run's slope of log ν over the upper half of [0, h0]
+    slope0 = np.log(cnt[32] / max(cnt[-1], 1)) / max(h_free[-1] - h_free[32], 1e-12)
+    step_h = np.log(5.0) / max(slope0, theta)
     # REPLICAS independent splitting chains from the same entrance pool: ν is their mean, and its
     # error their spread (resampled particles share ancestors, so a binomial error per level
     # would understate it), plus the Poisson error of the free run's count at h0
@@ -493,16 +496,20 @@ def calibrate(model, n: int, drift: float | None = None, key=None, lam=None,
                                   At, C0, C1, n, delta, rng, cap=h)[5].mean()))
         if nu0 * prod.mean() <= rate_floor:
             break
-        gmax, ok, zs, ws, gs, _ = _run_stage(zi, wi, gi, h + step_h, At, C0, C1, n, delta, rng)
+        while True:         # a level too far for some chain: halve the spacing and run it again
+            gmax, ok, zs, ws, gs, _ = _run_stage(zi, wi, gi, h + step_h, At, C0, C1, n, delta, rng)
+            if ok.reshape(REPLICAS, per).sum(axis=1).min() >= 5:
+                break
+            step_h *= 0.5
+            if step_h < 1e-6 * (1.0 + h0):
+                raise InputError("cusum calibration: the splitting lost its particles (none reached "
+                                 "the next level); the residual's noise model is degenerate?")
         hh = np.linspace(h, h + step_h, 33)[1:]
         curves, pools, p_level = [], [], []
         for r in range(REPLICAS):
             sl = slice(r * per, (r + 1) * per)
             gm = np.sort(gmax[sl])
             frac = (per - np.searchsorted(gm, hh, "left")) / per
-            if frac[-1] * per < 5:
-                raise InputError("cusum calibration: the splitting lost its particles (too few "
-                                 "reached the next level); the residual's noise model is degenerate?")
             curves.append(prod[r] * frac)
             p_level.append(frac[-1])
             okr = ok[sl]
