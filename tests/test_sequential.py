@@ -177,6 +177,10 @@ def test_compiled_splitting_stage_agrees_with_the_numpy_form():
         assert abs(x1.mean() - x2.mean()) < 4 * np.hypot(x1.std(), x2.std()) / np.sqrt(idx.size)
 
 
+def test_warm_compiles_the_calibration_loops():
+    assert S.warm() == bool(S._compiled())
+
+
 def test_onset_counts_equal_the_detector():
     """The compiled onset counter (several thresholds at once) counts what ``cusum`` flags."""
     s = _stat(50_000, 3, shift_every=600)
