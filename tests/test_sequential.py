@@ -108,6 +108,90 @@ def test_cusum_false_alarm_rate_matches_target():
     assert abs(k - expected) < 3 * np.sqrt(expected)
 
 
+def _paper_leg_model():
+    tim = timing.uniform("mean", 2)
+    a, b, B0, B1 = Nz.filter_terms(ROBOT, Q0, 0 * Q0, NOISE, 100.0, 1e-3, tim)
+    R = Nz.residual_covariance(ROBOT, Q0, 0 * Q0, NOISE, 100.0, 1e-3, tim)[0]
+    return a, b, B0[0], B1[0], R
+
+
+def test_cusum_threshold_meets_its_rate_on_an_independent_synthetic_run():
+    """The threshold for 1e-3 alarm onsets per sample, on 1.5e6 samples of the residual model drawn
+    with a seed other than the calibration's: the onset count is the target within 3σ, σ the
+    Poisson error of the count and the calibration's own stated error combined."""
+    model = _paper_leg_model()
+    cal = S.calibrate_model(*model)
+    alpha, T = 1e-3, 1_500_000
+    h = cal.threshold(alpha)
+    assert cal.rate(h) == pytest.approx(alpha, rel=1e-6)
+    s = S.synthetic_statistic(*model, T, seed=99)
+    alarm, _ = S.cusum(s, 5, h, cal.drift)
+    k = int(np.count_nonzero(np.diff(alarm.astype(np.int8)) == 1) + alarm[0])
+    expected = alpha * T
+    sigma = expected * np.hypot(1 / np.sqrt(expected), cal.rate_rel_error(h))
+    print(f"h = {h:.2f}: {k} onsets, {expected:.0f} expected, σ = {sigma:.0f}, "
+          f"calibration error {100 * cal.rate_rel_error(h):.1f} %")
+    assert cal.rate_rel_error(h) < 0.03
+    assert abs(k - expected) < 3 * sigma
+
+
+def test_cusum_calibration_is_seeded_and_its_rate_decreases_with_the_threshold():
+    """Two calibrations of the same model are identical (seeded, cached or not); the rate falls
+    monotonically with h over the whole range down to the splitting floor and beyond it
+    (θ* extrapolation), and the thresholds for 1e-2 … 1e-9 per sample increase."""
+    model = _paper_leg_model()
+    a = S.calibrate(model, 5, samples=200_000, particles=4000, rate_floor=1e-6)
+    b = S.calibrate(model, 5, samples=200_000, particles=4000, rate_floor=1e-6)
+    assert np.array_equal(a.log_nu, b.log_nu) and a.retrigger == b.retrigger
+    hs = np.linspace(0.5, 2 * a.h_grid[-1], 400)
+    assert np.all(np.diff(a.rate(hs)) <= 0)
+    th = [a.threshold(x) for x in (1e-2, 1e-3, 1e-4, 1e-6, 1e-9)]
+    assert np.all(np.diff(th) > 0)
+    # beyond the floor the slope is θ*
+    h1, h2 = a.h_grid[-1] + 10, a.h_grid[-1] + 60
+    nu1, nu2 = a._nu(h1), a._nu(h2)
+    assert np.log(nu1 / nu2) == pytest.approx(50 * a.theta, rel=1e-9)
+
+
+def test_compiled_splitting_stage_agrees_with_the_numpy_form():
+    """The numba stage (one particle at a time, its own seeded generator) and the vectorized numpy
+    form run the same particles from the same states: the fraction reaching the next level, the
+    mean steps and the mean alarm duration (capped run) agree within 4 sampling σ."""
+    if not S._compiled():
+        pytest.skip("numba not installed: only the numpy form exists")
+    a, b, B0, B1, R = _paper_leg_model()
+    At, C0, C1, _ = S.state_model(a, b, B0, B1, R)
+    z, w = S._free_run(a, b, B0, B1, R, 20_000, np.random.default_rng(5))
+    idx = np.random.default_rng(6).integers(0, 20_000, 6000)
+    g0 = np.full(idx.size, 10.0)
+    res = {}
+    for name, fn in (("numba", S._run_stage), ("numpy", S._stage)):
+        up = fn(z[idx], w[idx], g0, 15.0, At, C0, C1, 5, 5.0, np.random.default_rng(7))
+        dur = fn(z[idx], w[idx], g0, np.inf, At, C0, C1, 5, 5.0, np.random.default_rng(8), cap=10.0)
+        res[name] = (up[1].mean(), up[5], dur[5])
+    p1, p2 = res["numba"][0], res["numpy"][0]
+    assert 0.02 < p1 < 0.98
+    assert abs(p1 - p2) < 4 * np.sqrt(2 * p1 * (1 - p1) / idx.size)
+    for j in (1, 2):
+        x1, x2 = res["numba"][j], res["numpy"][j]
+        assert abs(x1.mean() - x2.mean()) < 4 * np.hypot(x1.std(), x2.std()) / np.sqrt(idx.size)
+
+
+def test_warm_compiles_the_calibration_loops():
+    assert S.warm() == bool(S._compiled())
+
+
+def test_onset_counts_equal_the_detector():
+    """The compiled onset counter (several thresholds at once) counts what ``cusum`` flags."""
+    s = _stat(50_000, 3, shift_every=600)
+    hs = np.array([5.0, 20.0, 35.0, 80.0])
+    got = S.onset_counts(s, 5, hs, 5.0)
+    for hh, k in zip(hs, got):
+        alarm, _ = S.cusum(s, 5, hh, 5.0)
+        assert k == int(np.count_nonzero(np.diff(alarm.astype(np.int8)) == 1) + alarm[0])
+    assert got[0] > got[-1] > 0
+
+
 def _held_pokes(magnitude, n_pokes=40, on=300, period=800, seed=4):
     from torquebench.reports.detection import simulated_log
 
@@ -146,6 +230,9 @@ def test_estimate_command_takes_the_detector(capsys, tmp_path):
     out = json.loads(capsys.readouterr().out)
     assert code == 0 and out["detector"].startswith("CUSUM") and out["cusum_threshold"] > 0
     assert out["contact_samples"] == 0
+    # the calibration's 1σ on the rate it sets (issue 12's error-estimate convention)
+    assert 0 < out["false_alarm_rate_per_s_error_estimate"] < 0.2 * out["false_alarm_rate_per_s"]
+    assert "splitting" in out["false_alarm_rate_per_s_error_method"]
 
 
 @pytest.mark.parametrize("theta", [0.0, 1.0, -0.5])
