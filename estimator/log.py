@@ -105,7 +105,7 @@ def _read_text_values(path, source: str, names: list[str], cols: list[str], row0
     for j, col in enumerate(cols):
         text = frame[col].str.strip()
         num = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
-        bad = np.isnan(num) & ~text.str.lower().isin(["", "nan", "-nan", "+nan", "na", "null"]).to_numpy()
+        bad = np.isnan(num) & ~text.isin(PANDAS_NA).to_numpy()      # what pandas reads as NaN
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise InputError(f"{source}: line {_line(row0 + i)}, column '{col}': "
@@ -117,6 +117,85 @@ def _read_text_values(path, source: str, names: list[str], cols: list[str], row0
 DEFAULT_CHUNK_SAMPLES = 65536
 KEEP_SKIPPED_LINES = 1000            # a streamed log keeps the first lines skipped (and a count)
 NA_VALUES = ["nan", "-nan", "+nan", "NaN", "NA", "null", ""]
+# pandas' default NA spellings (keep_default_na) and ours: a field pyarrow reads as null is one of these
+PANDAS_NA = sorted(set(NA_VALUES) | {"#N/A", "#N/A N/A", "#NA", "-1.#IND", "-1.#QNAN", "-NaN", "1.#IND",
+                                    "1.#QNAN", "<NA>", "N/A", "NULL", "None", "n/a"})
+CSV_BLOCK_BYTES = 1 << 23            # at most 8 MiB of CSV text per pyarrow parse (~40 k rows, 2 links)
+CSV_MIN_BLOCK_BYTES = 1 << 16        # and at least 64 KiB
+
+
+def _pandas_kw() -> dict:
+    """pandas.read_csv options of a log: floats correctly rounded (pandas ≥ 3 by default; before,
+    ``float_precision="round_trip"``), as pyarrow parses them."""
+    import pandas as pd
+
+    kw = dict(skipinitialspace=True, dtype=float, engine="c", na_values=NA_VALUES)
+    if int(pd.__version__.split(".")[0]) < 3:
+        kw["float_precision"] = "round_trip"
+    return kw
+
+
+def _byte_blocks(path, offset: int, size: int | None = None):
+    """The file's bytes from ``offset`` in blocks of about ``size`` (CSV_BLOCK_BYTES), each
+    ending at a line end (the last: at the end of the file)."""
+    size = size or CSV_BLOCK_BYTES
+    with open(path, "rb") as f:
+        f.seek(offset)
+        rest = b""
+        while True:
+            data = f.read(size)
+            if not data:
+                break
+            data = rest + data
+            cut = data.rfind(b"\n") + 1
+            if cut == 0:
+                rest = data
+                continue
+            rest = data[cut:]
+            yield data[:cut]
+        if rest:
+            yield rest
+
+
+def _arrow_values(body: bytes, names: list[str], cols: list[str]) -> np.ndarray | None:
+    """The rows of a block of CSV data lines as floats (rows, ``cols``) parsed by pyarrow, or
+    None where pandas might read it differently: any parse error (a non-numeric field, a row
+    with too few or too many fields, a whitespace-only line), or a field pyarrow reads as NaN/inf
+    that is not one of pandas' NA spellings (``nan(1)``, ``NAN``, ``inf`` ...: pandas decides)."""
+    import io
+
+    import pyarrow as pa
+    import pyarrow.csv as pc
+
+    f64 = pa.float64()
+    try:
+        table = pc.read_csv(
+            io.BytesIO(body),
+            read_options=pc.ReadOptions(column_names=names, use_threads=True, block_size=1 << 20),
+            parse_options=pc.ParseOptions(ignore_empty_lines=True),
+            convert_options=pc.ConvertOptions(column_types={c: f64 for c in names},
+                                              null_values=PANDAS_NA, strings_can_be_null=True,
+                                              quoted_strings_can_be_null=True))
+    except (pa.ArrowInvalid, pa.ArrowNotImplementedError, pa.ArrowTypeError, ValueError):
+        return None
+    out = np.empty((table.num_rows, len(cols)))
+    for j, c in enumerate(cols):
+        column = table.column(c)
+        out[:, j] = column.to_numpy(zero_copy_only=False)
+        if column.null_count:                       # an NA spelling: NaN, as pandas reads it
+            out[column.is_null().to_numpy(zero_copy_only=False), j] = np.nan
+    finite = np.isfinite(out)
+    if not finite.all():
+        nulls = np.zeros(out.shape, bool)
+        for j, c in enumerate(cols):
+            if table.column(c).null_count:
+                nulls[:, j] = table.column(c).is_null().to_numpy(zero_copy_only=False)
+        if np.any(~finite & ~nulls):
+            return None
+    for c in names:                                 # pandas refuses any non-numeric column
+        if c not in cols and not pa.types.is_floating(table.column(c).type):
+            return None
+    return out
 
 
 def read_log(path, robot=None, *, max_jitter: float = 0.01) -> SensorLog:
@@ -239,9 +318,81 @@ class LogReader:
             raise InputError(f"{self.source}: not a readable Parquet log: {str(exc).splitlines()[0]}") from None
 
     def _csv_blocks(self):
+        """Blocks of the CSV's data rows: pyarrow's multithreaded parser on byte blocks of
+        ``CSV_BLOCK_BYTES`` (cut at line ends), re-blocked into ``chunk_samples`` rows. A byte block
+        pyarrow cannot take exactly as pandas would (a parse error, a field it reads as NaN/inf
+        that is not one of the NA spellings) is parsed by pandas (``_pandas_values``), which names
+        a bad field's line; both give correctly rounded values (``read_csv_values``)."""
+        header = self._csv_header_line()
+        try:
+            import pyarrow.csv  # noqa: F401
+        except ImportError:
+            header = None
+        if header is None:                 # a header pyarrow's split would not reproduce
+            yield from self._pandas_blocks()
+            return
+        size = self.chunk_samples
+        held, n_held, row0 = [], 0, 0
+        # about chunk_samples rows of text per parse (24 bytes a field), so memory follows the chunk
+        block = None if size is None else int(np.clip(size * 24 * len(self.names), CSV_MIN_BLOCK_BYTES, CSV_BLOCK_BYTES))
+        for body in _byte_blocks(self.path, len(header), block):
+            values = _arrow_values(body, self.names, self.cols)
+            if values is None:
+                values = self._pandas_values(header + body, row0)
+            row0 += len(values)
+            if size is None:
+                held.append(values)
+                continue
+            held.append(values)
+            n_held += len(values)
+            while n_held >= size:
+                block = np.concatenate(held) if len(held) > 1 else held[0]
+                yield block[:size]
+                rest = block[size:]
+                held, n_held = ([rest] if len(rest) else []), len(rest)
+        if held:
+            yield np.concatenate(held) if len(held) > 1 else held[0]
+
+    def _csv_header_line(self) -> bytes | None:
+        """The file's first line (bytes, with its line end) if pandas reads the same column names
+        from it alone as from the file, else None."""
+        import io
+
         import pandas as pd
 
-        kw = dict(skipinitialspace=True, dtype=float, engine="c", na_values=NA_VALUES)
+        with open(self.path, "rb") as f:
+            line = f.readline()
+        try:
+            names = [str(c).strip() for c in
+                     pd.read_csv(io.BytesIO(line), nrows=0, skipinitialspace=True).columns]
+        except Exception:                  # noqa: BLE001 — the whole-file path decides
+            return None
+        return line if names == self.names and line.endswith(b"\n") else None
+
+    def _pandas_values(self, text: bytes, row0: int) -> np.ndarray:
+        """The data rows of ``text`` (the header line and a byte block starting at data row
+        ``row0``) parsed by pandas; a bad field raises InputError naming its file line."""
+        import io
+
+        import pandas as pd
+
+        try:
+            frame = pd.read_csv(io.BytesIO(text), **_pandas_kw())
+            frame.columns = self.names
+            return frame[self.cols].to_numpy(dtype=float)
+        except (ValueError, TypeError, pd.errors.ParserError, UnicodeDecodeError):
+            self._name_bad_field(row0, text.count(b"\n") + 1)
+
+    def _name_bad_field(self, row0: int, nrows: int | None):
+        """Raise InputError naming the first non-numeric field from data row ``row0`` on."""
+        _read_text_values(self.path, self.source, self.names, self.cols, row0, nrows)
+        raise InputError(f"{self.source}: not a readable CSV log after line {_line(row0)}")
+
+    def _pandas_blocks(self):
+        """The whole file through pandas' chunked reader (headers pyarrow's split cannot take)."""
+        import pandas as pd
+
+        kw = _pandas_kw()
         row0 = 0
         try:
             if self.chunk_samples is None:
@@ -259,9 +410,7 @@ class LogReader:
                 yield values
         except (ValueError, TypeError, pd.errors.ParserError, UnicodeDecodeError):
             # a non-numeric field in the rows from row0 on: name it (line, column)
-            values = _read_text_values(self.path, self.source, self.names, self.cols, row0,
-                                       self.chunk_samples)
-            raise InputError(f"{self.source}: not a readable CSV log after line {_line(row0)}") from None
+            self._name_bad_field(row0, self.chunk_samples)
 
     # ------------------------------------------------------------------ validated chunks
     def __iter__(self):
