@@ -36,6 +36,10 @@ def warm() -> bool:
         localize_dynamic(robot, q, uT.T + 1.0, _weights(5, None), q_now, min_force_N=0.05,
                          max_condition=20.0, ambiguity_tol=1e-3, position_tol_m=0.005,
                          bound_tol=0.05)
+    for base in (3, 0):             # the log reader's loops: floating and fixed base
+        valid, t, *_, rows = split_rows(np.zeros((3, 1 + 2 * (base + 2) + 5)), base, 2)
+        check_steps(t + np.arange(3), rows, None, 1.0, 0.01, True)
+        check_steps(t + np.arange(3), rows, (-1.0, -1), 1.0, 0.01, True)
     return True
 
 
@@ -307,6 +311,85 @@ def _localize_py(q, r, q_now, lengths, w, min_force, max_condition, ambiguity_to
                 point_o[t, 1] = q_now[t, 1] + z0 + a * (z1 - z0)
 
 
+def _split_rows_py(values, base, n, valid, t_o, q_o, dq_o, tau_o, w_o, rows_o):
+    """One pass over a block of a log (rows, columns in ``log.log_columns`` order): valid[i] =
+    every field of row i finite; the valid rows' fields copied, in order, into t, q and q̇
+    (floating coordinates: a fixed base's three columns zero), τ, wrench and their row
+    indices. Returns the number of valid rows."""
+    T, C = values.shape
+    pad = 3 - base
+    i0 = 1 + 2 * (base + n)
+    k = 0
+    for i in range(T):
+        ok = True
+        for j in range(C):
+            if not math.isfinite(values[i, j]):
+                ok = False
+                break
+        valid[i] = ok
+        if not ok:
+            continue
+        t_o[k] = values[i, 0]
+        for j in range(pad):
+            q_o[k, j] = 0.0
+            dq_o[k, j] = 0.0
+        for j in range(base + n):
+            q_o[k, pad + j] = values[i, 1 + j]
+            dq_o[k, pad + j] = values[i, 1 + base + n + j]
+        for j in range(n):
+            tau_o[k, j] = values[i, i0 + j]
+        for j in range(3):
+            w_o[k, j] = values[i, i0 + n + j]
+        rows_o[k] = i
+        k += 1
+    return k
+
+
+def _check_steps_py(t, rows, has_last, last_t, last_row, dt, max_jitter, regular):
+    """The time steps of tt = [last_t if has_last] + t (file rows rr likewise): (1, k) if step k
+    (tt[k] → tt[k+1]) does not increase (the first such); else, if ``regular``, (2, k) for the
+    first step that is not a whole number of periods dt (±max_jitter) or whose number of periods
+    is not the rows it spans; else (0, −1). The tests of ``log.LogReader._validate``."""
+    off0 = 1 if has_last else 0
+    m = len(t) + off0 - 1
+    for k in range(m):
+        a = last_t if (has_last and k == 0) else t[k - off0]
+        if t[k + 1 - off0] - a <= 0:
+            return 1, k
+    if regular:
+        for k in range(m):
+            a = last_t if (has_last and k == 0) else t[k - off0]
+            ra = last_row if (has_last and k == 0) else rows[k - off0]
+            ratio = (t[k + 1 - off0] - a) / dt
+            r = np.rint(ratio)
+            if abs(ratio - max(r, 1.0)) > max_jitter or r != rows[k + 1 - off0] - ra:
+                return 2, k
+    return 0, -1
+
+
+def split_rows(values, base, n):
+    """(valid, t, q, q̇, τ, wrench, rows) of a log block with the compiled ``_split_rows_py``."""
+    k = _load()
+    values = np.ascontiguousarray(values, float)
+    T = len(values)
+    valid = np.empty(T, np.bool_)
+    t, rows = np.empty(T), np.empty(T, np.int64)
+    q, dq = np.empty((T, n + 3)), np.empty((T, n + 3))
+    tau, w = np.empty((T, n)), np.empty((T, 3))
+    m = k["split"](values, base, n, valid, t, q, dq, tau, w, rows)
+    if m < T:
+        t, q, dq, tau, w, rows = t[:m], q[:m], dq[:m], tau[:m], w[:m], rows[:m]
+    return valid, t, q, dq, tau, w, rows
+
+
+def check_steps(t, rows, last, dt, max_jitter, regular):
+    """``_check_steps_py`` compiled; ``last``: (t, row) of the previous valid row or None."""
+    k = _load()
+    has = last is not None
+    return k["steps"](t, rows, has, float(last[0]) if has else 0.0, int(last[1]) if has else 0,
+                      float(dt), float(max_jitter), bool(regular))
+
+
 _fit = None                     # the compiled _fit_py, a global for _localize_py
 
 
@@ -317,7 +400,8 @@ def _compile():
 
     jit = njit(cache=True, nogil=True, error_model="numpy")
     _fit = jit(_fit_py)
-    return {"terms": jit(_terms_py), "localize": jit(_localize_py)}
+    return {"terms": jit(_terms_py), "localize": jit(_localize_py), "split": jit(_split_rows_py),
+            "steps": jit(_check_steps_py)}
 
 
 

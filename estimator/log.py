@@ -438,14 +438,21 @@ class LogReader:
             raise InputError(f"{self.source}: every sample has a NaN/inf field; nothing to estimate")
 
     def _validate(self, values):
+        from estimator import kernels
         from estimator.observer import regular_period
 
         row0 = self.n_rows
         self.n_rows += len(values)
-        valid = np.all(np.isfinite(values), axis=1)
+        n, base = self.n_links, 3 if self.floating else 0
+        fast = kernels.available()
+        if fast:                                   # one compiled pass: the mask and the split
+            valid, t, q, dq, tau, wrench, rows = kernels.split_rows(values, base, n)
+            rows += row0
+        else:
+            valid = np.all(np.isfinite(values), axis=1)
         if self.keep_valid_mask:
             self.valid_masks.append(valid)
-        bad_rows = np.flatnonzero(~valid)
+        bad_rows = np.flatnonzero(~valid) if not fast or len(t) < len(values) else np.zeros(0, int)
         if bad_rows.size:
             self.n_skipped += bad_rows.size
             room = KEEP_SKIPPED_LINES - len(self.skipped_lines)
@@ -454,44 +461,40 @@ class LogReader:
                 self.skipped_lines = np.concatenate([self.skipped_lines, rows_to_lines(row0 + extra)])
         if not valid.any():
             return None
-        data = values[valid] if bad_rows.size else values
-        rows = row0 + np.flatnonzero(valid)
-        t = data[:, 0]
-        if self._last is not None:                 # the step across the chunk boundary
-            tt, rr = np.r_[self._last[0], t], np.r_[self._last[1], rows]
-        else:
-            tt, rr = t, rows
-        steps = np.diff(tt)
-        if np.any(steps <= 0):
-            k = int(np.flatnonzero(steps <= 0)[0])
-            raise InputError(f"{self.source}: line {_line(rr[k + 1])}, column 't': time {tt[k + 1]:g} s "
-                             f"does not increase (previous sample {tt[k]:g} s at line {_line(rr[k])})")
+        if not fast:
+            data = values[valid] if bad_rows.size else values
+            rows = row0 + np.flatnonzero(valid)
+            t = np.ascontiguousarray(data[:, 0])
+            T = len(t)
+            q = np.zeros((T, n + 3))
+            dq = np.zeros((T, n + 3))
+            q[:, 3 - base:] = data[:, 1:1 + base + n]
+            dq[:, 3 - base:] = data[:, 1 + base + n:1 + 2 * (base + n)]
+            i0 = 1 + 2 * (base + n)
+            tau, wrench = data[:, i0:i0 + n].copy(), data[:, i0 + n:i0 + n + 3].copy()
         if self.period_s is None:
+            tt = t if self._last is None else np.r_[self._last[0], t]
             self.period_s = regular_period(tt)
             if len(tt) > 1:
                 self.checker.period(self.period_s)
         dt = self.period_s
-        if self._last is not None or len(tt) > 2:
-            # a step may span skipped rows: it must then be a whole number of periods
-            skipped = np.diff(rr) - 1
-            ratio = steps / dt
-            off = np.abs(ratio - np.maximum(np.round(ratio), 1)) > self.max_jitter
-            off |= np.round(ratio) != skipped + 1
-            if off.any():
-                k = int(np.flatnonzero(off)[0])
-                raise InputError(f"{self.source}: line {_line(rr[k + 1])}, column 't': irregular "
-                                 f"sampling, step {steps[k]:.6g} s where the log's period is "
-                                 f"{dt:.6g} s (±{100 * self.max_jitter:g}%)")
+        regular = self._last is not None or len(t) > 2
+        if fast:
+            kind, k = kernels.check_steps(t, rows, self._last, dt, self.max_jitter, regular)
+        else:
+            kind, k = _check_steps(t, rows, self._last, dt, self.max_jitter, regular)
+        if kind:
+            tt = t if self._last is None else np.r_[self._last[0], t]
+            rr = rows if self._last is None else np.r_[self._last[1], rows]
+            if kind == 1:
+                raise InputError(f"{self.source}: line {_line(rr[k + 1])}, column 't': time {tt[k + 1]:g} s "
+                                 f"does not increase (previous sample {tt[k]:g} s at line {_line(rr[k])})")
+            raise InputError(f"{self.source}: line {_line(rr[k + 1])}, column 't': irregular "
+                             f"sampling, step {tt[k + 1] - tt[k]:.6g} s where the log's period is "
+                             f"{dt:.6g} s (±{100 * self.max_jitter:g}%)")
         self._last = (t[-1], rows[-1])
-        n, base = self.n_links, 3 if self.floating else 0
         T = len(t)
-        q = np.zeros((T, n + 3))
-        dq = np.zeros((T, n + 3))
-        q[:, 3 - base:] = data[:, 1:1 + base + n]
-        dq[:, 3 - base:] = data[:, 1 + base + n:1 + 2 * (base + n)]
-        i0 = 1 + 2 * (base + n)
-        log = SensorLog(t=np.ascontiguousarray(t), q=q, dq=dq, tau_Nm=data[:, i0:i0 + n].copy(),
-                        wrench=data[:, i0 + n:i0 + n + 3].copy(), floating=self.floating,
+        log = SensorLog(t=t, q=q, dq=dq, tau_Nm=tau, wrench=wrench, floating=self.floating,
                         source=self.source, timing=self.timing)
         log.row0 = int(row0)
         log.period_s = dt
@@ -503,6 +506,25 @@ class LogReader:
         """The whole-log plausibility checks (velocity scale); warnings issued and returned."""
         self.plausibility_warnings = self.checker.finish()
         return self.plausibility_warnings
+
+
+def _check_steps(t, rows, last, dt, max_jitter, regular):
+    """The numpy form of ``kernels.check_steps``: (1, k) for the first non-increasing step k of
+    tt = [last t] + t, else (2, k) for the first step (if ``regular``) that is not a whole number
+    of periods (±max_jitter) or spans another number of rows, else (0, −1)."""
+    tt, rr = (t, rows) if last is None else (np.r_[last[0], t], np.r_[last[1], rows])
+    steps = np.diff(tt)
+    if np.any(steps <= 0):
+        return 1, int(np.flatnonzero(steps <= 0)[0])
+    if regular:
+        # a step may span skipped rows: it must then be a whole number of periods
+        skipped = np.diff(rr) - 1
+        ratio = steps / dt
+        off = np.abs(ratio - np.maximum(np.round(ratio), 1)) > max_jitter
+        off |= np.round(ratio) != skipped + 1
+        if off.any():
+            return 2, int(np.flatnonzero(off)[0])
+    return 0, -1
 
 
 def rows_to_lines(rows: np.ndarray) -> np.ndarray:

@@ -137,3 +137,50 @@ def test_extra_columns_and_crlf(tmp_path, monkeypatch):
     text = _write(tmp_path / "text.csv", [r + ["ok"] for r in rows], NAMES + ["note"])
     with pytest.raises(InputError, match="text.csv"):
         list(LogReader(text, ROBOT, chunk_samples=500))
+
+
+def _fixed_rows(rows):
+    """The same rows as a fixed-base log (no x, z, theta and their rates)."""
+    drop = {1, 2, 3, 6, 7, 8}
+    return [[v for i, v in enumerate(r) if i not in drop] for r in rows], log_columns(2, False)
+
+
+@pytest.mark.parametrize("floating", [True, False], ids=["floating", "fixed"])
+def test_compiled_row_split_equals_the_numpy_form(tmp_path, monkeypatch, floating):
+    """kernels.split_rows / check_steps against the numpy forms: the same arrays, skipped lines
+    and chunk sizes on a log with NaN rows (also at a chunk's first and last row)."""
+    from estimator import kernels
+
+    rows = _rows(3000, seed=5)
+    for k in (0, 1, 499, 500, 1234, 2999):
+        rows[k][10 if k % 2 else 13] = "nan"          # dq2 or Fx
+    header = None
+    if not floating:
+        rows, header = _fixed_rows(rows)
+    path = _write(tmp_path / "gaps.csv", rows, header)
+    assert kernels.available()
+    fast = _read(path, 500, "arrow", monkeypatch)
+    monkeypatch.setattr(kernels, "ENABLED", False)
+    slow = _read(path, 500, "arrow", monkeypatch)
+    _same(fast[0], slow[0])
+    assert fast[1] == slow[1] == [2, 3, 501, 502, 1236, 3001] and fast[2] == slow[2]
+    if not floating:
+        assert np.all(fast[0]["q"][:, :3] == 0) and np.all(fast[0]["dq"][:, :3] == 0)
+
+
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "numpy"])
+@pytest.mark.parametrize("edit, message", [
+    (lambda rows: rows[1700].__setitem__(0, rows[1699][0]), r"line 1702, column 't': time .* does not increase"),
+    (lambda rows: rows[1001].__setitem__(0, repr(1.0014)), r"line 1003, column 't': irregular sampling"),
+    (lambda rows: [r.__setitem__(0, repr(float(r[0]) + 5e-4)) for r in rows[500:]], r"line 502, column 't': irregular"),
+    (lambda rows: rows[999].__setitem__(0, repr(0.9995)), r"line 1001, column 't': irregular"),  # at a chunk's end
+], ids=["repeat", "jitter", "shift", "boundary"])
+def test_time_errors_name_the_same_line_compiled_or_not(tmp_path, monkeypatch, compiled, edit, message):
+    from estimator import kernels
+
+    rows = _rows(2000, seed=6, hard=False)
+    edit(rows)
+    path = _write(tmp_path / "time.csv", rows)
+    monkeypatch.setattr(kernels, "ENABLED", compiled)
+    with pytest.raises(InputError, match=message):
+        list(LogReader(path, ROBOT, chunk_samples=500))
