@@ -40,6 +40,8 @@ def warm() -> bool:
         valid, t, *_, rows = split_rows(np.zeros((3, 1 + 2 * (base + 2) + 5)), base, 2)
         check_steps(t + np.arange(3), rows, None, 1.0, 0.01, True)
         check_steps(t + np.arange(3), rows, (-1.0, -1), 1.0, 0.01, True)
+    from estimator.outframe import _empty_part
+    format_rows(_empty_part())
     return True
 
 
@@ -390,18 +392,144 @@ def check_steps(t, rows, last, dt, max_jitter, regular):
                       float(dt), float(max_jitter), bool(regular))
 
 
+_POW10_INT = np.array([10 ** i for i in range(19)], dtype=np.int64)
+_POW10_FLOAT = 10.0 ** np.arange(23)          # exact powers of ten (outframe.round_significant)
+
+
+def _put_uint_py(buf, pos, v, width):
+    """Write v ≥ 0 in decimal at buf[pos:], at least ``width`` digits (leading zeros); → new pos."""
+    n = 1
+    while n < 19 and v >= _POW10_INT[n]:
+        n += 1
+    if n < width:
+        n = width
+    end = pos + n
+    while n > 0:
+        end_i = pos + n - 1
+        buf[end_i] = 48 + v % 10
+        v //= 10
+        n -= 1
+    return end
+
+
+def _put_float_py(buf, pos, x, digits):
+    """x rounded to ``digits`` significant digits (outframe.round_significant) and printed as
+    pyarrow's CSV writer prints that double (its shortest decimal: plain for a decimal exponent
+    in [−6, 10), else d.ddde±x; nan, inf, -inf, 0, -0); → new pos, or −1 for the few values
+    round_significant leaves as they are (|x| < 1e−14 or ≥ 1e31 at 9 digits)."""
+    if x != x:
+        buf[pos], buf[pos + 1], buf[pos + 2] = 110, 97, 110            # nan
+        return pos + 3
+    if x < 0 or (x == 0 and math.copysign(1.0, x) < 0):
+        buf[pos] = 45                                                   # -
+        pos += 1
+    a = abs(x)
+    if a == math.inf:
+        buf[pos], buf[pos + 1], buf[pos + 2] = 105, 110, 102            # inf
+        return pos + 3
+    if a == 0:
+        buf[pos] = 48
+        return pos + 1
+    _, e2 = math.frexp(a)
+    k = (digits - 1) - int(math.floor((e2 - 1) * 0.30102999566398120))
+    if k > 22 or k < -22:
+        return -1
+    if k >= 0:
+        m = np.int64(np.rint(a * _POW10_FLOAT[k]))
+    else:
+        m = np.int64(np.rint(a / _POW10_FLOAT[-k]))
+    # the double nearest m·10^−k prints as m·10^−k without its trailing zeros
+    while m % 10 == 0:
+        m //= 10
+        k -= 1
+    nd = 1
+    while nd < 19 and m >= _POW10_INT[nd]:
+        nd += 1
+    e = nd - 1 - k                                                      # decimal exponent
+    if -6 <= e < 10:
+        if e < 0:
+            buf[pos], buf[pos + 1] = 48, 46                             # 0.
+            pos += 2
+            for _ in range(-e - 1):
+                buf[pos] = 48
+                pos += 1
+            return _put_uint(buf, pos, m, nd)
+        if nd <= e + 1:
+            pos = _put_uint(buf, pos, m, nd)
+            for _ in range(e + 1 - nd):
+                buf[pos] = 48
+                pos += 1
+            return pos
+        low = nd - e - 1
+        pos = _put_uint(buf, pos, m // _POW10_INT[low], 1)
+        buf[pos] = 46
+        return _put_uint(buf, pos + 1, m % _POW10_INT[low], low)
+    pos = _put_uint(buf, pos, m // _POW10_INT[nd - 1], 1)
+    if nd > 1:
+        buf[pos] = 46
+        pos = _put_uint(buf, pos + 1, m % _POW10_INT[nd - 1], nd - 1)
+    buf[pos] = 101                                                      # e
+    buf[pos + 1] = 43 if e > 0 else 45
+    return _put_uint(buf, pos + 2, abs(e), 1)
+
+
+def _format_rows_py(t, contact, link, alpha, Fx, Fz, px, pz, rnorm, digits, buf):
+    """The rows ``t,contact,link,alpha,Fx,Fz,px,pz,rnorm`` (outframe.COLUMNS) as CSV text in buf;
+    → bytes written, or −1 if a value needs pyarrow's writer (``_put_float_py``)."""
+    pos = 0
+    for i in range(len(t)):
+        pos = _put_float(buf, pos, t[i], digits)
+        if pos < 0:
+            return -1
+        buf[pos] = 44
+        buf[pos + 1] = 49 if contact[i] else 48
+        buf[pos + 2] = 44
+        pos += 3
+        v = link[i]
+        if v < 0:
+            buf[pos] = 45
+            pos += 1
+            v = -v
+        pos = _put_uint(buf, pos, v, 1)
+        for x in (alpha[i], Fx[i], Fz[i], px[i], pz[i], rnorm[i]):
+            buf[pos] = 44
+            pos = _put_float(buf, pos + 1, x, digits)
+            if pos < 0:
+                return -1
+        buf[pos] = 10
+        pos += 1
+    return pos
+
+
+def format_rows(part, digits: int = 9) -> bytes | None:
+    """The CSV rows of an estimate part (no header) as pyarrow's writer prints the part rounded
+    by ``outframe.round_significant``, or None if a value needs pyarrow's writer."""
+    k = _load()
+    T = len(part.t)
+    buf = np.empty(T * (7 * 24 + 30), np.uint8)
+    f = [np.ascontiguousarray(a, float) for a in (part.t, part.alpha, part.Fx, part.Fz, part.px,
+                                                  part.pz, part.rnorm)]
+    n = k["rows"](f[0], np.ascontiguousarray(part.contact, np.bool_),
+                  np.ascontiguousarray(part.link, np.int64), *f[1:], int(digits), buf)
+    return None if n < 0 else buf[:n].tobytes()
+
+
 _fit = None                     # the compiled _fit_py, a global for _localize_py
+_put_uint = None                # the compiled _put_uint_py and _put_float_py, globals for the rows
+_put_float = None
 
 
 def _compile():
     """Compile the loops (numba, cached beside this file); ImportError without numba."""
-    global _fit
+    global _fit, _put_uint, _put_float
     from numba import njit
 
     jit = njit(cache=True, nogil=True, error_model="numpy")
     _fit = jit(_fit_py)
+    _put_uint = jit(_put_uint_py)
+    _put_float = jit(_put_float_py)
     return {"terms": jit(_terms_py), "localize": jit(_localize_py), "split": jit(_split_rows_py),
-            "steps": jit(_check_steps_py)}
+            "steps": jit(_check_steps_py), "rows": jit(_format_rows_py)}
 
 
 

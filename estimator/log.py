@@ -122,6 +122,7 @@ PANDAS_NA = sorted(set(NA_VALUES) | {"#N/A", "#N/A N/A", "#NA", "-1.#IND", "-1.#
                                     "1.#QNAN", "<NA>", "N/A", "NULL", "None", "n/a"})
 CSV_BLOCK_BYTES = 1 << 23            # at most 8 MiB of CSV text per pyarrow parse (~40 k rows, 2 links)
 CSV_MIN_BLOCK_BYTES = 1 << 16        # and at least 64 KiB
+CSV_THREADS = True                   # pyarrow parses a block on its thread pool
 
 
 def _pandas_kw() -> dict:
@@ -171,7 +172,7 @@ def _arrow_values(body: bytes, names: list[str], cols: list[str]) -> np.ndarray 
     try:
         table = pc.read_csv(
             io.BytesIO(body),
-            read_options=pc.ReadOptions(column_names=names, use_threads=True, block_size=1 << 20),
+            read_options=pc.ReadOptions(column_names=names, use_threads=CSV_THREADS, block_size=1 << 20),
             parse_options=pc.ParseOptions(ignore_empty_lines=True),
             convert_options=pc.ConvertOptions(column_types={c: f64 for c in names},
                                               null_values=PANDAS_NA, strings_can_be_null=True,
