@@ -42,6 +42,9 @@ def warm() -> bool:
         check_steps(t + np.arange(3), rows, (-1.0, -1), 1.0, 0.01, True)
     from estimator.outframe import _empty_part
     format_rows(_empty_part())
+    plausibility_rows(t, np.zeros((3, 5)), np.zeros((3, 5)), 0, 2, 6.3, None, np.zeros(3))
+    plausibility_rows(t, np.zeros((3, 5)), np.zeros((3, 5)), 3, 2, 6.3, (-1.0, np.zeros(2), np.zeros(2)),
+                      np.zeros(3))
     return True
 
 
@@ -369,6 +372,45 @@ def _check_steps_py(t, rows, has_last, last_t, last_row, dt, max_jitter, regular
     return 0, -1
 
 
+def _plausibility_py(t, q, dq, base, n, max_angle, has_last, t0, q0, d0, sums):
+    """Checker.rows in one pass: the first (k, j) with |q_j| > max_angle (joint angles) or
+    (−1, −1); else the sums Σ fd·mid, Σ mid·mid, Σ fd·fd over the steps of [last] + rows
+    (fd = Δq/Δt, mid = ½(q̇_k + q̇_{k+1}), coordinates from ``base`` on) added to ``sums``."""
+    T, C = q.shape
+    for k in range(T):
+        for j in range(n):
+            if abs(q[k, 3 + j]) > max_angle:
+                return k, j
+    s0, s1, s2 = 0.0, 0.0, 0.0
+    for k in range(-1 if has_last else 0, T - 1):
+        ta = t0 if k < 0 else t[k]
+        h = t[k + 1] - ta
+        for j in range(base, C):
+            qa = q0[j - base] if k < 0 else q[k, j]
+            da = d0[j - base] if k < 0 else dq[k, j]
+            fd = (q[k + 1, j] - qa) / h
+            mid = (dq[k + 1, j] + da) * 0.5
+            s0 += fd * mid
+            s1 += mid * mid
+            s2 += fd * fd
+    sums[0] += s0
+    sums[1] += s1
+    sums[2] += s2
+    return -1, -1
+
+
+def plausibility_rows(t, q, dq, base, n, max_angle, last, sums):
+    """``_plausibility_py`` compiled; ``last``: (t, q, q̇) of the previous row (coordinates from
+    ``base`` on) or None. → (k, j) of the first joint angle beyond ``max_angle``, or (−1, −1)."""
+    k = _load()
+    has = last is not None
+    q0 = np.ascontiguousarray(last[1], float).ravel() if has else np.zeros(q.shape[1] - base)
+    d0 = np.ascontiguousarray(last[2], float).ravel() if has else np.zeros(q.shape[1] - base)
+    return k["plaus"](np.ascontiguousarray(t, float), np.ascontiguousarray(q, float),
+                      np.ascontiguousarray(dq, float), int(base), int(n), float(max_angle), has,
+                      float(last[0]) if has else 0.0, q0, d0, sums)
+
+
 def split_rows(values, base, n):
     """(valid, t, q, q̇, τ, wrench, rows) of a log block with the compiled ``_split_rows_py``."""
     k = _load()
@@ -529,7 +571,8 @@ def _compile():
     _put_uint = jit(_put_uint_py)
     _put_float = jit(_put_float_py)
     return {"terms": jit(_terms_py), "localize": jit(_localize_py), "split": jit(_split_rows_py),
-            "steps": jit(_check_steps_py), "rows": jit(_format_rows_py)}
+            "steps": jit(_check_steps_py), "rows": jit(_format_rows_py),
+            "plaus": jit(_plausibility_py)}
 
 
 

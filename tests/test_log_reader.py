@@ -184,3 +184,38 @@ def test_time_errors_name_the_same_line_compiled_or_not(tmp_path, monkeypatch, c
     monkeypatch.setattr(kernels, "ENABLED", compiled)
     with pytest.raises(InputError, match=message):
         list(LogReader(path, ROBOT, chunk_samples=500))
+
+
+@pytest.mark.parametrize("floating", [True, False], ids=["floating", "fixed"])
+def test_compiled_plausibility_sums_match_the_numpy_form(monkeypatch, floating):
+    """plausibility.Checker.rows compiled (kernels.plausibility_rows) against its numpy form, fed
+    the same chunks: the same step count, the velocity sums to rounding (summation order), the
+    same angle error naming the same column and time."""
+    from estimator import kernels
+    from estimator.plausibility import Checker
+
+    rng = np.random.default_rng(9)
+    T = 5000
+    t = np.arange(T) * 1e-3
+    q = np.cumsum(rng.normal(0, 1e-3, (T, 5)), axis=0)
+    dq = np.gradient(q, t, axis=0) + rng.normal(0, 0.01, (T, 5))
+    if not floating:
+        q[:, :3] = dq[:, :3] = 0.0
+    checkers = []
+    for compiled in (True, False):
+        monkeypatch.setattr(kernels, "ENABLED", compiled)
+        c = Checker("log.csv", floating, 2)
+        for a, b in ((0, 1), (1, 700), (700, 3001), (3001, T)):
+            c.rows(t[a:b], q[a:b], dq[a:b])
+        checkers.append(c)
+    fast, slow = checkers
+    assert fast.steps == slow.steps == T - 1
+    np.testing.assert_allclose(fast.sums, slow.sums, rtol=1e-12)
+    assert fast.scale() == pytest.approx(slow.scale(), rel=1e-12)
+    q[3456, 4] = 7.0                                     # q2 beyond 2π
+    for compiled in (True, False):
+        monkeypatch.setattr(kernels, "ENABLED", compiled)
+        c = Checker("log.csv", floating, 2)
+        c.rows(t[:3000], q[:3000], dq[:3000])
+        with pytest.raises(InputError, match=r"column 'q2': joint angle 7 rad at t = 3.456 s"):
+            c.rows(t[3000:], q[3000:], dq[3000:])
