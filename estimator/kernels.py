@@ -37,6 +37,8 @@ def warm() -> bool:
                          max_condition=20.0, ambiguity_tol=1e-3, position_tol_m=0.005,
                          bound_tol=0.05)
     for base in (3, 0):             # the log reader's loops: floating and fixed base
+        split_rows(np.zeros((1 + 2 * (base + 2) + 5, 3)).T, base, 2)          # column-major blocks
+        split_rows(np.zeros((1 + 2 * (base + 2) + 5, 4)).T[1:], base, 2)      # and slices of them
         valid, t, *_, rows = split_rows(np.zeros((3, 1 + 2 * (base + 2) + 5)), base, 2)
         check_steps(t + np.arange(3), rows, None, 1.0, 0.01, True)
         check_steps(t + np.arange(3), rows, (-1.0, -1), 1.0, 0.01, True)
@@ -414,7 +416,7 @@ def plausibility_rows(t, q, dq, base, n, max_angle, last, sums):
 def split_rows(values, base, n):
     """(valid, t, q, q̇, τ, wrench, rows) of a log block with the compiled ``_split_rows_py``."""
     k = _load()
-    values = np.ascontiguousarray(values, float)
+    values = np.asarray(values, float)        # any layout: row- or column-major, or a slice
     T = len(values)
     valid = np.empty(T, np.bool_)
     t, rows = np.empty(T), np.empty(T, np.int64)

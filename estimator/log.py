@@ -137,8 +137,8 @@ def _pandas_kw() -> dict:
 
 
 def _byte_blocks(path, offset: int, size: int | None = None):
-    """The file's bytes from ``offset`` in blocks of about ``size`` (CSV_BLOCK_BYTES), each
-    ending at a line end (the last: at the end of the file)."""
+    """The file's bytes from ``offset`` in blocks (bytes or memoryview) of about ``size``
+    (CSV_BLOCK_BYTES), each ending at a line end (the last: at the end of the file)."""
     size = size or CSV_BLOCK_BYTES
     with open(path, "rb") as f:
         f.seek(offset)
@@ -147,31 +147,28 @@ def _byte_blocks(path, offset: int, size: int | None = None):
             data = f.read(size)
             if not data:
                 break
-            data = rest + data
             cut = data.rfind(b"\n") + 1
-            if cut == 0:
-                rest = data
+            if cut == 0:                        # no line end in this read: keep reading
+                rest += data
                 continue
+            yield rest + data[:cut] if rest else memoryview(data)[:cut]     # no copy
             rest = data[cut:]
-            yield data[:cut]
         if rest:
             yield rest
 
 
-def _arrow_values(body: bytes, names: list[str], cols: list[str]) -> np.ndarray | None:
+def _arrow_values(body, names: list[str], cols: list[str]) -> np.ndarray | None:
     """The rows of a block of CSV data lines as floats (rows, ``cols``) parsed by pyarrow, or
     None where pandas might read it differently: any parse error (a non-numeric field, a row
     with too few or too many fields, a whitespace-only line), or a field pyarrow reads as NaN/inf
     that is not one of pandas' NA spellings (``nan(1)``, ``NAN``, ``inf`` ...: pandas decides)."""
-    import io
-
     import pyarrow as pa
     import pyarrow.csv as pc
 
     f64 = pa.float64()
     try:
         table = pc.read_csv(
-            io.BytesIO(body),
+            pa.BufferReader(pa.py_buffer(body)),
             read_options=pc.ReadOptions(column_names=names, use_threads=CSV_THREADS, block_size=1 << 20),
             parse_options=pc.ParseOptions(ignore_empty_lines=True),
             convert_options=pc.ConvertOptions(column_types={c: f64 for c in names},
@@ -179,7 +176,7 @@ def _arrow_values(body: bytes, names: list[str], cols: list[str]) -> np.ndarray 
                                               quoted_strings_can_be_null=True))
     except (pa.ArrowInvalid, pa.ArrowNotImplementedError, pa.ArrowTypeError, ValueError):
         return None
-    out = np.empty((table.num_rows, len(cols)))
+    out = np.empty((len(cols), table.num_rows)).T          # column-major: columns copied whole
     for j, c in enumerate(cols):
         column = table.column(c)
         out[:, j] = column.to_numpy(zero_copy_only=False)
@@ -311,7 +308,7 @@ class LogReader:
         size = self.chunk_samples or max(f.metadata.num_rows, 1)
         try:
             for batch in f.iter_batches(batch_size=size, columns=raw):
-                out = np.empty((batch.num_rows, len(raw)))
+                out = np.empty((len(raw), batch.num_rows)).T     # column-major: columns copied whole
                 for j in range(len(raw)):
                     out[:, j] = batch.column(j).to_numpy(zero_copy_only=False)
                 yield out
@@ -339,7 +336,7 @@ class LogReader:
         for body in _byte_blocks(self.path, len(header), block):
             values = _arrow_values(body, self.names, self.cols)
             if values is None:
-                values = self._pandas_values(header + body, row0)
+                values = self._pandas_values(header + bytes(body), row0)
             row0 += len(values)
             if size is None:
                 held.append(values)
