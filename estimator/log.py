@@ -136,6 +136,19 @@ def _pandas_kw() -> dict:
     return kw
 
 
+def _simple_header(path):
+    """(first line, names) if the file's first line is plain comma-separated names (letters,
+    digits, _; spaces around commas; distinct), which pandas reads as the same names; else None."""
+    import re
+
+    with open(path, "rb") as f:
+        line = f.readline(1 << 16)
+    if not re.fullmatch(rb" *[A-Za-z_]\w*(?: *, *[A-Za-z_]\w*)* *\r?\n", line):
+        return None
+    names = [c.strip() for c in line.decode("ascii").split(",")]
+    return (line, names) if len(set(names)) == len(names) else None
+
+
 def _byte_blocks(path, offset: int, size: int | None = None):
     """The file's bytes from ``offset`` in blocks (bytes or memoryview) of about ``size``
     (CSV_BLOCK_BYTES), each ending at a line end (the last: at the end of the file)."""
@@ -177,23 +190,45 @@ def _arrow_values(body, names: list[str], cols: list[str]) -> np.ndarray | None:
     except (pa.ArrowInvalid, pa.ArrowNotImplementedError, pa.ArrowTypeError, ValueError):
         return None
     out = np.empty((len(cols), table.num_rows)).T          # column-major: columns copied whole
+    nulls = None
     for j, c in enumerate(cols):
         column = table.column(c)
-        out[:, j] = column.to_numpy(zero_copy_only=False)
-        if column.null_count:                       # an NA spelling: NaN, as pandas reads it
-            out[column.is_null().to_numpy(zero_copy_only=False), j] = np.nan
-    finite = np.isfinite(out)
-    if not finite.all():
-        nulls = np.zeros(out.shape, bool)
-        for j, c in enumerate(cols):
-            if table.column(c).null_count:
-                nulls[:, j] = table.column(c).is_null().to_numpy(zero_copy_only=False)
-        if np.any(~finite & ~nulls):
+        _fill(out[:, j], column)                   # an NA spelling (null): NaN, as pandas reads it
+        if column.null_count:
+            nulls = np.zeros(out.shape, bool) if nulls is None else nulls
+            _fill(nulls[:, j], column, null_mask=True)
+    with np.errstate(all="ignore"):
+        suspect = not np.isfinite(out.sum(axis=0)).all()     # a NaN/inf (or a sum overflowing)
+    if suspect:
+        weird = ~np.isfinite(out)
+        if nulls is not None:
+            weird &= ~nulls
+        if weird.any():
             return None
     for c in names:                                 # pandas refuses any non-numeric column
         if c not in cols and not pa.types.is_floating(table.column(c).type):
             return None
     return out
+
+
+def _fill(dst: np.ndarray, column, null_mask: bool = False) -> None:
+    """dst[:] = a float64 pyarrow ChunkedArray's values (nulls as NaN), or its null mask, read
+    from the Arrow buffers chunk by chunk (pyarrow's to_numpy would import pandas)."""
+    i = 0
+    for chunk in getattr(column, "chunks", [column]):          # a ChunkedArray or an Array
+        n, off = len(chunk), chunk.offset
+        validity, data = chunk.buffers()[:2]
+        invalid = None
+        if chunk.null_count:
+            bits = np.unpackbits(np.frombuffer(validity, np.uint8), bitorder="little", count=off + n)
+            invalid = bits[off:] == 0
+        if null_mask:
+            dst[i:i + n] = False if invalid is None else invalid
+        else:
+            dst[i:i + n] = np.frombuffer(data, np.float64, count=n, offset=8 * off)
+            if invalid is not None:
+                dst[i:i + n][invalid] = np.nan
+        i += n
 
 
 def read_log(path, robot=None, *, max_jitter: float = 0.01) -> SensorLog:
@@ -259,6 +294,9 @@ class LogReader:
 
     # ------------------------------------------------------------------ header
     def _csv_names(self):
+        self._simple_header = _simple_header(self.path)
+        if self._simple_header is not None:       # plain names: no need to import pandas
+            return self._simple_header[1]
         import pandas as pd
 
         try:
@@ -310,7 +348,11 @@ class LogReader:
             for batch in f.iter_batches(batch_size=size, columns=raw):
                 out = np.empty((len(raw), batch.num_rows)).T     # column-major: columns copied whole
                 for j in range(len(raw)):
-                    out[:, j] = batch.column(j).to_numpy(zero_copy_only=False)
+                    column = batch.column(j)
+                    if column.type == pa.float64():
+                        _fill(out[:, j], column)
+                    else:                          # integers, float32, null: numpy converts
+                        out[:, j] = column.to_numpy(zero_copy_only=False)
                 yield out
         except (OSError, ValueError) as exc:
             raise InputError(f"{self.source}: not a readable Parquet log: {str(exc).splitlines()[0]}") from None
@@ -354,6 +396,8 @@ class LogReader:
     def _csv_header_line(self) -> bytes | None:
         """The file's first line (bytes, with its line end) if pandas reads the same column names
         from it alone as from the file, else None."""
+        if self._simple_header is not None:
+            return self._simple_header[0]
         import io
 
         import pandas as pd
