@@ -358,11 +358,12 @@ class LogReader:
             raise InputError(f"{self.source}: not a readable Parquet log: {str(exc).splitlines()[0]}") from None
 
     def _csv_blocks(self):
-        """Blocks of the CSV's data rows: pyarrow's multithreaded parser on byte blocks of
-        ``CSV_BLOCK_BYTES`` (cut at line ends), re-blocked into ``chunk_samples`` rows. A byte block
-        pyarrow cannot take exactly as pandas would (a parse error, a field it reads as NaN/inf
-        that is not one of the NA spellings) is parsed by pandas (``_pandas_values``), which names
-        a bad field's line; both give correctly rounded values (``read_csv_values``)."""
+        """Blocks of the CSV's data rows: pyarrow's multithreaded parser on byte blocks of about
+        ``chunk_samples`` rows of text (64 KiB–8 MiB, cut at line ends), re-blocked into
+        ``chunk_samples`` rows. A byte block pyarrow cannot take exactly as pandas would (a parse
+        error, a field it reads as NaN/inf that is not one of the NA spellings) is parsed by
+        pandas (``_pandas_values``), which names a bad field's line; both parsers round decimal
+        strings correctly (``_pandas_kw``), so the values do not depend on which one read them."""
         header = self._csv_header_line()
         try:
             import pyarrow.csv  # noqa: F401
@@ -374,8 +375,9 @@ class LogReader:
         size = self.chunk_samples
         held, n_held, row0 = [], 0, 0
         # about chunk_samples rows of text per parse (24 bytes a field), so memory follows the chunk
-        block = None if size is None else int(np.clip(size * 24 * len(self.names), CSV_MIN_BLOCK_BYTES, CSV_BLOCK_BYTES))
-        for body in _byte_blocks(self.path, len(header), block):
+        nbytes = None if size is None else int(np.clip(size * 24 * len(self.names),
+                                                       CSV_MIN_BLOCK_BYTES, CSV_BLOCK_BYTES))
+        for body in _byte_blocks(self.path, len(header), nbytes):
             values = _arrow_values(body, self.names, self.cols)
             if values is None:
                 values = self._pandas_values(header + bytes(body), row0)
