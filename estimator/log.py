@@ -136,6 +136,21 @@ def _pandas_kw() -> dict:
     return kw
 
 
+def _reblock(blocks, size: int | None):
+    """Arrays of rows re-cut into arrays of ``size`` rows (the last shorter); None: one array."""
+    held, n_held = [], 0
+    for values in blocks:
+        held.append(values)
+        n_held += len(values)
+        while size is not None and n_held >= size:
+            block = np.concatenate(held) if len(held) > 1 else held[0]
+            yield block[:size]
+            rest = block[size:]
+            held, n_held = ([rest] if len(rest) else []), len(rest)
+    if held:
+        yield np.concatenate(held) if len(held) > 1 else held[0]
+
+
 def _simple_header(path):
     """(first line, names) if the file's first line is plain comma-separated names (letters,
     digits, _; spaces around commas; distinct), which pandas reads as the same names; else None."""
@@ -344,16 +359,22 @@ class LogReader:
                 raise InputError(f"{self.source}: column '{name}' is not numeric")
         raw = [f.schema_arrow.names[index[c]] for c in self.cols]
         size = self.chunk_samples or max(f.metadata.num_rows, 1)
+
+        def batches():
+            # a row group at a time (iter_batches over the whole file buffers more and more of it)
+            for g in range(f.num_row_groups):
+                for batch in f.iter_batches(batch_size=size, columns=raw, row_groups=[g]):
+                    out = np.empty((len(raw), batch.num_rows)).T   # column-major: columns whole
+                    for j in range(len(raw)):
+                        column = batch.column(j)
+                        if column.type == pa.float64():
+                            _fill(out[:, j], column)
+                        else:                      # integers, float32, null: numpy converts
+                            out[:, j] = column.to_numpy(zero_copy_only=False)
+                    yield out
+
         try:
-            for batch in f.iter_batches(batch_size=size, columns=raw):
-                out = np.empty((len(raw), batch.num_rows)).T     # column-major: columns copied whole
-                for j in range(len(raw)):
-                    column = batch.column(j)
-                    if column.type == pa.float64():
-                        _fill(out[:, j], column)
-                    else:                          # integers, float32, null: numpy converts
-                        out[:, j] = column.to_numpy(zero_copy_only=False)
-                yield out
+            yield from _reblock(batches(), self.chunk_samples)
         except (OSError, ValueError) as exc:
             raise InputError(f"{self.source}: not a readable Parquet log: {str(exc).splitlines()[0]}") from None
 
@@ -373,27 +394,20 @@ class LogReader:
             yield from self._pandas_blocks()
             return
         size = self.chunk_samples
-        held, n_held, row0 = [], 0, 0
         # about chunk_samples rows of text per parse (24 bytes a field), so memory follows the chunk
         nbytes = None if size is None else int(np.clip(size * 24 * len(self.names),
                                                        CSV_MIN_BLOCK_BYTES, CSV_BLOCK_BYTES))
-        for body in _byte_blocks(self.path, len(header), nbytes):
-            values = _arrow_values(body, self.names, self.cols)
-            if values is None:
-                values = self._pandas_values(header + bytes(body), row0)
-            row0 += len(values)
-            if size is None:
-                held.append(values)
-                continue
-            held.append(values)
-            n_held += len(values)
-            while n_held >= size:
-                block = np.concatenate(held) if len(held) > 1 else held[0]
-                yield block[:size]
-                rest = block[size:]
-                held, n_held = ([rest] if len(rest) else []), len(rest)
-        if held:
-            yield np.concatenate(held) if len(held) > 1 else held[0]
+
+        def parsed():
+            row0 = 0
+            for body in _byte_blocks(self.path, len(header), nbytes):
+                values = _arrow_values(body, self.names, self.cols)
+                if values is None:
+                    values = self._pandas_values(header + bytes(body), row0)
+                row0 += len(values)
+                yield values
+
+        yield from _reblock(parsed(), size)
 
     def _csv_header_line(self) -> bytes | None:
         """The file's first line (bytes, with its line end) if pandas reads the same column names

@@ -241,3 +241,5 @@ def test_parquet_with_nulls_and_integer_columns_reads_as_the_csv(tmp_path, monke
     b, skipped_b, _ = _read(parquet, 333, "arrow", monkeypatch)
     _same(a, b)
     assert skipped_a == skipped_b == [779]
+    whole = L.read_log(parquet)                          # four row groups, one log
+    assert np.array_equal(whole.t, a["t"]) and whole.skipped_lines.tolist() == [779]
