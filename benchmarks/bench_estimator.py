@@ -8,9 +8,11 @@ may be shared: compare ratios).
 End to end (``bench_end_to_end``): a 2-link floating-base log of the paper leg swinging with a
 few pokes and the paper leg's sensor noise, written once (CSV with 9 significant digits, and
 Parquet) to a temporary directory; ``torquebench estimate LOG --out OUT`` timed in process
-(reading, estimating, writing), anchored by a bare ``pandas.read_csv`` of the same CSV; the peak
-resident memory of the same command in a fresh process (ru_maxrss of the child). ``--ten-million``
-adds the peak memory of a 10 M-sample log (the 2 M-sample log five times over).
+(reading, estimating, writing; CSV -> CSV, Parquet -> Parquet, CSV -> Parquet, CSV without --out;
+wall and CPU seconds), anchored by the bare readers of the same CSV (``pandas.read_csv``,
+``pyarrow.csv.read_csv``); the same command in a fresh process with its peak resident memory
+(VmHWM). ``--ten-million`` adds a 10 M-sample log (the 2 M-sample log five times over). On a
+shared machine the wall figures are pessimistic: samples per CPU-second are printed too.
 """
 
 from __future__ import annotations
@@ -222,23 +224,33 @@ def _log_blocks(n_samples: int, period_samples: int = 200_000):
         done += m
 
 
-def _peak_rss_MB(argv) -> tuple[float, float]:
-    """(wall s, peak RSS MB) of ``torquebench ARGV --json`` in a fresh process (its own
-    ``peak_memory_MB``: VmHWM, the interpreter and imports included)."""
+def _fresh_process(argv) -> tuple[float, float, float]:
+    """(wall s, CPU s, peak RSS MB) of ``torquebench ARGV --json`` in a fresh process (its own
+    ``peak_memory_MB``: VmHWM, the interpreter and imports included; CPU: user + system of the
+    child, all its threads)."""
     import json
+    import resource
     import subprocess
     import sys
 
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "torquebench", *argv, "--json"], capture_output=True,
                           text=True)
     wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if proc.returncode != 0:
         raise RuntimeError(proc.stderr)
-    return wall, float(json.loads(proc.stdout)["peak_memory_MB"])
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu, float(json.loads(proc.stdout)["peak_memory_MB"])
 
 
 def bench_end_to_end(n_samples: int = 2_000_000, ten_million: bool = False) -> dict:
+    """``torquebench estimate LOG --out OUT`` on CSV -> CSV, Parquet -> Parquet, CSV -> Parquet and
+    CSV without --out, in process after a warm-up (wall and CPU of the whole process, every
+    thread), anchored by the bare readers of the same CSV in the same run (pandas.read_csv and
+    pyarrow.csv.read_csv, all columns float64); then CSV -> CSV and Parquet -> Parquet in a fresh
+    process (imports and all) with their peak resident memory."""
     import contextlib
     import io
     import json
@@ -247,9 +259,10 @@ def bench_end_to_end(n_samples: int = 2_000_000, ten_million: bool = False) -> d
 
     import pandas as pd
     import pyarrow as pa
+    import pyarrow.csv as pcsv
     import pyarrow.parquet as pq
 
-    from estimator.log import log_to_frame
+    from estimator.log import log_columns, log_to_frame
     from torquebench.cli import main as cli
 
     out = {"samples": n_samples}
@@ -266,14 +279,13 @@ def bench_end_to_end(n_samples: int = 2_000_000, ten_million: bool = False) -> d
         writer.close()
         out["log_writing_s"] = time.perf_counter() - t0
         out["csv_MB"] = csv.stat().st_size / 1e6
-        out["anchor_pandas_read_csv_s"] = _best(lambda: pd.read_csv(csv, dtype=float), 1)
-
-        def run(src, dst):
-            buf = io.StringIO()
-            with contextlib.redirect_stdout(buf):
-                code = cli(["estimate", str(src), "--out", str(dst), "--force", "--json"])
-            assert code == 0
-            return json.loads(buf.getvalue())
+        out["anchor_pandas_read_csv_s"] = _best(lambda: pd.read_csv(csv, dtype=float), 1,
+                                                key="anchor_pandas")
+        out["anchor_pandas_read_csv_cpu_s"] = CPU["anchor_pandas"]
+        types = {c: pa.float64() for c in log_columns(2, True)}
+        out["anchor_pyarrow_read_csv_s"] = _best(lambda: pcsv.read_csv(
+            csv, convert_options=pcsv.ConvertOptions(column_types=types)), 1, key="anchor_arrow")
+        out["anchor_pyarrow_read_csv_cpu_s"] = CPU["anchor_arrow"]
 
         with contextlib.redirect_stdout(io.StringIO()):         # warm-up: imports, caches
             small = tmp / "small.csv"
@@ -281,29 +293,30 @@ def bench_end_to_end(n_samples: int = 2_000_000, ten_million: bool = False) -> d
             cli(["estimate", str(small), "--out", str(tmp / "warm.csv"), "--force", "--json"])
             cli(["estimate", str(small), "--out", str(tmp / "warm.parquet"), "--force", "--json"])
         for name, src, dst in (("csv", csv, tmp / "est.csv"), ("parquet", parquet, tmp / "est.parquet"),
-                               ("csv_no_out", csv, None)):
-            if dst is None:
-                buf = io.StringIO()
-                t0 = time.perf_counter()
-                with contextlib.redirect_stdout(buf):
-                    cli(["estimate", str(src), "--json"])
-                wall = time.perf_counter() - t0
-            else:
-                t0 = time.perf_counter()
-                summary = run(src, dst)
-                wall = time.perf_counter() - t0
-                out[f"{name}_intervals"] = len(summary["intervals"])
-            out[f"{name}_s"] = wall
+                               ("csv_to_parquet", csv, tmp / "est2.parquet"), ("csv_no_out", csv, None)):
+            argv = ["estimate", str(src), "--json"] + ([] if dst is None else ["--out", str(dst), "--force"])
+            buf = io.StringIO()
+            t0, c0 = time.perf_counter(), time.process_time()
+            with contextlib.redirect_stdout(buf):
+                code = cli(argv)
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+            assert code == 0
+            out[f"{name}_intervals"] = len(json.loads(buf.getvalue())["intervals"])
+            out[f"{name}_s"], out[f"{name}_cpu_s"] = wall, cpu
             out[f"{name}_samples_per_s"] = n_samples / wall
-        out["ratio_csv_to_read_anchor"] = out["csv_s"] / out["anchor_pandas_read_csv_s"]
-        wall, rss = _peak_rss_MB(["estimate", str(csv), "--out", str(tmp / "est2.csv"), "--force"])
-        out["csv_subprocess_s"], out["csv_peak_rss_MB"] = wall, rss
+            out[f"{name}_samples_per_cpu_s"] = n_samples / cpu
+        out["ratio_csv_to_pandas_anchor"] = out["csv_s"] / out["anchor_pandas_read_csv_s"]
+        out["ratio_csv_to_pyarrow_anchor"] = out["csv_s"] / out["anchor_pyarrow_read_csv_s"]
+        for name, src, dst in (("csv", csv, tmp / "est3.csv"), ("parquet", parquet, tmp / "est3.parquet")):
+            wall, cpu, rss = _fresh_process(["estimate", str(src), "--out", str(dst), "--force"])
+            out[f"{name}_subprocess_s"], out[f"{name}_subprocess_cpu_s"] = wall, cpu
+            out[f"{name}_peak_rss_MB"] = rss
         if ten_million:
             big = tmp / "log10m.csv"
             _write_log_csv(big, _log_blocks(10_000_000))
             csv.unlink()
-            wall, rss = _peak_rss_MB(["estimate", str(big), "--out", str(tmp / "est10m.csv"), "--force"])
-            out["ten_million_s"], out["ten_million_peak_rss_MB"] = wall, rss
+            wall, cpu, rss = _fresh_process(["estimate", str(big), "--out", str(tmp / "est10m.csv"), "--force"])
+            out["ten_million_s"], out["ten_million_cpu_s"], out["ten_million_peak_rss_MB"] = wall, cpu, rss
     return out
 
 
@@ -323,17 +336,25 @@ def main(argv=None) -> dict:
                "dynamics_vs_pinocchio": bench_vs_pinocchio()}
     if args.end_to_end and args.only != "offline":
         e = out["end_to_end"] = bench_end_to_end(args.end_to_end, args.ten_million)
-        print(f"torquebench estimate LOG --out OUT, {e['samples']:,} samples ({e['csv_MB']:.0f} MB CSV, "
-              f"9 significant digits), in process:")
-        print(f"  CSV -> CSV {e['csv_s']:.2f} s = {e['csv_samples_per_s']:,.0f} samples/s; Parquet -> "
-              f"Parquet {e['parquet_s']:.2f} s = {e['parquet_samples_per_s']:,.0f}/s; CSV without --out "
-              f"{e['csv_no_out_s']:.2f} s = {e['csv_no_out_samples_per_s']:,.0f}/s (target >= 500,000/s)")
-        print(f"  anchor: pandas.read_csv of the log alone {e['anchor_pandas_read_csv_s']:.2f} s; "
-              f"estimate/anchor = {e['ratio_csv_to_read_anchor']:.2f}x")
-        print(f"  fresh process CSV -> CSV: {e['csv_subprocess_s']:.2f} s, peak RSS {e['csv_peak_rss_MB']:.0f} MB")
+        n = e["samples"]
+        print(f"torquebench estimate LOG --out OUT, {n:,} samples ({e['csv_MB']:.0f} MB CSV, "
+              f"9 significant digits), in process (target >= 500,000 samples/s):")
+        for key, label in (("csv", "CSV -> CSV"), ("parquet", "Parquet -> Parquet"),
+                           ("csv_to_parquet", "CSV -> Parquet"), ("csv_no_out", "CSV, no --out")):
+            print(f"  {label:20s} {e[key + '_s']:6.2f} s = {e[key + '_samples_per_s']:>10,.0f} samples/s wall; "
+                  f"CPU {e[key + '_cpu_s']:.2f} s = {e[key + '_samples_per_cpu_s']:,.0f} samples per CPU-second")
+        print(f"  anchors, the same CSV read alone: pandas.read_csv {e['anchor_pandas_read_csv_s']:.2f} s "
+              f"(CPU {e['anchor_pandas_read_csv_cpu_s']:.2f} s), pyarrow.csv.read_csv "
+              f"{e['anchor_pyarrow_read_csv_s']:.2f} s (CPU {e['anchor_pyarrow_read_csv_cpu_s']:.2f} s); "
+              f"CSV -> CSV / pandas anchor = {e['ratio_csv_to_pandas_anchor']:.2f}x, / pyarrow anchor = "
+              f"{e['ratio_csv_to_pyarrow_anchor']:.2f}x")
+        for key, label in (("csv", "CSV -> CSV"), ("parquet", "Parquet -> Parquet")):
+            print(f"  fresh process {label}: {e[key + '_subprocess_s']:.2f} s = "
+                  f"{n / e[key + '_subprocess_s']:,.0f}/s wall, CPU {e[key + '_subprocess_cpu_s']:.2f} s = "
+                  f"{n / e[key + '_subprocess_cpu_s']:,.0f}/CPU-s, peak RSS {e[key + '_peak_rss_MB']:.0f} MB")
         if "ten_million_s" in e:
-            print(f"  10,000,000 samples CSV -> CSV: {e['ten_million_s']:.1f} s, peak RSS "
-                  f"{e['ten_million_peak_rss_MB']:.0f} MB")
+            print(f"  10,000,000 samples CSV -> CSV: {e['ten_million_s']:.1f} s, CPU {e['ten_million_cpu_s']:.1f} s, "
+                  f"peak RSS {e['ten_million_peak_rss_MB']:.0f} MB")
     if args.only == "end-to-end":
         return out
     off, st, pv = out["offline"], out["streaming"], out["dynamics_vs_pinocchio"]

@@ -36,6 +36,17 @@ def warm() -> bool:
         localize_dynamic(robot, q, uT.T + 1.0, _weights(5, None), q_now, min_force_N=0.05,
                          max_condition=20.0, ambiguity_tol=1e-3, position_tol_m=0.005,
                          bound_tol=0.05)
+    for base in (3, 0):             # the log reader's loops: floating and fixed base
+        split_rows(np.zeros((1 + 2 * (base + 2) + 5, 3)).T, base, 2)          # column-major blocks
+        split_rows(np.zeros((1 + 2 * (base + 2) + 5, 4)).T[1:], base, 2)      # and slices of them
+        valid, t, *_, rows = split_rows(np.zeros((3, 1 + 2 * (base + 2) + 5)), base, 2)
+        check_steps(t + np.arange(3), rows, None, 1.0, 0.01, True)
+        check_steps(t + np.arange(3), rows, (-1.0, -1), 1.0, 0.01, True)
+    from estimator.outframe import _empty_part
+    format_rows(_empty_part())
+    plausibility_rows(t, np.zeros((3, 5)), np.zeros((3, 5)), 0, 2, 6.3, None, np.zeros(3))
+    plausibility_rows(t, np.zeros((3, 5)), np.zeros((3, 5)), 3, 2, 6.3, (-1.0, np.zeros(2), np.zeros(2)),
+                      np.zeros(3))
     return True
 
 
@@ -307,17 +318,263 @@ def _localize_py(q, r, q_now, lengths, w, min_force, max_condition, ambiguity_to
                 point_o[t, 1] = q_now[t, 1] + z0 + a * (z1 - z0)
 
 
+def _split_rows_py(values, base, n, valid, t_o, q_o, dq_o, tau_o, w_o, rows_o):
+    """One pass over a block of a log (rows, columns in ``log.log_columns`` order): valid[i] =
+    every field of row i finite; the valid rows' fields copied, in order, into t, q and q̇
+    (floating coordinates: a fixed base's three columns zero), τ, wrench and their row
+    indices. Returns the number of valid rows."""
+    T, C = values.shape
+    pad = 3 - base
+    i0 = 1 + 2 * (base + n)
+    k = 0
+    for i in range(T):
+        ok = True
+        for j in range(C):
+            if not math.isfinite(values[i, j]):
+                ok = False
+                break
+        valid[i] = ok
+        if not ok:
+            continue
+        t_o[k] = values[i, 0]
+        for j in range(pad):
+            q_o[k, j] = 0.0
+            dq_o[k, j] = 0.0
+        for j in range(base + n):
+            q_o[k, pad + j] = values[i, 1 + j]
+            dq_o[k, pad + j] = values[i, 1 + base + n + j]
+        for j in range(n):
+            tau_o[k, j] = values[i, i0 + j]
+        for j in range(3):
+            w_o[k, j] = values[i, i0 + n + j]
+        rows_o[k] = i
+        k += 1
+    return k
+
+
+def _check_steps_py(t, rows, has_last, last_t, last_row, dt, max_jitter, regular):
+    """The time steps of tt = [last_t if has_last] + t (file rows rr likewise): (1, k) if step k
+    (tt[k] → tt[k+1]) does not increase (the first such); else, if ``regular``, (2, k) for the
+    first step that is not a whole number of periods dt (±max_jitter) or whose number of periods
+    is not the rows it spans; else (0, −1). The tests of ``log.LogReader._validate``."""
+    off0 = 1 if has_last else 0
+    m = len(t) + off0 - 1
+    for k in range(m):
+        a = last_t if (has_last and k == 0) else t[k - off0]
+        if t[k + 1 - off0] - a <= 0:
+            return 1, k
+    if regular:
+        for k in range(m):
+            a = last_t if (has_last and k == 0) else t[k - off0]
+            ra = last_row if (has_last and k == 0) else rows[k - off0]
+            ratio = (t[k + 1 - off0] - a) / dt
+            r = np.rint(ratio)
+            if abs(ratio - max(r, 1.0)) > max_jitter or r != rows[k + 1 - off0] - ra:
+                return 2, k
+    return 0, -1
+
+
+def _plausibility_py(t, q, dq, base, n, max_angle, has_last, t0, q0, d0, sums):
+    """Checker.rows in one pass: the first (k, j) with |q_j| > max_angle (joint angles) or
+    (−1, −1); else the sums Σ fd·mid, Σ mid·mid, Σ fd·fd over the steps of [last] + rows
+    (fd = Δq/Δt, mid = ½(q̇_k + q̇_{k+1}), coordinates from ``base`` on) added to ``sums``."""
+    T, C = q.shape
+    for k in range(T):
+        for j in range(n):
+            if abs(q[k, 3 + j]) > max_angle:
+                return k, j
+    s0, s1, s2 = 0.0, 0.0, 0.0
+    for k in range(-1 if has_last else 0, T - 1):
+        ta = t0 if k < 0 else t[k]
+        h = t[k + 1] - ta
+        for j in range(base, C):
+            qa = q0[j - base] if k < 0 else q[k, j]
+            da = d0[j - base] if k < 0 else dq[k, j]
+            fd = (q[k + 1, j] - qa) / h
+            mid = (dq[k + 1, j] + da) * 0.5
+            s0 += fd * mid
+            s1 += mid * mid
+            s2 += fd * fd
+    sums[0] += s0
+    sums[1] += s1
+    sums[2] += s2
+    return -1, -1
+
+
+def plausibility_rows(t, q, dq, base, n, max_angle, last, sums):
+    """``_plausibility_py`` compiled; ``last``: (t, q, q̇) of the previous row (coordinates from
+    ``base`` on) or None. → (k, j) of the first joint angle beyond ``max_angle``, or (−1, −1)."""
+    k = _load()
+    has = last is not None
+    q0 = np.ascontiguousarray(last[1], float).ravel() if has else np.zeros(q.shape[1] - base)
+    d0 = np.ascontiguousarray(last[2], float).ravel() if has else np.zeros(q.shape[1] - base)
+    return k["plaus"](np.ascontiguousarray(t, float), np.ascontiguousarray(q, float),
+                      np.ascontiguousarray(dq, float), int(base), int(n), float(max_angle), has,
+                      float(last[0]) if has else 0.0, q0, d0, sums)
+
+
+def split_rows(values, base, n):
+    """(valid, t, q, q̇, τ, wrench, rows) of a log block with the compiled ``_split_rows_py``."""
+    k = _load()
+    values = np.asarray(values, float)        # any layout: row- or column-major, or a slice
+    T = len(values)
+    valid = np.empty(T, np.bool_)
+    t, rows = np.empty(T), np.empty(T, np.int64)
+    q, dq = np.empty((T, n + 3)), np.empty((T, n + 3))
+    tau, w = np.empty((T, n)), np.empty((T, 3))
+    m = k["split"](values, base, n, valid, t, q, dq, tau, w, rows)
+    if m < T:
+        t, q, dq, tau, w, rows = t[:m], q[:m], dq[:m], tau[:m], w[:m], rows[:m]
+    return valid, t, q, dq, tau, w, rows
+
+
+def check_steps(t, rows, last, dt, max_jitter, regular):
+    """``_check_steps_py`` compiled; ``last``: (t, row) of the previous valid row or None."""
+    k = _load()
+    has = last is not None
+    return k["steps"](t, rows, has, float(last[0]) if has else 0.0, int(last[1]) if has else 0,
+                      float(dt), float(max_jitter), bool(regular))
+
+
+_POW10_INT = np.array([10 ** i for i in range(19)], dtype=np.int64)
+_POW10_FLOAT = 10.0 ** np.arange(23)          # exact powers of ten (outframe.round_significant)
+
+
+def _put_uint_py(buf, pos, v, width):
+    """Write v ≥ 0 in decimal at buf[pos:], at least ``width`` digits (leading zeros); → new pos."""
+    n = 1
+    while n < 19 and v >= _POW10_INT[n]:
+        n += 1
+    if n < width:
+        n = width
+    end = pos + n
+    while n > 0:
+        end_i = pos + n - 1
+        buf[end_i] = 48 + v % 10
+        v //= 10
+        n -= 1
+    return end
+
+
+def _put_float_py(buf, pos, x, digits):
+    """x rounded to ``digits`` significant digits (outframe.round_significant) and printed as
+    pyarrow's CSV writer prints that double (its shortest decimal: plain for a decimal exponent
+    in [−6, 10), else d.ddde±x; nan, inf, -inf, 0, -0); → new pos, or −1 for the few values
+    round_significant leaves as they are (|x| < 1e−14 or ≥ 1e31 at 9 digits)."""
+    if x != x:
+        buf[pos], buf[pos + 1], buf[pos + 2] = 110, 97, 110            # nan
+        return pos + 3
+    if x < 0 or (x == 0 and math.copysign(1.0, x) < 0):
+        buf[pos] = 45                                                   # -
+        pos += 1
+    a = abs(x)
+    if a == math.inf:
+        buf[pos], buf[pos + 1], buf[pos + 2] = 105, 110, 102            # inf
+        return pos + 3
+    if a == 0:
+        buf[pos] = 48
+        return pos + 1
+    _, e2 = math.frexp(a)
+    k = (digits - 1) - int(math.floor((e2 - 1) * 0.30102999566398120))
+    if k > 22 or k < -22:
+        return -1
+    if k >= 0:
+        m = np.int64(np.rint(a * _POW10_FLOAT[k]))
+    else:
+        m = np.int64(np.rint(a / _POW10_FLOAT[-k]))
+    # the double nearest m·10^−k prints as m·10^−k without its trailing zeros
+    while m % 10 == 0:
+        m //= 10
+        k -= 1
+    nd = 1
+    while nd < 19 and m >= _POW10_INT[nd]:
+        nd += 1
+    e = nd - 1 - k                                                      # decimal exponent
+    if -6 <= e < 10:
+        if e < 0:
+            buf[pos], buf[pos + 1] = 48, 46                             # 0.
+            pos += 2
+            for _ in range(-e - 1):
+                buf[pos] = 48
+                pos += 1
+            return _put_uint(buf, pos, m, nd)
+        if nd <= e + 1:
+            pos = _put_uint(buf, pos, m, nd)
+            for _ in range(e + 1 - nd):
+                buf[pos] = 48
+                pos += 1
+            return pos
+        low = nd - e - 1
+        pos = _put_uint(buf, pos, m // _POW10_INT[low], 1)
+        buf[pos] = 46
+        return _put_uint(buf, pos + 1, m % _POW10_INT[low], low)
+    pos = _put_uint(buf, pos, m // _POW10_INT[nd - 1], 1)
+    if nd > 1:
+        buf[pos] = 46
+        pos = _put_uint(buf, pos + 1, m % _POW10_INT[nd - 1], nd - 1)
+    buf[pos] = 101                                                      # e
+    buf[pos + 1] = 43 if e > 0 else 45
+    return _put_uint(buf, pos + 2, abs(e), 1)
+
+
+def _format_rows_py(t, contact, link, alpha, Fx, Fz, px, pz, rnorm, digits, buf):
+    """The rows ``t,contact,link,alpha,Fx,Fz,px,pz,rnorm`` (outframe.COLUMNS) as CSV text in buf;
+    → bytes written, or −1 if a value needs pyarrow's writer (``_put_float_py``)."""
+    pos = 0
+    for i in range(len(t)):
+        pos = _put_float(buf, pos, t[i], digits)
+        if pos < 0:
+            return -1
+        buf[pos] = 44
+        buf[pos + 1] = 49 if contact[i] else 48
+        buf[pos + 2] = 44
+        pos += 3
+        v = link[i]
+        if v < 0:
+            buf[pos] = 45
+            pos += 1
+            v = -v
+        pos = _put_uint(buf, pos, v, 1)
+        for x in (alpha[i], Fx[i], Fz[i], px[i], pz[i], rnorm[i]):
+            buf[pos] = 44
+            pos = _put_float(buf, pos + 1, x, digits)
+            if pos < 0:
+                return -1
+        buf[pos] = 10
+        pos += 1
+    return pos
+
+
+def format_rows(part, digits: int = 9) -> bytes | None:
+    """The CSV rows of an estimate part (no header) as pyarrow's writer prints the part rounded
+    by ``outframe.round_significant``, or None if a value needs pyarrow's writer."""
+    k = _load()
+    T = len(part.t)
+    buf = np.empty(T * (7 * 24 + 30), np.uint8)
+    f = [np.ascontiguousarray(a, float) for a in (part.t, part.alpha, part.Fx, part.Fz, part.px,
+                                                  part.pz, part.rnorm)]
+    n = k["rows"](f[0], np.ascontiguousarray(part.contact, np.bool_),
+                  np.ascontiguousarray(part.link, np.int64), *f[1:], int(digits), buf)
+    return None if n < 0 else buf[:n].tobytes()
+
+
 _fit = None                     # the compiled _fit_py, a global for _localize_py
+_put_uint = None                # the compiled _put_uint_py and _put_float_py, globals for the rows
+_put_float = None
 
 
 def _compile():
     """Compile the loops (numba, cached beside this file); ImportError without numba."""
-    global _fit
+    global _fit, _put_uint, _put_float
     from numba import njit
 
     jit = njit(cache=True, nogil=True, error_model="numpy")
     _fit = jit(_fit_py)
-    return {"terms": jit(_terms_py), "localize": jit(_localize_py)}
+    _put_uint = jit(_put_uint_py)
+    _put_float = jit(_put_float_py)
+    return {"terms": jit(_terms_py), "localize": jit(_localize_py), "split": jit(_split_rows_py),
+            "steps": jit(_check_steps_py), "rows": jit(_format_rows_py),
+            "plaus": jit(_plausibility_py)}
 
 
 

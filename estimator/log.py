@@ -105,7 +105,7 @@ def _read_text_values(path, source: str, names: list[str], cols: list[str], row0
     for j, col in enumerate(cols):
         text = frame[col].str.strip()
         num = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
-        bad = np.isnan(num) & ~text.str.lower().isin(["", "nan", "-nan", "+nan", "na", "null"]).to_numpy()
+        bad = np.isnan(num) & ~text.isin(PANDAS_NA).to_numpy()      # what pandas reads as NaN
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise InputError(f"{source}: line {_line(row0 + i)}, column '{col}': "
@@ -117,6 +117,133 @@ def _read_text_values(path, source: str, names: list[str], cols: list[str], row0
 DEFAULT_CHUNK_SAMPLES = 65536
 KEEP_SKIPPED_LINES = 1000            # a streamed log keeps the first lines skipped (and a count)
 NA_VALUES = ["nan", "-nan", "+nan", "NaN", "NA", "null", ""]
+# pandas' default NA spellings (keep_default_na) and ours: a field pyarrow reads as null is one of these
+PANDAS_NA = sorted(set(NA_VALUES) | {"#N/A", "#N/A N/A", "#NA", "-1.#IND", "-1.#QNAN", "-NaN", "1.#IND",
+                                    "1.#QNAN", "<NA>", "N/A", "NULL", "None", "n/a"})
+CSV_BLOCK_BYTES = 1 << 23            # at most 8 MiB of CSV text per pyarrow parse (~40 k rows, 2 links)
+CSV_MIN_BLOCK_BYTES = 1 << 16        # and at least 64 KiB
+CSV_THREADS = True                   # pyarrow parses a block on its thread pool
+
+
+def _pandas_kw() -> dict:
+    """pandas.read_csv options of a log: floats correctly rounded (pandas ≥ 3 by default; before,
+    ``float_precision="round_trip"``), as pyarrow parses them."""
+    import pandas as pd
+
+    kw = dict(skipinitialspace=True, dtype=float, engine="c", na_values=NA_VALUES)
+    if int(pd.__version__.split(".")[0]) < 3:
+        kw["float_precision"] = "round_trip"
+    return kw
+
+
+def _reblock(blocks, size: int | None):
+    """Arrays of rows re-cut into arrays of ``size`` rows (the last shorter); None: one array."""
+    held, n_held = [], 0
+    for values in blocks:
+        held.append(values)
+        n_held += len(values)
+        while size is not None and n_held >= size:
+            block = np.concatenate(held) if len(held) > 1 else held[0]
+            yield block[:size]
+            rest = block[size:]
+            held, n_held = ([rest] if len(rest) else []), len(rest)
+    if held:
+        yield np.concatenate(held) if len(held) > 1 else held[0]
+
+
+def _simple_header(path):
+    """(first line, names) if the file's first line is plain comma-separated names (letters,
+    digits, _; spaces around commas; distinct), which pandas reads as the same names; else None."""
+    import re
+
+    with open(path, "rb") as f:
+        line = f.readline(1 << 16)
+    if not re.fullmatch(rb" *[A-Za-z_]\w*(?: *, *[A-Za-z_]\w*)* *\r?\n", line):
+        return None
+    names = [c.strip() for c in line.decode("ascii").split(",")]
+    return (line, names) if len(set(names)) == len(names) else None
+
+
+def _byte_blocks(path, offset: int, size: int | None = None):
+    """The file's bytes from ``offset`` in blocks (bytes or memoryview) of about ``size``
+    (CSV_BLOCK_BYTES), each ending at a line end (the last: at the end of the file)."""
+    size = size or CSV_BLOCK_BYTES
+    with open(path, "rb") as f:
+        f.seek(offset)
+        rest = b""
+        while True:
+            data = f.read(size)
+            if not data:
+                break
+            cut = data.rfind(b"\n") + 1
+            if cut == 0:                        # no line end in this read: keep reading
+                rest += data
+                continue
+            yield rest + data[:cut] if rest else memoryview(data)[:cut]     # no copy
+            rest = data[cut:]
+        if rest:
+            yield rest
+
+
+def _arrow_values(body, names: list[str], cols: list[str]) -> np.ndarray | None:
+    """The rows of a block of CSV data lines as floats (rows, ``cols``) parsed by pyarrow, or
+    None where pandas might read it differently: any parse error (a non-numeric field, a row
+    with too few or too many fields, a whitespace-only line), or a field pyarrow reads as NaN/inf
+    that is not one of pandas' NA spellings (``nan(1)``, ``NAN``, ``inf`` ...: pandas decides)."""
+    import pyarrow as pa
+    import pyarrow.csv as pc
+
+    f64 = pa.float64()
+    try:
+        table = pc.read_csv(
+            pa.BufferReader(pa.py_buffer(body)),
+            read_options=pc.ReadOptions(column_names=names, use_threads=CSV_THREADS, block_size=1 << 20),
+            parse_options=pc.ParseOptions(ignore_empty_lines=True),
+            convert_options=pc.ConvertOptions(column_types={c: f64 for c in names},
+                                              null_values=PANDAS_NA, strings_can_be_null=True,
+                                              quoted_strings_can_be_null=True))
+    except (pa.ArrowInvalid, pa.ArrowNotImplementedError, pa.ArrowTypeError, ValueError):
+        return None
+    out = np.empty((len(cols), table.num_rows)).T          # column-major: columns copied whole
+    nulls = None
+    for j, c in enumerate(cols):
+        column = table.column(c)
+        _fill(out[:, j], column)                   # an NA spelling (null): NaN, as pandas reads it
+        if column.null_count:
+            nulls = np.zeros(out.shape, bool) if nulls is None else nulls
+            _fill(nulls[:, j], column, null_mask=True)
+    with np.errstate(all="ignore"):
+        suspect = not np.isfinite(out.sum(axis=0)).all()     # a NaN/inf (or a sum overflowing)
+    if suspect:
+        weird = ~np.isfinite(out)
+        if nulls is not None:
+            weird &= ~nulls
+        if weird.any():
+            return None
+    for c in names:                                 # pandas refuses any non-numeric column
+        if c not in cols and not pa.types.is_floating(table.column(c).type):
+            return None
+    return out
+
+
+def _fill(dst: np.ndarray, column, null_mask: bool = False) -> None:
+    """dst[:] = a float64 pyarrow ChunkedArray's values (nulls as NaN), or its null mask, read
+    from the Arrow buffers chunk by chunk (pyarrow's to_numpy would import pandas)."""
+    i = 0
+    for chunk in getattr(column, "chunks", [column]):          # a ChunkedArray or an Array
+        n, off = len(chunk), chunk.offset
+        validity, data = chunk.buffers()[:2]
+        invalid = None
+        if chunk.null_count:
+            bits = np.unpackbits(np.frombuffer(validity, np.uint8), bitorder="little", count=off + n)
+            invalid = bits[off:] == 0
+        if null_mask:
+            dst[i:i + n] = False if invalid is None else invalid
+        else:
+            dst[i:i + n] = np.frombuffer(data, np.float64, count=n, offset=8 * off)
+            if invalid is not None:
+                dst[i:i + n][invalid] = np.nan
+        i += n
 
 
 def read_log(path, robot=None, *, max_jitter: float = 0.01) -> SensorLog:
@@ -182,6 +309,9 @@ class LogReader:
 
     # ------------------------------------------------------------------ header
     def _csv_names(self):
+        self._simple_header = _simple_header(self.path)
+        if self._simple_header is not None:       # plain names: no need to import pandas
+            return self._simple_header[1]
         import pandas as pd
 
         try:
@@ -229,19 +359,98 @@ class LogReader:
                 raise InputError(f"{self.source}: column '{name}' is not numeric")
         raw = [f.schema_arrow.names[index[c]] for c in self.cols]
         size = self.chunk_samples or max(f.metadata.num_rows, 1)
+
+        def batches():
+            # a row group at a time (iter_batches over the whole file buffers more and more of it)
+            for g in range(f.num_row_groups):
+                for batch in f.iter_batches(batch_size=size, columns=raw, row_groups=[g]):
+                    out = np.empty((len(raw), batch.num_rows)).T   # column-major: columns whole
+                    for j in range(len(raw)):
+                        column = batch.column(j)
+                        if column.type == pa.float64():
+                            _fill(out[:, j], column)
+                        else:                      # integers, float32, null: numpy converts
+                            out[:, j] = column.to_numpy(zero_copy_only=False)
+                    yield out
+
         try:
-            for batch in f.iter_batches(batch_size=size, columns=raw):
-                out = np.empty((batch.num_rows, len(raw)))
-                for j in range(len(raw)):
-                    out[:, j] = batch.column(j).to_numpy(zero_copy_only=False)
-                yield out
+            yield from _reblock(batches(), self.chunk_samples)
         except (OSError, ValueError) as exc:
             raise InputError(f"{self.source}: not a readable Parquet log: {str(exc).splitlines()[0]}") from None
 
     def _csv_blocks(self):
+        """Blocks of the CSV's data rows: pyarrow's multithreaded parser on byte blocks of about
+        ``chunk_samples`` rows of text (64 KiB–8 MiB, cut at line ends), re-blocked into
+        ``chunk_samples`` rows. A byte block pyarrow cannot take exactly as pandas would (a parse
+        error, a field it reads as NaN/inf that is not one of the NA spellings) is parsed by
+        pandas (``_pandas_values``), which names a bad field's line; both parsers round decimal
+        strings correctly (``_pandas_kw``), so the values do not depend on which one read them."""
+        header = self._csv_header_line()
+        try:
+            import pyarrow.csv  # noqa: F401
+        except ImportError:
+            header = None
+        if header is None:                 # a header pyarrow's split would not reproduce
+            yield from self._pandas_blocks()
+            return
+        size = self.chunk_samples
+        # about chunk_samples rows of text per parse (24 bytes a field), so memory follows the chunk
+        nbytes = None if size is None else int(np.clip(size * 24 * len(self.names),
+                                                       CSV_MIN_BLOCK_BYTES, CSV_BLOCK_BYTES))
+
+        def parsed():
+            row0 = 0
+            for body in _byte_blocks(self.path, len(header), nbytes):
+                values = _arrow_values(body, self.names, self.cols)
+                if values is None:
+                    values = self._pandas_values(header + bytes(body), row0)
+                row0 += len(values)
+                yield values
+
+        yield from _reblock(parsed(), size)
+
+    def _csv_header_line(self) -> bytes | None:
+        """The file's first line (bytes, with its line end) if pandas reads the same column names
+        from it alone as from the file, else None."""
+        if self._simple_header is not None:
+            return self._simple_header[0]
+        import io
+
         import pandas as pd
 
-        kw = dict(skipinitialspace=True, dtype=float, engine="c", na_values=NA_VALUES)
+        with open(self.path, "rb") as f:
+            line = f.readline()
+        try:
+            names = [str(c).strip() for c in
+                     pd.read_csv(io.BytesIO(line), nrows=0, skipinitialspace=True).columns]
+        except Exception:                  # noqa: BLE001 — the whole-file path decides
+            return None
+        return line if names == self.names and line.endswith(b"\n") else None
+
+    def _pandas_values(self, text: bytes, row0: int) -> np.ndarray:
+        """The data rows of ``text`` (the header line and a byte block starting at data row
+        ``row0``) parsed by pandas; a bad field raises InputError naming its file line."""
+        import io
+
+        import pandas as pd
+
+        try:
+            frame = pd.read_csv(io.BytesIO(text), **_pandas_kw())
+            frame.columns = self.names
+            return frame[self.cols].to_numpy(dtype=float)
+        except (ValueError, TypeError, pd.errors.ParserError, UnicodeDecodeError):
+            self._name_bad_field(row0, text.count(b"\n") + 1)
+
+    def _name_bad_field(self, row0: int, nrows: int | None):
+        """Raise InputError naming the first non-numeric field from data row ``row0`` on."""
+        _read_text_values(self.path, self.source, self.names, self.cols, row0, nrows)
+        raise InputError(f"{self.source}: not a readable CSV log after line {_line(row0)}")
+
+    def _pandas_blocks(self):
+        """The whole file through pandas' chunked reader (headers pyarrow's split cannot take)."""
+        import pandas as pd
+
+        kw = _pandas_kw()
         row0 = 0
         try:
             if self.chunk_samples is None:
@@ -259,9 +468,7 @@ class LogReader:
                 yield values
         except (ValueError, TypeError, pd.errors.ParserError, UnicodeDecodeError):
             # a non-numeric field in the rows from row0 on: name it (line, column)
-            values = _read_text_values(self.path, self.source, self.names, self.cols, row0,
-                                       self.chunk_samples)
-            raise InputError(f"{self.source}: not a readable CSV log after line {_line(row0)}") from None
+            self._name_bad_field(row0, self.chunk_samples)
 
     # ------------------------------------------------------------------ validated chunks
     def __iter__(self):
@@ -289,14 +496,21 @@ class LogReader:
             raise InputError(f"{self.source}: every sample has a NaN/inf field; nothing to estimate")
 
     def _validate(self, values):
+        from estimator import kernels
         from estimator.observer import regular_period
 
         row0 = self.n_rows
         self.n_rows += len(values)
-        valid = np.all(np.isfinite(values), axis=1)
+        n, base = self.n_links, 3 if self.floating else 0
+        fast = kernels.available()
+        if fast:                                   # one compiled pass: the mask and the split
+            valid, t, q, dq, tau, wrench, rows = kernels.split_rows(values, base, n)
+            rows += row0
+        else:
+            valid = np.all(np.isfinite(values), axis=1)
         if self.keep_valid_mask:
             self.valid_masks.append(valid)
-        bad_rows = np.flatnonzero(~valid)
+        bad_rows = np.flatnonzero(~valid) if not fast or len(t) < len(values) else np.zeros(0, int)
         if bad_rows.size:
             self.n_skipped += bad_rows.size
             room = KEEP_SKIPPED_LINES - len(self.skipped_lines)
@@ -305,44 +519,40 @@ class LogReader:
                 self.skipped_lines = np.concatenate([self.skipped_lines, rows_to_lines(row0 + extra)])
         if not valid.any():
             return None
-        data = values[valid] if bad_rows.size else values
-        rows = row0 + np.flatnonzero(valid)
-        t = data[:, 0]
-        if self._last is not None:                 # the step across the chunk boundary
-            tt, rr = np.r_[self._last[0], t], np.r_[self._last[1], rows]
-        else:
-            tt, rr = t, rows
-        steps = np.diff(tt)
-        if np.any(steps <= 0):
-            k = int(np.flatnonzero(steps <= 0)[0])
-            raise InputError(f"{self.source}: line {_line(rr[k + 1])}, column 't': time {tt[k + 1]:g} s "
-                             f"does not increase (previous sample {tt[k]:g} s at line {_line(rr[k])})")
+        if not fast:
+            data = values[valid] if bad_rows.size else values
+            rows = row0 + np.flatnonzero(valid)
+            t = np.ascontiguousarray(data[:, 0])
+            T = len(t)
+            q = np.zeros((T, n + 3))
+            dq = np.zeros((T, n + 3))
+            q[:, 3 - base:] = data[:, 1:1 + base + n]
+            dq[:, 3 - base:] = data[:, 1 + base + n:1 + 2 * (base + n)]
+            i0 = 1 + 2 * (base + n)
+            tau, wrench = data[:, i0:i0 + n].copy(), data[:, i0 + n:i0 + n + 3].copy()
         if self.period_s is None:
+            tt = t if self._last is None else np.r_[self._last[0], t]
             self.period_s = regular_period(tt)
             if len(tt) > 1:
                 self.checker.period(self.period_s)
         dt = self.period_s
-        if self._last is not None or len(tt) > 2:
-            # a step may span skipped rows: it must then be a whole number of periods
-            skipped = np.diff(rr) - 1
-            ratio = steps / dt
-            off = np.abs(ratio - np.maximum(np.round(ratio), 1)) > self.max_jitter
-            off |= np.round(ratio) != skipped + 1
-            if off.any():
-                k = int(np.flatnonzero(off)[0])
-                raise InputError(f"{self.source}: line {_line(rr[k + 1])}, column 't': irregular "
-                                 f"sampling, step {steps[k]:.6g} s where the log's period is "
-                                 f"{dt:.6g} s (±{100 * self.max_jitter:g}%)")
+        regular = self._last is not None or len(t) > 2
+        if fast:
+            kind, k = kernels.check_steps(t, rows, self._last, dt, self.max_jitter, regular)
+        else:
+            kind, k = _check_steps(t, rows, self._last, dt, self.max_jitter, regular)
+        if kind:
+            tt = t if self._last is None else np.r_[self._last[0], t]
+            rr = rows if self._last is None else np.r_[self._last[1], rows]
+            if kind == 1:
+                raise InputError(f"{self.source}: line {_line(rr[k + 1])}, column 't': time {tt[k + 1]:g} s "
+                                 f"does not increase (previous sample {tt[k]:g} s at line {_line(rr[k])})")
+            raise InputError(f"{self.source}: line {_line(rr[k + 1])}, column 't': irregular "
+                             f"sampling, step {tt[k + 1] - tt[k]:.6g} s where the log's period is "
+                             f"{dt:.6g} s (±{100 * self.max_jitter:g}%)")
         self._last = (t[-1], rows[-1])
-        n, base = self.n_links, 3 if self.floating else 0
         T = len(t)
-        q = np.zeros((T, n + 3))
-        dq = np.zeros((T, n + 3))
-        q[:, 3 - base:] = data[:, 1:1 + base + n]
-        dq[:, 3 - base:] = data[:, 1 + base + n:1 + 2 * (base + n)]
-        i0 = 1 + 2 * (base + n)
-        log = SensorLog(t=np.ascontiguousarray(t), q=q, dq=dq, tau_Nm=data[:, i0:i0 + n].copy(),
-                        wrench=data[:, i0 + n:i0 + n + 3].copy(), floating=self.floating,
+        log = SensorLog(t=t, q=q, dq=dq, tau_Nm=tau, wrench=wrench, floating=self.floating,
                         source=self.source, timing=self.timing)
         log.row0 = int(row0)
         log.period_s = dt
@@ -354,6 +564,25 @@ class LogReader:
         """The whole-log plausibility checks (velocity scale); warnings issued and returned."""
         self.plausibility_warnings = self.checker.finish()
         return self.plausibility_warnings
+
+
+def _check_steps(t, rows, last, dt, max_jitter, regular):
+    """The numpy form of ``kernels.check_steps``: (1, k) for the first non-increasing step k of
+    tt = [last t] + t, else (2, k) for the first step (if ``regular``) that is not a whole number
+    of periods (±max_jitter) or spans another number of rows, else (0, −1)."""
+    tt, rr = (t, rows) if last is None else (np.r_[last[0], t], np.r_[last[1], rows])
+    steps = np.diff(tt)
+    if np.any(steps <= 0):
+        return 1, int(np.flatnonzero(steps <= 0)[0])
+    if regular:
+        # a step may span skipped rows: it must then be a whole number of periods
+        skipped = np.diff(rr) - 1
+        ratio = steps / dt
+        off = np.abs(ratio - np.maximum(np.round(ratio), 1)) > max_jitter
+        off |= np.round(ratio) != skipped + 1
+        if off.any():
+            return 2, int(np.flatnonzero(off)[0])
+    return 0, -1
 
 
 def rows_to_lines(rows: np.ndarray) -> np.ndarray:

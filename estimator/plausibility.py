@@ -69,15 +69,22 @@ class Checker:
         self._last = None                  # (t, q, dq) of the previous chunk's last row
 
     def rows(self, t, q, dq):
+        from estimator import kernels
+
         t, q, dq = np.asarray(t, float), np.asarray(q, float), np.asarray(dq, float)
+        if kernels.available() and len(t):             # the same checks and sums in one pass
+            k, j = kernels.plausibility_rows(t, q, dq, self.base, self.n, MAX_JOINT_ANGLE_RAD,
+                                             self._last, self.sums)
+            if k >= 0:
+                self._angle_error(t, q[:, 3:3 + self.n], k, j)
+            self.steps += len(t) - (0 if self._last is not None else 1)
+            self._last = (t[-1], q[-1:, self.base:].copy(), dq[-1:, self.base:].copy())
+            return
         joints = q[:, 3:3 + self.n]
         if joints.size:
             big = np.abs(joints) > MAX_JOINT_ANGLE_RAD
             if big.any():
-                k, j = np.argwhere(big)[0]
-                raise InputError(f"{self.src}: column 'q{j + 1}': joint angle {joints[k, j]:g} rad "
-                                 f"at t = {t[k]:g} s exceeds 2π; angles look like degrees (the log "
-                                 "must be in rad)")
+                self._angle_error(t, joints, *np.argwhere(big)[0])
         qq, dd = q[:, self.base:], dq[:, self.base:]
         if self._last is not None:
             t0, q0, d0 = self._last
@@ -91,6 +98,11 @@ class Checker:
                           float(np.einsum("ij,ij->", fd, fd))]
             self.steps += len(t) - 1
         self._last = (t[-1], qq[-1:].copy(), dd[-1:].copy())
+
+    def _angle_error(self, t, joints, k, j):
+        raise InputError(f"{self.src}: column 'q{j + 1}': joint angle {joints[k, j]:g} rad "
+                         f"at t = {t[k]:g} s exceeds 2π; angles look like degrees (the log "
+                         "must be in rad)")
 
     def period(self, dt: float):
         if not DT_MIN_S * (1 - 1e-6) <= dt <= DT_MAX_S * (1 + 1e-6):   # rounding of t
