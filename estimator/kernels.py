@@ -44,6 +44,7 @@ def warm() -> bool:
         check_steps(t + np.arange(3), rows, (-1.0, -1), 1.0, 0.01, True)
     from estimator.outframe import _empty_part
     format_rows(_empty_part())
+    first_order(np.ones(2), np.ones(2), np.zeros((2, 2)), np.zeros((2, 3)), 0, 2)
     plausibility_rows(t, np.zeros((3, 5)), np.zeros((3, 5)), 0, 2, 6.3, None, np.zeros(3))
     plausibility_rows(t, np.zeros((3, 5)), np.zeros((3, 5)), 3, 2, 6.3, (-1.0, np.zeros(2), np.zeros(2)),
                       np.zeros(3))
@@ -440,6 +441,25 @@ _POW10_INT = np.array([10 ** i for i in range(19)], dtype=np.int64)
 _POW10_FLOAT = 10.0 ** np.arange(23)          # exact powers of ten (outframe.round_significant)
 
 
+def _first_order_py(a, b, drive, out, start, stop):
+    """out[j, k+1] = a_j out[j, k] + b_j drive[j, k] for k = start … stop−1 (the observer's
+    recursion, in the order ``scipy.signal.lfilter`` evaluates it: b·x first, then + a·y)."""
+    for j in range(drive.shape[0]):
+        y = out[j, start]
+        for k in range(start, stop):
+            y = b[j] * drive[j, k] + a[j] * y
+            out[j, k + 1] = y
+
+
+def first_order(a, b, drive, out, start: int, stop: int) -> bool:
+    """Run ``_first_order_py`` compiled in place on ``out``; False without numba."""
+    k = _load() if ENABLED else None
+    if k is None:
+        return False
+    k["filter"](a, b, drive, out, start, stop)
+    return True
+
+
 def _put_uint_py(buf, pos, v, width):
     """Write v ≥ 0 in decimal at buf[pos:], at least ``width`` digits (leading zeros); → new pos."""
     n = 1
@@ -574,7 +594,7 @@ def _compile():
     _put_float = jit(_put_float_py)
     return {"terms": jit(_terms_py), "localize": jit(_localize_py), "split": jit(_split_rows_py),
             "steps": jit(_check_steps_py), "rows": jit(_format_rows_py),
-            "plaus": jit(_plausibility_py)}
+            "plaus": jit(_plausibility_py), "filter": jit(_first_order_py)}
 
 
 

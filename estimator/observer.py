@@ -17,8 +17,9 @@ Discretization over a step Δt, with d_k = (P_{k+1} − P_k)/Δt − ū_k the st
 * ``"explicit"`` (paper eq. 4): p_int ← p_int + (u_k + r_k) Δt, i.e. r_{k+1} = (1 − KΔt) r_k
   + KΔt d_k with ū_k = u_k. Unstable for K Δt ≥ 2, which is refused.
 
-The offline form evaluates the recurrence with ``scipy.signal.lfilter`` (one call per channel and
-per regular segment; no Python loop over samples); the streaming ``MomentumObserver.step`` runs the
+The offline form evaluates the recurrence in a compiled loop (``kernels.first_order``; without
+numba ``scipy.signal.lfilter``, one call per channel and regular segment: the same arithmetic,
+tested bit-equal); the streaming ``MomentumObserver.step`` runs the
 same arithmetic one sample at a time.
 """
 
@@ -230,7 +231,8 @@ def residual_offline(robot: Robot, t, q, dq, tau_meas, gain_per_s=100.0, method:
     instantaneous); the step mean ū_k of the measured force uses the matching quadrature.
 
     Steps equal to the nominal period ``dt_s`` (default: ``regular_period``) run through
-    ``scipy.signal.lfilter``; a longer step (a gap left by skipped NaN rows) is taken exactly with
+    the compiled recursion (``kernels.first_order``; ``scipy.signal.lfilter`` without numba, the
+    same arithmetic); a longer step (a gap left by skipped NaN rows) is taken exactly with
     its own Δt and starts a new segment (a Python loop over gaps, not samples). The same
     arithmetic as ``residual_window`` on a log read in chunks (estimator.pipeline).
     """
@@ -260,7 +262,7 @@ def residual_window(t, PT, uT, tauT, K, dt_s: float, method: str, timing, r0) ->
     only on r0 and rows ≤ k (+ ``lookahead_rows`` for a group delay), so a log cut into windows
     that overlap by one row gives the same numbers as one window.
     """
-    from scipy.signal import lfilter
+    from estimator import kernels
 
     n, W = PT.shape
     rT = np.empty((n, W))
@@ -281,7 +283,9 @@ def residual_window(t, PT, uT, tauT, K, dt_s: float, method: str, timing, r0) ->
     bounds = np.flatnonzero(gap)
     start = 0                              # r[start] is known
     for stop in [*bounds, W - 1]:          # regular steps start … stop−1, then the gap step stop
-        if stop > start:
+        if stop > start and not kernels.first_order(a, b, drive, rT, start, stop):
+            from scipy.signal import lfilter
+
             for j in range(n):
                 zi = np.array([a[j] * rT[j, start]])
                 rT[j, start + 1:stop + 1], _ = lfilter([b[j]], [1.0, -a[j]], drive[j, start:stop], zi=zi)
