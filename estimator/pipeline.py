@@ -676,10 +676,10 @@ def _resolve_timing(robot, log, timing):
 
 
 def quiet_window_covariance(robot, chunks, window, gain_per_s, period_s, discretization="exact",
-                            timing=None) -> np.ndarray:
+                            timing=None, where: str = "--quiet-window") -> np.ndarray:
     """(R, r) : the robust covariance of the residual over the contact-free window (t0, t1)
     (noise.quiet_covariance) and the window's residual rows, from an observer-only pass over the
-    log's chunks (stops after t1): the first of two passes."""
+    log's chunks (stops after t1): the first of two passes. ``where`` names the window in errors."""
     t0, t1 = window
     K = observer.gains(robot, gain_per_s)
     run = _ObserverRun(robot, K, float(period_s), discretization, timing)
@@ -697,7 +697,7 @@ def quiet_window_covariance(robot, chunks, window, gain_per_s, period_s, discret
                 break
     t = np.concatenate(ts) if ts else np.zeros(0)
     r = np.concatenate(rs) if rs else np.zeros((0, K.size))
-    return noise_mod.quiet_covariance(r, t, t0, t1, gain_per_s, float(period_s)), r
+    return noise_mod.quiet_covariance(r, t, t0, t1, gain_per_s, float(period_s), where), r
 
 
 def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=100.0,
@@ -707,7 +707,7 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
              lag_compensation: bool = True, timing=None, noise=None, quiet_window=None,
              false_alarm_rate=DEFAULT_FALSE_ALARM_RATE, cov_stride_s: float = 0.01,
              stats_samples: int = STATS_SAMPLES, chunk_samples: int | None = None,
-             detector: str = "chi2") -> ContactEstimate:
+             detector: str = "chi2", quiet_where: str = "--quiet-window") -> ContactEstimate:
     """Run observer, detection and localization on a whole log (offline, vectorized).
 
     ``EstimatorStream`` on the log in one chunk (or in chunks of ``chunk_samples``: the same
@@ -747,7 +747,8 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
                          min_force_N=min_force_N, max_condition=max_condition,
                          isolation_floor=isolation_floor, lag_compensation=lag_compensation,
                          timing=timing, noise=noise, quiet_window=quiet_window,
-                         quiet_chunks=lambda: [log], false_alarm_rate=false_alarm_rate,
+                         quiet_chunks=lambda: [log], quiet_where=quiet_where,
+                         false_alarm_rate=false_alarm_rate,
                          cov_stride_s=cov_stride_s, stats_samples=stats_samples, detector=detector)
     T = len(log.t)
     step = T if not chunk_samples else int(chunk_samples)
@@ -765,7 +766,7 @@ def _slice_log(log: SensorLog, sl) -> SensorLog:
 
 def open_stream(robot, log, method="dynamic", gain_per_s=100.0, threshold=None, debounce=0,
                 expected_contacts=None, *, timing=None, quiet_window=None, quiet_chunks=None,
-                period_s=None, **kw) -> EstimatorStream:
+                quiet_where: str = "--quiet-window", period_s=None, **kw) -> EstimatorStream:
     """An EstimatorStream set up for ``log`` (its first chunk, or a LogReader: the expected
     contacts, timing declaration and period come from it). ``quiet_chunks()``: a fresh iterable
     of the log's chunks for the quiet-window pass."""
@@ -780,7 +781,8 @@ def open_stream(robot, log, method="dynamic", gain_per_s=100.0, threshold=None, 
     cov, cov_source, cal = None, "", None
     if quiet_window is not None and method == "dynamic" and threshold is None:
         cov, r_quiet = quiet_window_covariance(robot, quiet_chunks(), quiet_window, gain_per_s,
-                                               period_s, kw.get("discretization", "exact"), timing)
+                                               period_s, kw.get("discretization", "exact"), timing,
+                                               quiet_where)
         cov_source = (f"robust estimate over the quiet window {quiet_window[0]:g}–"
                       f"{quiet_window[1]:g} s")
         if kw.get("detector") == "cusum":         # CUSUM calibrated on the stretch's correlation

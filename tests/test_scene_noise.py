@@ -94,3 +94,39 @@ def test_simulated_log_noise_is_the_bridge_chain_or_the_gaussian_sigma(tmp_path)
     gauss = load_scene(p)
     noise = P.scene_noise_model(gauss, None, readings="log")
     assert noise.torque_sigma_Nm[0] == 0.02 and "torque_noise_Nm" in noise.source
+
+
+def test_quiet_window_states_the_noise_and_a_window_with_the_poke_is_refused(tmp_path):
+    """[estimator] quiet_window_s: the detector's covariance comes from that contact-free stretch
+    (robust estimate; the way to state a recorded log's noise). Before the poke it flags no
+    contact-free sample and still detects the poke; a window holding the poke is one line naming
+    the scene's field."""
+    p = _scene_text(tmp_path, 'false_alarm_rate = "1/h"',
+                    'false_alarm_rate = "1/h"\nquiet_window_s = [0.05, 0.49]')
+    scene = load_scene(p)
+    assert scene.estimator.quiet_window_s == (0.05, 0.49)
+    arts, _ = P.execute(scene, ["estimates"], None)
+    est, t = arts["estimates"], arts["readings"]["t"]
+    poke, K = scene.sim.pokes[0], scene.estimator.gain_per_s
+    free = (t < poke.t_on_s) | (t >= poke.t_off_s + 10.0 / K)
+    held = (t > poke.t_on_s + 5.0 / K) & (t < poke.t_off_s)
+    assert "quiet window 0.05–0.49 s" in est["noise_source"]
+    assert est["dynamic"].contact[free].sum() == 0
+    assert est["dynamic"].contact[held].all()
+
+    bad = dataclasses.replace(scene, estimator=dataclasses.replace(scene.estimator,
+                                                                   quiet_window_s=(0.05, 0.8)))
+    with pytest.raises(InputError) as exc:
+        P.run_estimates(bad, {"readings": arts["readings"], "torques": arts["torques"]})
+    assert str(exc.value).startswith(f"{p}: estimator.quiet_window_s: the residual changes")
+    assert "\n" not in str(exc.value)
+
+
+@pytest.mark.parametrize("window, message", [("[0.4, 0.2]", "t0 < t1"), ("[0.1]", "expected 2 numbers"),
+                                              ("[-0.1, 0.2]", "≥ 0")])
+def test_bad_quiet_window_is_one_line_naming_the_field(tmp_path, window, message):
+    p = _scene_text(tmp_path, 'false_alarm_rate = "1/h"',
+                    f'false_alarm_rate = "1/h"\nquiet_window_s = {window}')
+    with pytest.raises(InputError) as exc:
+        load_scene(p)
+    assert "estimator.quiet_window_s" in str(exc.value) and message in str(exc.value)

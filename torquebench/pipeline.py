@@ -508,17 +508,24 @@ def run_estimates(scene, inp):
     log = SensorLog(t=rd["t"][keep], q=rd["q"][keep], dq=rd["dq"][keep], tau_Nm=tau[keep],
                     wrench=rd["wrench"][keep], floating=rd["floating"], source=str(scene.path))
     e = scene.estimator
-    try:
-        noise = scene_noise_model(scene, inp.get("chain"), inp.get("calibration"))
-    except InputError:
-        if e.threshold is None:
-            raise
-        noise = None                      # the scene's own ε: the paper rule, as before
-    out = {"kept": keep, "flagged_samples": int((~keep).sum()),
-           "noise_source": noise.describe() if noise is not None else None}
+    quiet = {}
+    if e.quiet_window_s is not None:      # the stretch states the noise, not the scene's sensors
+        noise = None
+        quiet = {"quiet_window": e.quiet_window_s,
+                 "quiet_where": f"{scene.path}: estimator.quiet_window_s"}
+        source = "robust estimate over the quiet window {:g}–{:g} s".format(*e.quiet_window_s)
+    else:
+        try:
+            noise = scene_noise_model(scene, inp.get("chain"), inp.get("calibration"))
+        except InputError:
+            if e.threshold is None:
+                raise
+            noise = None                  # the scene's own ε: the paper rule, as before
+        source = noise.describe() if noise is not None else None
+    out = {"kept": keep, "flagged_samples": int((~keep).sum()), "noise_source": source}
     for m in METHODS:
         out[m] = estimate(robot, log, method=m, gain_per_s=e.gain_per_s, threshold=e.threshold,
-                          noise=noise, false_alarm_rate=e.false_alarm_rate)
+                          noise=noise, false_alarm_rate=e.false_alarm_rate, **quiet)
     return out
 
 

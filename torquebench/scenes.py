@@ -35,12 +35,15 @@ class EstimatorSettings:
     """[estimator]: threshold None → ``dynamic`` detects with the chi-square test at
     ``false_alarm_rate`` (value, unit 'sample' | 's' | 'h') on the residual whitened by the scene's
     sensor noise (pipeline.scene_noise_model); ``paper`` keeps ε = 0.06. A threshold given → the
-    paper's rule ‖r‖ > threshold for both methods."""
+    paper's rule ‖r‖ > threshold for both methods. ``quiet_window_s`` (t0, t1): the residual's
+    covariance is estimated robustly from that contact-free stretch of the log instead (the way to
+    state the noise of a recorded log, whose sensors the scene does not describe)."""
 
     method: str = "dynamic"
     gain_per_s: float = 100.0
     threshold: float | None = None
     false_alarm_rate: tuple = (1.0, "h")
+    quiet_window_s: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -175,7 +178,8 @@ def _estimator(f: _Fields, data: dict) -> EstimatorSettings:
     from estimator.noise import parse_rate, per_sample_rate
 
     t = f.table(data, "estimator")
-    f.known(t, {"method", "gain_per_s", "threshold", "false_alarm_rate"}, "estimator")
+    f.known(t, {"method", "gain_per_s", "threshold", "false_alarm_rate", "quiet_window_s"},
+            "estimator")
     where = f"{f.path}: estimator.false_alarm_rate"
     raw = t.get("false_alarm_rate", "1/h")
     if isinstance(raw, bool) or not isinstance(raw, (str, int, float)):
@@ -189,7 +193,17 @@ def _estimator(f: _Fields, data: dict) -> EstimatorSettings:
         gain_per_s=f.number(t, "gain_per_s", "estimator", 100.0, positive=True),
         threshold=f.number(t, "threshold", "estimator", None, positive=True) if "threshold" in t
         else None,
-        false_alarm_rate=rate)
+        false_alarm_rate=rate, quiet_window_s=_quiet_window(f, t))
+
+
+def _quiet_window(f: _Fields, t: dict) -> tuple | None:
+    """[estimator] quiet_window_s = [t0, t1] (s, t0 < t1), or None."""
+    if "quiet_window_s" not in t:
+        return None
+    t0, t1 = f.vector(t, "quiet_window_s", "estimator", length=2, nonneg=True)
+    if not t1 > t0:
+        raise f.err("estimator.quiet_window_s", f"expected [t0, t1] with t0 < t1, got {[t0, t1]}")
+    return (float(t0), float(t1))
 
 
 def _poke(f: _Fields, p: dict, where: str, n_links: int, duration: float) -> Poke:
