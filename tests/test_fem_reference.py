@@ -4,15 +4,20 @@ STL, a STEP part and a re-entrant part (all but the paper disc in tests/data/fem
 
 References: scikit-fem P2 (its own assembly, boundary conditions and solve; only the gmsh mesh and
 the node selections are shared) on the design's mesh with every size × 0.5 (the paper disc also
-× 0.354), about 3–5× the finest project level's DOFs (benchmarks/fem_reference.py). On the same
-mesh scikit-fem and the project agree to 1e-7, so the difference to a finer reference is
-discretization error, not a different model. A reference is not exact: its own error allowance is
-stated beside it (how, per geometry, in REFERENCES).
+× 0.354, 309k DOFs), about 2–4× the answer level's DOFs (benchmarks/fem_reference.py). On the
+same mesh scikit-fem and the project agree to 2e-7 (paper disc, h × 0.5, 138,132 DOFs: 5.757121e-5
+vs 5.757122e-5 per N·m, 1755.805 vs 1755.805 N·m/rad), so the difference to a finer reference is
+discretization error, not a different model; the thick disc's and the STL's references are the
+project's own P2 at h × 0.5 for that reason (scikit-fem took 7–13 min per reference on the
+loaded machine). A reference is not exact: its own error allowance and how it was set are stored
+beside it (levels.json, ``references``); where a stiffness is still falling, the distance to the
+reference is a lower bound of the true error (allowance 0).
 
-The project's levels (h × √2, 1, 1/√2, what ``analyze_with_error`` computes by default) are stored
-in levels.json (``python benchmarks/fem_reference.py --project DESIGN 1.414 1 0.707``): the paper
-disc and thick discs take minutes per run, too long to recompute in a test. The estimate is taken
-from them by the shipped code (``flexure.convergence.usable_levels`` + ``richardson``), and one live
+The project's levels (h × 2**0.5, 1, 2**-0.5, what ``analyze_with_error`` computes by default)
+are stored in levels.json (``python benchmarks/fem_reference.py --project DESIGN
+1.4142135623730951 1 0.7071067811865476``): the paper disc and thick discs take minutes per run,
+too long to recompute in a test. The estimate is taken from them by the shipped code
+(``flexure.convergence.usable_levels`` + ``richardson``); one test recomputes a stored level and one
 test runs the whole default path on the STEP part.
 """
 
