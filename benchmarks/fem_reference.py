@@ -13,9 +13,12 @@ symmetry). Then
 
     T = uᵀ K u / θ         (reaction torque from the strain energy: 2U = Tθ)
     k = T / θ              (N·m/rad)
-    ε_g per N·m = (1/LW)∫∫ aᵀ ε a dA / T   at the same Gauss points as flexure.gauges.read
+    ε_g per N·m = (1/LW)∫∫ aᵀ ε a dA / T   over the same footprint pieces as flexure.gauges.read_footprint
+                                           (the grid clipped by the mesh's faces; exact for P2 strain)
 
 Run:  python benchmarks/fem_reference.py DESIGN.toml [h_factor ...]     (prints one JSON line per level)
+      python benchmarks/fem_reference.py --project DESIGN.toml 1.414 1 0.707   (the project's levels,
+      as stored in tests/data/fem_reference/levels.json)
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ def reference(design, h_factor: float, rtol: float = 1e-10) -> dict:
     from skfem.models.elasticity import lame_parameters, linear_elasticity
 
     from flexure.analysis import _selections, build_mesh
-    from flexure.gauges import bridge_strains, sample_points
+    from flexure.gauges import bridge_strains, footprint_pieces, sample_points
 
     t0 = time.perf_counter()
     m1 = build_mesh(design, order=1, h_factor=h_factor, max_elements=5e6).mesh
@@ -85,9 +88,13 @@ def reference(design, h_factor: float, rtol: float = 1e-10) -> dict:
     finder = sm.element_finder()
     readings = []
     for g in design.gauges:
-        pts, w = sample_points(g)
+        pieces = footprint_pieces(g, m1)          # the grid cut by the mesh's faces: exact area mean
+        if pieces is None:
+            pts, w = sample_points(g)
+            elems = finder(*pts.T)
+        else:
+            elems, pts, w = pieces
         a = g.frame()[1]
-        elems = finder(*pts.T)
         eps_a = np.empty(len(pts))
         for k in range(len(pts)):
             X = sm.mapping().invF(pts[k][:, None, None], tind=np.array([elems[k]]))[:, 0, :]
@@ -101,12 +108,27 @@ def reference(design, h_factor: float, rtol: float = 1e-10) -> dict:
             "torsional_stiffness_Nm_per_rad": torque / theta, "seconds": time.perf_counter() - t0}
 
 
+def project_level(design, h_factor: float) -> dict:
+    """The project's own answer on one level (flexure.analysis.analyze), in the form that
+    tests/data/fem_reference/levels.json stores and flexure.convergence estimates from."""
+    from flexure.analysis import analyze
+
+    res, _ = analyze(design, h_factor=h_factor)
+    side = min(min(g.length_m, g.width_m) for g in design.gauges)
+    return {"h_factor": h_factor, "dofs": int(res["dofs"]), "gauge_elements": side / res["mesh"]["h_gauge_m"],
+            "gauge_strain_per_Nm": res["gauge_strain_per_Nm"],
+            "torsional_stiffness_Nm_per_rad": res["torsional_stiffness_Nm_per_rad"],
+            "gauge_arm_imbalance": res["gauge_arm_imbalance"], "min_dihedral_deg": res["mesh"]["min_dihedral_deg"]}
+
+
 def main(argv: list[str]) -> int:
     from flexure.design import load_design
 
+    project = "--project" in argv
+    argv = [a for a in argv if a != "--project"]
     design = load_design(argv[0])
     for f in [float(v) for v in argv[1:]] or [0.5]:
-        print(json.dumps(reference(design, f)), flush=True)
+        print(json.dumps(project_level(design, f) if project else reference(design, f)), flush=True)
     return 0
 
 

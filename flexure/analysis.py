@@ -31,8 +31,8 @@ import numpy as np
 
 from flexure.design import Design, load_design
 from flexure.errors import InputError
-from flexure.gauges import bridge_strains, read
-from flexure.post import element_nodal_strains, nodal_average, strain_at, stress_from_strain, von_mises
+from flexure.gauges import bridge_strains, read_footprint
+from flexure.post import element_nodal_strains, nodal_average, stress_from_strain, von_mises
 
 CASES = ("Mz", "Fx", "Fy", "Fz", "Mx", "My")
 CROSSTALK_KEYS = {"Fx": "Fx_per_N", "Fy": "Fy_per_N", "Fz": "Fz_per_N", "Mx": "Mx_per_Nm", "My": "My_per_Nm"}
@@ -221,7 +221,7 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
     if repairs:                                    # a repair changes the geometry: say so
         warnings.append(f"the surface was repaired before meshing ({', '.join(repairs)}); check the result")
 
-    readings = read(design.gauges, lambda p: strain_at(mesh, U, p))        # (g, cases)
+    readings = read_footprint(design.gauges, mesh, U)                       # (g, cases)
     eps = bridge_strains(design.gauges, readings)                           # (cases, 4)
     T = design.rated_torque_Nm
     gf = design.gauge_factor

@@ -10,6 +10,7 @@ from flexure.analysis import analyze
 from flexure.design import load_design
 
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
+DATA = Path(__file__).resolve().parent / "data" / "fem_reference"
 
 
 def _thick_text() -> str:
@@ -38,25 +39,21 @@ def test_thick_disc_default_mesh_has_no_slivers_and_balanced_arms(thick):
     assert res["gauge_arm_imbalance"] < 0.02              # four-fold symmetric part: arms agree
 
 
-def test_thick_disc_as_stl_agrees_arm_to_arm_and_with_the_parametric_one(thick, tmp_path):
-    import trimesh
-
-    from flexure.geometry import spoke_disc_surface
-
+def test_thick_disc_as_stl_agrees_arm_to_arm_and_with_the_parametric_one(thick):
+    """The same disc as an STL of its polygonal outline (tests/data/fem_reference/thick_disc.stl,
+    written by flexure.geometry.spoke_disc_surface(disc, 3)), re-meshed by gmsh, held at its whole
+    outer face."""
     d, res = thick
-    surf = spoke_disc_surface(d.disc, 3)                 # the STL's own (coarse, long) triangles
-    trimesh.Trimesh(surf.points * 1e3, surf.faces, process=False).export(tmp_path / "thick.stl")
-    gauges = "".join(f"[[gauges.gauge]]\ncentre_mm = {[float(x) * 1e3 for x in g.centre_m]}\n"
-                     f"axis = {list(map(float, g.axis))}\narm = {g.arm}\n" for g in d.gauges)
-    text = ('[geometry]\nkind = "stl"\nfile = "thick.stl"\n[gauges]\ngrid_length_mm = 0.5\n'
-            f'grid_width_mm = 0.5\n{gauges}[loads]\nrated_torque_Nm = 2.0\nload_radius_max_mm = 4.004\n'
-            'fixed_radius_min_mm = 29.97\n[mesh]\nsize = "coarse"\n')
-    (tmp_path / "stl.toml").write_text(text)
-    r, _ = analyze(load_design(tmp_path / "stl.toml"))
+    r, _ = analyze(load_design(DATA / "thick_disc_stl.toml"))
     assert r["mesh"]["mesher"] == "gmsh" and abs(r["mesh"]["remesh_volume_change"]) < 0.01
-    # tetgen on the raw STL gave ±25 %. The target is 2 %: NOT met, 2.97 % measured with the
-    # re-meshed STL (the re-parametrised surface patches are not four-fold symmetric); this bounds it
-    assert r["gauge_arm_imbalance"] < 0.04
+    # tetgen on the raw STL gave ±25 %. At this level (h × 1, `analyze`'s single level) the 2 %
+    # target is NOT met: 2.57 %; 2.51 % at h × √2, then 1.34 % at h × 1/√2 (the answer of the default
+    # three-level run: tests/test_fem_reference.py) and 0.81 % at h × 0.5. One contributor: gmsh's
+    # re-parametrisation (classifySurfaces(..., forReparametrization=True)) cuts the flat top face
+    # into patches that differ from arm to arm; without that split 0.95 % was measured at h × √2,
+    # but the surface then keeps the STL's triangles (half the DOFs, 1.5 % volume change).
+    # (Held at r ≥ 29.97 mm, as before, only the nodes near the 12-gon's corners were held: 2.97 %.)
+    assert r["gauge_arm_imbalance"] < 0.03
     # held at the outer face instead of the bolt holes: compare the spoke strain only
     assert r["gauge_strain_per_Nm"] == pytest.approx(res["gauge_strain_per_Nm"], rel=0.05)
     assert np.isfinite(r["torsional_stiffness_Nm_per_rad"])
