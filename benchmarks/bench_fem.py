@@ -248,7 +248,19 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-paper-disc", action="store_true")
     ap.add_argument("--scale-child", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--paper-disc-child", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--only", choices=("three", "ladder"),
+                    help="three: the paper disc, the thick disc and an STL part at ≥ 300k P2 DOFs (and P1 "
+                         "on the same meshes), each in a fresh subprocess; ladder: CG iterations at 3 mesh "
+                         "sizes on the thick disc")
+    ap.add_argument("--json-out", type=Path, help="write the --only results as JSON here")
+    ap.add_argument("--three-child", nargs=3, metavar=("NAME", "ORDER", "H_FACTOR"), help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
+    if a.three_child:
+        name, order, hf = a.three_child
+        print(json.dumps(three_run(name, int(order), float(hf) if hf != "-" else None)))
+        return 0
+    if a.only:
+        return run_only(a.only, a.json_out)
     if a.scale_child:
         print(json.dumps(scale_run()))
         return 0
@@ -294,6 +306,161 @@ def main(argv=None) -> int:
               f"in {time.perf_counter() - t0:.1f} s")
         print((ROOT / "reports" / "fem_convergence.md").read_text().split("\n\n")[2])
     return 0
+
+
+
+# --------------------------------------------------------------------------------------------
+# [5] three geometries at ≥ 300k P2 DOFs (--only three)
+
+#: mesh settings (size preset, h_factor) that give ≥ 300k P2 DOFs on each geometry with the
+#: default (gmsh) mesher; the DOF counts are printed and checked in the run.
+THREE_SIZES = {"paper_disc": ("fine", 0.70), "thick_disc": ("fine", 0.58), "stl_part": ("fine", 0.58)}
+MIN_DOFS = 300_000
+
+
+def thick_disc_text() -> str:
+    """The issue's thick disc: the paper disc at 5 mm, no fillets, 0.5 × 0.5 mm gauges (as
+    tests/test_fem_thick_disc.py builds it)."""
+    t = (ROOT / "scenes" / "paper_disc.toml").read_text()
+    for a, b in (("thickness_mm = 2.2 ", "thickness_mm = 5.0 "), ("fillet_radius_mm = 1.5 ", "fillet_radius_mm = 0.0 "),
+                 ("grid_length_mm = 1.5", "grid_length_mm = 0.5"), ("grid_width_mm = 1.5", "grid_width_mm = 0.5"),
+                 ('sensor = "paper_sensor.toml"', f'sensor = "{ROOT / "scenes" / "paper_sensor.toml"}"')):
+        t = t.replace(a, b)
+    return t
+
+
+def three_designs(work: Path) -> dict:
+    """{name: Design}: the paper disc, the thick disc, and the thick disc as an STL part (its
+    surface exported with trimesh and read back as ``kind = "stl"``, held at the outer face)."""
+    import trimesh
+
+    from flexure.design import load_design
+    from flexure.geometry import spoke_disc_surface
+
+    work.mkdir(parents=True, exist_ok=True)
+    (work / "thick.toml").write_text(thick_disc_text())
+    thick = load_design(work / "thick.toml")
+    surf = spoke_disc_surface(thick.disc, 3)
+    trimesh.Trimesh(surf.points * 1e3, surf.faces, process=False).export(work / "thick.stl")
+    gauges = "".join(f"[[gauges.gauge]]\ncentre_mm = {[float(x) * 1e3 for x in g.centre_m]}\n"
+                     f"axis = {list(map(float, g.axis))}\narm = {g.arm}\n" for g in thick.gauges)
+    (work / "stl.toml").write_text(
+        '[geometry]\nkind = "stl"\nfile = "thick.stl"\n[gauges]\ngrid_length_mm = 0.5\n'
+        f'grid_width_mm = 0.5\n{gauges}[loads]\nrated_torque_Nm = 2.0\nload_radius_max_mm = 4.004\n'
+        'fixed_radius_min_mm = 29.97\n[mesh]\nsize = "coarse"\n')
+    return {"paper_disc": load_design(ROOT / "scenes" / "paper_disc.toml"), "thick_disc": thick,
+            "stl_part": load_design(work / "stl.toml")}
+
+
+def _cpu_s() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def three_run(name: str, order: int = 2, h_factor: float | None = None) -> dict:
+    """One geometry end to end as `flexure.analysis.analyze` runs it (its own stage functions:
+    mesh → assembly → constraints + preconditioner set-up → six load cases → gauges, stresses),
+    with the wall and CPU time of every stage, CG iterations and residual per load case."""
+    from flexure.analysis import CASES, _selections, _solve_cases, build_mesh
+    from flexure.fem import stiffness_matrix
+    from flexure.gauges import bridge_strains, read
+    from flexure.post import element_nodal_strains, nodal_average, strain_at, stress_from_strain, von_mises
+
+    design = three_designs(Path("/tmp") / f"bench_fem_three_{name}")[name]
+    size, hf = THREE_SIZES[name]
+    hf = hf if h_factor is None else h_factor
+    stages, t_all, c_all = {}, time.perf_counter(), _cpu_s()
+
+    def stage(key, t0, c0):
+        stages[key] = dict(wall_s=time.perf_counter() - t0, cpu_s=_cpu_s() - c0)
+
+    t0, c0 = time.perf_counter(), _cpu_s()
+    mres = build_mesh(design, size, order, hf, max_elements=5e6)
+    mesh = mres.mesh
+    stage("mesh", t0, c0)
+    load, fixed = _selections(design, mesh)
+    t0, c0 = time.perf_counter(), _cpu_s()
+    K = stiffness_matrix(mesh, design.material)
+    stage("assembly", t0, c0)
+    wrench = np.zeros((6, 6))
+    for i, c in enumerate(CASES):
+        wrench[i, {"Fx": 0, "Fy": 1, "Fz": 2, "Mx": 3, "My": 4, "Mz": 5}[c]] = 1.0
+    t_mid = 0.5 * (mesh.points[:, 2].min() + mesh.points[:, 2].max())
+    t0, c0 = time.perf_counter(), _cpu_s()
+    U, theta, info = _solve_cases(design, mesh, K, load, fixed, np.array([0.0, 0.0, t_mid]), wrench)
+    stage("solve", t0, c0)
+    t0, c0 = time.perf_counter(), _cpu_s()
+    eps = bridge_strains(design.gauges, read(design.gauges, lambda p: strain_at(mesh, U, p)))
+    en = element_nodal_strains(mesh, U[:, :, 0] * design.rated_torque_Nm)
+    vm = von_mises(stress_from_strain(en, design.material))
+    nodal_average(mesh, vm)
+    stage("post", t0, c0)
+    cases_s = info.get("case_s", [])
+    return dict(name=name, order=order, size=size, h_factor=hf, dofs=int(mesh.n_dofs),
+                elements=int(mesh.n_elements), mesher=mres.report.get("mesher"),
+                min_dihedral_deg=float(mres.report.get("min_dihedral_deg", np.nan)),
+                n_slivers=mres.report.get("n_slivers"), stages=stages,
+                setup_s=info.get("setup_s"), case_s=cases_s, cases=list(CASES),
+                iterations=info.get("iterations"), case_residuals=info.get("case_residuals"),
+                solver=info.get("solver"), amg_levels=info.get("amg_levels"),
+                operator_complexity=info.get("operator_complexity"),
+                total_wall_s=time.perf_counter() - t_all, total_cpu_s=_cpu_s() - c_all,
+                peak_rss_GB=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024 ** 2,
+                strain_per_Nm=float((eps[0, 0] - eps[0, 1] + eps[0, 2] - eps[0, 3]) / 4),
+                stiffness_Nm_per_rad=float(1.0 / theta[2, 0]))
+
+
+def print_three(r: dict) -> None:
+    st = r["stages"]
+    six = sum(r["case_s"]) + (r["setup_s"] or 0.0)
+    solve = st["solve"]["wall_s"]
+    print(f"  {r['name']} P{r['order']} ({r['size']}, h × {r['h_factor']:g}, {r['mesher']}): {r['dofs']:,} DOFs, "
+          f"{r['elements']:,} tets, min dihedral {r['min_dihedral_deg']:.1f}°, {r['n_slivers']} slivers < 5°")
+    print("    stage wall/CPU s: " + ", ".join(f"{k} {v['wall_s']:.1f}/{v['cpu_s']:.1f}" for k, v in st.items())
+          + f"; of the solve: constraints {st['solve']['wall_s'] - six:.1f}, preconditioner set-up "
+          f"{r['setup_s']:.1f}")
+    print("    per case: " + ", ".join(f"{c} {t:.1f} s {it} it {res:.0e}" for c, t, it, res in
+                                        zip(r["cases"], r["case_s"], r["iterations"], r["case_residuals"])))
+    print(f"    six cases (constraints + set-up + CG) {solve:.1f} s wall {st['solve']['cpu_s']:.1f} s CPU "
+          f"(target ≤ 60 s), end to end {r['total_wall_s']:.1f} s wall "
+          f"{r['total_cpu_s']:.1f} s CPU, peak RSS {r['peak_rss_GB']:.2f} GB (target ≤ 3 GB); "
+          f"ε_ref {r['strain_per_Nm']:.5g} per N·m, k {r['stiffness_Nm_per_rad']:.5g} N·m/rad")
+
+
+def run_only(which: str, json_out: Path | None) -> int:
+    """--only three | ladder: each run in a fresh subprocess (clean peak RSS), printed as it ends."""
+    runs = []
+    if which == "three":
+        todo = [(g, 2, "-") for g in THREE_SIZES] + [(g, 1, "-") for g in THREE_SIZES]
+        print(f"[5] three geometries, ≥ {MIN_DOFS:,} P2 DOFs, the default mesher; P1 on the same meshes "
+              "(timings on a shared, loaded 2-core machine: pessimistic)")
+    else:
+        hf0 = THREE_SIZES["thick_disc"][1]
+        todo = [("thick_disc", o, f"{hf0 * f:g}") for o in (2, 1) for f in (2.0, 1.41, 1.0)]
+        print("[6] mesh-refinement ladder on the thick disc: CG iterations at 3 sizes, P2 and P1")
+    for name, order, hf in todo:
+        r = _child_args(["--three-child", name, str(order), hf])
+        if r is None:
+            return 1
+        print_three(r)
+        runs.append(r)
+    if which == "three":
+        small = [r["name"] for r in runs if r["order"] == 2 and r["dofs"] < MIN_DOFS]
+        if small:
+            print(f"    below {MIN_DOFS:,} P2 DOFs: {small} (lower THREE_SIZES' h_factor)")
+    if json_out is not None:
+        from userio.files import write_text_atomic
+        write_text_atomic(json_out, json.dumps(runs, indent=1) + "\n")
+        print(f"    written {json_out}")
+    return 0
+
+
+def _child_args(args: list[str]) -> dict | None:
+    out = subprocess.run([sys.executable, __file__, *args], capture_output=True, text=True, cwd=ROOT)
+    if out.returncode != 0:
+        print(out.stderr[-3000:])
+        return None
+    return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 if __name__ == "__main__":
