@@ -1,6 +1,7 @@
 """FEM benchmarks: our P2 assembly/solve beside scikit-fem, a ≥300k-DOF model, convergence table.
 
 Run from the repo root:  python benchmarks/bench_fem.py [--quick] [--skip-skfem] [--skip-scale] [--skip-report]
+                         python benchmarks/bench_fem.py --only three|ladder|skfem-amg [--orders 2,1] [--json-out F]
 1. Same tetgen P2 mesh (hollow tube in torsion) in both codes: assembly time (ratio vs scikit-fem,
    the anchor measured in this run), direct solve time, gauge-point strains (relative difference).
 2. Scale (in a subprocess, for a clean peak memory): a 329k-DOF P2 annular disc end to end
@@ -9,6 +10,12 @@ Run from the repo root:  python benchmarks/bench_fem.py [--quick] [--skip-skfem]
 4. The paper's disc (scenes/paper_disc.toml) at the fine size, ≥ 300k P2 DOFs, in a subprocess:
    the whole design analysis (swept mesh → assembly → six load cases with one p-multigrid
    set-up → gauges, stress, cross-talk), time per stage and per load case, peak RSS.
+5. (--only three) The paper disc, the thick disc (5 mm, 0.5 mm gauges, no fillets) and that disc as
+   an STL part, each at ≥ 300k P2 DOFs with the default mesher (size preset × h_factor), then P1 on
+   the same meshes: DOFs, min dihedral, wall and CPU time per stage, CG iterations and residual per
+   load case, peak RSS, each in a fresh subprocess.
+6. (--only ladder) CG iterations on the paper disc at three mesh sizes (h × 2, √2, 1 of [5]).
+7. (--only skfem-amg) scikit-fem P2 + pyamg smoothed aggregation beside ours, same mesh and load case.
 """
 
 from __future__ import annotations
@@ -251,8 +258,9 @@ def main(argv=None) -> int:
     ap.add_argument("--only", choices=("three", "ladder", "skfem-amg"),
                     help="three: the paper disc, the thick disc and an STL part at ≥ 300k P2 DOFs (and P1 "
                          "on the same meshes), each in a fresh subprocess; ladder: CG iterations at 3 mesh "
-                         "sizes on the thick disc; skfem-amg: scikit-fem P2 + pyamg beside ours on the paper "
+                         "sizes on the paper disc; skfem-amg: scikit-fem P2 + pyamg beside ours on the paper "
                          "disc's ≥ 300k-DOF mesh")
+    ap.add_argument("--orders", default="2,1", help="element orders for --only three|ladder (default %(default)s)")
     ap.add_argument("--json-out", type=Path, help="write the --only results as JSON here")
     ap.add_argument("--three-child", nargs=3, metavar=("NAME", "ORDER", "H_FACTOR"), help=argparse.SUPPRESS)
     ap.add_argument("--skfem-amg-child", help=argparse.SUPPRESS)
@@ -274,7 +282,7 @@ def main(argv=None) -> int:
             write_text_atomic(a.json_out, json.dumps(r, indent=1) + "\n")
         return 0
     if a.only:
-        return run_only(a.only, a.json_out)
+        return run_only(a.only, a.json_out, tuple(int(o) for o in a.orders.split(",")))
     if a.scale_child:
         print(json.dumps(scale_run()))
         return 0
@@ -445,17 +453,17 @@ def print_three(r: dict) -> None:
           f"ε_ref {r['strain_per_Nm']:.5g} per N·m, k {r['stiffness_Nm_per_rad']:.5g} N·m/rad")
 
 
-def run_only(which: str, json_out: Path | None) -> int:
+def run_only(which: str, json_out: Path | None, orders=(2, 1)) -> int:
     """--only three | ladder: each run in a fresh subprocess (clean peak RSS), printed as it ends."""
     runs = []
     if which == "three":
-        todo = [(g, 2, "-") for g in THREE_SIZES] + [(g, 1, "-") for g in THREE_SIZES]
+        todo = [(g, o, "-") for o in orders for g in THREE_SIZES]
         print(f"[5] three geometries, ≥ {MIN_DOFS:,} P2 DOFs, the default mesher; P1 on the same meshes "
               "(timings on a shared, loaded 2-core machine: pessimistic)")
     else:
-        hf0 = THREE_SIZES["thick_disc"][1]
-        todo = [("thick_disc", o, f"{hf0 * f:g}") for o in (2, 1) for f in (2.0, 1.41, 1.0)]
-        print("[6] mesh-refinement ladder on the thick disc: CG iterations at 3 sizes, P2 and P1")
+        hf0 = THREE_SIZES["paper_disc"][1]
+        todo = [("paper_disc", o, f"{hf0 * f:.3g}") for o in orders for f in (2.0, 1.41, 1.0)]
+        print("[6] mesh-refinement ladder on the paper disc: CG iterations at 3 sizes")
     for name, order, hf in todo:
         r = _child_args(["--three-child", name, str(order), hf])
         if r is None:

@@ -40,6 +40,8 @@ COND_LIMIT = 1e12
 RESIDUAL_LIMIT = 1e-6
 #: P2 load cases solved together (flexure.multirhs, numba); False: one CG per case (the reference)
 MULTI_RHS = True
+#: block Gauss–Seidel sweeps before and after the coarse correction of the P2 p-multigrid
+PMG_SWEEPS = 1
 
 
 @dataclass
@@ -119,7 +121,7 @@ def _pmg_preconditioner(A, coarse, B_coarse, smoothed: bool = False):
     return spla.LinearOperator((n, n), matvec=apply, dtype=np.float64), ml
 
 
-def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False):
+def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False, sweeps: int = 1):
     """The same two-level p-multigrid as ``_pmg_preconditioner`` applied to k columns at once
     (flexure.multirhs: one pass over the matrix per Gauss–Seidel sweep for all columns); the
     coarse V-cycle runs per column. Returns (M(R) → Z for R (n, k), pyamg hierarchy)."""
@@ -136,10 +138,12 @@ def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False):
 
     def apply(R):
         X = np.zeros_like(R)
-        multirhs.block_gauss_seidel(Ac, Dinv, X, R, forward=True)
+        for _ in range(sweeps):
+            multirhs.block_gauss_seidel(Ac, Dinv, X, R, forward=True)
         Rc = It @ (R - multirhs.spmm(Ac, X))
         X += coarse @ np.column_stack([M1 @ Rc[:, j] for j in range(Rc.shape[1])])
-        multirhs.block_gauss_seidel(Ac, Dinv, X, R, forward=False)
+        for _ in range(sweeps):
+            multirhs.block_gauss_seidel(Ac, Dinv, X, R, forward=False)
         return X
 
     return apply, ml
@@ -182,7 +186,7 @@ def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, m
         if coarse is not None and A.shape[0] % 3 == 0 and _multirhs_available():
             from flexure import multirhs
 
-            M, ml = _pmg_multi(A, coarse, B_coarse, smoothed_coarse)
+            M, ml = _pmg_multi(A, coarse, B_coarse, smoothed_coarse, PMG_SWEEPS)
             info["setup_s"] = time.perf_counter() - t0
             tc = time.perf_counter()
             q, its, _ = multirhs.pcg(A.tocsr(), np.ascontiguousarray(cols, dtype=np.float64), M, rtol, maxiter)
