@@ -42,6 +42,11 @@ RESIDUAL_LIMIT = 1e-6
 MULTI_RHS = True
 #: block Gauss–Seidel sweeps before and after the coarse correction of the P2 p-multigrid
 PMG_SWEEPS = 1
+#: largest system the P2 p-multigrid's coarse AMG solves directly. The CG iterations grew with the
+#: number of AMG levels, not with h or the geometry: on the paper disc (smoothed coarse) 26–36
+#: iterations at 72k DOFs and 22–31 at 145k (2 levels), 39–46 at 317k (3 levels with 1000);
+#: with 6000 the 317k model keeps 2 levels and needs 22–30 (benchmarks/bench_fem.py --only ladder).
+PMG_MAX_COARSE = 6000
 
 
 @dataclass
@@ -81,7 +86,7 @@ def _check_restrained(system) -> None:
                          "rigid-body motions (fix more dofs)")
 
 
-def _sa_hierarchy(A, B, smoothed: bool = True):
+def _sa_hierarchy(A, B, smoothed: bool = True, max_coarse: int = 1000):
     """PyAMG (smoothed) aggregation on 3×3 nodal blocks with the rigid-body near-nullspace B."""
     import pyamg
 
@@ -91,7 +96,7 @@ def _sa_hierarchy(A, B, smoothed: bool = True):
         smooth=("jacobi", {"omega": 4.0 / 3.0}) if smoothed else None, improve_candidates=None,
         presmoother=("block_gauss_seidel", {"sweep": "forward"}),
         postsmoother=("block_gauss_seidel", {"sweep": "backward"}),
-        max_coarse=1000, coarse_solver="splu")
+        max_coarse=max_coarse, coarse_solver="splu")
 
 
 def _pmg_preconditioner(A, coarse, B_coarse, smoothed: bool = False):
@@ -105,7 +110,7 @@ def _pmg_preconditioner(A, coarse, B_coarse, smoothed: bool = False):
     Ab = A.tobsr(blocksize=(3, 3))
     Dinv = get_block_diag(Ab, blocksize=3, inv_flag=True)
     A1 = (coarse.T @ A @ coarse).tocsr()
-    ml = _sa_hierarchy(A1, B_coarse, smoothed=smoothed)   # A₁ is wide-stencil: plain keeps it sparse
+    ml = _sa_hierarchy(A1, B_coarse, smoothed=smoothed, max_coarse=PMG_MAX_COARSE)   # A₁ is wide-stencil: plain keeps it sparse
     M1 = ml.aspreconditioner(cycle="V")
     It = coarse.T.tocsr()
 
@@ -132,7 +137,7 @@ def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False, sweeps: int = 1):
     Ac = A.tocsr()
     Dinv = np.ascontiguousarray(get_block_diag(Ac.tobsr(blocksize=(3, 3)), blocksize=3, inv_flag=True))
     A1 = (coarse.T @ Ac @ coarse).tocsr()
-    ml = _sa_hierarchy(A1, B_coarse, smoothed=smoothed)
+    ml = _sa_hierarchy(A1, B_coarse, smoothed=smoothed, max_coarse=PMG_MAX_COARSE)
     M1 = ml.aspreconditioner(cycle="V")
     It = coarse.T.tocsr()
 
