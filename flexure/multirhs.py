@@ -30,6 +30,22 @@ def available() -> bool:
     return True
 
 
+def warm() -> bool:
+    """Compile (and cache) the loops for 1 … KMAX columns on a tiny matrix, so that the first
+    design analysis does not pay numba's compile time; False without numba."""
+    if not available():
+        return False
+    import scipy.sparse as sp
+
+    A = sp.identity(6, format="csr") * 2.0
+    Dinv = np.tile(np.eye(3) / 2.0, (2, 1, 1))
+    for k in range(1, KMAX + 1):
+        X = np.zeros((6, k))
+        spmm(A, X)
+        block_gauss_seidel(A, Dinv, X, np.ones((6, k)), True)
+    return True
+
+
 def _spmm_src(k: int) -> str:
     c = range(k)
     return "\n".join([

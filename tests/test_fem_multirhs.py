@@ -15,6 +15,14 @@ from flexure.material import ALUMINIUM_6061_T6 as MAT
 from flexure.mesh import cylinder_mesh
 
 
+def test_warm_compiles_every_width():
+    assert multirhs.warm()
+    X = np.zeros((6, 2))
+    multirhs.block_gauss_seidel(sp.identity(6, format="csr") * 2.0, np.tile(np.eye(3) / 2.0, (2, 1, 1)), X,
+                                np.ones((6, 2)), True)
+    assert np.allclose(X, 0.5)                     # one sweep on a diagonal system solves it
+
+
 def test_generated_loops_are_the_generator_output():
     path = Path(multirhs.__file__).with_name("_multirhs_loops.py")
     assert path.read_text() == multirhs._generate()
