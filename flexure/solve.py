@@ -2,11 +2,17 @@
 
 AMG: on P1 systems PyAMG smoothed aggregation (six rigid-body modes as near-nullspace B, 3×3
 nodal blocks) preconditions CG; on P2 systems a two-level p-multigrid (block Gauss–Seidel on P2,
-Galerkin P1-vertex coarse system, one aggregation-AMG V-cycle) preconditions CG.
+Galerkin P1-vertex coarse system, one aggregation-AMG V-cycle, direct below PMG_MAX_COARSE unknowns)
+preconditions CG; with numba the load cases are solved together (flexure.multirhs: the smoother
+and A·X read the matrix once for all cases; same iterations and answers as one CG per case).
 ``info`` reports the solver, iterations, relative residual ‖b − A q‖/‖b‖, dofs, timings and named
 conditioning warnings:
-* ``near_incompressible``: ν ≥ 0.49 (λ/μ ≥ 49): low-order tetrahedra lock (displacements too small)
-  and K is ill-conditioned; use a mixed formulation — the numbers are not to be trusted.
+* ``near_incompressible``: ν ≥ NU_LOCKING[order]. P1 (ν ≥ 0.49, λ/μ ≥ 49): linear tetrahedra lock
+  (displacements too small: 7 % at ν = 0.49, 20 % at 0.499 on the Lamé cylinder); use P2 or a mixed
+  formulation. P2 (ν ≥ 0.49999, λ/μ ≥ 5·10⁴): measured on the plane-strain Lamé cylinder, the bore
+  strain error of P2 is 1.9e-4, 3.6e-4, 4.5e-4, 4.8e-4 at ν = 0.49, 0.499, 0.4999, 0.49999 (1.5k–5k
+  DOFs: no locking), but the condition estimate grows ×10 per decade of 1 − 2ν (1.6e9 at 0.49999 on
+  5k DOFs, so ~1e11 on a 300k-DOF model): past the measured range the numbers are not trusted.
 * ``sliver_elements``: a sliver-rich mesh — more than 1 % of the elements with a dihedral angle
   < 5°, or any below 1° (near-zero volume): K is ill-conditioned and stresses there unreliable.
   (A handful of 2–5° slivers, as tetgen leaves, are counted in ``n_slivers`` but not flagged.)
@@ -29,11 +35,20 @@ from flexure.mesh import SLIVER_DIHEDRAL_DEG, element_shape_metrics
 
 #: "auto" uses the direct solver up to this many unknowns, AMG-CG above.
 DIRECT_MAX_DOFS = 12_000
-NU_LOCKING = 0.49
+NU_LOCKING = {1: 0.49, 2: 0.49999}      # by element order: see the module docstring
 SLIVER_FRACTION = 0.01
 DEGENERATE_DIHEDRAL_DEG = 1.0
 COND_LIMIT = 1e12
 RESIDUAL_LIMIT = 1e-6
+#: P2 load cases solved together (flexure.multirhs, numba); False: one CG per case (the reference)
+MULTI_RHS = True
+#: block Gauss–Seidel sweeps before and after the coarse correction of the P2 p-multigrid
+PMG_SWEEPS = 1
+#: largest system the P2 p-multigrid's coarse AMG solves directly. The CG iterations grew with the
+#: number of AMG levels, not with h or the geometry: on the paper disc (smoothed coarse) 26–36
+#: iterations at 72k DOFs and 22–31 at 145k (2 levels), 39–46 at 317k (3 levels with 1000);
+#: with 6000 the 317k model keeps 2 levels and needs 22–30 (benchmarks/bench_fem.py --only ladder).
+PMG_MAX_COARSE = 6000
 
 
 @dataclass
@@ -57,7 +72,7 @@ def conditioning_warnings(mesh, material) -> tuple[list[str], dict]:
     q = element_shape_metrics(mesh.points, mesh.corner_tets)
     dmin = q["dihedral_deg"].min(axis=1)
     n_sliver = int(np.count_nonzero(dmin < SLIVER_DIHEDRAL_DEG))
-    if material.nu >= NU_LOCKING:
+    if material.nu >= NU_LOCKING[mesh.order]:
         warnings.append("near_incompressible")
     if n_sliver > SLIVER_FRACTION * len(dmin) or dmin.min() < DEGENERATE_DIHEDRAL_DEG:
         warnings.append("sliver_elements")
@@ -73,7 +88,7 @@ def _check_restrained(system) -> None:
                          "rigid-body motions (fix more dofs)")
 
 
-def _sa_hierarchy(A, B, smoothed: bool = True):
+def _sa_hierarchy(A, B, smoothed: bool = True, max_coarse: int = 1000):
     """PyAMG (smoothed) aggregation on 3×3 nodal blocks with the rigid-body near-nullspace B."""
     import pyamg
 
@@ -83,7 +98,7 @@ def _sa_hierarchy(A, B, smoothed: bool = True):
         smooth=("jacobi", {"omega": 4.0 / 3.0}) if smoothed else None, improve_candidates=None,
         presmoother=("block_gauss_seidel", {"sweep": "forward"}),
         postsmoother=("block_gauss_seidel", {"sweep": "backward"}),
-        max_coarse=1000, coarse_solver="splu")
+        max_coarse=max_coarse, coarse_solver="splu")
 
 
 def _pmg_preconditioner(A, coarse, B_coarse, smoothed: bool = False):
@@ -97,7 +112,7 @@ def _pmg_preconditioner(A, coarse, B_coarse, smoothed: bool = False):
     Ab = A.tobsr(blocksize=(3, 3))
     Dinv = get_block_diag(Ab, blocksize=3, inv_flag=True)
     A1 = (coarse.T @ A @ coarse).tocsr()
-    ml = _sa_hierarchy(A1, B_coarse, smoothed=smoothed)   # A₁ is wide-stencil: plain keeps it sparse
+    ml = _sa_hierarchy(A1, B_coarse, smoothed=smoothed, max_coarse=PMG_MAX_COARSE)   # A₁ is wide-stencil: plain keeps it sparse
     M1 = ml.aspreconditioner(cycle="V")
     It = coarse.T.tocsr()
 
@@ -111,6 +126,40 @@ def _pmg_preconditioner(A, coarse, B_coarse, smoothed: bool = False):
 
     n = A.shape[0]
     return spla.LinearOperator((n, n), matvec=apply, dtype=np.float64), ml
+
+
+def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False, sweeps: int = 1):
+    """The same two-level p-multigrid as ``_pmg_preconditioner`` applied to k columns at once
+    (flexure.multirhs: one pass over the matrix per Gauss–Seidel sweep for all columns); the
+    coarse V-cycle runs per column. Returns (M(R) → Z for R (n, k), pyamg hierarchy)."""
+    from pyamg.util.utils import get_block_diag
+
+    from flexure import multirhs
+
+    Ac = A.tocsr()
+    Dinv = np.ascontiguousarray(get_block_diag(Ac.tobsr(blocksize=(3, 3)), blocksize=3, inv_flag=True))
+    A1 = (coarse.T @ Ac @ coarse).tocsr()
+    ml = _sa_hierarchy(A1, B_coarse, smoothed=smoothed, max_coarse=PMG_MAX_COARSE)
+    M1 = ml.aspreconditioner(cycle="V")
+    It = coarse.T.tocsr()
+
+    def apply(R):
+        X = np.zeros_like(R)
+        for _ in range(sweeps):
+            multirhs.block_gauss_seidel(Ac, Dinv, X, R, forward=True)
+        Rc = It @ (R - multirhs.spmm(Ac, X))
+        X += coarse @ np.column_stack([M1 @ Rc[:, j] for j in range(Rc.shape[1])])
+        for _ in range(sweeps):
+            multirhs.block_gauss_seidel(Ac, Dinv, X, R, forward=False)
+        return X
+
+    return apply, ml
+
+
+def _multirhs_available() -> bool:
+    from flexure import multirhs
+
+    return MULTI_RHS and multirhs.available()
 
 
 def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, method: str = "auto",
@@ -140,8 +189,19 @@ def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, m
     elif method == "amg":
         cols = b[:, None] if b.ndim == 1 else b          # several right-hand sides: one hierarchy
         q = np.empty_like(cols)
-        its = []
-        if coarse is not None:
+        its, case_s = [], []
+        if coarse is not None and A.shape[0] % 3 == 0 and _multirhs_available():
+            from flexure import multirhs
+
+            M, ml = _pmg_multi(A, coarse, B_coarse, smoothed_coarse, PMG_SWEEPS)
+            info["setup_s"] = time.perf_counter() - t0
+            tc = time.perf_counter()
+            q, its, _ = multirhs.pcg(A.tocsr(), np.ascontiguousarray(cols, dtype=np.float64), M, rtol, maxiter)
+            info["cg_s"] = time.perf_counter() - tc
+            info["solver"] = ("amg-cg (p-multigrid: P2 block Gauss-Seidel + pyamg "
+                              f"{'smoothed ' if smoothed_coarse else ''}aggregation AMG "
+                              "on the P1 vertex system, 6 rigid-body modes; all load cases together)")
+        elif coarse is not None:
             M, ml = _pmg_preconditioner(A, coarse, B_coarse, smoothed_coarse)
             info["setup_s"] = time.perf_counter() - t0
             for j in range(cols.shape[1]):
@@ -150,8 +210,10 @@ def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, m
                 def cb(_):
                     it[0] += 1
 
+                tc = time.perf_counter()
                 q[:, j], _ = spla.cg(A, cols[:, j], rtol=rtol, atol=0.0, maxiter=maxiter, M=M, callback=cb)
                 its.append(it[0])
+                case_s.append(time.perf_counter() - tc)
             info["solver"] = ("amg-cg (p-multigrid: P2 block Gauss-Seidel + pyamg "
                               f"{'smoothed ' if smoothed_coarse else ''}aggregation AMG "
                               "on the P1 vertex system, 6 rigid-body modes)")
@@ -160,11 +222,15 @@ def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, m
             info["setup_s"] = time.perf_counter() - t0
             for j in range(cols.shape[1]):
                 res: list = []
+                tc = time.perf_counter()
                 q[:, j] = ml.solve(cols[:, j], tol=rtol, accel="cg", maxiter=maxiter, residuals=res)
                 its.append(len(res) - 1)
+                case_s.append(time.perf_counter() - tc)
             info["solver"] = "amg-cg (pyamg smoothed aggregation, 6 rigid-body modes)"
         q = q[:, 0] if b.ndim == 1 else q
         info["iterations"] = its[0] if b.ndim == 1 else its
+        info["case_s"] = case_s                          # per case (one CG each); together: cg_s only
+        info.setdefault("cg_s", float(sum(case_s)))
         info["amg_levels"] = len(ml.levels)
         info["operator_complexity"] = float(ml.operator_complexity())
     elif method == "cg":
@@ -182,7 +248,9 @@ def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, m
     info["solve_s"] = time.perf_counter() - t0
     r = np.linalg.norm((b - A @ q).reshape(n, -1), axis=0)
     bn = np.linalg.norm(b.reshape(n, -1), axis=0)
-    info["residual_norm"] = float(np.max(r / np.where(bn > 0, bn, 1.0)))
+    rel = r / np.where(bn > 0, bn, 1.0)
+    info["residual_norm"] = float(np.max(rel))
+    info["case_residuals"] = rel.tolist()
     return q, info
 
 

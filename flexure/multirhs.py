@@ -1,0 +1,161 @@
+"""Several load cases at once: CG on k right-hand sides together, with a smoother that reads the
+matrix once for all k columns (numba loops, compiled on first use and cached).
+
+The P2 systems of a design (six unit wrenches) share the matrix: a sparse product or a
+Gauss–Seidel sweep is bound by reading the matrix, so doing the k columns in the same pass costs
+little more than one. Same arithmetic per column as one CG on one column:
+
+    α_j = (r_j·z_j)/(p_j·A p_j),  x_j += α_j p_j,  r_j −= α_j A p_j,  z = M r,
+    β_j = (r_j·z_j)_new/(r_j·z_j)_old,  p_j = z_j + β_j p_j,   until ‖r_j‖ ≤ rtol ‖b_j‖.
+
+Block Gauss–Seidel on 3×3 nodal blocks (D_i⁻¹ given): x_i ← x_i + D_i⁻¹ (b_i − Σ_j A_ij x_j),
+rows in increasing (forward) or decreasing (backward) order, each block row for all k columns.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: column group width: the loops are generated for k = 1 … KMAX columns (scalar accumulators that
+#: stay in registers); wider blocks are done in groups.
+KMAX = 6
+
+
+def available() -> bool:
+    """True when numba is there to compile the loops (else callers use their one-column path)."""
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def warm() -> bool:
+    """Compile (and cache) the loops for 1 … KMAX columns on a tiny matrix, so that the first
+    design analysis does not pay numba's compile time; False without numba."""
+    if not available():
+        return False
+    import scipy.sparse as sp
+
+    A = sp.identity(6, format="csr") * 2.0
+    Dinv = np.tile(np.eye(3) / 2.0, (2, 1, 1))
+    for k in range(1, KMAX + 1):
+        X = np.zeros((6, k))
+        spmm(A, X)
+        block_gauss_seidel(A, Dinv, X, np.ones((6, k)), True)
+    return True
+
+
+def _spmm_src(k: int) -> str:
+    c = range(k)
+    return "\n".join([
+        "def spmm(indptr, indices, data, X, Y):",
+        "    for i in range(Y.shape[0]):",
+        "        " + "; ".join(f"a{j} = 0.0" for j in c),
+        "        for p in range(indptr[i], indptr[i + 1]):",
+        "            v = data[p]; j = indices[p]",
+        *[f"            a{j} += v * X[j, {j}]" for j in c],
+        *[f"        Y[i, {j}] = a{j}" for j in c]])
+
+
+def _gs_src(k: int) -> str:
+    c = range(k)
+    rows = []
+    for a in range(3):
+        rows += ["        r = 3 * i + %d" % a,
+                 "        " + "; ".join(f"s{a}_{j} = B[r, {j}]" for j in c),
+                 "        for p in range(indptr[r], indptr[r + 1]):",
+                 "            v = data[p]; j = indices[p]",
+                 *[f"            s{a}_{j} -= v * X[j, {j}]" for j in c]]
+    upd = [f"        X[3 * i + {a}, {j}] += Dinv[i, {a}, 0] * s0_{j} + Dinv[i, {a}, 1] * s1_{j} + "
+           f"Dinv[i, {a}, 2] * s2_{j}" for a in range(3) for j in c]
+    return "\n".join(["def block_gs(indptr, indices, data, Dinv, X, B, forward):",
+                      "    nb = Dinv.shape[0]",
+                      "    for t in range(nb):",
+                      "        i = t if forward else nb - 1 - t", *rows, *upd])
+
+
+def _kernel(name: str, k: int):
+    """The numba loop ``name`` for exactly k ≤ KMAX columns (flexure._multirhs_loops, generated
+    from the two sources above by ``python -m flexure.multirhs``; numba caches the compiled code)."""
+    from flexure import _multirhs_loops
+
+    return getattr(_multirhs_loops, f"{'spmm' if name == 'spmm' else 'block_gs'}_{k}")
+
+
+def _groups(k: int):
+    return [slice(s, min(k, s + KMAX)) for s in range(0, k, KMAX)]
+
+
+def spmm(A, X: np.ndarray) -> np.ndarray:
+    """A X for CSR A and X (n, k)."""
+    Y = np.empty((A.shape[0], X.shape[1]))
+    for g in _groups(X.shape[1]):
+        Yg = np.empty((A.shape[0], g.stop - g.start))
+        _kernel("spmm", g.stop - g.start)(A.indptr, A.indices, A.data, np.ascontiguousarray(X[:, g]), Yg)
+        Y[:, g] = Yg
+    return Y
+
+
+def block_gauss_seidel(A, Dinv: np.ndarray, X: np.ndarray, B: np.ndarray, forward: bool) -> None:
+    """One block Gauss–Seidel sweep in place on X (n, k) for A X = B (CSR A, Dinv (n/3, 3, 3))."""
+    for g in _groups(X.shape[1]):
+        if g.start == 0 and g.stop == X.shape[1]:
+            _kernel("gs", X.shape[1])(A.indptr, A.indices, A.data, Dinv, X, np.ascontiguousarray(B), forward)
+        else:
+            Xg = np.ascontiguousarray(X[:, g])
+            _kernel("gs", g.stop - g.start)(A.indptr, A.indices, A.data, Dinv, Xg,
+                                             np.ascontiguousarray(B[:, g]), forward)
+            X[:, g] = Xg
+
+
+def pcg(A, B: np.ndarray, M, rtol: float, maxiter: int):
+    """CG on the columns of B (n, k) together, preconditioner M(R) → Z for R (n, m) (the active
+    columns). Returns X (n, k), iterations per column, and whether each column converged."""
+    n, k = B.shape
+    X = np.zeros((n, k))
+    its = np.zeros(k, dtype=np.int64)
+    bn = np.sqrt(np.einsum("ij,ij->j", B, B))
+    act = np.flatnonzero(bn > 0)
+    done = bn == 0
+    if not len(act):
+        return X, its.tolist(), done
+    R = B[:, act].copy()
+    Z = M(R)
+    P = Z.copy()
+    rz = np.einsum("ij,ij->j", R, Z)
+    for _ in range(maxiter):
+        AP = spmm(A, P)
+        alpha = rz / np.einsum("ij,ij->j", P, AP)
+        X[:, act] += P * alpha
+        R -= AP * alpha
+        its[act] += 1
+        ok = np.sqrt(np.einsum("ij,ij->j", R, R)) <= rtol * bn[act]
+        if ok.any():
+            done[act[ok]] = True
+            keep = ~ok
+            act, R, P, rz = act[keep], R[:, keep], P[:, keep], rz[keep]
+            if not len(act):
+                break
+        Z = M(R)
+        rz_new = np.einsum("ij,ij->j", R, Z)
+        P = Z + P * (rz_new / rz)
+        rz = rz_new
+    return X, its.tolist(), done
+
+
+def _generate() -> str:
+    """Source of flexure/_multirhs_loops.py."""
+    out = ['"""Generated by ``python -m flexure.multirhs`` (do not edit): the loops of flexure.multirhs for',
+           'k = 1 … 6 columns, one function per k so that the k accumulators stay in registers; compiled by',
+           'numba on first use and cached beside this file."""', '', 'import numba', '']
+    for k in range(1, KMAX + 1):
+        for name, src in (("spmm", _spmm_src(k)), ("block_gs", _gs_src(k))):
+            out += ["", "@numba.njit(cache=True, nogil=True)", src.replace(f"def {name}(", f"def {name}_{k}(", 1), ""]
+    return "\n".join(out).rstrip() + "\n"
+
+
+if __name__ == "__main__":
+    from pathlib import Path
+
+    Path(__file__).with_name("_multirhs_loops.py").write_text(_generate())

@@ -1,0 +1,87 @@
+"""Load cases solved together (flexure.multirhs): the loops equal scipy/pyamg column by column,
+and the P2 solve gives the same iterations and answers as one CG per load case."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from flexure import multirhs
+from flexure import solve as fsolve
+from flexure.bc import Problem
+from flexure.fem import stiffness_matrix
+from flexure.material import ALUMINIUM_6061_T6 as MAT
+from flexure.mesh import cylinder_mesh
+
+
+def test_warm_compiles_every_width():
+    assert multirhs.warm()
+    X = np.zeros((6, 2))
+    multirhs.block_gauss_seidel(sp.identity(6, format="csr") * 2.0, np.tile(np.eye(3) / 2.0, (2, 1, 1)), X,
+                                np.ones((6, 2)), True)
+    assert np.allclose(X, 0.5)                     # one sweep on a diagonal system solves it
+
+
+def test_generated_loops_are_the_generator_output():
+    path = Path(multirhs.__file__).with_name("_multirhs_loops.py")
+    assert path.read_text() == multirhs._generate()
+
+
+@pytest.fixture(scope="module")
+def disc():
+    """An annular P2 disc, rim fixed, bore rigidly coupled: the reduced system and six unit wrenches."""
+    m = cylinder_mesh(0.004, 0.03, 0.006, 4, 32, 3, order=2)
+    r = np.hypot(m.points[:, 0], m.points[:, 1])
+    p = Problem(m, MAT).fix(np.flatnonzero(r > 0.03 * (1 - 1e-9)))
+    p.couple_rigid(np.flatnonzero(r < 0.004 * (1 + 1e-9)), (0, 0, 0.003))
+    sy = p.reduced_system(stiffness_matrix(m, MAT))
+    B = np.zeros((sy.A.shape[0], 6))
+    B[sy.ref_slices[0], :] = np.eye(6)
+    return sy, B
+
+
+@pytest.mark.parametrize("k", [1, 4, 6, 9])
+def test_spmm_equals_scipy(disc, k):
+    sy, _ = disc
+    X = np.random.default_rng(k).standard_normal((sy.A.shape[0], k))
+    Y = multirhs.spmm(sy.A, X)
+    assert np.abs(Y - sy.A @ X).max() <= 1e-12 * np.abs(sy.A @ X).max()
+
+
+@pytest.mark.parametrize("forward", [True, False])
+def test_block_gauss_seidel_equals_pyamg_per_column(disc, forward):
+    from pyamg.relaxation.relaxation import block_gauss_seidel
+    from pyamg.util.utils import get_block_diag
+
+    sy, _ = disc
+    A = sy.A.tocsr()
+    Dinv = np.ascontiguousarray(get_block_diag(A.tobsr(blocksize=(3, 3)), blocksize=3, inv_flag=True))
+    rng = np.random.default_rng(1)
+    B = rng.standard_normal((A.shape[0], 7))
+    X = rng.standard_normal((A.shape[0], 7))
+    ref = X.copy()
+    multirhs.block_gauss_seidel(A, Dinv, X, B, forward)
+    for j in range(7):
+        x = ref[:, j].copy()
+        block_gauss_seidel(A.tobsr(blocksize=(3, 3)), x, B[:, j], iterations=1,
+                           sweep="forward" if forward else "backward", blocksize=3, Dinv=Dinv)
+        assert np.abs(X[:, j] - x).max() <= 1e-10 * np.abs(x).max()
+
+
+def test_load_cases_together_equal_one_cg_per_case(disc, monkeypatch):
+    sy, B = disc
+    B = B.copy()
+    B[:, 2] = 0.0                                      # an all-zero case: zero answer, no iterations
+    out = {}
+    for multi in (True, False):
+        monkeypatch.setattr(fsolve, "MULTI_RHS", multi)
+        out[multi] = fsolve.solve_system(sy.A, B, sy.B, "amg", 1e-10, coarse=sy.coarse, B_coarse=sy.B_coarse)
+    (q1, i1), (q0, i0) = out[True], out[False]
+    assert "together" in i1["solver"] and "together" not in i0["solver"]
+    assert i1["iterations"][2] == 0 and np.all(q1[:, 2] == 0.0)
+    assert all(abs(a - b) <= 1 for a, b in zip(i1["iterations"], i0["iterations"]))
+    assert np.abs(q1 - q0).max() <= 1e-8 * np.abs(q0).max()
+    assert i1["residual_norm"] < 1e-9 and len(i1["case_residuals"]) == 6
+    direct = sp.linalg.spsolve(sy.A.tocsc(), B)
+    assert np.abs(q1 - direct).max() <= 1e-7 * np.abs(direct).max()
