@@ -65,6 +65,28 @@ def test_rtol_stopped_by_the_dof_cap_says_so(capsys):
     assert any("--rtol 1e-06 not reached" in w and "--max-dofs 20000" in w for w in data["warnings"])
 
 
+def test_rtol_stopped_by_a_refused_finer_level_keeps_the_levels_solved(capsys, monkeypatch):
+    """A finer level refused by the mesh-cost check (an InputError) ends the refinement with a
+    warning naming it; the levels already solved are the answer, not an exit 2."""
+    import flexure.analysis as A
+
+    real = A.analyze
+
+    def analyze(design, *a, h_factor=1.0, **kw):
+        if h_factor < 0.6:
+            raise InputError("mesh: the mesh would have ~1e9 tetrahedra, above --max-elements 1e6")
+        return real(design, *a, h_factor=h_factor, **kw)
+
+    monkeypatch.setattr(A, "analyze", analyze)
+    code, out, _ = _run(capsys, "--order", "1", "--json", "--rtol", "1e-6")
+    assert code == 0
+    data = json.loads(out)
+    assert len(data["discretization_levels"]) == 3
+    assert data["gauge_strain_per_Nm"] > 0 and data["gauge_strain_per_Nm_error_estimate"] > 0
+    assert any("--rtol 1e-06 not reached" in w and "h × 0.5) was refused" in w and "--max-elements" in w
+               for w in data["warnings"])
+
+
 @pytest.mark.parametrize("argv, where", [(["--rtol", "0"], "--rtol"), (["--rtol", "2"], "--rtol"),
                                          (["--rtol", "0.01", "--single-level"], "--rtol"),
                                          (["--max-dofs", "10"], "--max-dofs")])
