@@ -101,20 +101,27 @@ def _sa_hierarchy(A, B, smoothed: bool = True, max_coarse: int = 1000):
         max_coarse=max_coarse, coarse_solver="splu")
 
 
+def _pmg_setup(A, coarse, B_coarse, smoothed: bool):
+    """The parts of the two-level p-multigrid: the 3×3 block-diagonal inverses of the P2 system
+    (its BSR form), and the coarse V-cycle M₁ on the Galerkin P1-vertex system A₁ = Iᵀ A I
+    (aggregation AMG with the rigid-body modes; plain keeps the wide-stencil A₁ sparse)."""
+    from pyamg.util.utils import get_block_diag
+
+    Ab = A.tobsr(blocksize=(3, 3))
+    Dinv = get_block_diag(Ab, blocksize=3, inv_flag=True)
+    A1 = (coarse.T @ A @ coarse).tocsr()
+    ml = _sa_hierarchy(A1, B_coarse, smoothed=smoothed, max_coarse=PMG_MAX_COARSE)
+    return Ab, Dinv, ml, ml.aspreconditioner(cycle="V"), coarse.T.tocsr()
+
+
 def _pmg_preconditioner(A, coarse, B_coarse, smoothed: bool = False):
     """Two-level p-multigrid for P2: block Gauss–Seidel (forward before, backward after) on the
     P2 system, coarse correction on the Galerkin P1-vertex system A₁ = Iᵀ A I by one V-cycle of
     aggregation AMG with the rigid-body modes (plain, or ``smoothed``: denser coarse levels, which
     pay off on layered, flat-element meshes). Symmetric, so it preconditions CG."""
     from pyamg.relaxation.relaxation import block_gauss_seidel
-    from pyamg.util.utils import get_block_diag
 
-    Ab = A.tobsr(blocksize=(3, 3))
-    Dinv = get_block_diag(Ab, blocksize=3, inv_flag=True)
-    A1 = (coarse.T @ A @ coarse).tocsr()
-    ml = _sa_hierarchy(A1, B_coarse, smoothed=smoothed, max_coarse=PMG_MAX_COARSE)   # A₁ is wide-stencil: plain keeps it sparse
-    M1 = ml.aspreconditioner(cycle="V")
-    It = coarse.T.tocsr()
+    Ab, Dinv, ml, M1, It = _pmg_setup(A, coarse, B_coarse, smoothed)
 
     def apply(r):
         r = np.asarray(r).ravel()
@@ -132,16 +139,11 @@ def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False, sweeps: int = 1):
     """The same two-level p-multigrid as ``_pmg_preconditioner`` applied to k columns at once
     (flexure.multirhs: one pass over the matrix per Gauss–Seidel sweep for all columns); the
     coarse V-cycle runs per column. Returns (M(R) → Z for R (n, k), pyamg hierarchy)."""
-    from pyamg.util.utils import get_block_diag
-
     from flexure import multirhs
 
     Ac = A.tocsr()
-    Dinv = np.ascontiguousarray(get_block_diag(Ac.tobsr(blocksize=(3, 3)), blocksize=3, inv_flag=True))
-    A1 = (coarse.T @ Ac @ coarse).tocsr()
-    ml = _sa_hierarchy(A1, B_coarse, smoothed=smoothed, max_coarse=PMG_MAX_COARSE)
-    M1 = ml.aspreconditioner(cycle="V")
-    It = coarse.T.tocsr()
+    _, Dinv, ml, M1, It = _pmg_setup(Ac, coarse, B_coarse, smoothed)
+    Dinv = np.ascontiguousarray(Dinv)
 
     def apply(R):
         X = np.zeros_like(R)
