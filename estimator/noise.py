@@ -24,6 +24,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from pathlib import Path
+
 import numpy as np
 
 from estimator.errors import InputError
@@ -59,6 +61,50 @@ class NoiseModel:
         return (f"{self.source}: τ σ {np.round(self.torque_sigma_Nm, 6).tolist()} N·m, FT σ "
                 f"{np.round(self.ft_sigma, 6).tolist()}, q̇ σ {self.velocity_sigma_rad_per_s:g} rad/s, "
                 f"encoder {self.encoder_counts} counts/rev")
+
+
+def noise_side_file(log_path) -> Path:
+    """``LOG.noise.toml`` beside ``LOG.csv`` / ``LOG.parquet``: the log's sensor noise, declared."""
+    p = Path(log_path)
+    return p.with_name(p.stem + ".noise.toml")
+
+
+def noise_toml(noise: NoiseModel, who: str = "torquebench's simulator") -> str:
+    """The ``LOG.noise.toml`` text of a noise model (1σ per sample, SI units)."""
+    vec = lambda v: "[" + ", ".join(f"{float(x):.10g}" for x in np.atleast_1d(v)) + "]"
+    return "\n".join([
+        f"# Sensor noise of this log (estimator/noise.py, docs/conventions.md), written by {who}:",
+        "# white noise, 1 sigma per sample; `estimate` whitens the residual with it.",
+        f"# ({noise.source})",
+        "[noise]",
+        f"torque_sigma_Nm = {vec(noise.torque_sigma_Nm)}",
+        f"ft_sigma = {vec(noise.ft_sigma)}            # Fx [N], Fz [N], My [N·m]",
+        f"velocity_sigma_rad_per_s = {float(noise.velocity_sigma_rad_per_s):.10g}",
+        f"encoder_counts = {int(noise.encoder_counts)}               # per revolution, 0 = none",
+    ]) + "\n"
+
+
+def read_noise_declaration(log_path, n_links: int) -> NoiseModel | None:
+    """The NoiseModel declared in ``LOG.noise.toml`` beside the log, or None without one; every
+    error names the file and the field."""
+    from userio.fields import Fields
+    from userio.files import read_toml
+
+    path = noise_side_file(log_path)
+    if not path.exists():
+        return None
+    data = read_toml(path)
+    f = Fields(path)
+    f.known(data, {"noise"}, "")
+    t = f.table(data, "noise", required=True)
+    f.known(t, {"torque_sigma_Nm", "ft_sigma", "velocity_sigma_rad_per_s", "encoder_counts"}, "noise")
+    tau = f.vector(t, "torque_sigma_Nm", "noise", positive=True)
+    if tau.size not in (1, n_links):
+        raise f.err("noise.torque_sigma_Nm", f"expected 1 or {n_links} values, got {tau.size}")
+    return NoiseModel(torque_sigma_Nm=tau, ft_sigma=f.vector(t, "ft_sigma", "noise", length=3, positive=True),
+                      velocity_sigma_rad_per_s=f.number(t, "velocity_sigma_rad_per_s", "noise", 0.0, nonneg=True),
+                      encoder_counts=f.integer(t, "encoder_counts", "noise", 0, lo=0),
+                      source=f"log declaration {path.name}")
 
 
 def paper_leg_noise() -> NoiseModel:

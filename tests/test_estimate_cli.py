@@ -214,6 +214,32 @@ def test_dynamic_default_is_the_chi_square_detector(capsys, good_log):
     assert json.loads(out)["detector"].startswith("paper rule")
 
 
+def test_noise_side_file_is_read_and_options_override_it(capsys, tmp_path, good_log):
+    """LOG.noise.toml beside the log states the sensors' noise; the --*-sigma options and
+    --quiet-window take precedence; a bad declaration is one line naming its file and field."""
+    import shutil
+
+    log = tmp_path / "declared.csv"
+    shutil.copy(good_log, log)
+    side = tmp_path / "declared.noise.toml"
+    side.write_text("[noise]\ntorque_sigma_Nm = [0.02, 0.03]\nft_sigma = [0.2, 0.2, 0.02]\n")
+    code, out, _ = run(capsys, log, "--json")
+    s = json.loads(out)
+    assert code == 0 and "log declaration declared.noise.toml" in s["residual_noise_source"]
+    assert "[0.02, 0.03]" in s["residual_noise_source"] and "[0.2, 0.2, 0.02]" in s["residual_noise_source"]
+    code, out, _ = run(capsys, log, "--json", "--torque-sigma", "0.01")
+    assert code == 0 and "--torque-sigma" in json.loads(out)["residual_noise_source"]
+    for text, field in [("[noise]\ntorque_sigma_Nm = [0.0]\nft_sigma = [0.1, 0.1, 0.01]\n", "noise.torque_sigma_Nm"),
+                        ("[noise]\ntorque_sigma_Nm = [0.01]\nft_sigma = [0.1, 0.1]\n", "noise.ft_sigma"),
+                        ("[noise]\ntorque_sigma_Nm = [0.01]\nft_sigma = [0.1, 0.1, 0.01]\nft_sgma = 1\n", "noise.ft_sgma"),
+                        ("[noise]\nft_sigma = [0.1, 0.1, 0.01]\n", "noise.torque_sigma_Nm"),
+                        ("[noise]\ntorque_sigma_Nm = [0.01, 0.01, 0.01]\nft_sigma = [0.1, 0.1, 0.01]\n",
+                         "noise.torque_sigma_Nm")]:
+        side.write_text(text)
+        err = _bad(capsys, log)
+        assert "declared.noise.toml" in err and field in err, err
+
+
 @pytest.mark.parametrize("option,value,name", [
     ("--torque-sigma", "0", "torque sigma"), ("--ft-sigma", "0.1,-0.1,0.01", "FT sigma"),
     ("--false-alarm-rate", "1/sample", "--false-alarm-rate"),

@@ -80,7 +80,9 @@ def test_simulate_cli_writes_log_and_truth(tmp_path):
     on = truth.link.values > 0
     assert on.sum() == summary["contact_samples"] == 101   # t = 0.5 … 0.6 inclusive
     assert np.allclose(np.hypot(truth.Fx[on], truth.Fz[on]), 7.0)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["leg.csv", "leg.timing.toml", "leg.truth.csv"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["leg.csv", "leg.noise.toml", "leg.timing.toml",
+                                                           "leg.truth.csv"]
+    assert summary["noise"] == str(tmp_path / "leg.noise.toml")
 
 
 def test_simulate_cli_reads_back_through_the_estimator(tmp_path):
@@ -108,3 +110,21 @@ def test_simulate_cli_refuses_bad_input(tmp_path):
     assert not (tmp_path / "z.csv").exists()
     proc = _cli("simulate", str(tmp_path / "missing.toml"), "--out", str(tmp_path / "m.csv"))
     assert proc.returncode == 2 and "missing.toml" in proc.stderr
+
+
+def test_noise_free_simulation_declares_no_noise(tmp_path):
+    """A scene whose sensors draw no noise has nothing to whiten with: no LOG.noise.toml, and an
+    old one beside --out --force is not left behind to describe the new log."""
+    root = Path(__file__).resolve().parents[1]
+    text = (root / "scenes" / "paper_fixed_link2.toml").read_text()
+    text = text.replace('robot = "paper_leg.toml"', f'robot = "{root / "robots" / "paper_leg.toml"}"')
+    text = text.replace('torque_model = "bridge"', 'torque_model = "gaussian"\ntorque_noise_Nm = 0.0')
+    text = text.replace("ft_noise = [0.1, 0.1, 0.01]", "ft_noise = [0.0, 0.0, 0.0]")
+    (tmp_path / "quiet.toml").write_text(text)
+    out = tmp_path / "leg.csv"
+    (tmp_path / "leg.noise.toml").write_text("[noise]\n")
+    proc = _cli("simulate", str(tmp_path / "quiet.toml"), "--out", str(out), "--duration", "0.2",
+                "--json", "--force")
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)["noise"] is None
+    assert not (tmp_path / "leg.noise.toml").exists()

@@ -578,7 +578,9 @@ def run_predicted_error(scene, inp, draws=2000):
 def run_sensor_log(scene, inp):
     """The log `simulate` writes: estimator.sim.sensors.measure(scene sensors, sampled truth) —
     encoders, gaussian or bridge/ADC torque (through the scene's one sensor chain), FT noise;
-    a fixed or rigid base logs zero base columns. Returns {log, truth, stats}."""
+    a fixed or rigid base logs zero base columns. Returns {log, truth, stats, noise}: ``noise``
+    is the NoiseModel the sensors drew (scene_noise_model, readings="log"), which `simulate`
+    declares beside the log, or None when a channel is noise-free (nothing to whiten with)."""
     from estimator.log import SensorLog
     from estimator.sim.sensors import measure
 
@@ -589,7 +591,11 @@ def run_sensor_log(scene, inp):
         q[:, :3] = 0.0
         dq[:, :3] = 0.0
     log = SensorLog(t=tr["t"], q=q, dq=dq, tau_Nm=tau, wrench=W, floating=cfg.base == "floating")
-    return {"log": log, "truth": tr["truth"], "stats": tr["stats"]}
+    try:
+        noise = scene_noise_model(scene, chain, readings="log")
+    except InputError:                    # a zero σ: a noise-free channel declares nothing
+        noise = None
+    return {"log": log, "truth": tr["truth"], "stats": tr["stats"], "noise": noise}
 
 
 def run_static_holds(scene, inp):

@@ -66,9 +66,13 @@ def timing_path(log_path) -> Path:
     return side_file(log_path)
 
 
-def log_files(out, log: SensorLog, truth: dict, truth_path) -> list[tuple[Path, str]]:
-    """[(path, text)] of a simulated log: the log, its truth and its timing declaration, for
-    userio.files.write_files_atomic (all or nothing)."""
+def log_files(out, log: SensorLog, truth: dict, truth_path, noise=None) -> list[tuple[Path, str]]:
+    """[(path, text)] of a simulated log: the log, its truth, its timing declaration and (with a
+    NoiseModel ``noise``) its noise declaration, for userio.files.write_files_atomic (all or
+    nothing)."""
+    from estimator.noise import noise_side_file, noise_toml
+
     out = Path(out)
-    return [(out, log_csv(log)), (Path(truth_path), truth_csv(truth)),
-            (timing_path(out), timing_toml(log))]
+    files = [(out, log_csv(log)), (Path(truth_path), truth_csv(truth)),
+             (timing_path(out), timing_toml(log))]
+    return files + ([(noise_side_file(out), noise_toml(noise))] if noise is not None else [])

@@ -62,11 +62,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--detector", choices=["chi2", "cusum"], default="chi2",
                         help="dynamic detector on the whitened residual: 'chi2' (per-sample test; "
                              "default) or 'cusum' (sequential; detects small persistent contacts "
-                             "more often, ends ~60 ms after them; reports/detection.md) "
+                             "more often, ends ~110 ms after them; reports/detection.md) "
                              "(default: %(default)s)")
     parser.add_argument("--quiet-window", default=None, metavar="T0:T1",
                         help="estimate the residual noise from this contact-free stretch (seconds) "
-                             "instead of the sensor noise model")
+                             "instead of the sensor noise model (which is, in order: these --*-sigma "
+                             "options, LOG.noise.toml beside the log, the paper leg's sensors)")
     parser.add_argument("--torque-sigma", default=None, metavar="NM[,NM...]",
                         help="joint torque noise σ per sample, N·m (default 0.005, paper leg)")
     parser.add_argument("--ft-sigma", default=None, metavar="FX,FZ,MY",
@@ -177,6 +178,9 @@ def run(args) -> int:
     prepare_file(args.out, "--out", force=args.force, inputs=(args.log, args.robot))
     robot = load_robot(args.robot or PAPER_LEG_TOML)
     noise, quiet, rate = _detector_options(args, robot.n_links)
+    if noise is None and quiet is None:           # LOG.noise.toml beside the log, if any
+        from estimator.noise import read_noise_declaration
+        noise = read_noise_declaration(args.log, robot.n_links)
     timing = None
     if args.timing is not None:
         from estimator.timing import uniform

@@ -62,6 +62,7 @@ def scene_from_args(args, max_run_time_s: float):
 
 
 def run(args) -> int:
+    from estimator.noise import noise_side_file
     from estimator.sim.output import log_files, timing_path
     from torquebench.io import print_json
     from torquebench import pipeline as P
@@ -74,11 +75,12 @@ def run(args) -> int:
     if args.duration is not None:
         finite(args.duration, "--duration", positive=True)
     out, tpath = Path(args.out), truth_path(Path(args.out))
-    timing_file = timing_path(out)
-    for p in (out, tpath, timing_file):
+    timing_file, noise_file = timing_path(out), noise_side_file(out)
+    for p in (out, tpath, timing_file, noise_file):
         prepare_file(p, "--out", force=args.force, inputs=(args.scene,))   # mkdir, --force
     plan_outputs({"scene": args.scene}, {"--out": out, "truth (--out with .truth.csv)": tpath,
-                                         "timing (--out with .timing.toml)": timing_file})
+                                         "timing (--out with .timing.toml)": timing_file,
+                                         "noise (--out with .noise.toml)": noise_file})
     if out.suffix == ".toml":
         raise InputError(f"--out: {out} looks like a scene/robot file; refusing to overwrite it "
                          "with a log (the log is a CSV)")
@@ -90,9 +92,14 @@ def run(args) -> int:
     want = "log" if scene.sim is not None else "static_log"    # the stage graph: simulation → sensor_log
     arts, _ = P.execute(scene, [want], Cache())
     log, truth, stats = (arts[want][k] for k in ("log", "truth", "stats"))
-    write_files_atomic(log_files(out, log, truth, tpath))     # log + truth + timing: a set
+    noise = arts[want].get("noise")
+    # log + truth + timing (+ noise): one set; an old noise file of another log is not left behind
+    write_files_atomic(log_files(out, log, truth, tpath, noise))
+    if noise is None and noise_file.exists():
+        noise_file.unlink()
     summary = {"scene": scene.name, "log": str(out), "truth": str(tpath),
-               "timing": str(timing_file), "samples": len(log.t),
+               "timing": str(timing_file), "noise": str(noise_file) if noise is not None else None,
+               "samples": len(log.t),
                "duration_s": float(log.t[-1]) if len(log.t) else 0.0,
                "contact_samples": int((truth["link"] > 0).sum()), **stats}
     est = summary.get("q_rad_error_estimate")
@@ -104,7 +111,9 @@ def run(args) -> int:
         print_json(summary)
     else:
         print(f"{scene.name}: {summary['samples']} samples, {summary['contact_samples']} in contact "
-              f"→ {out} (+ {tpath.name}, {timing_file.name}); {stats.get('integrator')} in {stats['run_time_s']:.2f} s"
+              f"→ {out} (+ {tpath.name}, {timing_file.name}"
+              + (f", {noise_file.name}" if noise is not None else "")
+              + f"); {stats.get('integrator')} in {stats['run_time_s']:.2f} s"
               + (f"; integration error ± {stats['q_rad_error_estimate']:.2g} rad"
                  if "q_rad_error_estimate" in stats else ""),
               file=sys.stdout)
