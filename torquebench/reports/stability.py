@@ -102,6 +102,14 @@ ROWS = [
     ("`--rtol` past what can be meshed", "a finer level refused by the mesh-cost check",
      "refinement stops; the levels solved are the answer, a warning names the refusal",
      "exit 0, warning", "tests/test_flexure_cli.py::test_rtol_stopped_by_a_refused_finer_level_keeps_the_levels_solved"),
+    ("Log whose sensors are noisier than the default", "examples/sim logs (bridge σ_τ 0.0133 N·m) "
+     "estimated with and without their LOG.noise.toml",
+     "declared: the residual whitened by the sensors' own noise; undeclared: the paper leg's default "
+     "(0.005 N·m) is assumed and said", "contact-free flagged 0.00 % / 0.67 % declared, 6.6 % / 7.9 % not",
+     "tests/test_examples.py::test_declared_noise_keeps_contact_free_samples_quiet"),
+    ("Bad noise declaration", "LOG.noise.toml with a zero σ, two FT values, a misspelt key, a missing "
+     "or wrong-length torque σ", "refused before any work", "exit 2, names the file and field",
+     "tests/test_estimate_cli.py::test_noise_side_file_is_read_and_options_override_it"),
     ("Footprint off flat faces", "a gauge grid not lying on flat mesh faces",
      "the gauge read-out falls back to the 6×3 Gauss rule over the grid", "see test",
      "tests/test_flexure_gauge_footprint.py::test_grid_off_flat_faces_falls_back_to_the_gauss_rule"),
