@@ -86,8 +86,8 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
         from flexure.gmsh_mesh import mesh_step
         from flexure.meshing import MeshResult, mesh_report
         field = size_field(size, scale, centres, extent, gw, h_factor)
-        from flexure.meshing import check_cost, surface_volume
-        check_cost(field, surf.points, surface_volume(surf), cap, where)
+        from flexure.meshing import check_cost, surface_area, surface_volume
+        check_cost(field, surface_volume(surf), surface_area(surf), cap, where)
         mesh = mesh_step(design.file_path, design.file_unit_m, field, order, where=where)
         return MeshResult(mesh, surf, mesh_report(mesh, size, "gmsh", None, field))
     return mesh_design_surface(surf, None, size, centres, extent, scale, order, gauge_width=gw,

@@ -240,19 +240,32 @@ MAX_ELEMENTS = 500_000
 BYTES_PER_ELEMENT = 12_000
 
 
-def estimate_elements(field: SizeField, points: np.ndarray, volume_m3: float, h_max: float = np.inf) -> float:
-    """N ≈ V · mean(1/v(h)) over ``points`` sampling the solid, v(h) = h³/(6√2) (regular tet), with
-    h ≤ ``h_max`` (the part's own thickness 2V/A: no element is larger than the part)."""
-    h = field(points[:, :2]) if points.shape[1] == 2 else field(points)
-    h = np.minimum(h, h_max)
-    return float(volume_m3 * np.mean(6 * np.sqrt(2) / h ** 3))
+def estimate_elements(field: SizeField, volume_m3: float, thickness_m: float) -> float:
+    """Tetrahedra a mesh of ``field`` will have: N = ∫_V dV / v(h(x)), v(h) = h³/(6√2) (regular
+    tet), h ≤ t = ``thickness_m`` (the part's own thickness 2V/A: no element is larger than the
+    part). Far from the gauges h = h_far over the whole volume; each gauge adds the integral over
+    the ball where h(d) < h_far (d = distance to its centre), of which the part holds the fraction
+    φ(d) = ½ for d ≤ t (a gauge sits on a face: a half ball) and t/(2d) beyond (a plate of
+    thickness t: the band of the sphere inside it). Measured against the meshes made: 0.8–1.8×
+    on the shipped and test designs (the former point-sampled estimate was 0.26–6.8×)."""
+    c = 6.0 * math.sqrt(2.0)
+    t = float(thickness_m)
+    h_far = min(field.h_far, t)
+    n = volume_m3 * c / h_far ** 3
+    if len(field.centres) == 0 or field.h_gauge >= h_far:
+        return float(n)
+    R = field.r_gauge + (h_far - field.h_gauge) / field.grading
+    d = np.linspace(0.0, R, 2001)[1:]
+    h = np.minimum(np.clip(field.h_gauge + field.grading * (d - field.r_gauge), field.h_gauge, field.h_far), h_far)
+    phi = np.where(d <= t, 0.5, t / (2.0 * d))
+    ball = 4.0 * np.pi * d ** 2 * phi * c * (1.0 / h ** 3 - 1.0 / h_far ** 3)
+    return float(n + len(field.centres) * np.sum(0.5 * (ball[1:] + ball[:-1]) * np.diff(d)))
 
 
-def check_cost(field: SizeField, points: np.ndarray, volume_m3: float, max_elements: float,
-               where: str = "mesh", area_m2: float | None = None) -> float:
+def check_cost(field: SizeField, volume_m3: float, area_m2: float, max_elements: float,
+               where: str = "mesh") -> float:
     """Refuse up front (InputError) a mesh estimated above ``max_elements``; → the estimate."""
-    h_max = 2 * volume_m3 / area_m2 if area_m2 else np.inf
-    n = estimate_elements(field, points, volume_m3, h_max)
+    n = estimate_elements(field, volume_m3, 2 * volume_m3 / area_m2) if area_m2 > 0 else math.inf
     if not np.isfinite(n) or n > max_elements:
         raise InputError(f"{where}: the mesh would have ~{n:.3g} tetrahedra (~{n * BYTES_PER_ELEMENT / 1e9:.3g} GB "
                          f"for P2), above --max-elements {max_elements:.3g}; check the dimensions "
@@ -295,20 +308,11 @@ def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gau
     surface, layers = None, None
     is_surface = isinstance(surface_or_poly, Surface)
     if is_surface:
-        x = surface_or_poly.points[surface_or_poly.faces]
-        area = 0.5 * np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), axis=1).sum()
-        check_cost(field, surface_or_poly.points, surface_volume(surface_or_poly), max_elements, area_m2=area)
+        check_cost(field, surface_volume(surface_or_poly), surface_area(surface_or_poly), max_elements)
     else:
-        import shapely
-        minx, miny, maxx, maxy = surface_or_poly.bounds
-        gx, gy = np.meshgrid(np.linspace(minx, maxx, 80), np.linspace(miny, maxy, 80))
-        xy = np.column_stack([gx.ravel(), gy.ravel()])
-        xy = xy[shapely.contains_xy(surface_or_poly, xy[:, 0], xy[:, 1])]
-        if len(xy) == 0:
-            xy = np.asarray(surface_or_poly.exterior.coords)
         perimeter = surface_or_poly.exterior.length + sum(r.length for r in surface_or_poly.interiors)
-        check_cost(field, xy, surface_or_poly.area * thickness, max_elements,
-                   area_m2=2 * surface_or_poly.area + perimeter * thickness)
+        check_cost(field, surface_or_poly.area * thickness,
+                   2 * surface_or_poly.area + perimeter * thickness, max_elements)
     if is_surface and mesher == "sweep":
         mesher = "gmsh"                          # a closed surface is not an extrusion
     if mesher == "gmsh":
@@ -340,6 +344,12 @@ def mesh_report(mesh, size: str, mesher: str, layers, field: SizeField, surface:
         v0 = surface_volume(surface)
         rep["remesh_volume_change"] = float(rep["total_volume_m3"] / v0 - 1.0) if v0 > 0 else math.nan
     return rep
+
+
+def surface_area(surface: Surface) -> float:
+    """Area of a triangulation: Σ |(x_b − x_a) × (x_c − x_a)| / 2."""
+    x = surface.points[surface.faces]
+    return float(0.5 * np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), axis=1).sum())
 
 
 def surface_volume(surface: Surface) -> float:
