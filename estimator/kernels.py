@@ -437,10 +437,6 @@ def check_steps(t, rows, last, dt, max_jitter, regular):
                       float(dt), float(max_jitter), bool(regular))
 
 
-_POW10_INT = np.array([10 ** i for i in range(19)], dtype=np.int64)
-_POW10_FLOAT = 10.0 ** np.arange(23)          # exact powers of ten (outframe.round_significant)
-
-
 def _first_order_py(a, b, drive, out, start, stop):
     """out[j, k+1] = a_j out[j, k] + b_j drive[j, k] for k = start … stop−1 (the observer's
     recursion, in the order ``scipy.signal.lfilter`` evaluates it: b·x first, then + a·y)."""
@@ -458,6 +454,10 @@ def first_order(a, b, drive, out, start: int, stop: int) -> bool:
         return False
     k["filter"](a, b, drive, out, start, stop)
     return True
+
+
+_POW10_INT = np.array([10 ** i for i in range(19)], dtype=np.int64)
+_POW10_FLOAT = 10.0 ** np.arange(23)          # exact powers of ten (outframe.round_significant)
 
 
 def _put_uint_py(buf, pos, v, width):

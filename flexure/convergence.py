@@ -1,4 +1,4 @@
-"""Discretisation error estimate of a flexure analysis: the same design on nested mesh levels.
+"""Discretisation error estimate of a flexure analysis: the same design on several mesh levels.
 
 Levels: the whole size function × f (h_f(x) = f·h(x): far size, gauge size and grading),
 f = √2, 1, 1/√2 (then 1/2, 1/(2√2), ... under ``rtol``); the answer is the finest level, h of a level
@@ -170,21 +170,21 @@ def analyze_with_error(design, size: str | None = None, order: int | None = None
     warnings = []
     if rtol is not None:
         f = factors[-1]
-        while max(relative_error(res, k) for k in RTOL_FIGURES) > rtol:
+
+        def not_reached(why: str) -> str:
+            return (f"--rtol {rtol:g} not reached: error estimate {worst:.2%} at "
+                    f"{levels[-1]['dofs']} dofs; the next level {why}")
+
+        while (worst := max(relative_error(res, k) for k in RTOL_FIGURES)) > rtol:
             predicted = int(levels[-1]["dofs"] * 2 ** 1.5)          # h / √2 → dofs × 2^1.5
             if predicted > max_dofs:
-                worst = max(relative_error(res, k) for k in RTOL_FIGURES)
-                warnings.append(f"--rtol {rtol:g} not reached: error estimate {worst:.2%} at "
-                                f"{levels[-1]['dofs']} dofs; the next level (~{predicted} dofs) exceeds "
-                                f"--max-dofs {max_dofs}")
+                warnings.append(not_reached(f"(~{predicted} dofs) exceeds --max-dofs {max_dofs}"))
                 break
             f /= math.sqrt(2.0)
             try:
                 run(f)
             except InputError as exc:       # a finer level refused (mesh cost): keep what is solved
-                worst = max(relative_error(res, k) for k in RTOL_FIGURES)
-                warnings.append(f"--rtol {rtol:g} not reached: error estimate {worst:.2%} at "
-                                f"{levels[-1]['dofs']} dofs; the next level (h × {f:.3g}) was refused: {exc}")
+                warnings.append(not_reached(f"(h × {f:.3g}) was refused: {exc}"))
                 break
             _attach(res, levels, order_used)
         res["rtol"] = rtol
