@@ -27,8 +27,8 @@ SIZES = {  # h_far as a multiple of thickness, h_gauge as a multiple of the gaug
 #: solids; scaled like h_far: × coarse.far / size.far / h_factor). Without it a fillet or bolt hole
 #: is faceted at the far size, and where its facets fall changes from one mesh level to the next: on
 #: the STEP part (1 mm fillets at the spoke roots) the gauge strain then moved by 0.1–0.6 % between
-#: levels in no order and the stiffness was 1–3 % high; with 12 per turn the levels converge
-#: monotonically to within 0.05 % (tests/data/fem_reference/levels.json).
+#: levels in no order and the stiffness was 1–3 % high; with 12 per turn the changes from h × 1 down
+#: are ≤ 0.09 % (tests/data/fem_reference/levels.json, ``fine``).
 CURVATURE_ELEMENTS = 12.0
 
 
@@ -44,7 +44,8 @@ class SizeField:
     r_gauge: float
     grading: float = 0.35
     curvature_elements: float = 0.0
-    #: re-entrant edges (k, 2, 3) and their sizes h_edge (k,): h ≤ h_edge + grading·d(x, edge)
+    #: re-entrant edges (k, 2, 3) and their sizes h_edge (k,): h ≤ h_edge + grading·(d(x, edge) −
+    #: r_gauge) (gmsh only, like the curvature term)
     edges: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
     h_edge: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
@@ -300,7 +301,7 @@ def size_field(size: str, h_scale: float, gauge_centres, gauge_extent: float,
     """h_far = f · SIZES[size].far · h_scale; h_gauge = f · SIZES[size].gauge · gauge width (≤ h_far),
     f = ``h_factor`` (the refinement levels of flexure.convergence). With the part's ``surface``,
     its sharp re-entrant edges (``reentrant_edges``) get h_edge = clip(f·D/EDGE_DISTANCE_RATIO,
-    h_gauge, h_far), D the edge's distance to the nearest gauge grid."""
+    h_gauge, h_far/2), D the edge's distance to the nearest gauge grid."""
     if size not in SIZES:
         raise InputError(f"--size: must be one of {', '.join(SIZES)}, got {size!r}")
     s = SIZES[size]
@@ -320,7 +321,8 @@ def size_field(size: str, h_scale: float, gauge_centres, gauge_extent: float,
                      edges=edges, h_edge=h_edge)
 
 
-#: a re-entrant edge at distance D from a gauge is meshed at D / 4 (not finer than the gauges): its
+#: a re-entrant edge at distance D from a gauge is meshed at D / 4 (not finer than the gauges, not
+#: coarser than half the far size, since every notch shapes the load path to the gauges): its
 #: singular field (stress ~ r^(λ−1), λ ≈ 0.54 for a 90° notch) then pollutes the gauge reading no
 #: more than the gauge's own discretisation. Without it, on the re-entrant part (gauges 1.3 mm from
 #: sharp spoke roots) the gauge strain moved by up to 0.8 % between levels with no trend and the
