@@ -11,7 +11,7 @@ angle (``mindihedral``) and the volume bound V ≤ h_far³/(6√2) (regular tetr
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -23,18 +23,31 @@ SIZES = {  # h_far as a multiple of thickness, h_gauge as a multiple of the gaug
     "medium": {"far": 0.7, "gauge": 0.4, "minratio": 1.8, "mindihedral": 12.0},
     "fine": {"far": 0.5, "gauge": 0.25, "minratio": 1.6, "mindihedral": 14.0},
 }
+#: elements per 2π of a curved edge or face at ``size = "coarse"``, h_factor 1 (gmsh meshes of CAD
+#: solids; scaled like h_far: × coarse.far / size.far / h_factor). Without it a fillet or bolt hole
+#: is faceted at the far size, and where its facets fall changes from one mesh level to the next: on
+#: the STEP part (1 mm fillets at the spoke roots) the gauge strain then moved by 0.1–0.6 % between
+#: levels in no order and the stiffness was 1–3 % high; with 12 per turn the changes from h × 1 down
+#: are ≤ 0.09 % (tests/data/fem_reference/levels.json, ``fine``).
+CURVATURE_ELEMENTS = 12.0
 
 
 @dataclass
 class SizeField:
     """h(x) = clip(h_gauge + grading·(d(x) − r_gauge), h_gauge, h_far), d = distance to the
-    nearest gauge centre (in the xy-plane for extrusions)."""
+    nearest gauge centre (in the xy-plane for extrusions); on curved edges and faces of a CAD
+    solid (gmsh) also h ≤ 2πR / ``curvature_elements`` (R the local radius of curvature)."""
 
     h_far: float
     h_gauge: float
     centres: np.ndarray          # (g, 2 or 3)
     r_gauge: float
     grading: float = 0.35
+    curvature_elements: float = 0.0
+    #: re-entrant edges (k, 2, 3) and their sizes h_edge (k,): h ≤ h_edge + grading·(d(x, edge) −
+    #: r_gauge) (gmsh only, like the curvature term)
+    edges: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
+    h_edge: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def __call__(self, xy: np.ndarray) -> np.ndarray:
         xy = np.asarray(xy, float)
@@ -246,8 +259,9 @@ def estimate_elements(field: SizeField, volume_m3: float, thickness_m: float) ->
     part). Far from the gauges h = h_far over the whole volume; each gauge adds the integral over
     the ball where h(d) < h_far (d = distance to its centre), of which the part holds the fraction
     φ(d) = ½ for d ≤ t (a gauge sits on a face: a half ball) and t/(2d) beyond (a plate of
-    thickness t: the band of the sphere inside it). Measured against the meshes made: 0.8–1.8×
-    on the shipped and test designs (the former point-sampled estimate was 0.26–6.8×)."""
+    thickness t: the band of the sphere inside it); each re-entrant edge the same over the
+    cylinder around it (¾ inside). The refinement at curved faces (curvature_elements) is not
+    counted. Measured against the meshes made: tests/test_mesh_cost.py (within 2×)."""
     c = 6.0 * math.sqrt(2.0)
     t = float(thickness_m)
     h_far = min(field.h_far, t)
@@ -259,7 +273,16 @@ def estimate_elements(field: SizeField, volume_m3: float, thickness_m: float) ->
     h = np.minimum(np.clip(field.h_gauge + field.grading * (d - field.r_gauge), field.h_gauge, field.h_far), h_far)
     phi = np.where(d <= t, 0.5, t / (2.0 * d))
     ball = 4.0 * np.pi * d ** 2 * phi * c * (1.0 / h ** 3 - 1.0 / h_far ** 3)
-    return float(n + len(field.centres) * np.sum(0.5 * (ball[1:] + ball[:-1]) * np.diff(d)))
+    n += len(field.centres) * np.sum(0.5 * (ball[1:] + ball[:-1]) * np.diff(d))
+    for (a, b), he in zip(np.asarray(field.edges).reshape(-1, 2, 3), np.asarray(field.h_edge)):
+        # a re-entrant edge: the graded cylinder around it, 3/4 of it inside (a 90° notch)
+        if he >= h_far:
+            continue
+        rho = np.linspace(0.0, field.r_gauge + (h_far - he) / field.grading, 401)[1:]
+        h = np.minimum(he + field.grading * np.maximum(rho - field.r_gauge, 0.0), h_far)
+        band = 0.75 * 2.0 * np.pi * rho * c * (1.0 / h ** 3 - 1.0 / h_far ** 3)
+        n += float(np.linalg.norm(b - a)) * np.sum(0.5 * (band[1:] + band[:-1]) * np.diff(rho))
+    return float(n)
 
 
 def check_cost(field: SizeField, volume_m3: float, area_m2: float, max_elements: float,
@@ -274,23 +297,57 @@ def check_cost(field: SizeField, volume_m3: float, area_m2: float, max_elements:
 
 
 def size_field(size: str, h_scale: float, gauge_centres, gauge_extent: float,
-               gauge_width: float | None = None, h_factor: float = 1.0) -> SizeField:
+               gauge_width: float | None = None, h_factor: float = 1.0, surface: Surface | None = None) -> SizeField:
     """h_far = f · SIZES[size].far · h_scale; h_gauge = f · SIZES[size].gauge · gauge width (≤ h_far),
-    f = ``h_factor`` (the refinement levels of flexure.convergence)."""
+    f = ``h_factor`` (the refinement levels of flexure.convergence). With the part's ``surface``,
+    its sharp re-entrant edges (``reentrant_edges``) get h_edge = clip(f·D/EDGE_DISTANCE_RATIO,
+    h_gauge, h_far/2), D the edge's distance to the nearest gauge grid."""
     if size not in SIZES:
         raise InputError(f"--size: must be one of {', '.join(SIZES)}, got {size!r}")
     s = SIZES[size]
     h_far = h_factor * s["far"] * h_scale
     h_gauge = min(h_factor * s["gauge"] * (gauge_width or gauge_extent), h_far)
-    # grading × f too, so that the whole size function scales by f (h_f(x) = f·h_1(x)): nested levels
-    return SizeField(h_far, h_gauge, np.asarray(gauge_centres, float).reshape(-1, 3), r_gauge=gauge_extent,
-                     grading=SizeField.grading * h_factor)
+    centres = np.asarray(gauge_centres, float).reshape(-1, 3)
+    edges, h_edge = np.zeros((0, 2, 3)), np.zeros(0)
+    if surface is not None and len(centres):
+        edges = reentrant_edges(surface)
+        mid = edges.mean(1)
+        D = np.sqrt(((mid[:, None, :] - centres[None]) ** 2).sum(-1)).min(1) - gauge_extent
+        h_edge = np.clip(h_factor * D / EDGE_DISTANCE_RATIO, h_gauge, h_far / 2)
+    # grading × f and curvature elements / f too, so that the whole size function scales by f
+    # (h_f(x) = f·h_1(x)): similar levels
+    return SizeField(h_far, h_gauge, centres, r_gauge=gauge_extent, grading=SizeField.grading * h_factor,
+                     curvature_elements=CURVATURE_ELEMENTS * SIZES["coarse"]["far"] / s["far"] / h_factor,
+                     edges=edges, h_edge=h_edge)
+
+
+#: a re-entrant edge at distance D from a gauge is meshed at D / 4 (not finer than the gauges, not
+#: coarser than half the far size, since every notch shapes the load path to the gauges): its
+#: singular field (stress ~ r^(λ−1), λ ≈ 0.54 for a 90° notch) then pollutes the gauge reading no
+#: more than the gauge's own discretisation. Without it, on the re-entrant part (gauges 1.3 mm from
+#: sharp spoke roots) the gauge strain moved by up to 0.8 % between levels with no trend and the
+#: stiffness was 1 % high (tests/data/fem_reference/levels.json).
+EDGE_DISTANCE_RATIO = 4.0
+#: a fold sharper than this between two faces of the surface is an edge (as gmsh's classification)
+EDGE_ANGLE_DEG = 40.0
+
+
+def reentrant_edges(surface: Surface, min_angle_deg: float = EDGE_ANGLE_DEG) -> np.ndarray:
+    """The sharp re-entrant (concave) edges of a closed, outward-oriented triangulation: (k, 2, 3)
+    segments where two faces meet at a fold of more than ``min_angle_deg`` with the material on
+    the reflex side (a notch, a sharp spoke root), where the elastic field is singular."""
+    import trimesh
+
+    tm = trimesh.Trimesh(surface.points, surface.faces, process=False)
+    sharp = (tm.face_adjacency_angles > np.deg2rad(min_angle_deg)) & ~tm.face_adjacency_convex
+    return surface.points[tm.face_adjacency_edges[sharp]]
 
 
 def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gauge_centres: np.ndarray,
                         gauge_extent: float, h_scale: float, order: int = 1,
                         gauge_width: float | None = None, mesher: str = "sweep",
-                        h_factor: float = 1.0, max_elements: float = MAX_ELEMENTS, exact_disc=None) -> MeshResult:
+                        h_factor: float = 1.0, max_elements: float = MAX_ELEMENTS, exact_disc=None,
+                        feature_surface: Surface | None = None) -> MeshResult:
     """Mesh an extruded profile (shapely polygon + thickness) or a closed Surface (user STL).
     With ``exact_disc`` (a geometry.SpokeDisc) the gmsh mesher meshes that disc's exact solid
     (true circles and fillets, flexure.gmsh_mesh.mesh_spoke_disc) instead of the polygon.
@@ -299,11 +356,16 @@ def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gau
     within ``gauge_extent`` of each gauge centre, graded outwards. A profile is swept through
     ⌈thickness / h_gauge⌉ layers (``mesher="sweep"``), or its closed surface handed to tetgen
     (``"tetgen"``, which grades only from the surface); ``"gmsh"`` meshes the volume with the size
-    field (isotropic, graded in 3-D; flexure.gmsh_mesh), re-meshing a Surface (STL) on the way.
+    field (isotropic, graded in 3-D; flexure.gmsh_mesh), re-meshing a Surface (STL) on the way;
+    gmsh also refines toward the re-entrant edges of ``feature_surface`` (the part's closed surface;
+    the Surface itself when one is given).
     """
     if mesher not in MESHERS:
         raise InputError(f"mesh.mesher: must be one of {', '.join(MESHERS)}, got {mesher!r}")
-    field = size_field(size, h_scale, gauge_centres, gauge_extent, gauge_width, h_factor)
+    if feature_surface is None and isinstance(surface_or_poly, Surface):
+        feature_surface = surface_or_poly
+    field = size_field(size, h_scale, gauge_centres, gauge_extent, gauge_width, h_factor,
+                       surface=feature_surface if mesher == "gmsh" else None)
     s, h_far, h_gauge = SIZES[size], field.h_far, field.h_gauge
     surface, layers = None, None
     is_surface = isinstance(surface_or_poly, Surface)
@@ -316,10 +378,14 @@ def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gau
     if is_surface and mesher == "sweep":
         mesher = "gmsh"                          # a closed surface is not an extrusion
     if mesher == "gmsh":
+        from dataclasses import replace
+
         from flexure import gmsh_mesh
         if is_surface:
             surface = surface_or_poly
-            mesh = gmsh_mesh.mesh_surface(surface, field, order)
+            # a triangulated surface is its facets: no curvature to resolve (gmsh would read every
+            # fold between facets as a tight radius and refine along it)
+            mesh = gmsh_mesh.mesh_surface(surface, replace(field, curvature_elements=0.0), order)
         else:
             mesh = (gmsh_mesh.mesh_spoke_disc(exact_disc, field, order) if exact_disc is not None else
                     gmsh_mesh.mesh_extrusion(surface_or_poly, thickness, field, order))

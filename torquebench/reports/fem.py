@@ -177,7 +177,9 @@ FEM_PLAN = {
                                   ("tetgen", 2): (2.0, math.sqrt(2.0), 1.0, 1 / math.sqrt(2.0)),
                                   ("scikit-fem", 2): (1.0,)},
 }
-FEM_QUICK = {"paper disc": {("gmsh", 1): (4.0, 2.0, 1.0), ("tetgen", 1): (4.0,), ("scikit-fem", 2): (4.0,)}}
+#: the tests' quick plan. gmsh P1 from h × 2: at h × 4 the curvature sizing leaves 3 elements per turn,
+#: so the fillets there are a different (cruder) solid and that level does not follow the trend
+FEM_QUICK = {"paper disc": {("gmsh", 1): (2.0, math.sqrt(2.0), 1.0), ("tetgen", 1): (4.0,), ("scikit-fem", 2): (4.0,)}}
 FEM_FIGURES = {"gauge_strain_per_Nm": "gauge strain per N·m", "torsional_stiffness_Nm_per_rad": "torsional stiffness"}
 OUTSIDE = "scikit-fem"
 

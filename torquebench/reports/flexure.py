@@ -134,14 +134,13 @@ def build(out_dir: Path) -> list[Path]:
          f"{fine['crosstalk_single_arm_percent']['Mx_per_Nm']:.0f} / "
          f"{fine['crosstalk_single_arm_percent']['My_per_Nm']:.0f} |", "",
          "The torsional stiffness converges slowly: the rigid bore coupling and the clamped bolt-hole "
-         "walls meet the free faces at sharp edges (stress singularities), and the stiffness still "
-         "falls without settling to a rate (coarse size × 1, × 0.71, × 0.5, × 0.35: 1776, 1765, 1756, "
-         "1730 N·m/rad at 43k, 71k, 138k, 309k DOFs, the last two from scikit-fem, "
-         "`benchmarks/fem_reference.py`): the far element size (the 2.2 mm thickness) is not small against "
-         "the bolt holes that hold the disc (3.2 mm) until × 0.5. `torquebench flexure` reports it as "
-         "value ± its estimate (observed order at the 0.5 floor: ± 4.0 % on the default levels, which "
-         "brackets the 2.0 % to the × 0.35 reference). The gauge strain settles (57.34, 57.57, 57.44 "
-         "µε/N·m at × 0.71, 0.5, 0.35: within 0.4 %).\n",
+         "walls meet the free faces at sharp edges (stress singularities, energy error ~ h^(2λ), λ ≈ 0.5), "
+         "and the stiffness still falls at the finest level computed (coarse size × 1, × 0.71, × 0.5, "
+         "× 0.42: 1728, 1721, 1714, 1711 N·m/rad at 68k, 110k, 216k, 303k DOFs; "
+         "tests/data/fem_reference/levels.json, `benchmarks/fem_reference.py`). `torquebench flexure` "
+         "reports it as value ± its estimate (± 3.4 % on the default levels, at the nominal order 1, "
+         "which brackets the ≥ 0.56 % to the × 0.42 level). The gauge strain settles (57.58, 57.43, "
+         "57.44, 57.43 µε/N·m at the same sizes: within 0.01 % from × 0.71 down).\n",
          "The single-arm leak is what one gauge alone sees of an off-axis moment: the bridge cancels "
          "it only as well as its arms match. Arms mismatched by 1 % (a typical gauge-factor "
          "tolerance) leak about 1 % of it, i.e. "
