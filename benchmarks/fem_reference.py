@@ -112,12 +112,12 @@ def project_level(design, h_factor: float) -> dict:
     """The project's own answer on one level (flexure.analysis.analyze), in the form that
     tests/data/fem_reference/levels.json stores and flexure.convergence estimates from."""
     from flexure.analysis import analyze
+    from flexure.convergence import level_record
 
     res, _ = analyze(design, h_factor=h_factor)
-    side = min(min(g.length_m, g.width_m) for g in design.gauges)
-    return {"h_factor": h_factor, "dofs": int(res["dofs"]), "gauge_elements": side / res["mesh"]["h_gauge_m"],
-            "gauge_strain_per_Nm": res["gauge_strain_per_Nm"],
-            "torsional_stiffness_Nm_per_rad": res["torsional_stiffness_Nm_per_rad"],
+    lv = level_record(design, res, h_factor)
+    return {**{k: lv[k] for k in ("h_factor", "dofs", "gauge_elements", "gauge_strain_per_Nm",
+                                  "torsional_stiffness_Nm_per_rad")},
             "gauge_arm_imbalance": res["gauge_arm_imbalance"], "min_dihedral_deg": res["mesh"]["min_dihedral_deg"]}
 
 

@@ -32,6 +32,7 @@ import numpy as np
 from flexure.design import Design, load_design
 from flexure.errors import InputError
 from flexure.gauges import bridge_strains, read_footprint
+from flexure.mesh import TET_EDGES
 from flexure.post import element_nodal_strains, nodal_average, stress_from_strain, von_mises
 
 CASES = ("Mz", "Fx", "Fy", "Fz", "Mx", "My")
@@ -122,7 +123,6 @@ def _selections(design: Design, mesh):
 
     def with_mid_edges(chosen: np.ndarray) -> np.ndarray:
         if mesh.order == 2:
-            from flexure.mesh import TET_EDGES
             for j, (a, b) in enumerate(TET_EDGES):
                 mid = mesh.tets[:, 4 + j]
                 chosen[mid[chosen[mesh.tets[:, a]] & chosen[mesh.tets[:, b]] & bnodes[mid]]] = True

@@ -143,6 +143,14 @@ def _attach(res: dict, levels: list[dict], order: int) -> dict:
     return res
 
 
+def level_record(design, res: dict, h_factor: float) -> dict:
+    """One mesh level as the estimate uses it: its size factor, DOFs, time, elements across the
+    narrowest gauge grid side (``usable_levels``) and the FIGURES."""
+    side = min(min(g.length_m, g.width_m) for g in design.gauges)
+    return {"h_factor": float(h_factor), "dofs": int(res["dofs"]), "total_s": res["total_s"],
+            "gauge_elements": float(side / res["mesh"]["h_gauge_m"]), **{k: res[k] for k in FIGURES}}
+
+
 def relative_error(res: dict, key: str) -> float:
     v = res.get(key)
     e = res.get(f"{key}_error_estimate", math.nan)
@@ -163,16 +171,13 @@ def analyze_with_error(design, size: str | None = None, order: int | None = None
         raise InputError(f"--rtol: must be in (0, 1), got {rtol!r}")
     levels, res, fields = [], None, None
     factors = list(factors)
-    gauge_side = min(min(g.length_m, g.width_m) for g in design.gauges)
 
     def run(f):
         nonlocal res, fields
         if progress:
             print(f"flexure: mesh level h × {f:.3g}", file=sys.stderr)
         res, fields = analyze(design, size, order, progress=progress, h_factor=f, max_elements=max_elements)
-        levels.append({"h_factor": float(f), "dofs": int(res["dofs"]), "total_s": res["total_s"],
-                       "gauge_elements": float(gauge_side / res["mesh"]["h_gauge_m"]),
-                       **{k: res[k] for k in FIGURES}})
+        levels.append(level_record(design, res, f))
 
     for f in factors:
         run(f)

@@ -171,13 +171,13 @@ def read_footprint(gauges: list[Gauge], mesh, U) -> np.ndarray:
     discontinuous integrand), the read-out carries no quadrature error that changes erratically
     from one mesh to the next. A grid not covered by flat faces in its plane (a curved face) is
     read with the Gauss rule (``read``)."""
-    from flexure.post import _newton_xi, gradient_at, strain_from_gradient
+    from flexure.post import _newton_xi, gradient_at, strain_at, strain_from_gradient
 
     out = []
     for g in gauges:
         pieces = footprint_pieces(g, mesh)
         if pieces is None:
-            out.append(read([g], lambda p: _strain_at(mesh, U, p))[0])
+            out.append(read([g], lambda p: strain_at(mesh, U, p))[0])
             continue
         elems, pts, w = pieces
         V = mesh.points[mesh.corner_tets[elems]]
@@ -190,9 +190,3 @@ def read_footprint(gauges: list[Gauge], mesh, U) -> np.ndarray:
         e_aa = np.einsum("i,k...ij,j->k...", a, eps, a)
         out.append(np.tensordot(w, e_aa, axes=1))
     return np.asarray(out)
-
-
-def _strain_at(mesh, U, p):
-    from flexure.post import strain_at
-
-    return strain_at(mesh, U, p)

@@ -42,8 +42,8 @@ def _size_field(gmsh, field) -> None:
     c = np.asarray(field.centres, float).reshape(-1, 3) * MM
     h0, h1, r0, g = field.h_gauge * MM, field.h_far * MM, field.r_gauge * MM, field.grading
 
-    e0 = np.asarray(field.edges, float).reshape(-1, 2, 3)[:, 0] * MM
-    ev = np.asarray(field.edges, float).reshape(-1, 2, 3)[:, 1] * MM - e0
+    edges = np.asarray(field.edges, float).reshape(-1, 2, 3) * MM
+    e0, ev = edges[:, 0], edges[:, 1] - edges[:, 0]
     ev2 = np.maximum((ev * ev).sum(1), 1e-300)
     he = np.asarray(field.h_edge, float) * MM
 
@@ -133,7 +133,10 @@ def mesh_extrusion(poly, height: float, field, order: int = 1, where: str = "mes
 def mesh_surface(surface, field, order: int = 1, where: str = "mesh", angle_deg: float = 40.0):
     """Re-mesh a closed triangulated surface (STL, m) and its volume with the size field: the
     triangles are classified into patches (dihedral angle > ``angle_deg`` = sharp edge), each patch
-    re-parametrised and re-triangulated at the field's size, then the volume is meshed."""
+    re-parametrised and re-triangulated at the field's size, then the volume is meshed. The
+    field's curvature term is not used: a triangulated surface is its facets, and gmsh would read
+    every fold between facets as a tight radius and refine along it."""
+    from dataclasses import replace
 
     def build(gmsh):
         gmsh.model.add("stl")
@@ -148,7 +151,7 @@ def mesh_surface(surface, field, order: int = 1, where: str = "mesh", angle_deg:
         gmsh.model.geo.addVolume([loop])
         gmsh.model.geo.synchronize()
 
-    return _session(build, field, where, order)
+    return _session(build, replace(field, curvature_elements=0.0), where, order)
 
 
 def mesh_step(path, unit_m: float, field, order: int = 1, where: str = "geometry.file"):

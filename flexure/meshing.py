@@ -378,14 +378,10 @@ def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gau
     if is_surface and mesher == "sweep":
         mesher = "gmsh"                          # a closed surface is not an extrusion
     if mesher == "gmsh":
-        from dataclasses import replace
-
         from flexure import gmsh_mesh
         if is_surface:
             surface = surface_or_poly
-            # a triangulated surface is its facets: no curvature to resolve (gmsh would read every
-            # fold between facets as a tight radius and refine along it)
-            mesh = gmsh_mesh.mesh_surface(surface, replace(field, curvature_elements=0.0), order)
+            mesh = gmsh_mesh.mesh_surface(surface, field, order)
         else:
             mesh = (gmsh_mesh.mesh_spoke_disc(exact_disc, field, order) if exact_disc is not None else
                     gmsh_mesh.mesh_extrusion(surface_or_poly, thickness, field, order))

@@ -76,11 +76,12 @@ def _gs_src(k: int) -> str:
 
 
 def _kernel(name: str, k: int):
-    """The numba loop ``name`` for exactly k ≤ KMAX columns (flexure._multirhs_loops, generated
-    from the two sources above by ``python -m flexure.multirhs``; numba caches the compiled code)."""
+    """The numba loop ``name`` ("spmm" or "block_gs") for exactly k ≤ KMAX columns
+    (flexure._multirhs_loops, generated from the two sources above by ``python -m flexure.multirhs``;
+    numba caches the compiled code)."""
     from flexure import _multirhs_loops
 
-    return getattr(_multirhs_loops, f"{'spmm' if name == 'spmm' else 'block_gs'}_{k}")
+    return getattr(_multirhs_loops, f"{name}_{k}")
 
 
 def _groups(k: int):
@@ -101,10 +102,10 @@ def block_gauss_seidel(A, Dinv: np.ndarray, X: np.ndarray, B: np.ndarray, forwar
     """One block Gauss–Seidel sweep in place on X (n, k) for A X = B (CSR A, Dinv (n/3, 3, 3))."""
     for g in _groups(X.shape[1]):
         if g.start == 0 and g.stop == X.shape[1]:
-            _kernel("gs", X.shape[1])(A.indptr, A.indices, A.data, Dinv, X, np.ascontiguousarray(B), forward)
+            _kernel("block_gs", X.shape[1])(A.indptr, A.indices, A.data, Dinv, X, np.ascontiguousarray(B), forward)
         else:
             Xg = np.ascontiguousarray(X[:, g])
-            _kernel("gs", g.stop - g.start)(A.indptr, A.indices, A.data, Dinv, Xg,
+            _kernel("block_gs", g.stop - g.start)(A.indptr, A.indices, A.data, Dinv, Xg,
                                              np.ascontiguousarray(B[:, g]), forward)
             X[:, g] = Xg
 
