@@ -4,7 +4,8 @@ The size at a point is the project's ``meshing.SizeField``, given to gmsh as its
 the smallest of
 
     h_gauge + g (d − r_gauge)          d: distance to the nearest gauge centre   (≥ h_gauge)
-    h_edge + g (d_e − r_gauge)         d_e: distance to a sharp re-entrant edge  (≥ h_edge)
+    meshing.edge_size(h_edge, d_e)     d_e: distance to a singular edge (a sharp re-entrant edge or
+                                       a support's boundary), graded √d_e down to h_edge / 4
     2πR / curvature_elements           on a curved edge or face of radius R (gmsh's own, CAD only)
     h_far
 
@@ -22,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from flexure.errors import InputError
+from flexure.meshing import edge_size
 
 MM = 1e3                        # metres → gmsh units (mm)
 #: gmsh options of the volume mesh: Delaunay 3-D, gmsh's optimiser on every tetrahedron of quality
@@ -56,7 +58,7 @@ def _size_field(gmsh, field) -> None:
             w = np.array((x, y, z)) - e0
             t = np.clip((w * ev).sum(1) / ev2, 0.0, 1.0)
             d = np.sqrt(((w - t[:, None] * ev) ** 2).sum(1))
-            h = min(h, float((he + g * np.maximum(d - r0, 0.0)).min()))
+            h = min(h, float(edge_size(he, d, g, r0).min()))
         return h
 
     gmsh.model.mesh.setSizeCallback(size)
