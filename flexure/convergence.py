@@ -63,6 +63,12 @@ RTOL_FIGURES = ("gauge_strain_per_Nm", "torsional_stiffness_Nm_per_rad")
 #: written as powers of 2 (2 ** -0.5, not 1 / √2: they differ in the last bit, and gmsh then makes a
 #: different mesh, 50190 instead of 49881 DOFs on the STEP part: tests/data/fem_reference/levels.json)
 FACTORS = (2.0 ** 0.5, 1.0, 2.0 ** -0.5)
+#: P1 locks in bending: its levels are pre-asymptotic and their changes understate the error
+#: (paper disc, default levels: stiffness 18 % above P2's limit with an estimate of 12.5 %, observed
+#: order 1.30 from changes of 118 and 75 N·m/rad while the errors fell only from 508 to 315)
+P1_WARNING = ("order 1 (linear tetrahedra) is too stiff in bending until many elements span the thickness: its "
+              "figures are biased (stiffness high, strains low) by more than the level-to-level error estimate "
+              "may show; use order 2 for numbers")
 #: a level enters the estimate only with at least this many elements across the gauge grid
 MIN_GAUGE_ELEMENTS = 1.0
 MAX_DOFS = 2_000_000
@@ -213,6 +219,8 @@ def analyze_with_error(design, size: str | None = None, order: int | None = None
             if relative_error(res, k) > rtol and not any(w.startswith(f"{k}:") for w in warnings):
                 warnings.append(f"{k}: discretization error estimate {relative_error(res, k):.2%} exceeds "
                                 f"--rtol {rtol:g}")
+    if order_used == 1:
+        warnings.append(P1_WARNING)
     imb = res.get("gauge_arm_imbalance", math.nan)
     if len(design.gauges) == 4 and math.isfinite(imb) and imb > 0.02:
         warnings.append(f"gauge arms differ by {imb:.1%} under torque: a symmetric layout should read "
