@@ -4,8 +4,8 @@ The size at a point is the project's ``meshing.SizeField``, given to gmsh as its
 the smallest of
 
     h_gauge + g (d − r_gauge)          d: distance to the nearest gauge centre   (≥ h_gauge)
-    meshing.edge_size(h_edge, d_e)     d_e: distance to a singular edge (a sharp re-entrant edge or
-                                       a support's boundary), graded √d_e down to h_edge / 4
+    meshing.edge_size(h_edge, d_e)     d_e: distance to a sharp re-entrant edge, graded as √d_e
+                                       down to h_edge / 4 at the edge
     2πR / curvature_elements           on a curved edge or face of radius R (gmsh's own, CAD only)
     h_far
 

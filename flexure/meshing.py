@@ -71,9 +71,10 @@ def edge_size(h_edge, d, grading: float, r_plateau: float):
     resolves it about as well as the smooth field elsewhere (Babuška, Kellogg & Pitkäranta 1979:
     h ~ d^(1−μ), μ < λ); the floor h_edge / 4 keeps the grading self-similar from level to level,
     so the singular part still converges as h^(2λ), with a far smaller constant. On the thick disc
-    (sharp spoke roots) the stiffness at h × 1/√2 went from 3278 to 3187 N·m/rad (its limit is
-    about 3160), for 1.5× the DOFs. The same grading at the supports' edges (bolt-hole walls, the
-    bore) made it no better (3191) for 1.9× the DOFs, so it is not applied there."""
+    (sharp spoke roots) the stiffness at h × 1/√2 went from 3278 to 3188 N·m/rad (its limit:
+    3165 ± 10, tests/data/fem_reference/levels.json), for 1.5× the DOFs; a floor of h_edge / 8 gave
+    the same (3187), h_edge / 2 less (3204). The same grading at the supports' edges (bolt-hole
+    walls, the bore) made it no better (3191) for 1.9× the DOFs, so it is not applied there."""
     h_edge, d = np.asarray(h_edge, float), np.asarray(d, float)
     graded = np.maximum(h_edge / EDGE_REFINEMENT, h_edge * np.sqrt(d / (2.0 * h_edge)))
     return np.minimum(h_edge + grading * np.maximum(d - r_plateau, 0.0), graded)
