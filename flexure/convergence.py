@@ -23,10 +23,12 @@ rate to extrapolate with: the estimate then uses the nominal order and, for |Q_3
 of the change seen and the change the first one implies at that order (on the thick disc's STL the
 last change was 0.02 % while the answer was 0.14 % off). An order below 1 is slower than any
 asymptotic rate here (every singularity of these parts has λ ≥ ½, so figures converge at least as
-h^(2λ) = h), but it is not clipped at 1: it means the change still grows between the levels
-(pre-asymptotic), and P1's locked stiffness on the paper disc (observed order 0.75) is 18.5 %
-above the limit, which an estimate at order 1 (12.9 %) would not bracket. At 0.5 the estimate is
-3–6× the true error on three of the ten reference figures (tests/data/fem_reference/levels.json). Oscillatory convergence (the two
+h^(2λ) = h), but it is not clipped at 1: it says the changes are not yet shrinking (pre-asymptotic
+levels), and extrapolating them at a faster rate would understate a change still growing (P1's
+locked stiffness on the paper disc showed order 0.75 on one set of meshes, 18.5 % off, where an
+order-1 estimate gives 12.9 %). The price: where two changes are about equal the estimate is wide
+(3.8× and 8.9× the far end of the true error on two of the ten reference figures,
+tests/data/fem_reference/levels.json). Oscillatory convergence (the two
 changes of opposite sign) has no order: e = F_s · max(|Q_1 − Q_2|, |Q_2 − Q_3|), stated as such.
 The estimate is a bound-like figure (not a 1σ).
 
