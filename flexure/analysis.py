@@ -247,8 +247,12 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
     eps = bridge_strains(design.gauges, readings)                           # (cases, 4)
     T = design.rated_torque_Nm
     gf = design.gauge_factor
-    ratio_rated = float(output_ratio(eps[0] * T, "full_bending", gf, design.gauge_resistance_ohm))
-    ratio_unit = output_ratio(eps, "full_bending", gf, design.gauge_resistance_ohm)       # (cases,)
+    flagged = any(w in warnings for w in ("ill_conditioned", "large_residual", "near_incompressible"))
+    if flagged:         # no bridge output from a flagged solve (its strains may be anything)
+        ratio_rated, ratio_unit = math.nan, np.full(len(CASES), math.nan)
+    else:
+        ratio_rated = float(output_ratio(eps[0] * T, "full_bending", gf, design.gauge_resistance_ohm))
+        ratio_unit = output_ratio(eps, "full_bending", gf, design.gauge_resistance_ohm)   # (cases,)
     sens = ratio_rated / T * 1e3
     eps_ref = float((eps[0, 0] - eps[0, 1] + eps[0, 2] - eps[0, 3]) / 4.0)
     crosstalk = {CROSSTALK_KEYS[c]: float(100.0 * ratio_unit[i] / ratio_rated)
@@ -272,7 +276,6 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
     cfg = _sensor_config(design)
     eps_min_noise = min_detectable_strain(cfg, method="noise")
     eps_min_enob = min_detectable_strain(cfg, method="resolution", n_bits=cfg.enob)
-    flagged = any(w in warnings for w in ("ill_conditioned", "large_residual", "near_incompressible"))
     nan_if = (lambda v: math.nan if flagged else v)
     good_ref = eps_ref > 0
     results = {

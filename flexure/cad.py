@@ -36,7 +36,10 @@ def _quiet_stdout():
 
 def load_step(path: str | Path, unit_m: float = 1e-3, size_for=None, where: str = "geometry.file") -> Surface:
     """Surface (m) of the one solid in a STEP file. ``size_for(scale_m) -> SizeField`` gives the
-    surface mesh size (m) from the solid's smallest bounding-box extent."""
+    surface mesh size (m) from the solid's smallest bounding-box extent, never coarser than 16
+    triangles per turn of a curved face: a fillet tessellated coarser folds by more than
+    meshing.EDGE_ANGLE_DEG between its triangles and would read as a sharp re-entrant edge (the
+    STEP part's 1 mm fillets did at h × √2 and h × 1/√2 but not at h × 1)."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{where}: {path} does not exist")
@@ -62,7 +65,7 @@ def load_step(path: str | Path, unit_m: float = 1e-3, size_for=None, where: str 
             if size_for is not None:
                 field = size_for(scale_m)
                 gmsh.model.mesh.setSizeCallback(
-                    lambda dim, tag, x, y, z, lc: float(field(np.array([[x, y, z]]) * unit_m)[0]) / unit_m)
+                    lambda dim, tag, x, y, z, lc: min(lc, float(field(np.array([[x, y, z]]) * unit_m)[0]) / unit_m))
                 gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
                 gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
             gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 16)     # elements per 2π of a hole

@@ -21,7 +21,14 @@ and the error of the finest answer is estimated as the grid convergence index (R
 p is clipped to [0.5, 4]. An order above the nominal one (FIGURES) is a lucky pair of levels, not a
 rate to extrapolate with: the estimate then uses the nominal order and, for |Q_3 − Q_2|, the larger
 of the change seen and the change the first one implies at that order (on the thick disc's STL the
-last change was 0.02 % while the answer was 0.14 % off). Oscillatory convergence (the two
+last change was 0.02 % while the answer was 0.14 % off). An order below 1 is slower than any
+asymptotic rate here (every singularity of these parts has λ ≥ ½, so figures converge at least as
+h^(2λ) = h), but it is not clipped at 1: it says the changes are not yet shrinking (pre-asymptotic
+levels), and extrapolating them at a faster rate would understate a change still growing (P1's
+locked stiffness on the paper disc showed order 0.75 on one set of meshes, 18.5 % off, where an
+order-1 estimate gives 12.9 %). The price: where two changes are about equal the estimate is wide
+(3.8× and 8.9× the far end of the true error on two of the ten reference figures,
+tests/data/fem_reference/levels.json). Oscillatory convergence (the two
 changes of opposite sign) has no order: e = F_s · max(|Q_1 − Q_2|, |Q_2 − Q_3|), stated as such.
 The estimate is a bound-like figure (not a 1σ).
 
@@ -58,6 +65,12 @@ RTOL_FIGURES = ("gauge_strain_per_Nm", "torsional_stiffness_Nm_per_rad")
 #: written as powers of 2 (2 ** -0.5, not 1 / √2: they differ in the last bit, and gmsh then makes a
 #: different mesh, 50190 instead of 49881 DOFs on the STEP part: tests/data/fem_reference/levels.json)
 FACTORS = (2.0 ** 0.5, 1.0, 2.0 ** -0.5)
+#: P1 locks in bending: its levels are pre-asymptotic and their changes understate the error
+#: (paper disc, default levels: stiffness 18 % above P2's limit with an estimate of 12.5 %, observed
+#: order 1.30 from changes of 118 and 75 N·m/rad while the errors fell only from 508 to 315)
+P1_WARNING = ("order 1 (linear tetrahedra) is too stiff in bending until many elements span the thickness: its "
+              "figures are biased (stiffness high, strains low) by more than the level-to-level error estimate "
+              "may show; use order 2 for numbers")
 #: a level enters the estimate only with at least this many elements across the gauge grid
 MIN_GAUGE_ELEMENTS = 1.0
 MAX_DOFS = 2_000_000
@@ -208,6 +221,8 @@ def analyze_with_error(design, size: str | None = None, order: int | None = None
             if relative_error(res, k) > rtol and not any(w.startswith(f"{k}:") for w in warnings):
                 warnings.append(f"{k}: discretization error estimate {relative_error(res, k):.2%} exceeds "
                                 f"--rtol {rtol:g}")
+    if order_used == 1:
+        warnings.append(P1_WARNING)
     imb = res.get("gauge_arm_imbalance", math.nan)
     if len(design.gauges) == 4 and math.isfinite(imb) and imb > 0.02:
         warnings.append(f"gauge arms differ by {imb:.1%} under torque: a symmetric layout should read "

@@ -4,7 +4,8 @@ The size at a point is the project's ``meshing.SizeField``, given to gmsh as its
 the smallest of
 
     h_gauge + g (d − r_gauge)          d: distance to the nearest gauge centre   (≥ h_gauge)
-    h_edge + g (d_e − r_gauge)         d_e: distance to a sharp re-entrant edge  (≥ h_edge)
+    meshing.edge_size(h_edge, d_e)     d_e: distance to a sharp re-entrant edge, graded as √d_e
+                                       down to h_edge / 4 at the edge
     2πR / curvature_elements           on a curved edge or face of radius R (gmsh's own, CAD only)
     h_far
 
@@ -22,17 +23,24 @@ from __future__ import annotations
 import numpy as np
 
 from flexure.errors import InputError
+from flexure.meshing import edge_size
 
 MM = 1e3                        # metres → gmsh units (mm)
 #: gmsh options of the volume mesh: Delaunay 3-D, gmsh's optimiser on every tetrahedron of quality
-#: below 0.5 (default 0.3), Netgen's optimiser, 10 smoothing passes. On the paper disc's exact solid
-#: (coarse) the minimum dihedral angle is 9.8° with the defaults, 10.4° with the threshold and
-#: 11.4° with both (measured; the former polygonal profile gave 6.0°, whatever these options).
-#: A re-meshed STL keeps a few 6–8° tetrahedra against its folds (the thick disc's STL: 6.3° at the
-#: answer level); gmsh's MeshAdapt surface algorithm (Mesh.Algorithm 1) gave 9.4° there but moved
-#: the re-meshed volume 0.3 % further from the STL's (0.91 % against 0.60 %), so it is not used.
+#: below 0.7 (default 0.3), Netgen's optimiser, 10 smoothing passes; ``_volume_tets`` then runs
+#: gmsh's optimiser once more on the Netgen-optimised mesh. Minimum dihedral angle at the answer
+#: level (h × 1/√2), measured: paper disc 13.5°, re-entrant 14.3°, thick disc 12.6°, STEP part 11.0°
+#: (threshold 0.5 without the last pass: 12.3°, 9.9°, 14.1°, 11.9°; threshold 0.9: 14.6°, 16.2°,
+#: 10.8°, 12.1°), for ±1 % elements and ≤ 10 % more meshing time; at h × 1: 12.9–16.3° (STEP
+#: 10.3°). The former polygonal profile gave 6.0°, whatever these options. HXT (Algorithm3D 10)
+#: gave 5.9–7.7° on three of the four. A re-meshed STL keeps a few 5–8° tetrahedra whatever the
+#: volume options (the thick disc's STL: 5.3° at the answer level): they stand on needle surface
+#: triangles (angles 4°/172°/4°) of the re-parametrised walls of its 12-gon hub bolt holes (0.57 mm
+#: facets, 30° folds), which no volume optimiser may move. gmsh's MeshAdapt surface algorithm
+#: (Mesh.Algorithm 1) gave 10.5° there but 9 % fewer elements, 30 % more time and a re-meshed volume
+#: 0.65 % off the STL's (0.46 % with the default), so it is not used.
 VOLUME_OPTIONS = {"Mesh.Algorithm3D": 1, "Mesh.Optimize": 1, "Mesh.OptimizeNetgen": 1,
-                  "Mesh.OptimizeThreshold": 0.5, "Mesh.Smoothing": 10}
+                  "Mesh.OptimizeThreshold": 0.7, "Mesh.Smoothing": 10}
 
 
 def _size_field(gmsh, field) -> None:
@@ -56,7 +64,7 @@ def _size_field(gmsh, field) -> None:
             w = np.array((x, y, z)) - e0
             t = np.clip((w * ev).sum(1) / ev2, 0.0, 1.0)
             d = np.sqrt(((w - t[:, None] * ev) ** 2).sum(1))
-            h = min(h, float((he + g * np.maximum(d - r0, 0.0)).min()))
+            h = min(h, float(edge_size(he, d, g, r0).min()))
         return h
 
     gmsh.model.mesh.setSizeCallback(size)
@@ -67,11 +75,13 @@ def _size_field(gmsh, field) -> None:
 
 
 def _volume_tets(gmsh, where: str):
-    """Generate the 3-D mesh (Delaunay, Netgen-optimised) → (points m, corner tets)."""
+    """Generate the 3-D mesh (Delaunay, gmsh- and Netgen-optimised, then gmsh's optimiser once
+    more) → (points m, corner tets)."""
     for key, value in VOLUME_OPTIONS.items():
         gmsh.option.setNumber(key, value)
     try:
         gmsh.model.mesh.generate(3)
+        gmsh.model.mesh.optimize("", False, 1)       # after Netgen: lifts the worst tetrahedra
     except Exception as exc:
         raise InputError(f"{where}: gmsh could not mesh the volume ({str(exc).splitlines()[0]})") from None
     tags, coords, _ = gmsh.model.mesh.getNodes()

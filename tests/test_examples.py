@@ -8,6 +8,7 @@ and `estimate` finds the applied contact in it. examples/leg_poke/: the independ
 import json
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +27,16 @@ def _tb(*argv, cwd=ROOT):
                           capture_output=True, text=True, timeout=300)
 
 
+def _declared_sigma(noise_toml: Path, columns: list[str]) -> dict[str, float]:
+    """Column → the 1σ noise the log's declaration gives it (torques, force/torque sensor)."""
+    noise = tomllib.loads(noise_toml.read_text())["noise"]
+    taus = [c for c in columns if c.startswith("tau")]
+    tau_sigma = np.broadcast_to(np.asarray(noise["torque_sigma_Nm"], float), (len(taus),))
+    out = dict(zip(taus, tau_sigma.tolist()))
+    out.update({c: float(v) for c, v in zip(("Fx", "Fz", "My"), noise["ft_sigma"]) if c in columns})
+    return out
+
+
 @pytest.mark.parametrize("scene", SCENES)
 def test_shipped_sim_log_is_what_the_simulator_makes(scene, tmp_path):
     proc = _tb("simulate", ROOT / "scenes" / f"{scene}.toml", "--out", tmp_path / "log.csv")
@@ -34,8 +45,19 @@ def test_shipped_sim_log_is_what_the_simulator_makes(scene, tmp_path):
                           (tmp_path / "log.truth.csv", SIM / f"{scene}.truth.csv")):
         a, b = pd.read_csv(made), pd.read_csv(shipped)
         assert list(a.columns) == list(b.columns) and a.shape == b.shape
-        # same seed and integrator: equal up to the CSV's printed digits and BLAS round-off
-        np.testing.assert_allclose(a.to_numpy(), b.to_numpy(), rtol=1e-6, atol=1e-7, equal_nan=True)
+        # same seed and integrator. On one machine the files are equal to the printed digits; on
+        # another CPU the LU round-off inside the adaptive BDF can change an accepted step: the
+        # integrated states then agree to the integrator's tolerance (≤ 10 × (rtol·|column| + atol)
+        # accumulated; measured up to 4.6×), and the sensor channels, which the controller's gains and the
+        # dynamics amplify, to far below the noise the log declares (< 1 % of its σ; measured 0.4 %)
+        integ = tomllib.loads((ROOT / "scenes" / f"{scene}.toml").read_text())["integrator"]
+        scale = np.nanmax(np.abs(b.to_numpy()), axis=0)
+        bound = 10.0 * (integ["rtol"] * scale + integ["atol"]) + 1e-12
+        for col, sigma in _declared_sigma(SIM / f"{scene}.noise.toml", list(b.columns)).items():
+            bound[list(b.columns).index(col)] = 0.01 * sigma
+        diff = np.nan_to_num(np.abs(a.to_numpy() - b.to_numpy()))
+        np.testing.assert_array_less(diff, np.broadcast_to(bound, diff.shape))
+        assert np.array_equal(np.isnan(a.to_numpy()), np.isnan(b.to_numpy()))
 
 
 @pytest.mark.parametrize("scene", SCENES)

@@ -6,6 +6,7 @@ from pathlib import Path
 import pytest
 
 from flexure.analysis import parse_sweep
+from flexure.convergence import P1_WARNING
 from flexure.errors import InputError
 from torquebench.cli import main
 
@@ -40,13 +41,14 @@ def test_json_keys_vtu_and_png(capsys, tmp_path):
     # edges): it has no converged value, and its estimate must not call it converged (1.17 on a
     # safety factor of 5.59 measured, 21 %)
     assert data["safety_factor_error_estimate"] > 0.1 * data["safety_factor"]
-    # P1 locks: its stiffness is far above P2's, and its estimate must say so: at least the distance
-    # to the finest P2 level of tests/data/fem_reference/levels.json (itself still above the
-    # converged stiffness), which bounds P1's true error from below
+    # P1 locks: its stiffness is far above P2's limit (tests/data/fem_reference/levels.json: 18 % at
+    # these levels). Its changes from level to level understate that (the estimate is 12.5 %, measured),
+    # so the answer must not look converged, and must say that P1 is biased beyond its estimate
     k = data["torsional_stiffness_Nm_per_rad"]
     k_p2 = json.loads((Path(__file__).parent / "data" / "fem_reference" / "levels.json").read_text())[
         "references"]["paper_disc"]["torsional_stiffness_Nm_per_rad"]["value"]
-    assert k > k_p2 and data["torsional_stiffness_Nm_per_rad_error_estimate"] >= k - k_p2
+    assert k > 1.1 * k_p2 and data["torsional_stiffness_Nm_per_rad_error_estimate"] > 0.1 * k
+    assert P1_WARNING in data["warnings"]
     assert [lv["h_factor"] for lv in data["discretization_levels"]] == pytest.approx([2 ** 0.5, 1, 2 ** -0.5])
 
 

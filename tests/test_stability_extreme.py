@@ -127,7 +127,10 @@ def test_float32_sensor_log_changes_the_estimate_by_far_less_than_its_error_esti
 
 def test_float32_calibration_csv_changes_the_fit_by_far_less_than_its_error_estimate(tmp_path):
     """The shipped session with readings rounded to float32 and written with 7 significant digits:
-    the posterior (exact and emcee, same seed) moves by < 1 % of the coefficients' σ."""
+    the exact posterior moves by < 1 % of the coefficients' σ, and the emcee means (same seed) by
+    less than their Monte Carlo error (3 × the standard error of the difference): once one
+    accept/reject decision flips, the two chains are independent draws (1.4 % of σ on the slope
+    on one machine, 0 on another, where no decision flipped)."""
     src = REPO_ROOT / "calibration" / "data" / "paper_link1_session.csv"
     lines = src.read_text().splitlines()
     header = lines[1].split(",")
@@ -142,4 +145,6 @@ def test_float32_calibration_csv_changes_the_fit_by_far_less_than_its_error_esti
     assert not np.array_equal(a.reading, b.reading)
     fa, fb = fit_session(a, "linear", seed=3), fit_session(b, "linear", seed=3)
     assert np.all(np.abs(fa.exact.beta - fb.exact.beta) < 0.01 * fa.exact.std)
-    assert np.all(np.abs(fa.mean[:2] - fb.mean[:2]) < 0.01 * fa.std[:2])
+    mcse = np.hypot(fa.mc_standard_error[:2], fb.mc_standard_error[:2])
+    assert np.all(np.abs(fa.mean[:2] - fb.mean[:2]) < 3.0 * mcse)
+    assert np.all(mcse < 0.1 * fa.std[:2])                  # and that error is small

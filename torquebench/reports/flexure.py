@@ -53,6 +53,35 @@ def _beam_check():
     return eps_beam, k_beam, rows
 
 
+def _stiffness_paragraph() -> str:
+    """How the paper disc's stiffness and gauge strain converge, from the stored levels
+    (tests/data/fem_reference/levels.json, made by benchmarks/fem_levels.py)."""
+    import json
+
+    from flexure.convergence import FIGURES, richardson, usable_levels
+
+    data = json.loads((Path(__file__).resolve().parents[2] / "tests" / "data" / "fem_reference" / "levels.json").read_text())
+    levels = [lv for lv in data["fine"]["paper_disc"] if lv["h_factor"] <= 1.0 + 1e-9][::2]   # × 1, 0.71, 0.5
+    levels.append(data["fine"]["paper_disc"][-1])                                              # × 0.42
+    k, eps = "torsional_stiffness_Nm_per_rad", "gauge_strain_per_Nm"
+    ref = data["references"]["paper_disc"][k]
+    used, _ = usable_levels(data["levels"]["paper_disc"])
+    answer = used[-1][k]
+    est = richardson([lv["h_factor"] for lv in used], [lv["dofs"] for lv in used], [lv[k] for lv in used], FIGURES[k](2))[0]
+    return ("The torsional stiffness converges slowly: the rigid bore coupling and the clamped bolt-hole walls "
+            "meet the free faces at sharp edges (stress singularities, energy error ~ h^(2λ), λ ≈ 0.5), and the "
+            "stiffness still falls at the finest level computed (coarse size × "
+            + ", × ".join(f"{lv['h_factor']:.2g}" for lv in levels) + ": "
+            + ", ".join(f"{lv[k]:.0f}" for lv in levels) + " N·m/rad at "
+            + ", ".join(f"{lv['dofs'] / 1e3:.0f}k" for lv in levels) + " DOFs). Its limit lies between the finest "
+            f"level and the order-1 extrapolation: {ref['value']:.0f} ± {ref['allowance']:.0f} N·m/rad "
+            "(tests/data/fem_reference/levels.json, `benchmarks/fem_levels.py`). `torquebench flexure` reports "
+            f"the stiffness as value ± its estimate ({answer:.0f} ± {est / answer:.1%} on the default levels, "
+            f"against a distance of {abs(answer - ref['value']) / ref['value']:.2%} ± "
+            f"{ref['allowance'] / ref['value']:.2%} to that limit). The gauge strain settles ("
+            + ", ".join(f"{lv[eps] * 1e6:.2f}" for lv in levels) + " µε/N·m at the same sizes).\n")
+
+
 def build(out_dir: Path) -> list[Path]:
     from bridge.chain import PAPER_STRAIN_PER_NM
     from flexure.analysis import analyze, sweep, sweep_plot, sweep_table
@@ -133,14 +162,7 @@ def build(out_dir: Path) -> list[Path]:
          "| single-arm leak of Mx / My (% of rated output per N·m) | "
          f"{fine['crosstalk_single_arm_percent']['Mx_per_Nm']:.0f} / "
          f"{fine['crosstalk_single_arm_percent']['My_per_Nm']:.0f} |", "",
-         "The torsional stiffness converges slowly: the rigid bore coupling and the clamped bolt-hole "
-         "walls meet the free faces at sharp edges (stress singularities, energy error ~ h^(2λ), λ ≈ 0.5), "
-         "and the stiffness still falls at the finest level computed (coarse size × 1, × 0.71, × 0.5, "
-         "× 0.42: 1728, 1721, 1714, 1711 N·m/rad at 68k, 110k, 216k, 303k DOFs; "
-         "tests/data/fem_reference/levels.json, `benchmarks/fem_reference.py`). `torquebench flexure` "
-         "reports it as value ± its estimate (± 3.4 % on the default levels, at the nominal order 1, "
-         "which brackets the ≥ 0.56 % to the × 0.42 level). The gauge strain settles (57.58, 57.43, "
-         "57.44, 57.43 µε/N·m at the same sizes: within 0.01 % from × 0.71 down).\n",
+         _stiffness_paragraph(),
          "The single-arm leak is what one gauge alone sees of an off-axis moment: the bridge cancels "
          "it only as well as its arms match. Arms mismatched by 1 % (a typical gauge-factor "
          "tolerance) leak about 1 % of it, i.e. "
