@@ -54,18 +54,16 @@ def reference(levels: list[dict], figure: str) -> dict:
 
 
 def build(fine: dict[str, list[dict]]) -> dict:
-    from flexure.convergence import FACTORS, FIGURES as ALL, richardson, usable_levels
+    from flexure.convergence import FACTORS, estimate_from_levels
 
     levels = {n: [lv for lv in fl if any(abs(lv["h_factor"] - f) < 1e-9 for f in FACTORS)]
               for n, fl in fine.items()}
     refs, misses = {}, {}
     for name, fl in fine.items():
         refs[name] = {}
-        used, _ = usable_levels(levels[name])
         for figure in FIGURES:
             ref = reference(fl, figure)
-            e = richardson([lv["h_factor"] for lv in used], [lv["dofs"] for lv in used],
-                           [lv[figure] for lv in used], ALL[figure](2))[0]
+            e = estimate_from_levels(levels[name], figure, 2)[0]
             true = abs(levels[name][-1][figure] - ref["value"])
             ratio = e / (true + ref["allowance"])
             ref.update(estimate_over_far_end=ratio, ratio_checked=bool(ratio <= 3.0),
@@ -80,16 +78,17 @@ def build(fine: dict[str, list[dict]]) -> dict:
 
 
 def main(argv: list[str]) -> int:
-    sys.path.insert(0, str(ROOT))
+    sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
+    from fem_reference import project_level
+
+    from flexure.design import load_design
+
     src = Path(argv[argv.index("--from") + 1]) if "--from" in argv else None
     fine = {}
     for name, path in DESIGNS.items():
         if src is not None:
             fine[name] = [json.loads(line) for line in (src / f"{name}.jsonl").read_text().splitlines() if line]
         else:
-            sys.path.insert(0, str(ROOT / "benchmarks"))
-            from fem_reference import project_level
-            from flexure.design import load_design
             fine[name] = [project_level(load_design(path), f) for f in FINE]
         got = [lv["h_factor"] for lv in fine[name]]
         if not np.allclose(got, FINE, rtol=0, atol=1e-12):

@@ -139,15 +139,20 @@ def usable_levels(levels: list[dict]) -> tuple[list[dict], str]:
                                              "across a gauge grid)" for lv in out))
 
 
+def estimate_from_levels(levels: list[dict], key: str, order: int) -> tuple[float, float, str]:
+    """``richardson`` on the usable levels (``level_record``s) for figure ``key`` of elements of
+    ``order``: (error estimate of the finest level, observed order, method incl. levels left out)."""
+    used, note = usable_levels(levels)
+    e, p, method = richardson([lv["h_factor"] for lv in used], [lv["dofs"] for lv in used],
+                              [lv[key] for lv in used], FIGURES[key](order))
+    return e, p, method + note
+
+
 def _attach(res: dict, levels: list[dict], order: int) -> dict:
     """Error keys beside every figure of ``res`` (the finest level), from the usable levels."""
-    used, note = usable_levels(levels)
-    dofs = [lv["dofs"] for lv in used]
     orders = {}
-    for key, nominal in FIGURES.items():
-        vals = [lv[key] for lv in used]
-        e, p, method = richardson([lv["h_factor"] for lv in used], dofs, vals, nominal(order))
-        method += note
+    for key in FIGURES:
+        e, p, method = estimate_from_levels(levels, key, order)
         res[f"{key}_error_estimate"] = float(e)
         res[f"{key}_error_method"] = method
         orders[key] = None if math.isnan(p) else float(p)

@@ -72,8 +72,8 @@ def edge_size(h_edge, d, grading: float, r_plateau: float):
     h ~ d^(1−μ), μ < λ); the floor h_edge / 4 keeps the grading self-similar from level to level,
     so the singular part still converges as h^(2λ), with a far smaller constant. On the thick disc
     (sharp spoke roots) the stiffness at h × 1/√2 went from 3278 to 3188 N·m/rad (its limit:
-    3165 ± 10, tests/data/fem_reference/levels.json), for 1.5× the DOFs; a floor of h_edge / 8 gave
-    the same (3187), h_edge / 2 less (3204). The same grading at the supports' edges (bolt-hole
+    3165 ± 10, tests/data/fem_reference/levels.json), for 1.5× the DOFs; before the last change of
+    gmsh's optimiser (VOLUME_OPTIONS), floors of h_edge / 2, / 4, / 8 gave 3204, 3186, 3187. The same grading at the supports' edges (bolt-hole
     walls, the bore) made it no better (3191) for 1.9× the DOFs, so it is not applied there."""
     h_edge, d = np.asarray(h_edge, float), np.asarray(d, float)
     graded = np.maximum(h_edge / EDGE_REFINEMENT, h_edge * np.sqrt(d / (2.0 * h_edge)))

@@ -27,13 +27,14 @@ def _tb(*argv, cwd=ROOT):
                           capture_output=True, text=True, timeout=300)
 
 
-def _declared_sigma(noise_toml: Path, columns: list[str]) -> dict[str, float]:
-    """Column → the 1σ noise the log's declaration gives it (torques, force/torque sensor)."""
-    noise = tomllib.loads(noise_toml.read_text())["noise"]
+def _declared_sigma(log: Path, columns: list[str]) -> dict[str, float]:
+    """Column → the 1σ noise the log's declaration (LOG.noise.toml) gives it."""
+    from estimator.noise import read_noise_declaration
+
     taus = [c for c in columns if c.startswith("tau")]
-    tau_sigma = np.broadcast_to(np.asarray(noise["torque_sigma_Nm"], float), (len(taus),))
-    out = dict(zip(taus, tau_sigma.tolist()))
-    out.update({c: float(v) for c, v in zip(("Fx", "Fz", "My"), noise["ft_sigma"]) if c in columns})
+    noise = read_noise_declaration(log, len(taus))
+    out = dict(zip(taus, np.broadcast_to(noise.torque_sigma_Nm, (len(taus),)).tolist()))
+    out.update((c, s) for c, s in zip(("Fx", "Fz", "My"), noise.ft_sigma.tolist()) if c in columns)
     return out
 
 
@@ -53,7 +54,7 @@ def test_shipped_sim_log_is_what_the_simulator_makes(scene, tmp_path):
         integ = tomllib.loads((ROOT / "scenes" / f"{scene}.toml").read_text())["integrator"]
         scale = np.nanmax(np.abs(b.to_numpy()), axis=0)
         bound = 10.0 * (integ["rtol"] * scale + integ["atol"]) + 1e-12
-        for col, sigma in _declared_sigma(SIM / f"{scene}.noise.toml", list(b.columns)).items():
+        for col, sigma in _declared_sigma(SIM / f"{scene}.csv", list(b.columns)).items():
             bound[list(b.columns).index(col)] = 0.01 * sigma
         diff = np.nan_to_num(np.abs(a.to_numpy() - b.to_numpy()))
         np.testing.assert_array_less(diff, np.broadcast_to(bound, diff.shape))

@@ -58,16 +58,15 @@ def _stiffness_paragraph() -> str:
     (tests/data/fem_reference/levels.json, made by benchmarks/fem_levels.py)."""
     import json
 
-    from flexure.convergence import FIGURES, richardson, usable_levels
+    from flexure.convergence import estimate_from_levels
 
     data = json.loads((Path(__file__).resolve().parents[2] / "tests" / "data" / "fem_reference" / "levels.json").read_text())
     levels = [lv for lv in data["fine"]["paper_disc"] if lv["h_factor"] <= 1.0 + 1e-9][::2]   # × 1, 0.71, 0.5
     levels.append(data["fine"]["paper_disc"][-1])                                              # × 0.42
     k, eps = "torsional_stiffness_Nm_per_rad", "gauge_strain_per_Nm"
     ref = data["references"]["paper_disc"][k]
-    used, _ = usable_levels(data["levels"]["paper_disc"])
-    answer = used[-1][k]
-    est = richardson([lv["h_factor"] for lv in used], [lv["dofs"] for lv in used], [lv[k] for lv in used], FIGURES[k](2))[0]
+    answer = data["levels"]["paper_disc"][-1][k]
+    est = estimate_from_levels(data["levels"]["paper_disc"], k, 2)[0]
     return ("The torsional stiffness converges slowly: the rigid bore coupling and the clamped bolt-hole walls "
             "meet the free faces at sharp edges (stress singularities, energy error ~ h^(2λ), λ ≈ 0.5), and the "
             "stiffness still falls at the finest level computed (coarse size × "
