@@ -160,8 +160,11 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
     elif kind in ("stl", "step"):
         _unknown(geo, {"kind", "file", "unit_mm"}, w)
         file_path = (path.parent / _get(geo, "file", w, str, required=True))
+        if kind == "step" and "unit_mm" in geo:
+            raise InputError(f"{w}.unit_mm: a STEP file declares its own length unit (OpenCASCADE reads it "
+                             "and converts to mm); unit_mm is for STL files, which have none")
         unit = _get(geo, "unit_mm", w, float, 1.0) * 1e-3
-        if unit <= 0:
+        if not unit > 0:
             raise InputError(f"{w}.unit_mm: must be > 0")
     else:
         raise InputError(f"{w}.kind: must be 'spoke_disc', 'stl' or 'step', got {kind!r}")

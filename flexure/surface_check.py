@@ -185,7 +185,9 @@ def check_gauges(points: np.ndarray, faces: np.ndarray, gauges, where: str) -> N
         if d[0] > tol:
             outside_box = bool(np.any(c < lo - tol) or np.any(c > hi + tol))
             inside = winding_number(c, tri) > 0.5
-            what = ("off the part (outside its bounding box)" if outside_box else
+            span = " × ".join(f"{v:.3g}" for v in (hi - lo) * 1e3)
+            what = (f"off the part (outside its bounding box, {span} mm: is the file's length unit right?)"
+                    if outside_box else
                     "inside the part, not on its surface" if inside else "off the part's surface")
             raise InputError(f"{where}: {name}: centre {cmm} mm is {d[0] * 1e3:.3g} mm {what}; "
                              "put it on a face of the solid")

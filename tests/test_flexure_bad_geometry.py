@@ -129,7 +129,7 @@ def test_open_stl_exit_2(capsys, tmp_path, no_meshing):
 @pytest.mark.parametrize("change, needle", [
     ({"centre_mm": [11.0, 11.0, 2.2]}, "mm off the part's surface"),          # in the window between spokes
     ({"centre_mm": [15.5, 0.0, 1.1]}, "inside the part, not on its surface"),  # mid-thickness
-    ({"centre_mm": [100.0, 0.0, 2.2]}, "off the part (outside its bounding box)"),
+    ({"centre_mm": [100.0, 0.0, 2.2]}, "off the part (outside its bounding box, 60 × 60 × 2.2 mm: is the file's length unit right?)"),
     ({"centre_mm": [15.5, 0.0, 2.2], "normal": [1.0, 0.0, 0.0], "axis": [0.0, 1.0, 0.0]}, "90° from the surface normal"),
     ({"centre_mm": [15.5, 1.2, 2.2]}, "overhangs its face"),                  # too near the spoke's edge
     ({"centre_mm": [float("nan"), 0.0, 2.2]}, "must be finite numbers"),
