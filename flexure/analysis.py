@@ -139,8 +139,11 @@ def _selections(design: Design, mesh):
     else:
         fixed = with_mid_edges(bnodes_v & (r >= design.fixed_radius_min_m - tol))
     if len(load) < 3:
+        centre = np.round((pts.min(axis=0) + pts.max(axis=0))[:2] / 2 * 1e3, 3).tolist()
         raise InputError(f"{design.path}: loads.load_radius_max_mm: no surface nodes within "
-                         f"{design.load_radius_max_m * 1e3:g} mm of the axis to carry the load")
+                         f"{design.load_radius_max_m * 1e3:g} mm of the torque axis (the file's z axis "
+                         f"through its origin; the part's bounding box is centred at x, y = {centre} mm) "
+                         "to carry the load")
     if len(fixed) < 3:
         raise InputError(f"{design.path}: loads.fixed: no surface nodes selected to hold the flexure")
     return load, fixed

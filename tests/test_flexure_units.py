@@ -41,18 +41,19 @@ def _cli_error(capsys, path: Path) -> str:
 
 
 # ----------------------------------------------------------------------------------------- STL
-def _stl_design(tmp_path: Path, scale: float, unit_line: str) -> Path:
+def _stl_design(tmp_path: Path, scale: float, unit_line: str, offset_mm=(0.0, 0.0, 0.0)) -> Path:
     """The paper disc (3 segments per quarter circle) as an STL with coordinates × ``scale``
-    (metres → file units), its four gauges explicit."""
+    (metres → file units), moved by ``offset_mm``, its four gauges explicit (moved with it)."""
     import trimesh
 
     d = load_design(ROOT / "scenes" / "paper_disc.toml")
     s = spoke_disc_surface(d.disc, 3)
     name = f"disc_{scale:g}.stl"
-    trimesh.Trimesh(s.points * scale, s.faces, process=False).export(tmp_path / name)
+    shift_m = np.asarray(offset_mm) * 1e-3
+    trimesh.Trimesh((s.points + shift_m) * scale, s.faces, process=False).export(tmp_path / name)
     text = f'[geometry]\nkind = "stl"\nfile = "{name}"\n{unit_line}\n[gauges]\ngrid_length_mm = 1.5\ngrid_width_mm = 1.5\n'
     for g in d.gauges:
-        c = ", ".join(f"{x * 1e3:.9g}" for x in g.centre_m)
+        c = ", ".join(f"{x * 1e3:.9g}" for x in np.asarray(g.centre_m) + shift_m)
         a = ", ".join(f"{x:.12g}" for x in g.axis)
         text += f"[[gauges.gauge]]\ncentre_mm = [{c}]\naxis = [{a}]\narm = {g.arm}\n"
     text += '[loads]\nload_radius_max_mm = 4.004\nfixed_radius_min_mm = 29.97\n[mesh]\nsize = "coarse"\n'
@@ -74,6 +75,14 @@ def test_stl_in_metres_read_as_millimetres_is_refused(capsys, tmp_path):
     p = _stl_design(tmp_path, 1.0, "")
     err = _cli_error(capsys, p)
     assert str(p) in err and "gauge" in err and "0.06 × 0.06" in err and "length unit" in err
+
+
+def test_part_off_the_torque_axis_is_refused(capsys, tmp_path):
+    """The torque axis is the file's z axis through its origin: a part drawn 100 mm away from it
+    has no bore there; the message says which axis and where the part is."""
+    p = _stl_design(tmp_path, 1e3, "", offset_mm=(100.0, 0.0, 0.0))
+    err = _cli_error(capsys, p)
+    assert str(p) in err and "torque axis" in err and "centred at x, y = [100.0, 0.0] mm" in err
 
 
 # ---------------------------------------------------------------------------------------- STEP
