@@ -35,11 +35,14 @@ def _quiet_stdout():
 
 
 def load_step(path: str | Path, unit_m: float = 1e-3, size_for=None, where: str = "geometry.file") -> Surface:
-    """Surface (m) of the one solid in a STEP file. ``size_for(scale_m) -> SizeField`` gives the
+    """Surface (m) of the one solid in a STEP file, whatever length unit the file declares
+    (OpenCASCADE converts it to mm, so ``unit_m`` is 1e-3 for a STEP file). ``size_for(scale_m) -> SizeField`` gives the
     surface mesh size (m) from the solid's smallest bounding-box extent, never coarser than 16
     triangles per turn of a curved face: a fillet tessellated coarser folds by more than
     meshing.EDGE_ANGLE_DEG between its triangles and would read as a sharp re-entrant edge (the
     STEP part's 1 mm fillets did at h × √2 and h × 1/√2 but not at h × 1)."""
+    from flexure.gmsh_mesh import LC_INTEGRATION_PRECISION
+
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{where}: {path} does not exist")
@@ -51,6 +54,7 @@ def load_step(path: str | Path, unit_m: float = 1e-3, size_for=None, where: str 
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         with _quiet_stdout():
+            gmsh.option.setString("Geometry.OCCTargetUnit", "MM")    # the file's declared unit → mm
             try:
                 gmsh.model.occ.importShapes(str(path))
                 gmsh.model.occ.synchronize()
@@ -68,6 +72,7 @@ def load_step(path: str | Path, unit_m: float = 1e-3, size_for=None, where: str 
                     lambda dim, tag, x, y, z, lc: min(lc, float(field(np.array([[x, y, z]]) * unit_m)[0]) / unit_m))
                 gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
                 gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
+                gmsh.option.setNumber("Mesh.LcIntegrationPrecision", LC_INTEGRATION_PRECISION)
             gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 16)     # elements per 2π of a hole
             gmsh.model.mesh.generate(2)
         tags, coords, _ = gmsh.model.mesh.getNodes()

@@ -27,8 +27,8 @@ h^(2λ) = h), but it is not clipped at 1: it says the changes are not yet shrink
 levels), and extrapolating them at a faster rate would understate a change still growing (P1's
 locked stiffness on the paper disc showed order 0.75 on one set of meshes, 18.5 % off, where an
 order-1 estimate gives 12.9 %). The price: where two changes are about equal the estimate is wide
-(3.8× and 8.9× the far end of the true error on two of the ten reference figures,
-tests/data/fem_reference/levels.json). Oscillatory convergence (the two
+(4.2–17× the far end of the true error on the five reference strains, where that error,
+0.01–0.07 %, is of the size of the level-to-level scatter: tests/data/fem_reference/levels.json). Oscillatory convergence (the two
 changes of opposite sign) has no order: e = F_s · max(|Q_1 − Q_2|, |Q_2 − Q_3|), stated as such.
 The estimate is a bound-like figure (not a 1σ).
 
@@ -53,7 +53,7 @@ from flexure.errors import InputError
 #: figure → nominal convergence order per element order k: a strain reading ~ h^k; the stiffness
 #: (an energy) ~ h^(2λ) whatever k, λ ≈ 0.5 the singular exponent at the edges where a clamped or
 #: rigidly coupled face meets a free one (every flexure has them; on the paper disc it still falls
-#: by 0.4 % from h × 1/√2 to h × 0.42 after a fast start that reads as order 4)
+#: by 0.24 % from h × 1/√2 to h × 0.42)
 FIGURES = {
     "gauge_strain_per_Nm": lambda k: k,
     "sensitivity_mV_per_V_per_Nm": lambda k: k,

@@ -16,6 +16,16 @@ elements whatever the STL's triangles: an STL is re-meshed through gmsh's
 is extruded in OpenCASCADE and a STEP solid is meshed directly on its exact geometry, and so is the
 parametric spoke disc (an exact OpenCASCADE solid, ``mesh_spoke_disc``). gmsh's Delaunay 3-D +
 optimisers (VOLUME_OPTIONS). Everything in gmsh is in millimetres (its tolerances are absolute).
+
+P2 on an exact solid (spoke disc, STEP) is isoparametric: the mid-edge nodes of boundary edges are
+gmsh's second-order nodes, on the true curved faces (``_curved_quadratic``). With mid-edge nodes on
+the chords instead, the rigidly coupled bore was a polygon inscribed in its circle, a coupling
+radius short by the sagitta, which made the stiffness too low by an O(h²) amount of the opposite
+sign to the discretisation's own (too stiff) error: on the STEP part refining only the bore
+raised the stiffness by 0.6 % at h × 1, and the sum of the two errors fell by about the same
+amount per level at the finest levels (order ≈ 0). Curved, the STEP part's stiffness converges at
+order 1.8 (h × 1 → 1/√2 → 1/2: 2793.7, 2781.2, 2774.4 N·m/rad) and refining the bore lowers it, as
+refining must. An STL keeps straight P2 (its facets are the geometry).
 """
 
 from __future__ import annotations
@@ -29,18 +39,25 @@ MM = 1e3                        # metres → gmsh units (mm)
 #: gmsh options of the volume mesh: Delaunay 3-D, gmsh's optimiser on every tetrahedron of quality
 #: below 0.7 (default 0.3), Netgen's optimiser, 10 smoothing passes; ``_volume_tets`` then runs
 #: gmsh's optimiser once more on the Netgen-optimised mesh. Minimum dihedral angle at the answer
-#: level (h × 1/√2), measured: paper disc 13.5°, re-entrant 14.3°, thick disc 12.6°, STEP part 11.0°
-#: (threshold 0.5 without the last pass: 12.3°, 9.9°, 14.1°, 11.9°; threshold 0.9: 14.6°, 16.2°,
-#: 10.8°, 12.1°), for ±1 % elements and ≤ 10 % more meshing time; at h × 1: 12.9–16.3° (STEP
-#: 10.3°). The former polygonal profile gave 6.0°, whatever these options. HXT (Algorithm3D 10)
+#: level (h × 1/√2), measured: paper disc 13.1°, re-entrant 12.3°, thick disc 14.4°, STEP part 12.5°
+#: (before LC_INTEGRATION_PRECISION: 13.5°, 14.3°, 12.6°, 11.0°; threshold 0.5 without the last
+#: pass: 12.3°, 9.9°, 14.1°, 11.9°; threshold 0.9: 14.6°, 16.2°, 10.8°, 12.1°), for ±1 % elements
+#: and ≤ 10 % more meshing time; at h × 1: 10.3–14.7°. The former polygonal profile gave 6.0°, whatever these options. HXT (Algorithm3D 10)
 #: gave 5.9–7.7° on three of the four. A re-meshed STL keeps a few 5–8° tetrahedra whatever the
-#: volume options (the thick disc's STL: 5.3° at the answer level): they stand on needle surface
+#: volume options (the thick disc's STL: 4.9° at the answer level): they stand on needle surface
 #: triangles (angles 4°/172°/4°) of the re-parametrised walls of its 12-gon hub bolt holes (0.57 mm
 #: facets, 30° folds), which no volume optimiser may move. gmsh's MeshAdapt surface algorithm
 #: (Mesh.Algorithm 1) gave 10.5° there but 9 % fewer elements, 30 % more time and a re-meshed volume
 #: 0.65 % off the STL's (0.46 % with the default), so it is not used.
 VOLUME_OPTIONS = {"Mesh.Algorithm3D": 1, "Mesh.Optimize": 1, "Mesh.OptimizeNetgen": 1,
                   "Mesh.OptimizeThreshold": 0.7, "Mesh.Smoothing": 10}
+
+#: relative accuracy of gmsh's integral ∫ ds / h along each curve, which places the curve's nodes
+#: (gmsh's default 1e-9). Its adaptive quadrature calls the size callback (Python) at every
+#: sample: at 1e-9 that was 70–90 % of the meshing time, 333k of 339k calls on the thick disc at
+#: h × 1 (11.5 s), 691k on a 47k-triangle STL (39 s of 39 s). At 1e-4: 18k calls and 4.6 s, 58k calls
+#: and 15 s; node placement along a curve changes by < 1e-4 of an element.
+LC_INTEGRATION_PRECISION = 1e-4
 
 
 def _size_field(gmsh, field) -> None:
@@ -68,6 +85,7 @@ def _size_field(gmsh, field) -> None:
         return h
 
     gmsh.model.mesh.setSizeCallback(size)
+    gmsh.option.setNumber("Mesh.LcIntegrationPrecision", LC_INTEGRATION_PRECISION)
     gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
     gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
     gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", float(field.curvature_elements))
@@ -102,8 +120,81 @@ def _volume_tets(gmsh, where: str):
     return points, tets
 
 
-def _session(build, field, where: str, order: int):
-    """Run ``build(gmsh)`` (creates the volume), mesh it with ``field``; → flexure.mesh.Mesh."""
+def _geometric_midpoints(gmsh, points: np.ndarray):
+    """gmsh's second-order nodes (``setOrder(2)``: mid-edge nodes of boundary edges on the CAD
+    surface) → (edge codes lo·n + hi in our node numbering, mid-edge points m). Each of a
+    10-node element's six extra nodes is matched to the corner pair whose midpoint is nearest
+    (its offset from the chord's midpoint, the sagitta, is far below half an edge), so gmsh's
+    node ordering is not assumed."""
+    from scipy.spatial import cKDTree
+
+    gmsh.model.mesh.setOrder(2)
+    tags, coords, _ = gmsh.model.mesh.getNodes()
+    xyz = np.zeros((int(tags.max()) + 1, 3))
+    xyz[tags.astype(np.int64)] = np.asarray(coords, float).reshape(-1, 3) / MM
+    _, enodes = gmsh.model.mesh.getElementsByType(11)               # 10-node tetrahedra
+    e = np.asarray(enodes, np.int64).reshape(-1, 10)
+    corner, extra = xyz[e[:, :4]], xyz[e[:, 4:]]
+    pairs = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])
+    chord_mid = 0.5 * (corner[:, pairs[:, 0]] + corner[:, pairs[:, 1]])        # (m, 6, 3)
+    d = ((extra[:, :, None, :] - chord_mid[:, None, :, :]) ** 2).sum(-1)        # (m, extra, pair)
+    k = d.argmin(axis=2)
+    tree = cKDTree(points)                  # setOrder may renumber: corners found by position
+    dist, idx = tree.query(corner.reshape(-1, 3))
+    if dist.max() > 1e-9 * np.ptp(points, axis=0).max():
+        raise RuntimeError("second-order mesh corners do not match the first-order mesh")
+    idx = idx.reshape(-1, 4)
+    a = np.take_along_axis(idx, pairs[k, 0], axis=1)
+    b = np.take_along_axis(idx, pairs[k, 1], axis=1)
+    codes = np.minimum(a, b) * np.int64(len(points)) + np.maximum(a, b)
+    codes, first = np.unique(codes.ravel(), return_index=True)
+    return codes, extra.reshape(-1, 3)[first]
+
+
+#: a curved element is kept where det J at every quadrature point and node is at least this
+#: fraction of its straight (affine) value; below it the element is nearly folded by its curved
+#: edge and its nodal strains are spurious (det J down to 0.005× on the paper disc's fillets at
+#: h × √2 gave a 965 MPa peak von Mises where the straight mesh reads 60.6 MPa; with it, 64.3 MPa)
+MIN_SCALED_JACOBIAN = 0.25
+
+
+def _curved_quadratic(points: np.ndarray, tets: np.ndarray, codes: np.ndarray, mids: np.ndarray):
+    """P2 mesh whose mid-edge nodes are gmsh's geometric ones (on the curved faces), straightened
+    back to the chord's midpoint on every element whose Jacobian falls below MIN_SCALED_JACOBIAN × its
+    straight value at a quadrature point or node (where the strains are read: flexure.post), until
+    none does."""
+    from flexure.fem import TET_QUAD, tet_shape
+    from flexure.mesh import Mesh, unique_edges
+    from flexure.post import REF_NODES
+
+    edges, e2e = unique_edges(tets, len(points))
+    mid = 0.5 * (points[edges[:, 0]] + points[edges[:, 1]])
+    at = np.searchsorted(codes, edges[:, 0] * np.int64(len(points)) + edges[:, 1])
+    found = (at < len(codes)) & (codes[np.minimum(at, len(codes) - 1)] == edges[:, 0] * np.int64(len(points)) + edges[:, 1])
+    curved = found & (np.abs(mids[np.minimum(at, len(codes) - 1)] - mid).max(axis=1) > 0)
+    mid[curved] = mids[at[curved]]
+    _, dN = tet_shape(2, np.vstack([TET_QUAD[2][0], REF_NODES[:10]]))
+    for _ in range(5):
+        elements = np.flatnonzero(curved[e2e].any(axis=1))
+        if len(elements) == 0:
+            break
+        X = np.concatenate([points[tets[elements]], mid[e2e[elements]]], axis=1)
+        J = np.einsum("eai,qak->eqik", X, dN)
+        V = X[:, 1:4] - X[:, :1]
+        affine = np.linalg.det(V.transpose(0, 2, 1))[:, None]                 # the straight element's
+        bad = elements[~(np.linalg.det(J) > MIN_SCALED_JACOBIAN * affine).all(axis=1)]
+        if len(bad) == 0:
+            break
+        straight = e2e[bad].ravel()
+        mid[straight] = 0.5 * (points[edges[straight, 0]] + points[edges[straight, 1]])
+        curved[straight] = False
+    return Mesh(np.vstack([points, mid]), np.hstack([tets.astype(np.int64), len(points) + e2e]))
+
+
+def _session(build, field, where: str, order: int, curved: bool = False):
+    """Run ``build(gmsh)`` (creates the volume), mesh it with ``field``; → flexure.mesh.Mesh.
+    ``curved`` (order 2, exact CAD geometry): mid-edge nodes of boundary edges on the true curved
+    faces (isoparametric P2), else on the chords."""
     import gmsh
 
     from flexure.cad import _quiet_stdout
@@ -116,8 +207,16 @@ def _session(build, field, where: str, order: int):
             build(gmsh)
             _size_field(gmsh, field)
             points, tets = _volume_tets(gmsh, where)
+            geometric = None
+            if order == 2 and curved:
+                try:
+                    geometric = _geometric_midpoints(gmsh, points)
+                except Exception:         # gmsh could not curve this mesh: keep straight P2
+                    geometric = None
     finally:
         gmsh.finalize()
+    if geometric is not None:
+        return _curved_quadratic(points, tets, *geometric)
     mesh = Mesh(points, tets)
     return to_quadratic(mesh) if order == 2 else mesh
 
@@ -165,30 +264,32 @@ def mesh_surface(surface, field, order: int = 1, where: str = "mesh", angle_deg:
 
 
 def mesh_step(path, unit_m: float, field, order: int = 1, where: str = "geometry.file"):
-    """Graded mesh of the one solid of a STEP file (``unit_m`` metres per file unit), meshed on
-    the exact OpenCASCADE geometry (no intermediate triangulation)."""
+    """Graded mesh of the one solid of a STEP file, meshed on the exact OpenCASCADE geometry (no
+    intermediate triangulation). OpenCASCADE converts the file's declared length unit (mm, inch,
+    m, ...) to mm; ``unit_m`` (metres per mm after that conversion) stays 1e-3 for a STEP file."""
     scale = unit_m * MM
 
     def build(gmsh):
+        gmsh.option.setString("Geometry.OCCTargetUnit", "MM")      # whatever unit the file declares
         gmsh.model.occ.importShapes(str(path))
         gmsh.model.occ.synchronize()
         if abs(scale - 1.0) > 1e-12:
             gmsh.model.occ.dilate(gmsh.model.getEntities(3), 0, 0, 0, scale, scale, scale)
             gmsh.model.occ.synchronize()
 
-    return _session(build, field, where, order)
+    return _session(build, field, where, order, curved=True)
 
 
 def mesh_spoke_disc(disc, field, order: int = 1, where: str = "geometry"):
     """Graded mesh of the parametric spoke disc built as an exact OpenCASCADE solid: true circles
     and fillets (no polygon), so that the geometry itself converges with the mesh (P2 mid-edge
-    nodes on straight edges: O(h²) geometric error) and no tetrahedra are wedged into the shallow
+    nodes on the curved faces: O(h³) geometric error) and no tetrahedra are wedged into the shallow
     creases of a polygonal outline (the slivers of the polygonal profile).
 
     Same construction as ``geometry.profile``: rim ring ∪ hub ∪ spokes (∪ pads) from mid-hub to
     mid-rim, every concave (re-entrant) vertical edge filleted with ``fillet_radius``, minus the
     bore and the bolt holes."""
-    return _session(lambda gmsh: build_spoke_disc(gmsh, disc, where), field, where, order)
+    return _session(lambda gmsh: build_spoke_disc(gmsh, disc, where), field, where, order, curved=True)
 
 
 def build_spoke_disc(gmsh, disc, where: str = "geometry") -> None:
