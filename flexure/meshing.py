@@ -71,8 +71,9 @@ def edge_size(h_edge, d, grading: float, r_plateau: float):
     resolves it about as well as the smooth field elsewhere (Babuška, Kellogg & Pitkäranta 1979:
     h ~ d^(1−μ), μ < λ); the floor h_edge / 4 keeps the grading self-similar from level to level,
     so the singular part still converges as h^(2λ), with a far smaller constant. On the thick disc
-    (sharp spoke roots) the stiffness at h × 1/√2 went from 3278 to 3188 N·m/rad (its limit:
-    3165 ± 10, tests/data/fem_reference/levels.json), for 1.5× the DOFs; before the last change of
+    (sharp spoke roots) the stiffness at h × 1/√2 went from 3278 to 3188 N·m/rad (its limit then:
+    3165 ± 10; with isoparametric P2 today 3194 against 3164 ± 13, tests/data/fem_reference/levels.json),
+    for 1.5× the DOFs; before the last change of
     gmsh's optimiser (VOLUME_OPTIONS), floors of h_edge / 2, / 4, / 8 gave 3204, 3186, 3187. The same grading at the supports' edges (bolt-hole
     walls, the bore) made it no better (3191) for 1.9× the DOFs, so it is not applied there."""
     h_edge, d = np.asarray(h_edge, float), np.asarray(d, float)
