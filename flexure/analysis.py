@@ -78,7 +78,7 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
     if design.kind == "step":
         from flexure.cad import load_step
         from flexure.meshing import size_field
-        surf = load_step(design.file_path, design.file_unit_m, where=where,
+        surf = load_step(design.file_path, where=where,
                          size_for=lambda scale: size_field(size, scale, centres, extent, gw, h_factor))
     else:
         surf = load_stl(design.file_path, design.file_unit_m, where=where)
@@ -90,7 +90,7 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
         field = size_field(size, scale, centres, extent, gw, h_factor, surface=surf)
         from flexure.meshing import check_cost, surface_area, surface_volume
         check_cost(field, surface_volume(surf), surface_area(surf), cap, where)
-        mesh = mesh_step(design.file_path, design.file_unit_m, field, order, where=where)
+        mesh = mesh_step(design.file_path, field, order, where=where)
         return MeshResult(mesh, surf, mesh_report(mesh, size, "gmsh", None, field))
     return mesh_design_surface(surf, None, size, centres, extent, scale, order, gauge_width=gw,
                                mesher=design.mesher, h_factor=h_factor, max_elements=cap)

@@ -34,15 +34,23 @@ def _quiet_stdout():
         os.close(devnull)
 
 
-def load_step(path: str | Path, unit_m: float = 1e-3, size_for=None, where: str = "geometry.file") -> Surface:
-    """Surface (m) of the one solid in a STEP file, whatever length unit the file declares
-    (OpenCASCADE converts it to mm, so ``unit_m`` is 1e-3 for a STEP file). ``size_for(scale_m) -> SizeField`` gives the
+def import_step(gmsh, path) -> None:
+    """Read a STEP file into gmsh's OpenCASCADE model, in mm whatever length unit the file declares
+    (OpenCASCADE converts it: a STEP file carries its unit, so none is asked of the user)."""
+    gmsh.option.setString("Geometry.OCCTargetUnit", "MM")
+    gmsh.model.occ.importShapes(str(path))
+    gmsh.model.occ.synchronize()
+
+
+def load_step(path: str | Path, size_for=None, where: str = "geometry.file") -> Surface:
+    """Surface (m) of the one solid in a STEP file (``import_step``). ``size_for(scale_m) -> SizeField`` gives the
     surface mesh size (m) from the solid's smallest bounding-box extent, never coarser than 16
     triangles per turn of a curved face: a fillet tessellated coarser folds by more than
     meshing.EDGE_ANGLE_DEG between its triangles and would read as a sharp re-entrant edge (the
     STEP part's 1 mm fillets did at h × √2 and h × 1/√2 but not at h × 1)."""
     from flexure.gmsh_mesh import LC_INTEGRATION_PRECISION
 
+    unit_m = 1e-3                                       # import_step reads every STEP in mm
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{where}: {path} does not exist")
@@ -54,10 +62,8 @@ def load_step(path: str | Path, unit_m: float = 1e-3, size_for=None, where: str 
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         with _quiet_stdout():
-            gmsh.option.setString("Geometry.OCCTargetUnit", "MM")    # the file's declared unit → mm
             try:
-                gmsh.model.occ.importShapes(str(path))
-                gmsh.model.occ.synchronize()
+                import_step(gmsh, path)
             except Exception as exc:
                 raise InputError(f"{where}: {path}: cannot read STEP ({str(exc).splitlines()[0]})") from None
             solids = gmsh.model.getEntities(3)

@@ -128,6 +128,8 @@ def _geometric_midpoints(gmsh, points: np.ndarray):
     node ordering is not assumed."""
     from scipy.spatial import cKDTree
 
+    from flexure.mesh import TET_EDGES
+
     gmsh.model.mesh.setOrder(2)
     tags, coords, _ = gmsh.model.mesh.getNodes()
     xyz = np.zeros((int(tags.max()) + 1, 3))
@@ -135,7 +137,7 @@ def _geometric_midpoints(gmsh, points: np.ndarray):
     _, enodes = gmsh.model.mesh.getElementsByType(11)               # 10-node tetrahedra
     e = np.asarray(enodes, np.int64).reshape(-1, 10)
     corner, extra = xyz[e[:, :4]], xyz[e[:, 4:]]
-    pairs = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])
+    pairs = TET_EDGES
     chord_mid = 0.5 * (corner[:, pairs[:, 0]] + corner[:, pairs[:, 1]])        # (m, 6, 3)
     d = ((extra[:, :, None, :] - chord_mid[:, None, :, :]) ** 2).sum(-1)        # (m, extra, pair)
     k = d.argmin(axis=2)
@@ -169,9 +171,9 @@ def _curved_quadratic(points: np.ndarray, tets: np.ndarray, codes: np.ndarray, m
 
     edges, e2e = unique_edges(tets, len(points))
     mid = 0.5 * (points[edges[:, 0]] + points[edges[:, 1]])
-    at = np.searchsorted(codes, edges[:, 0] * np.int64(len(points)) + edges[:, 1])
-    found = (at < len(codes)) & (codes[np.minimum(at, len(codes) - 1)] == edges[:, 0] * np.int64(len(points)) + edges[:, 1])
-    curved = found & (np.abs(mids[np.minimum(at, len(codes) - 1)] - mid).max(axis=1) > 0)
+    at = np.minimum(np.searchsorted(codes, edges[:, 0] * np.int64(len(points)) + edges[:, 1]), len(codes) - 1)
+    found = codes[at] == edges[:, 0] * np.int64(len(points)) + edges[:, 1]
+    curved = found & (np.abs(mids[at] - mid).max(axis=1) > 0)
     mid[curved] = mids[at[curved]]
     _, dN = tet_shape(2, np.vstack([TET_QUAD[2][0], REF_NODES[:10]]))
     for _ in range(5):
@@ -180,8 +182,7 @@ def _curved_quadratic(points: np.ndarray, tets: np.ndarray, codes: np.ndarray, m
             break
         X = np.concatenate([points[tets[elements]], mid[e2e[elements]]], axis=1)
         J = np.einsum("eai,qak->eqik", X, dN)
-        V = X[:, 1:4] - X[:, :1]
-        affine = np.linalg.det(V.transpose(0, 2, 1))[:, None]                 # the straight element's
+        affine = np.linalg.det(X[:, 1:4] - X[:, :1])[:, None]                 # the straight element's
         bad = elements[~(np.linalg.det(J) > MIN_SCALED_JACOBIAN * affine).all(axis=1)]
         if len(bad) == 0:
             break
@@ -212,7 +213,7 @@ def _session(build, field, where: str, order: int, curved: bool = False):
                 try:
                     geometric = _geometric_midpoints(gmsh, points)
                 except Exception:         # gmsh could not curve this mesh: keep straight P2
-                    geometric = None
+                    pass
     finally:
         gmsh.finalize()
     if geometric is not None:
@@ -263,21 +264,12 @@ def mesh_surface(surface, field, order: int = 1, where: str = "mesh", angle_deg:
     return _session(build, replace(field, curvature_elements=0.0), where, order)
 
 
-def mesh_step(path, unit_m: float, field, order: int = 1, where: str = "geometry.file"):
+def mesh_step(path, field, order: int = 1, where: str = "geometry.file"):
     """Graded mesh of the one solid of a STEP file, meshed on the exact OpenCASCADE geometry (no
-    intermediate triangulation). OpenCASCADE converts the file's declared length unit (mm, inch,
-    m, ...) to mm; ``unit_m`` (metres per mm after that conversion) stays 1e-3 for a STEP file."""
-    scale = unit_m * MM
+    intermediate triangulation), read in mm whatever unit the file declares (cad.import_step)."""
+    from flexure.cad import import_step
 
-    def build(gmsh):
-        gmsh.option.setString("Geometry.OCCTargetUnit", "MM")      # whatever unit the file declares
-        gmsh.model.occ.importShapes(str(path))
-        gmsh.model.occ.synchronize()
-        if abs(scale - 1.0) > 1e-12:
-            gmsh.model.occ.dilate(gmsh.model.getEntities(3), 0, 0, 0, scale, scale, scale)
-            gmsh.model.occ.synchronize()
-
-    return _session(build, field, where, order, curved=True)
+    return _session(lambda gmsh: import_step(gmsh, path), field, where, order, curved=True)
 
 
 def mesh_spoke_disc(disc, field, order: int = 1, where: str = "geometry"):
