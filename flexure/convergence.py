@@ -5,7 +5,7 @@ f = √2, 1, 1/√2 (then 1/2, 1/(2√2), ... under ``rtol``); the answer is the
 is f. Rule for the levels that enter the estimate: a level whose element size at the gauges is
 larger than the gauge grid's smaller side (fewer than MIN_GAUGE_ELEMENTS = 1 element across the
 grid) is outside the asymptotic range of the gauge strain and is left out (stated in the method).
-On every reference geometry the former coarsest level f = 2 (0.83 elements across a grid) read
+On every reference geometry the former coarsest level f = 2 (then 0.83 elements across a grid) read
 the strain 2–3 % off the trend of the finer ones, which made the three-level estimate up to 20×
 too wide; that is why the levels are √2, 1, 1/√2 and why the rule guards custom levels.
 
@@ -21,14 +21,20 @@ and the error of the finest answer is estimated as the grid convergence index (R
 p is clipped to [0.5, 4]. An order above the nominal one (FIGURES) is a lucky pair of levels, not a
 rate to extrapolate with: the estimate then uses the nominal order and, for |Q_3 − Q_2|, the larger
 of the change seen and the change the first one implies at that order (on the thick disc's STL the
-last change was 0.02 % while the answer was 0.14 % off). An order below 1 is slower than any
-asymptotic rate here (every singularity of these parts has λ ≥ ½, so figures converge at least as
-h^(2λ) = h), but it is not clipped at 1: it says the changes are not yet shrinking (pre-asymptotic
-levels), and extrapolating them at a faster rate would understate a change still growing (P1's
-locked stiffness on the paper disc showed order 0.75 on one set of meshes, 18.5 % off, where an
-order-1 estimate gives 12.9 %). The price: where two changes are about equal the estimate is wide
-(4.2–17× the far end of the true error on the five reference strains, where that error,
-0.01–0.07 %, is of the size of the level-to-level scatter: tests/data/fem_reference/levels.json). Oscillatory convergence (the two
+last change was 0.02 % while the answer was 0.14 % off). An order below the figure's asymptotic
+minimum (MIN_ORDER) is not a rate either: every singularity of these parts (a sharp re-entrant
+edge, the edge of a support) has an exponent λ ≥ ½, so in the asymptotic range P2's gauge strain,
+sensitivity and stiffness converge at least as h^(2λ) ≥ h (the energy directly, a gauge reading
+through the pollution of its dual solution); an observed order below 1 there is the scatter of
+non-nested meshes on two small changes, and extrapolating with it (the denominator (√2)^p − 1 is
+0.19 at p = ½ against 0.41 at p = 1) made the strain estimates many times their true error. It
+is used at 1 then (stated in the method). With it and the gauge sizing of meshing.SIZES (4.7
+elements across a grid at the answer level, 2.4 before) the five reference strains' estimates
+are 2.1–3.6× the far end of their true error (were 4.2–17×), the stiffnesses' 0.9–1.9×, and
+every estimate still brackets its error (tests/data/fem_reference/levels.json). The floor
+is not applied to P1, whose locked levels are pre-asymptotic (the paper disc's P1 stiffness showed
+order 0.75 on one set of meshes, 18.5 % off, where an order-1 estimate gives 12.9 %), nor to the
+safety factor, whose peak stress may diverge at a sharp edge. Oscillatory convergence (the two
 changes of opposite sign) has no order: e = F_s · max(|Q_1 − Q_2|, |Q_2 − Q_3|), stated as such.
 The estimate is a bound-like figure (not a 1σ).
 
@@ -75,6 +81,15 @@ P1_WARNING = ("order 1 (linear tetrahedra) is too stiff in bending until many el
 MIN_GAUGE_ELEMENTS = 1.0
 MAX_DOFS = 2_000_000
 P_RANGE = (0.5, 4.0)
+#: figure → slowest asymptotic order per element order k (module docstring): h^(2λ) ≥ h for P2's
+#: strain, sensitivity and stiffness; none (P_RANGE's floor) for P1 (locking: pre-asymptotic
+#: levels) and for the safety factor (the peak stress may diverge at a sharp edge)
+MIN_ORDER = {
+    "gauge_strain_per_Nm": lambda k: 1.0 if k >= 2 else P_RANGE[0],
+    "sensitivity_mV_per_V_per_Nm": lambda k: 1.0 if k >= 2 else P_RANGE[0],
+    "torsional_stiffness_Nm_per_rad": lambda k: 1.0 if k >= 2 else P_RANGE[0],
+    "safety_factor": lambda k: P_RANGE[0],
+}
 
 
 def observed_order(h: np.ndarray, q: np.ndarray) -> float:
@@ -98,8 +113,9 @@ def observed_order(h: np.ndarray, q: np.ndarray) -> float:
     return 0.5 * (lo + hi)
 
 
-def richardson(h, dofs, values, nominal_order: float) -> tuple[float, float, str]:
-    """(error estimate of values[-1] (absolute), order used, method) from levels of size ``h``."""
+def richardson(h, dofs, values, nominal_order: float, min_order: float = P_RANGE[0]) -> tuple[float, float, str]:
+    """(error estimate of values[-1] (absolute), observed order, method) from levels of size ``h``;
+    the order used is the observed one within [``min_order``, ``nominal_order``]."""
     h = np.asarray(h, float)
     dofs = np.asarray(dofs, float)
     q = np.asarray(values, float)
@@ -117,13 +133,16 @@ def richardson(h, dofs, values, nominal_order: float) -> tuple[float, float, str
         e = 1.25 * max(abs(q[0] - q[1]), abs(q[1] - q[2]))
         return e, p, (f"oscillatory convergence over 3 mesh levels ({levels} dofs): 1.25 × the largest "
                       "change; a bound, not 1σ")
-    used = min(p, float(nominal_order))
+    used = min(max(p, float(min_order)), float(nominal_order))
     last = abs(q[2] - q[1])
     if p > used:        # the last change is smaller than theory says: take the one the first implies
         last = max(last, abs(q[0] - q[1]) * (h[1] ** used - h[2] ** used) / (h[0] ** used - h[1] ** used))
     e = 1.25 * last / ((h[1] / h[2]) ** used - 1.0)
     capped = (f", used at the nominal {used:g} (faster than theory is not trusted: the last change is "
               "taken as the larger of the one seen and the one the first implies at that order)") if p > used else ""
+    if p < used:
+        capped = (f", used at {used:g}, the slowest asymptotic rate of this figure (λ ≥ ½ at every singular "
+                  "edge: a slower observed order is the scatter of non-nested meshes)")
     return e, p, (f"Richardson/GCI from 3 mesh levels ({levels} dofs), observed order {p:.2f}{capped}, "
                   "safety factor 1.25; a bound, not 1σ")
 
@@ -144,7 +163,7 @@ def estimate_from_levels(levels: list[dict], key: str, order: int) -> tuple[floa
     ``order``: (error estimate of the finest level, observed order, method incl. levels left out)."""
     used, note = usable_levels(levels)
     e, p, method = richardson([lv["h_factor"] for lv in used], [lv["dofs"] for lv in used],
-                              [lv[key] for lv in used], FIGURES[key](order))
+                              [lv[key] for lv in used], FIGURES[key](order), MIN_ORDER[key](order))
     return e, p, method + note
 
 

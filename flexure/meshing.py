@@ -18,10 +18,16 @@ import numpy as np
 from flexure.errors import InputError
 from flexure.geometry import Surface, check_watertight
 
-SIZES = {  # h_far as a multiple of thickness, h_gauge as a multiple of the gauge grid width
-    "coarse": {"far": 1.0, "gauge": 0.6, "minratio": 2.0, "mindihedral": 10.0},
-    "medium": {"far": 0.7, "gauge": 0.4, "minratio": 1.8, "mindihedral": 12.0},
-    "fine": {"far": 0.5, "gauge": 0.25, "minratio": 1.6, "mindihedral": 14.0},
+#: h_far as a multiple of thickness, h_gauge as a multiple of the gauge grid's smaller side. At
+#: "coarse" 0.3: 3.3 elements across a grid at h × 1, 2.4 at h × √2, 4.7 at the answer level h × 1/√2.
+#: With 0.6 (1.7 elements across at h × 1) the paper disc's four arms all read 0.2 % high at h × 1
+#: and low at h × √2, levels that made its three-level estimate oscillatory (± 0.69 % on a true
+#: error of 0.02 %); at 0.3 its levels change by 0.04 % and then 0.04 % (tests/data/fem_reference/
+#: levels.json), for 1.3× the DOFs at the answer level.
+SIZES = {
+    "coarse": {"far": 1.0, "gauge": 0.3, "minratio": 2.0, "mindihedral": 10.0},
+    "medium": {"far": 0.7, "gauge": 0.2, "minratio": 1.8, "mindihedral": 12.0},
+    "fine": {"far": 0.5, "gauge": 0.125, "minratio": 1.6, "mindihedral": 14.0},
 }
 #: elements per 2π of a curved edge or face at ``size = "coarse"``, h_factor 1 (gmsh meshes of CAD
 #: solids; scaled like h_far: × coarse.far / size.far / h_factor). Without it a fillet or bolt hole
