@@ -5,6 +5,7 @@ A STEP file declares its unit in its header; OpenCASCADE converts it to mm, and 
 refused there. The same part written in metres (STL) or in inches (STEP) must give the
 millimetre original's answers, and a wrong declaration must stop with exit 2 naming the file."""
 
+import json
 import re
 from pathlib import Path
 
@@ -154,3 +155,16 @@ def test_unit_mm_on_a_step_is_refused(capsys, tmp_path):
     p = _step_design(tmp_path, "part.step", "\nunit_mm = 25.4")
     err = _cli_error(capsys, p)
     assert str(p) in err and "unit_mm" in err and "STEP file declares its own length unit" in err
+
+
+def test_stl_text_output_states_the_remesh_volume_change(capsys, tmp_path):
+    """Re-meshing an STL changes its geometry a little (gmsh re-triangulates the classified
+    patches): the text output says by how much, the same figure as the JSON's mesh report."""
+    p = _stl_design(tmp_path, 1e3, "")
+    assert main(["flexure", str(p), "--single-level", "--json"]) == 0
+    change = json.loads(capsys.readouterr().out)["mesh"]["remesh_volume_change"]
+    assert main(["flexure", str(p), "--single-level"]) == 0
+    text = capsys.readouterr().out
+    m = re.search(r"the STL re-meshed, its volume changed by ([+-]\d+\.\d\d) %", text)
+    assert m, text
+    assert float(m.group(1)) == pytest.approx(100 * change, abs=0.006)

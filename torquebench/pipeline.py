@@ -91,7 +91,7 @@ class Stage:
 
 
 STAGES = (
-    Stage("flexure_fem", (), "flexure", "tetrahedral FEM of the flexure design"),
+    Stage("flexure_fem", (), "flexure", "tetrahedral FEM of the flexure design (three mesh levels, error estimates)"),
     Stage("sensor_chain", ("flexure?",), "chain", "bridge/amplifier/ADC model at the strain per N·m"),
     Stage("calibration_session", ("chain",), "session", "simulated static loading session (ADC counts)"),
     Stage("calibration_fit", ("session",), "calibration", "emcee fit of the loading session"),
@@ -263,16 +263,16 @@ def _design_hash(p):
 
 # ---------------------------------------------------------------- the stage functions
 def run_flexure_fem(scene, inp):
-    from flexure.analysis import analyze          # the ONE call into the flexure package
+    """The design's figures as ``torquebench flexure`` gives them: the answer on the finest of three
+    mesh levels, each figure with its discretisation error estimate (flexure.convergence)."""
+    from flexure.convergence import FIGURES, analyze_with_error   # the ONE call into the flexure package
     from flexure.design import load_design
 
-    fx, _ = analyze(load_design(scene.chain.flexure_design))
+    fx, _ = analyze_with_error(load_design(scene.chain.flexure_design))
     if fx.get("nan_reason"):
         raise InputError(f"{scene.path}: flexure.design: no trustworthy gauge strain ({fx['nan_reason']})")
-    keep = ("gauge_strain_per_Nm", "sensitivity_mV_per_V_per_Nm", "torsional_stiffness_Nm_per_rad",
-            "safety_factor", "dofs")
-    extra = {k: v for k, v in fx.items() if k.endswith(("_error_estimate", "_error_method"))}
-    return {**{k: fx.get(k) for k in keep}, **extra}      # FEM error estimates when analyze gives them
+    keep = [k for f in FIGURES for k in (f, f"{f}_error_estimate", f"{f}_error_method")]
+    return {**{k: fx.get(k) for k in keep}, "dofs": fx["dofs"], "warnings": list(fx["warnings"])}
 
 
 def run_sensor_chain(scene, inp):

@@ -89,7 +89,9 @@ def _print_design(res: dict) -> None:
     print(f"material: {res['material']['name']} (E {res['material']['E_Pa'] / 1e9:g} GPa, "
           f"ν {res['material']['nu']:g}, σ_y {res['material']['yield_Pa'] / 1e6:g} MPa)")
     print(f"mesh: {m['n_elements']} P{res['order']} tetrahedra ({res['size']}), {res['dofs']} dofs, "
-          f"min dihedral {m['min_dihedral_deg']:.1f}°, worst aspect ratio {m['max_aspect_ratio']:.1f}")
+          f"min dihedral {m['min_dihedral_deg']:.1f}°, worst aspect ratio {m['max_aspect_ratio']:.1f}"
+          + (f"; the STL re-meshed, its volume changed by {100 * m['remesh_volume_change']:+.2f} %"
+             if m.get("remesh_volume_change") is not None else ""))
     print(f"solver: {s['solver']}; relative residual {s['residual_norm']:.1e}; "
           f"mesh {res['mesh_s']:.1f} s, assembly {res['assemble_s']:.1f} s, solve {res['solve_s']:.1f} s")
     if res["warnings"]:

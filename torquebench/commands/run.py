@@ -87,6 +87,15 @@ def run(args) -> int:
         return 0
     for n, a, t in timing:
         print(f"  {n:20s} {a:7s} {t:7.2f} s", file=sys.stderr)
+    if "flexure" in out:
+        from torquebench.commands.flexure import _pm
+
+        fx = out["flexure"]
+        print(f"flexure: {fx['gauge_strain_per_Nm']:.4g}{_pm(fx, 'gauge_strain_per_Nm')} strain/N·m, "
+              f"{fx['torsional_stiffness_Nm_per_rad']:.4g}{_pm(fx, 'torsional_stiffness_Nm_per_rad')} N·m/rad "
+              f"({fx['dofs']} dofs; ± discretisation error bound, 3 mesh levels)")
+        for w in fx.get("warnings", []):
+            print(f"WARNING: flexure: {w}")
     if "sensor" in out:
         s = out["sensor"]
         print(f"sensor: {s['strain_per_Nm']:.3g} strain/N·m, σ_τ = {s['torque_noise_std_Nm']:.4g} N·m per sample")
