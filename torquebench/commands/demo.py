@@ -41,6 +41,7 @@ def run(args) -> int:
     from estimator.sim.output import truth_csv
     from torquebench import pipeline as P
     from torquebench.cache import Cache
+    from torquebench.commands.flexure import _pm
     from torquebench.errors import InputError
     from torquebench.io import print_json, write_text_atomic
     from torquebench.scenes import load_scene, scene_path
@@ -62,8 +63,9 @@ def run(args) -> int:
     if "flexure" in arts:
         fx = arts["flexure"]
         results["flexure"] = {"design_file": str(args.flexure), **fx}
-        say(f"0. flexure: {args.flexure}: {fx['gauge_strain_per_Nm']:.3g} strain/N·m at the gauges "
-            f"(P2 FEM, {fx['dofs']} DOFs), safety factor {fx['safety_factor']:.2f}")
+        say(f"0. flexure: {args.flexure}: {fx['gauge_strain_per_Nm']:.4g}{_pm(fx, 'gauge_strain_per_Nm')} "
+            f"strain/N·m at the gauges (P2 FEM, 3 mesh levels, {fx['dofs']} DOFs at the answer), "
+            f"safety factor {fx['safety_factor']:.2f}")
     say(f"1. sensor: bridge/ADC chain, {chain.strain_per_Nm:.3g} strain/N·m → σ_τ = "
         f"{chain.noise_std_Nm:.4f} N·m per sample (the same model in the simulation)")
     e = scene.estimator
