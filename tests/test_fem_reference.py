@@ -118,19 +118,17 @@ def test_default_path_on_the_step_part():
 @pytest.mark.parametrize("name", sorted(STORED["levels"]))
 def test_arms_agree_within_2_percent_at_the_default_answer(name):
     """The four arms of these four-fold symmetric parts read the same |strain| within 2 % at the
-    answer level (h × 1/√2): 0.04–0.32 % (the STL disc 0.32 %)."""
+    answer level (h × 1/√2): 0.04–0.55 % (the STL disc 0.55 %)."""
     assert STORED["levels"][name][-1]["gauge_arm_imbalance"] < 0.02
 
 
-@pytest.mark.parametrize("name", ["paper_disc", "step_part", "thick_disc"])
-def test_no_tetrahedron_below_10_degrees_at_the_answer_level_of_a_cad_part(name):
-    """The default mesher on a CAD solid (exact spoke disc, STEP): min dihedral angle ≥ 10° at the
-    answer level (11.4–15.4° measured). Not met, and so not asserted here: the re-entrant part,
-    9.7° (one tetrahedron at its rim, where a single far-size element spans the 2.2 mm plate: all
-    four nodes on the top and bottom faces, which neither gmsh's nor Netgen's optimiser, nor
-    Relocate3D, nor another random seed moved), and a re-meshed STL (the thick disc's STL: 5.4°,
-    on needle triangles of its re-meshed hole walls; gmsh_mesh.VOLUME_OPTIONS says what was
-    tried). Both are checked below against the sliver threshold."""
+@pytest.mark.parametrize("name", sorted(STORED["levels"]))
+def test_no_tetrahedron_below_10_degrees_at_the_answer_level(name):
+    """The default mesher, the re-meshed STL included: min dihedral angle ≥ 10° at the answer level
+    (10.8–15.4° measured). A first volume mesh with a tetrahedron below 10° is made again, finer
+    around it (gmsh_mesh.MIN_DIHEDRAL_DEG): the re-entrant part's 9.7° rim tetrahedron and the STL's
+    5.4° ones on needle triangles of its re-meshed hole walls went that way. At the coarser,
+    non-answer levels the STL keeps 7.9° (h × √2) after the passes allowed."""
     assert STORED["levels"][name][-1]["min_dihedral_deg"] >= 10.0
 
 
