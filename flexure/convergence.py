@@ -29,9 +29,10 @@ through the pollution of its dual solution); an observed order below 1 there is 
 non-nested meshes on two small changes, and extrapolating with it (the denominator (√2)^p − 1 is
 0.19 at p = ½ against 0.41 at p = 1) made the strain estimates many times their true error. It
 is used at 1 then (stated in the method). With it and the gauge sizing of meshing.SIZES (4.7
-elements across a grid at the answer level, 2.4 before) the five reference strains' estimates
-are 2.1–3.6× the far end of their true error (were 4.2–17×), the stiffnesses' 0.9–1.9×, and
-every estimate still brackets its error (tests/data/fem_reference/levels.json). The floor
+elements across a grid at the answer level, 2.4 before) three of the five reference strains'
+estimates are within 1.5–2.1× the far end of their true error, two at 3.2× and 6.2× (were
+4.2–17×), the stiffnesses' within 1.0–1.3×, and every estimate still brackets its error
+(tests/data/fem_reference/levels.json). The floor
 is not applied to P1, whose locked levels are pre-asymptotic (the paper disc's P1 stiffness showed
 order 0.75 on one set of meshes, 18.5 % off, where an order-1 estimate gives 12.9 %), nor to the
 safety factor, whose peak stress may diverge at a sharp edge. Oscillatory convergence (the two
