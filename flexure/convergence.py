@@ -265,4 +265,5 @@ def design_figures(path, overrides: dict | None = None, size: str | None = None,
 
     res, _ = analyze_with_error(load_design(path, overrides), size, order, rtol)
     keys = [k for f in FIGURES for k in (f, f"{f}_error_estimate", f"{f}_error_method")]
-    return {**{k: res[k] for k in keys}, "dofs": res["dofs"], "warnings": list(res["warnings"])}
+    flagged = {"nan_reason": res["nan_reason"]} if res.get("nan_reason") else {}
+    return {**{k: res[k] for k in keys}, "dofs": res["dofs"], "warnings": list(res["warnings"]), **flagged}

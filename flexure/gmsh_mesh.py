@@ -205,7 +205,7 @@ def _curved_quadratic(points: np.ndarray, tets: np.ndarray, codes: np.ndarray, m
 #: the surface where one far-size element spans a plate (the re-entrant part's rim at h × 1/√2:
 #: 9.7°, whatever the optimiser, Relocate3D or random seed), or stands on a needle triangle of a
 #: re-meshed STL wall; no optimiser moves surface nodes, a finer surface there removes both.
-#: Measured at h × 1/√2: re-entrant 9.7° → 12.8° (+1 % elements), the thick disc's STL 5.4° →
+#: Measured at h × 1/√2: re-entrant 9.7° → 12.7° (+1 % elements), the thick disc's STL 5.4° →
 #: 9.8° → 10.8° (+6 %), an eight-spoke disc with 0.8 mm fillets 8.0° → 7.6° → 11.1° (+7 %).
 #: A spot size of 0.5 × the longest edge left the re-entrant part's mesh unchanged.
 MIN_DIHEDRAL_DEG = 10.0
@@ -218,7 +218,7 @@ def _session(build, field, where: str, order: int, curved: bool = False):
     ``curved`` (order 2, exact CAD geometry): mid-edge nodes of boundary edges on the true curved
     faces (isoparametric P2), else on the chords. A mesh with a tetrahedron below MIN_DIHEDRAL_DEG
     is made again, finer around it (MIN_DIHEDRAL_DEG says how)."""
-    from flexure.mesh import element_shape_metrics
+    from flexure.mesh import Mesh, element_shape_metrics, to_quadratic
 
     spots, best = np.zeros((0, 4)), None
     for _ in range(QUALITY_PASSES + 1):
@@ -233,8 +233,6 @@ def _session(build, field, where: str, order: int, curved: bool = False):
         longest = np.linalg.norm(x[:, :, None] - x[:, None], axis=-1).max(axis=(1, 2))
         spots = np.vstack([spots, np.column_stack([x.mean(axis=1), SPOT_REFINEMENT * longest])])
     _, points, tets, geometric = best
-    from flexure.mesh import Mesh, to_quadratic
-
     if geometric is not None:
         return _curved_quadratic(points, tets, *geometric)
     mesh = Mesh(points, tets)

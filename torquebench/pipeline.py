@@ -265,14 +265,12 @@ def _design_hash(p):
 def run_flexure_fem(scene, inp):
     """The design's figures as ``torquebench flexure`` gives them: the answer on the finest of three
     mesh levels, each figure with its discretisation error estimate (flexure.convergence)."""
-    from flexure.convergence import FIGURES, analyze_with_error   # the ONE call into the flexure package
-    from flexure.design import load_design
+    from flexure.convergence import design_figures   # the ONE call into the flexure package
 
-    fx, _ = analyze_with_error(load_design(scene.chain.flexure_design))
+    fx = design_figures(scene.chain.flexure_design)
     if fx.get("nan_reason"):
         raise InputError(f"{scene.path}: flexure.design: no trustworthy gauge strain ({fx['nan_reason']})")
-    keep = [k for f in FIGURES for k in (f, f"{f}_error_estimate", f"{f}_error_method")]
-    return {**{k: fx.get(k) for k in keep}, "dofs": fx["dofs"], "warnings": list(fx["warnings"])}
+    return fx
 
 
 def run_sensor_chain(scene, inp):
