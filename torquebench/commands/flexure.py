@@ -38,12 +38,14 @@ def add_arguments(parser) -> None:
     parser.add_argument("--field", choices=("strain", "von_mises"), default="strain",
                         help="field drawn in --png: strain = max shear strain (what ±45° gauges read), von_mises = stress in Pa (default: %(default)s)")
     parser.add_argument("--rtol", type=float, default=None, metavar="R",
-                        help="refine the mesh until every figure's discretisation error estimate is "
-                             "below R (relative, e.g. 0.01), up to --max-dofs (default: none, three levels)")
+                        help="refine the mesh (h/√2 per level) until the gauge strain's and the stiffness's "
+                             "discretisation error estimates are below R (relative, e.g. 0.01); the last level is "
+                             "fitted under --max-dofs (default: none, three levels)")
     parser.add_argument("--max-dofs", type=int, default=None, metavar="N",
                         help="DOF cap for --rtol refinement (default: 2,000,000)")
     parser.add_argument("--max-elements", type=float, default=None, metavar="N",
-                        help="refuse, before meshing, a mesh estimated above N tetrahedra (default: 500,000)")
+                        help="refuse, before meshing, a mesh estimated above N tetrahedra (default: 500,000, "
+                             "about 6 GB for P2 by its estimate; it usually binds before --max-dofs)")
     parser.add_argument("--single-level", action="store_true",
                         help="one mesh level only: faster, but the answers (and sweep rows) carry no error estimate")
     parser.add_argument("--sweep", action="append", metavar="PARAM=v1,v2,...",
