@@ -255,21 +255,19 @@ def analyze_with_error(design, size: str | None = None, order: int | None = None
     _attach(res, levels, order_used)
     warnings = []
     if rtol is not None:
-        f = factors[-1]
-
         def not_reached(why: str) -> str:
             return (f"--rtol {rtol:g} not reached: error estimate {worst:.2%} at "
                     f"{levels[-1]['dofs']} dofs; the next level {why}")
 
-        last_level = False
+        fitted = False
         while (worst := max(relative_error(res, k) for k in RTOL_FIGURES)) > rtol:
-            f_next, predicted, last_level = next_level(levels, max_dofs) if not last_level else (None, 0, True)
-            if f_next is None:
-                why = (f"(~{predicted} dofs) exceeds --max-dofs {max_dofs}" if predicted else
-                       f"would exceed --max-dofs {max_dofs} (the last one was made to fit under it)")
-                warnings.append(not_reached(why))
+            if fitted:
+                warnings.append(not_reached(f"would exceed --max-dofs {max_dofs} (the last one was made to fit under it)"))
                 break
-            f = f_next
+            f, predicted, fitted = next_level(levels, max_dofs)
+            if f is None:
+                warnings.append(not_reached(f"(~{predicted} dofs) exceeds --max-dofs {max_dofs}"))
+                break
             try:
                 run(f)
             except InputError as exc:       # a finer level refused (mesh cost): keep what is solved

@@ -53,8 +53,8 @@ class _Design:
 def test_rtol_uses_the_budget_and_says_when_it_is_not_enough(monkeypatch, max_dofs, reached):
     """rtol 0.03 on an order-1 figure whose GCI estimate is 1.25 c f: reached at f ≤ 0.48, i.e.
     435k dofs. Unlimited: h/√2 steps to f = 0.354. Cap 700k: h/√2 (400k at f = 0.5, estimate
-    3.1 %), then one level fitted under the cap (630k, f = 0.398, 2.5 %). Cap 500k: the fitted level (450k, f = 0.471)
-    is only 1.06× finer than f = 0.5: no level, a warning."""
+    3.1 %), then one level fitted under the cap (630k, f = 0.398, 2.5 %). Cap 500k: the fitted
+    level (450k, f = 0.471) is only 1.06× finer than f = 0.5: no level, a warning."""
     monkeypatch.setattr(A, "analyze", _fake_analyze)
     res, _ = analyze_with_error(_Design(), rtol=0.03, max_dofs=max_dofs)
     dofs = [lv["dofs"] for lv in res["discretization_levels"]]
