@@ -5,7 +5,7 @@ CSV: optional leading ``# key=value; key=value`` metadata lines (``reading_unit=
 ``direction`` (``load``/``unload``), ``repeat``, ``lever_arm_m``, ``timestamp`` (s),
 ``sensor_id``. Units are in the column names (g, m, s); the reading's unit is the
 ``reading_unit`` metadata (mV for the paper's eqs. 12–13, or ``counts``).
-Torque of a dead weight on a horizontal lever: τ = m g L (m in kg, g = 9.81 m/s², DESIGN.md's
+Torque of a dead weight on a horizontal lever: τ = m g L (m in kg, g = 9.81 m/s², the workbench's
 gravity, as ``bridge.chain`` uses).
 """
 

@@ -1,9 +1,9 @@
-"""Sensor logs: the estimator's input (DESIGN.md, "Sensor log").
+"""Sensor logs: the estimator's input (docs/conventions.md, "Sensor log CSV").
 
 CSV header ``t,x,z,theta,q1,q2,dx,dz,dtheta,dq1,dq2,tau1,tau2,Fx,Fz,My`` (q3…, dq3…, tau3… for
 longer chains; a fixed-base log omits x, z, theta and their rates). SI units throughout.
 In memory, coordinates are always the floating ones [x, z, θ, q_1…q_N]: a fixed-base log is
-padded with a zero base, and the base wrench enters on the base rows (DESIGN.md).
+padded with a zero base, and the base wrench enters on the base rows (docs/conventions.md).
 """
 
 from __future__ import annotations
@@ -247,7 +247,7 @@ def _fill(dst: np.ndarray, column, null_mask: bool = False) -> None:
 
 
 def read_log(path, robot=None, *, max_jitter: float = 0.01) -> SensorLog:
-    """Read and validate a sensor log (DESIGN.md format): CSV, or Parquet for ``.parquet``.
+    """Read and validate a sensor log (docs/conventions.md format): CSV, or Parquet for ``.parquet``.
 
     Rows with a NaN/inf (or empty) field are skipped and counted (``skipped_lines``, ``valid_mask``);
     a non-numeric field, a non-increasing time or a step that is not a whole number of sample
@@ -590,7 +590,7 @@ def rows_to_lines(rows: np.ndarray) -> np.ndarray:
 
 
 def log_to_frame(log: SensorLog):
-    """A pandas DataFrame with DESIGN.md's columns in order (a fixed base omits the base columns)."""
+    """A pandas DataFrame with the columns of docs/conventions.md in order (a fixed base omits the base columns)."""
     import pandas as pd
 
     n = log.n_links

@@ -1,6 +1,6 @@
 """Robot descriptions: a planar serial chain on a floating or fixed base, read from TOML.
 
-Conventions (DESIGN.md): link i runs from p_i to p_{i+1} = p_i + l_i (sin φ_i, −cos φ_i),
+Conventions (docs/conventions.md): link i runs from p_i to p_{i+1} = p_i + l_i (sin φ_i, −cos φ_i),
 φ_i = θ + q_1 + … + q_i; its centre of mass lies on the axis at r_i from p_i; I_i is about that
 centre of mass. The base's centre of mass is the base origin p_1 (the hip).
 """

@@ -1,4 +1,4 @@
-"""Sensor uncertainty → contact-localization error, before the robot exists (DESIGN.md, job 3).
+"""Sensor uncertainty → contact-localization error, before the robot exists (the workbench's third job).
 
 A static contact (link c, α, F) on a leg held at posture q loads the sensors with
 

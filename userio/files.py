@@ -1,6 +1,6 @@
 """Files the tool writes appear whole or not at all (temp file beside the target + rename).
 
-Contract (DESIGN.md): nothing a user gave is overwritten or lost on an error. With
+Contract (CONTRIBUTING.md): nothing a user gave is overwritten or lost on an error. With
 ``overwrite=False`` an existing file is never replaced: the finished temp file is hard-linked
 onto the target, which fails atomically if the target exists.
 """

@@ -1,6 +1,6 @@
 """Simulation configuration: what a scene file describes once validated.
 
-Units are SI; angles follow DESIGN.md (from the downward vertical, counterclockwise-positive).
+Units are SI; angles follow docs/conventions.md (from the downward vertical, counterclockwise-positive).
 """
 
 from __future__ import annotations
