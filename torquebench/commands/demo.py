@@ -25,7 +25,9 @@ SCENE = "paper_floating_link2"
 def add_arguments(parser) -> None:
     parser.add_argument("--out-dir", type=Path, default=Path("out/demo"),
                         help="directory for the demo's files, created if missing; the demo replaces its own four files there (log.csv, log.truth.csv, estimate_dynamic.csv, estimate_paper.csv) (default: %(default)s)")
-    parser.add_argument("--seed", type=int, default=1, help="sensor-noise seed (default: %(default)s)")
+    parser.add_argument("--seed", type=int, default=None,
+                        help="sensor-noise seed (default: the scene's, so that the demo and "
+                             "`torquebench run` of its scene give the same numbers)")
     parser.add_argument("--flexure", type=Path, default=None, metavar="DESIGN.toml",
                         help="take the torque sensor's strain per N·m from this flexure's FEM "
                              "(e.g. scenes/paper_disc.toml) instead of the paper's calibration")
