@@ -1,6 +1,6 @@
 """Bayesian calibration fit with emcee.
 
-reading = slope·m + offset [+ quad·m²] [+ hysteresis·1{unloading}] + ε, m in g,
+``reading = slope·m + offset [+ quad·m²] [+ hysteresis·1{unloading}] + ε``, m in g,
 ε ~ N(0, σ² + (∂reading/∂m)² σ_m²) (σ_m: optional standard uncertainty of the applied masses,
 "errors in the load", marginalized analytically to first order).
 Priors: flat on slope, offset, quad, hysteresis; p(σ) ∝ 1/σ, i.e. flat on log σ in [−30, 30].
