@@ -232,9 +232,10 @@ def segment_point(surface: BodySurface, o: np.ndarray, d: np.ndarray):
     w0 = a - o
     uu = u @ u
     ud = d @ u
+    wd = np.einsum("si,si->s", w0, d)
     with np.errstate(divide="ignore", invalid="ignore"):
         den = uu - ud * ud                            # |d| = 1
-        alpha = np.where(den > 1e-12 * uu, (ud * (w0 @ d) - (w0 @ u)) / den, 0.5)
+        alpha = np.where(den > 1e-12 * uu, (ud * wd - w0 @ u) / den, 0.5)
     alpha = np.clip(alpha, 0.0, 1.0)
     p = a + alpha[:, None] * u
     off = (p - o) - np.einsum("si,si->s", p - o, d)[:, None] * d

@@ -60,6 +60,9 @@ class SimSpec:
     start_at_rest: bool = True                # start from the static equilibrium (no transient)
 
 
+RAMP_S = 0.25          # the sine trajectory's smooth start
+
+
 def _log3(R):
     import pinocchio as pin
 
@@ -93,8 +96,13 @@ class _Sim:
             self.pokes.append((pk, fr.parentJoint, fr.placement.act(np.asarray(pk.point_m, float))))
 
     def reference(self, t):
+        """q0 + e(t) A sin(ωt) with a smooth envelope e (0 → 1 over ``RAMP_S``), so that the
+        set point starts at rest from the static equilibrium (no start-up transient)."""
         w = 2 * np.pi * self.spec.frequency_Hz
-        return self.q0 + self.amp * np.sin(w * t), self.amp * w * np.cos(w * t)
+        x = min(t / RAMP_S, 1.0)
+        e, de = x * x * (3 - 2 * x), (6 * x * (1 - x) / RAMP_S if x < 1 else 0.0)
+        return (self.q0 + e * self.amp * np.sin(w * t),
+                self.amp * (de * np.sin(w * t) + e * w * np.cos(w * t)))
 
     def joint_torque(self, q, v, t):
         qr, dqr = self.reference(t)

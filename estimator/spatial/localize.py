@@ -1,0 +1,164 @@
+"""Contacts on link surfaces in 3-D, from the observer residual.
+
+A point contact on body b at p (world, relative to the base origin O) with force F gives
+τ_ext = A_b [F; p × F], A_b the Jacobian columns (twists at O, estimator.spatial.model.columns)
+of the coordinates that move b, restricted to the rows that are equations. Per candidate body,
+vectorized over samples, with the residual whitened by L (L Lᵀ = R⁻¹, the no-contact covariance):
+
+1. the wrench w = [F; m] = argmin ‖L(r − A_b w)‖² (six unknowns: the FT rows fix it; the
+   sensed joint rows add equations);
+2. its line of action: a pure force transmits m = p × F, so p lies on p₀ + s F̂ with
+   p₀ = F × m / |F|² (the moment's part along F, the wrench's pitch, is left out);
+3. the line enters the body's collision solids (estimator.spatial.geometry) where F pushes into
+   the surface (F̂ · n < 0): that is the contact point; a body without solids is located on its
+   segment (the point nearest the line; flagged ``no_geometry``);
+4. a pure force at that point is refitted, F = argmin ‖L(r − A_b [I; [p]×] F)‖², and its
+   χ²_b = ‖L(r − …)‖² is the body's whitened misfit.
+
+The body with the smallest χ² wins (the whitened isolation test). Refused (NaN, a reason):
+|F| below the floor (``small_force``), a line meeting the surface at a grazing angle, 1/|F̂·n| >
+``max_condition`` (``grazing``), a line that enters no candidate's solids (``off_surface``), a
+second body within ``ambiguity_chi2`` of the best χ² at a point more than ``position_tol_m``
+away (``ambiguous_link``: the data cannot tell them apart, e.g. the joint between them has no
+torque sensor).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimator.spatial import geometry as geo
+from estimator.spatial.model import _skew, columns, moves
+from estimator.spatial.observer import used_rows
+
+REASONS = ("ok", "no_contact", "small_force", "grazing", "off_surface", "ambiguous_link",
+           "no_geometry")
+OK, NO_CONTACT, SMALL_FORCE, GRAZING, OFF_SURFACE, AMBIGUOUS, NO_GEOMETRY = range(7)
+
+
+@dataclass
+class SpatialLocalization:
+    body: np.ndarray            # (S,) body index (−1: none)
+    link: np.ndarray            # (S,) object: URDF link name of the solid hit ('' none)
+    point_body: np.ndarray      # (S, 3) in the body frame (NaN when refused)
+    force_N: np.ndarray         # (S, 3) world, ON the robot
+    chi2: np.ndarray            # (S,) the winner's whitened misfit
+    condition: np.ndarray       # (S,) 1/|F̂·n| (≥ 1; large: grazing)
+    reason: np.ndarray          # (S,) int8 into REASONS
+
+
+def _solve(A, b):
+    """Batched least squares by the normal equations (A (S, m, k) full column rank)."""
+    AtA = np.einsum("smi,smj->sij", A, A)
+    Atb = np.einsum("smi,sm->si", A, b)
+    return np.linalg.solve(AtA, Atb[..., None])[..., 0]
+
+
+def localize(model, surfaces, q, r, Linv, *, min_force_N=0.05, max_condition=20.0,
+             ambiguity_chi2=6.63, position_tol_m=0.005) -> SpatialLocalization:
+    """Per sample (q (S, nq), r (S, nv) all rows, Linv (nu, nu) or (S, nu, nu)): module doc."""
+    q = np.atleast_2d(q)
+    r = np.atleast_2d(r)
+    S_ = len(q)
+    rows = used_rows(model)
+    cols, _, _, (R, pos) = columns(model.tree, q)
+    A = cols[:, rows]                                     # (S, nu, 6)
+    L = np.broadcast_to(Linv, (S_,) + Linv.shape[-2:])
+    rw = np.einsum("sij,sj->si", L, r[:, rows])
+    mv = moves(model.tree)[rows]
+    NB = model.tree.n_bodies
+    cost = np.full((S_, NB), np.inf)
+    pts = np.full((S_, NB, 3), np.nan)                    # body frame
+    pw = np.full((S_, NB, 3), np.nan)                     # world, relative to O
+    force = np.full((S_, NB, 3), np.nan)
+    cond = np.full((S_, NB), np.inf)
+    which = np.full((S_, NB), -1)
+    fnorm = np.zeros((S_, NB))
+    for b in range(NB):
+        Ab = A * mv[:, b][None, :, None]
+        Aw = np.einsum("sij,sjk->sik", L, Ab)
+        w = _solve(Aw, rw)
+        F, m = w[:, :3], w[:, 3:]
+        fn = np.linalg.norm(F, axis=1)
+        fnorm[:, b] = fn
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d = F / fn[:, None]
+            p0 = np.cross(F, m) / (fn * fn)[:, None]
+        good = fn > 0
+        d = np.where(good[:, None], d, np.array([0.0, 0.0, 1.0]))
+        p0 = np.where(good[:, None], p0, 0.0)
+        Rb, pb = R[:, b], pos[:, b]
+        o_b = np.einsum("sji,sj->si", Rb, p0 - pb)
+        d_b = np.einsum("sji,sj->si", Rb, d)
+        surf = surfaces[b]
+        if surf.has_geometry:
+            s, point, normal, hit = geo.body_entry(surf, o_b, d_b)
+            ok = np.isfinite(s)
+            with np.errstate(divide="ignore"):
+                cond[:, b] = np.where(ok, 1.0 / np.abs(np.einsum("si,si->s", normal, d_b)), np.inf)
+            which[:, b] = hit
+        else:
+            point, _, _ = geo.segment_point(surf, o_b, d_b)
+            ok = np.ones(S_, bool)
+            cond[:, b] = 1.0
+        pwb = pb + np.einsum("sij,sj->si", Rb, point)
+        Ap = Aw[:, :, :3] + np.einsum("sij,sjk->sik", Aw[:, :, 3:], _skew(np.nan_to_num(pwb)))
+        Fp = _solve(Ap, rw)
+        e = rw - np.einsum("sij,sj->si", Ap, Fp)
+        c2 = np.einsum("si,si->s", e, e)
+        cost[:, b] = np.where(ok, c2, np.inf)
+        pts[:, b], pw[:, b], force[:, b] = point, pwb, Fp
+    order = np.argsort(cost, axis=1, kind="stable")
+    best = order[:, 0]
+    idx = np.arange(S_)
+    c_best = cost[idx, best]
+    reason = np.zeros(S_, np.int8)
+    reason[~np.isfinite(c_best)] = OFF_SURFACE
+    if NB > 1:
+        second = order[:, 1]
+        with np.errstate(invalid="ignore"):
+            close = cost[idx, second] - c_best < ambiguity_chi2
+        far = np.linalg.norm(pw[idx, second] - pw[idx, best], axis=1) > position_tol_m
+        reason[(reason == OK) & close & far] = AMBIGUOUS
+    condition = cond[idx, best]
+    reason[(reason == OK) & (condition > max_condition)] = GRAZING
+    reason[(reason == OK) & np.array([not surfaces[b].has_geometry for b in best])] = NO_GEOMETRY
+    F_best = force[idx, best]
+    reason[~(np.linalg.norm(np.nan_to_num(F_best), axis=1) >= min_force_N)
+           & ~(fnorm[idx, best] >= min_force_N)] = SMALL_FORCE
+    bad = (reason != OK) & (reason != NO_GEOMETRY)
+    names = np.array([""] + [n for s in surfaces for n, _ in s.solids] + [s.name for s in surfaces],
+                     dtype=object)
+    link = np.empty(S_, dtype=object)
+    for i in range(S_):
+        b, h = best[i], which[i, best[i]]
+        link[i] = surfaces[b].solids[h][0] if h >= 0 else surfaces[b].name
+    point = np.where(bad[:, None], np.nan, pts[idx, best])
+    off = reason == OFF_SURFACE
+    F_out = np.where(off[:, None], np.nan, F_best)
+    del names
+    return SpatialLocalization(body=np.where(off, -1, best), link=np.where(off, "", link),
+                               point_body=point, force_N=F_out, chi2=c_best, condition=condition,
+                               reason=reason)
+
+
+def identifiability(model, surfaces) -> list[dict]:
+    """Per body: the sensed joints on its path (whose rows separate it from other bodies), the
+    bodies it cannot be told apart from by the residual (the same sensed joints moving them:
+    only the line of action's crossing of their surfaces separates them), and whether it can be
+    located on a surface (collision geometry) or only on its segment."""
+    mv = moves(model.tree)[used_rows(model)]
+    out = []
+    for b in range(model.tree.n_bodies):
+        same = [surfaces[c].name for c in range(model.tree.n_bodies)
+                if c != b and np.array_equal(mv[:, c], mv[:, b])]
+        sensed = [model.joint_names[k - 6] for k in used_rows(model)[6:] if mv[list(used_rows(model)).index(k), b]]
+        out.append({"link": surfaces[b].name,
+                    "links_on_body": sorted({n for n, _ in surfaces[b].solids}) or [surfaces[b].name],
+                    "sensed_joints_moving_it": sensed,
+                    "confused_with": same,
+                    "located_on": "surface" if surfaces[b].has_geometry else "segment (no collision geometry)",
+                    "line_of_action": "identifiable (six-axis FT sensor)"})
+    return out
