@@ -165,7 +165,9 @@ class SpatialStream:
 
 def intervals(frame) -> list[dict]:
     """Contact intervals: start/end, samples, the most frequent link, and over its samples with a
-    surface answer ('ok') the mean point (world and link frame) and force."""
+    surface answer ('ok'; 'no_geometry' on a segment) the median point (world and link frame)
+    and force (the median: the onset and the residual's decay after the contact ends are the
+    samples least well explained, and a few of them do not move it)."""
     c = frame["contact"].to_numpy().astype(bool)
     if not c.any():
         return []
@@ -181,7 +183,7 @@ def intervals(frame) -> list[dict]:
         link = str(names[int(np.argmax(counts))]) if len(names) else ""
         m = np.zeros(len(frame), bool)
         m[a:b] = good_all[a:b] & (links[a:b] == link)
-        mean = lambda k: float(frame[k].to_numpy()[m].mean()) if m.any() else float("nan")  # noqa: E731
+        mean = lambda k: float(np.median(frame[k].to_numpy()[m])) if m.any() else float("nan")  # noqa: E731
         out.append({"t_start_s": float(t[a]), "t_end_s": float(t[b - 1]), "samples": int(b - a),
                     "link": link, "located_fraction": float(m.sum() / (b - a)),
                     **{f"{k}_m" if k[0] in "pl" else f"{k}_N": mean(k)
