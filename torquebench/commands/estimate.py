@@ -9,6 +9,7 @@ HELP = "estimate contacts (link, α, force, point) sample by sample from a senso
 EXAMPLES = """\
 torquebench estimate examples/leg_poke/leg_poke.csv
 torquebench estimate examples/sim/paper_fixed_link2.csv --method paper --out out/fixed_link2_estimate.csv --json
+torquebench estimate examples/spatial/leg_pokes.csv --robot robots/quadruped_leg.toml
 """
 
 
@@ -48,7 +49,8 @@ def _chunk(text: str) -> int:
 def add_arguments(parser) -> None:
     parser.add_argument("log", type=Path, metavar="LOG.csv", help="sensor log: CSV (or Parquet for .parquet) with t,[x,z,theta,]q1,q2,[dx,dz,dtheta,]dq1,dq2,tau1,tau2,Fx,Fz,My in SI units (docs/conventions.md)")
     parser.add_argument("--robot", type=Path, default=None,
-                        help="robot TOML (default: robots/paper_leg.toml)")
+                        help="robot TOML (default: robots/paper_leg.toml), or a URDF robot: a .urdf or "
+                             "a declaration TOML naming one (robots/quadruped_leg.toml): the 3-D estimator")
     parser.add_argument("--method", choices=["paper", "dynamic"], default="dynamic",
                         help="localization: 'dynamic' (observer residual, least squares; default) "
                              "or 'paper' (eqs. 6-9, quasi-static)")
@@ -176,6 +178,10 @@ def run(args) -> int:
             raise InputError(f"--out {args.out}: is the input log; refusing to overwrite it")
     from torquebench.outputs import prepare_file
     prepare_file(args.out, "--out", force=args.force, inputs=(args.log, args.robot))
+    from estimator.spatial.robot import is_spatial_robot_file
+    if args.robot is not None and is_spatial_robot_file(args.robot):   # a URDF robot: the 3-D path
+        from torquebench.spatial_cli import estimate as estimate_3d
+        return estimate_3d(args)
     robot = load_robot(args.robot or PAPER_LEG_TOML)
     noise, quiet, rate = _detector_options(args, robot.n_links)
     if noise is None and quiet is None:           # LOG.noise.toml beside the log, if any
