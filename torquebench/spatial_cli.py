@@ -73,12 +73,16 @@ def estimate(args) -> int:
             atomic_write(args.out, lambda tmp: frame.to_parquet(tmp, index=False))
         else:
             atomic_write(args.out, lambda tmp: frame.to_csv(tmp, index=False, float_format="%.9g"))
+    if getattr(args, "png", None) is not None:
+        pictures = _contact_pictures(model, args, est)
     summary = {"log": str(args.log), "robot": robot.name, "urdf": str(robot.urdf_path),
                "gain_per_s": args.gain, "skipped_samples": reader.n_skipped,
                "timing": "declared" if reader.timing is not None else "instant",
                **est.summary(), "run_time_s": time.perf_counter() - start}
     if args.out is not None:
         summary["out"] = str(args.out)
+    if getattr(args, "png", None) is not None:
+        summary["png"] = pictures
     if args.json:
         print_json(summary)
         return 0
@@ -94,6 +98,39 @@ def estimate(args) -> int:
     if args.out is not None:
         print(f"wrote {args.out}")
     return 0
+
+
+def _contact_pictures(model, args, est) -> list[str]:
+    """One picture per contact interval at its middle sample (estimator.spatial.render)."""
+    import pandas as pd
+
+    from estimator.spatial.logs import read_spatial_log
+    from estimator.spatial.predict import SurfaceMap, solid_mesh
+    from estimator.spatial.geometry import body_surfaces
+    from estimator.spatial.render import contact_picture
+
+    log = read_spatial_log(args.log, model.robot, model)
+    truth_file = Path(args.log).with_name(Path(args.log).stem + ".truth.csv")
+    truth = pd.read_csv(truth_file, keep_default_na=False, na_values=["nan", ""]) if truth_file.exists() else None
+    maps = []
+    for s in body_surfaces(model.robot, model.tree):
+        for link, shape in s.solids:
+            m = solid_mesh(shape, 24)
+            maps.append(SurfaceMap(link, s.body, m.vertices, m.faces, np.zeros(len(m.vertices)), None))
+    out = []
+    f = est.frame
+    for i, iv in enumerate(est.intervals, start=1):
+        k = int(np.searchsorted(f.t.to_numpy(), 0.5 * (iv["t_start_s"] + iv["t_end_s"])))
+        row = f.iloc[k]
+        tp = tf = None
+        if truth is not None and str(truth.link.iloc[k] or "") != "":
+            tp = truth[["px", "py", "pz"]].to_numpy()[k]
+            tf = truth[["Fx", "Fy", "Fz"]].to_numpy()[k]
+        path = Path(args.png).with_name(f"{Path(args.png).stem}_{i}.png")
+        contact_picture(model, log.q[k], maps, row[["px", "py", "pz"]].to_numpy(float),
+                        row[["Fx", "Fy", "Fz"]].to_numpy(float), tp, tf, path)
+        out.append(str(path))
+    return out
 
 
 def simulate(args) -> int:
@@ -133,4 +170,55 @@ def simulate(args) -> int:
     else:
         print(f"{scene.name}: {summary['samples']} samples, {summary['contact_samples']} in contact → "
               f"{out} (+ {tpath.name}); {summary['run_time_s']:.2f} s")
+    return 0
+
+
+def propagate(args) -> int:
+    """``torquebench propagate --robot leg.toml``: the 3-D error map (estimator.spatial.predict)
+    at a posture, for a force of the given magnitude pushing into every surface point."""
+    from estimator.spatial.logs import make_noise
+    from estimator.spatial.model import UrdfModel
+    from estimator.spatial.predict import error_map, summarize
+    from estimator.spatial.robot import load_spatial_robot
+    from torquebench.io import print_json
+
+    robot = load_spatial_robot(args.robot)
+    model = UrdfModel(robot)
+    ft = _floats(args.ft_noise, "--ft-noise")
+    if len(ft) == 3:                    # the planar form Fx, Fz, My: force σ, moment σ
+        ft = [ft[0], ft[2]]
+    tau = args.torque_noise_Nm if args.torque_noise_Nm is not None else 0.005
+    noise = make_noise(tau, ft, int(sum(robot.sensed)), source="--torque-noise-Nm/--ft-noise")
+    magnitude = _floats(args.force, "--force")[0]
+    if not magnitude > 0:
+        raise InputError(f"--force: the magnitude must be > 0 N, got {magnitude:g}")
+    q = robot.rest_q()
+    if getattr(args, "posture", None):
+        post = _floats(args.posture, "--posture")
+        if len(post) != robot.n_joints:
+            raise InputError(f"--posture: expected {robot.n_joints} joint values "
+                             f"({', '.join(robot.joint_names)}), got {len(post)}")
+        q[7:] = post
+    maps = error_map(model, q, noise, magnitude, args.gain, 1.0 / args.rate,
+                     resolution=max(8, 4 * args.grid))
+    results = {"robot": robot.name, "urdf": str(robot.urdf_path), "posture_rad": q[7:].tolist(),
+               "force_N": magnitude, "torque_noise_std_Nm": float(tau), "ft_noise": noise.ft_sigma.tolist(),
+               "links": summarize(maps),
+               "method": "first-order propagation of the residual's no-contact covariance through "
+                         "the surface localizer, force pushing straight into each surface point"}
+    if args.png:
+        from estimator.spatial.render import error_picture
+
+        error_picture(model, q, maps, args.png, f"RMS contact-position error, {magnitude:g} N pushes")
+        results["png"] = str(args.png)
+    if args.json:
+        print_json(results)
+        return 0
+    print(f"{robot.name}: τ σ {tau:g} N·m, FT σ {noise.ft_sigma.tolist()}, |F| = {magnitude:g} N, "
+          f"posture {np.round(q[7:], 3).tolist()} rad")
+    for link, s in results["links"].items():
+        med, mx = s["position_rms_median_m"], s["position_rms_max_m"]
+        print(f"  {link:12s} median {med * 1e3 if med is not None else float('nan'):7.2f} mm, "
+              f"max {mx * 1e3 if mx is not None else float('nan'):7.2f} mm, refused "
+              f"{100 * s['refused_fraction']:.0f} % of {s['points']} surface points")
     return 0

@@ -91,6 +91,10 @@ def add_arguments(parser) -> None:
                         help="write t,contact,link,alpha,Fx,Fz,px,pz,rnorm per sample (s, -, -, -, N, N, m, m, -); "
                              "Parquet for .parquet, else CSV; its directory is created, an existing file is kept unless --force")
     parser.add_argument("--force", action="store_true", help="replace an existing --out file")
+    parser.add_argument("--png", type=Path, default=None, metavar="OUT.png",
+                        help="URDF robots: the robot in 3-D at each contact interval's middle sample, the "
+                             "estimated contact and force arrow beside the true one (LOG.truth.csv, if "
+                             "there); one picture per interval, OUT_1.png, OUT_2.png, ...")
     parser.add_argument("--chunk-samples", type=_chunk, default=65536, metavar="N",
                         help="samples read, estimated and written per chunk: memory is bounded by "
                              "this, not by the log's length; results do not depend on it "
@@ -182,6 +186,8 @@ def run(args) -> int:
     if args.robot is not None and is_spatial_robot_file(args.robot):   # a URDF robot: the 3-D path
         from torquebench.spatial_cli import estimate as estimate_3d
         return estimate_3d(args)
+    if getattr(args, "png", None) is not None:
+        raise InputError("--png: the 3-D contact picture is drawn for URDF robots (--robot LEG.urdf)")
     robot = load_robot(args.robot or PAPER_LEG_TOML)
     noise, quiet, rate = _detector_options(args, robot.n_links)
     if noise is None and quiet is None:           # LOG.noise.toml beside the log, if any
