@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimator.spatial import geometry as geo
-from estimator.spatial.model import _skew, columns, moves
+from estimator.spatial.model import _skew, columns, cross, moves
 from estimator.spatial.observer import used_rows
 
 REASONS = ("ok", "no_contact", "small_force", "grazing", "off_surface", "ambiguous_link",
@@ -51,9 +51,8 @@ class SpatialLocalization:
 
 def _solve(A, b):
     """Batched least squares by the normal equations (A (S, m, k) full column rank)."""
-    AtA = np.einsum("smi,smj->sij", A, A)
-    Atb = np.einsum("smi,sm->si", A, b)
-    return np.linalg.solve(AtA, Atb[..., None])[..., 0]
+    At = A.transpose(0, 2, 1)
+    return np.linalg.solve(At @ A, At @ b[..., None])[..., 0]
 
 
 def localize(model, surfaces, q, r, Linv, *, min_force_N=0.05, max_condition=20.0,
@@ -66,7 +65,7 @@ def localize(model, surfaces, q, r, Linv, *, min_force_N=0.05, max_condition=20.
     cols, _, _, (R, pos) = columns(model.tree, q)
     A = cols[:, rows]                                     # (S, nu, 6)
     L = np.broadcast_to(Linv, (S_,) + Linv.shape[-2:])
-    rw = np.einsum("sij,sj->si", L, r[:, rows])
+    rw = (L @ r[:, rows][..., None])[..., 0]
     mv = moves(model.tree)[rows]
     NB = model.tree.n_bodies
     cost = np.full((S_, NB), np.inf)
@@ -78,20 +77,21 @@ def localize(model, surfaces, q, r, Linv, *, min_force_N=0.05, max_condition=20.
     fnorm = np.zeros((S_, NB))
     for b in range(NB):
         Ab = A * mv[:, b][None, :, None]
-        Aw = np.einsum("sij,sjk->sik", L, Ab)
+        Aw = L @ Ab
         w = _solve(Aw, rw)
         F, m = w[:, :3], w[:, 3:]
         fn = np.linalg.norm(F, axis=1)
         fnorm[:, b] = fn
         with np.errstate(divide="ignore", invalid="ignore"):
             d = F / fn[:, None]
-            p0 = np.cross(F, m) / (fn * fn)[:, None]
+            p0 = cross(F, m) / (fn * fn)[:, None]
         good = fn > 0
         d = np.where(good[:, None], d, np.array([0.0, 0.0, 1.0]))
         p0 = np.where(good[:, None], p0, 0.0)
         Rb, pb = R[:, b], pos[:, b]
-        o_b = np.einsum("sji,sj->si", Rb, p0 - pb)
-        d_b = np.einsum("sji,sj->si", Rb, d)
+        RbT = Rb.transpose(0, 2, 1)
+        o_b = (RbT @ (p0 - pb)[..., None])[..., 0]
+        d_b = (RbT @ d[..., None])[..., 0]
         surf = surfaces[b]
         if surf.has_geometry:
             s, point, normal, hit = geo.body_entry(surf, o_b, d_b)
@@ -103,10 +103,10 @@ def localize(model, surfaces, q, r, Linv, *, min_force_N=0.05, max_condition=20.
             point, _, _ = geo.segment_point(surf, o_b, d_b)
             ok = np.ones(S_, bool)
             cond[:, b] = 1.0
-        pwb = pb + np.einsum("sij,sj->si", Rb, point)
-        Ap = Aw[:, :, :3] + np.einsum("sij,sjk->sik", Aw[:, :, 3:], _skew(np.nan_to_num(pwb)))
+        pwb = pb + (Rb @ point[..., None])[..., 0]
+        Ap = Aw[:, :, :3] + Aw[:, :, 3:] @ _skew(np.nan_to_num(pwb))
         Fp = _solve(Ap, rw)
-        e = rw - np.einsum("sij,sj->si", Ap, Fp)
+        e = rw - (Ap @ Fp[..., None])[..., 0]
         c2 = np.einsum("si,si->s", e, e)
         cost[:, b] = np.where(ok, c2, np.inf)
         pts[:, b], pw[:, b], force[:, b] = point, pwb, Fp
@@ -129,16 +129,17 @@ def localize(model, surfaces, q, r, Linv, *, min_force_N=0.05, max_condition=20.
     reason[~(np.linalg.norm(np.nan_to_num(F_best), axis=1) >= min_force_N)
            & ~(fnorm[idx, best] >= min_force_N)] = SMALL_FORCE
     bad = (reason != OK) & (reason != NO_GEOMETRY)
-    names = np.array([""] + [n for s in surfaces for n, _ in s.solids] + [s.name for s in surfaces],
-                     dtype=object)
-    link = np.empty(S_, dtype=object)
-    for i in range(S_):
-        b, h = best[i], which[i, best[i]]
-        link[i] = surfaces[b].solids[h][0] if h >= 0 else surfaces[b].name
+    # the link name of (body, solid index): solids first, the body's own name at index −1
+    width = max(len(sf.solids) for sf in surfaces) + 1
+    table = np.empty((NB, width), dtype=object)
+    for sf in surfaces:
+        table[sf.body, :] = sf.name
+        for i, (name, _) in enumerate(sf.solids):
+            table[sf.body, i] = name
+    link = table[best, which[idx, best]]
     point = np.where(bad[:, None], np.nan, pts[idx, best])
     off = reason == OFF_SURFACE
     F_out = np.where(off[:, None], np.nan, F_best)
-    del names
     return SpatialLocalization(body=np.where(off, -1, best), link=np.where(off, "", link),
                                point_body=point, force_N=F_out, chi2=c_best, condition=condition,
                                reason=reason)

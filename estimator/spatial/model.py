@@ -94,6 +94,7 @@ class UrdfModel:
         self.sensed_joints = tuple(robot.sensed)
         self.n_v = 6 + len(self.joint_names)
         self.parameter_names = tuple(f"{b}.{p}" for b in self.tree.body_names for p in PARAMS)
+        self._ft = robot.ft_placement()
 
     # ------------------------------------------------------------------ dynamics
     def momentum_terms(self, q, v, tau_meas):
@@ -191,22 +192,42 @@ class UrdfModel:
         """The six base rows of τ_meas from the sensor-frame wrench ON the robot (T, 6):
         force in the world (R_wb R_bs f_s), moment about the base origin in the base frame
         (R_bs m_s + p_bs × R_bs f_s)."""
-        Rbs, pbs = self.robot.ft_placement()
+        Rbs, pbs = self._ft
         q = np.atleast_2d(q)
         w = np.atleast_2d(np.asarray(wrench_s, float))
+        out = np.empty(w.shape)
         f_b = w[:, :3] @ Rbs.T
-        m_b = w[:, 3:] @ Rbs.T + np.cross(pbs, f_b)
-        f_w = np.einsum("tij,tj->ti", tree_mod.quat_matrix(q[:, 3:7]), f_b)
-        return np.concatenate([f_w, m_b], axis=1)
+        out[:, 3:] = w[:, 3:] @ Rbs.T + cross(np.broadcast_to(pbs, f_b.shape), f_b)
+        out[:, :3] = quat_rotate(q[:, 3:7], f_b)
+        return out
 
     def ft_from_base_rows(self, q: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """The inverse of ``base_rows_from_ft``: the sensor-frame wrench (T, 6)."""
-        Rbs, pbs = self.robot.ft_placement()
+        Rbs, pbs = self._ft
         q = np.atleast_2d(q)
         rows = np.atleast_2d(np.asarray(rows, float))
-        f_b = np.einsum("tji,tj->ti", tree_mod.quat_matrix(q[:, 3:7]), rows[:, :3])
-        m_b = rows[:, 3:] - np.cross(pbs, f_b)
+        f_b = quat_rotate(q[:, 3:7], rows[:, :3], inverse=True)
+        m_b = rows[:, 3:] - cross(np.broadcast_to(pbs, f_b.shape), f_b)
         return np.concatenate([f_b @ Rbs, m_b @ Rbs], axis=1)
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a × b over the last axis (3), without np.cross's axis shuffling (faster on (T, 3))."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def quat_rotate(quat: np.ndarray, v: np.ndarray, inverse: bool = False) -> np.ndarray:
+    """R(quat) v (or Rᵀ v) for quaternions (T, 4) = (x, y, z, w), normalized here, and v (T, 3):
+    v' = v + 2w (u × v) + 2 u × (u × v), u = (x, y, z) (−u for the inverse)."""
+    n = np.sqrt(np.einsum("ti,ti->t", quat, quat))[:, None]
+    u = quat[:, :3] / n
+    w = quat[:, 3:4] / n
+    if inverse:
+        u = -u
+    c = cross(u, v)
+    return v + 2.0 * (w * c + cross(u, c))
 
 
 def pinocchio_terms(robot: SpatialRobot, q, v, tau):

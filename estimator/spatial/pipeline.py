@@ -21,7 +21,7 @@ from estimator.spatial import localize as loc
 from estimator.spatial import noise as snoise
 from estimator.spatial.geometry import body_surfaces
 from estimator.spatial.observer import ObserverRun, gains, used_rows
-from estimator.spatial.tree import body_poses
+from estimator.spatial.tree import body_poses, whitened_statistic
 
 OUT_COLUMNS = ["t", "contact", "link", "px", "py", "pz", "Fx", "Fy", "Fz", "lx", "ly", "lz",
                "rnorm", "reason"]
@@ -82,7 +82,8 @@ class SpatialStream:
                      "identifiability": loc.identifiability(model, self.surfaces)}
 
     def _whiteners(self, q, v, g0):
-        """L⁻¹ per sample from one covariance per stride block (block index (g0 + i) // stride)."""
+        """(L⁻¹ per block (B, nu, nu), block of each sample (T,)): one covariance per stride
+        block (block index (g0 + i) // stride), evaluated at the block's first sample here."""
         T = len(q)
         blocks = (g0 + np.arange(T)) // self.stride
         first = np.r_[0, np.flatnonzero(np.diff(blocks)) + 1]
@@ -93,21 +94,19 @@ class SpatialStream:
             self._floor = max(self.min_force_N, 5.0 * float(np.sqrt(np.max(np.diagonal(R[0])[:3]))))
             self.info["min_force_N"] = self._floor
             self.info["residual_sigma"] = np.sqrt(np.diagonal(R[0])).tolist()
-        return Linv[np.searchsorted(first, np.arange(T), side="right") - 1]
+        return Linv, np.searchsorted(first, np.arange(T), side="right") - 1
 
     def _process(self, rows):
         import pandas as pd
 
         t, q, v, r = rows["t"], rows["q"], rows["v"], rows["r"]
         T = len(t)
-        L = self._whiteners(q, v, self.g)
-        ru = r[:, self.rows]
-        z = np.einsum("tij,tj->ti", L, ru)
-        stat = np.einsum("ti,ti->t", z, z)
+        Lb, block = self._whiteners(q, v, self.g)
+        stat = whitened_statistic(r, self.rows, Lb, block)
         if self.threshold is None:
             contact, rnorm = stat > self.h, np.sqrt(stat)
         else:
-            rnorm = np.linalg.norm(ru, axis=1)
+            rnorm = np.linalg.norm(r[:, self.rows], axis=1)
             contact = rnorm > self.threshold
         q_loc = q
         if self.lag > 0:
@@ -125,7 +124,7 @@ class SpatialStream:
         F = np.full((T, 3), np.nan)
         reason = np.full(T, loc.REASONS[loc.NO_CONTACT], dtype=object)
         if sel.size:
-            res = loc.localize(self.model, self.surfaces, q_loc[sel], r[sel], L[sel],
+            res = loc.localize(self.model, self.surfaces, q_loc[sel], r[sel], Lb[block[sel]],
                                min_force_N=self._floor, max_condition=self.max_condition,
                                position_tol_m=self.position_tol_m)
             R, p, _, _ = body_poses(self.model.tree, q[sel])

@@ -109,6 +109,13 @@ def _terms_loop(q, v, tau, parent, Rp, pp, axis, kind, mass, com, Ic, g, P, u):
     S = np.empty((NB, 6))           # joint columns (world, at O)
     H = np.empty((NB, 6))
     F = np.empty((NB, 6))
+    Rj = np.empty((3, 3))
+    o = np.empty(3)
+    e = np.empty(3)
+    c = np.empty(3)
+    wb = np.empty(3)
+    Iw = np.empty(3)
+    L = np.empty(3)
     for k in range(T):
         x, y, z, w = q[k, 3], q[k, 4], q[k, 5], q[k, 6]
         s = 1.0 / np.sqrt(x * x + y * y + z * z + w * w)
@@ -132,39 +139,36 @@ def _terms_loop(q, v, tau, parent, Rp, pp, axis, kind, mass, com, Ic, g, P, u):
         for b in range(1, NB):
             a = parent[b]
             # joint frame: R_a Rp, origin pos_a + R_a pp
-            Rj = np.empty((3, 3))
-            o = np.empty(3)
             for i in range(3):
                 o[i] = pos[a, i] + R[a, i, 0] * pp[b, 0] + R[a, i, 1] * pp[b, 1] + R[a, i, 2] * pp[b, 2]
-                for c in range(3):
-                    Rj[i, c] = R[a, i, 0] * Rp[b, 0, c] + R[a, i, 1] * Rp[b, 1, c] + R[a, i, 2] * Rp[b, 2, c]
+                for j in range(3):
+                    Rj[i, j] = R[a, i, 0] * Rp[b, 0, j] + R[a, i, 1] * Rp[b, 1, j] + R[a, i, 2] * Rp[b, 2, j]
             ax = axis[b]
-            e = np.empty(3)
             for i in range(3):
                 e[i] = Rj[i, 0] * ax[0] + Rj[i, 1] * ax[1] + Rj[i, 2] * ax[2]
             qj = q[k, 6 + b]
             if kind[b] == 0:
                 # R_b = Rj · rot(axis, q) = rot_world(e, q) · Rj (Rodrigues on the world axis)
                 sn, cs = np.sin(qj), np.cos(qj)
-                for c in range(3):
-                    r0, r1, r2 = Rj[0, c], Rj[1, c], Rj[2, c]
+                for j in range(3):
+                    r0, r1, r2 = Rj[0, j], Rj[1, j], Rj[2, j]
                     d = e[0] * r0 + e[1] * r1 + e[2] * r2
                     cx = e[1] * r2 - e[2] * r1
                     cy = e[2] * r0 - e[0] * r2
                     cz = e[0] * r1 - e[1] * r0
-                    R[b, 0, c] = r0 * cs + cx * sn + e[0] * d * (1 - cs)
-                    R[b, 1, c] = r1 * cs + cy * sn + e[1] * d * (1 - cs)
-                    R[b, 2, c] = r2 * cs + cz * sn + e[2] * d * (1 - cs)
-                    pos[b, c] = o[c]
+                    R[b, 0, j] = r0 * cs + cx * sn + e[0] * d * (1 - cs)
+                    R[b, 1, j] = r1 * cs + cy * sn + e[1] * d * (1 - cs)
+                    R[b, 2, j] = r2 * cs + cz * sn + e[2] * d * (1 - cs)
+                    pos[b, j] = o[j]
                 S[b, 0] = o[1] * e[2] - o[2] * e[1]       # o × e: the twist at O
                 S[b, 1] = o[2] * e[0] - o[0] * e[2]
                 S[b, 2] = o[0] * e[1] - o[1] * e[0]
                 S[b, 3], S[b, 4], S[b, 5] = e[0], e[1], e[2]
             else:
-                for c in range(3):
+                for j in range(3):
                     for i in range(3):
-                        R[b, i, c] = Rj[i, c]
-                    pos[b, c] = o[c] + e[c] * qj
+                        R[b, i, j] = Rj[i, j]
+                    pos[b, j] = o[j] + e[j] * qj
                 S[b, 0], S[b, 1], S[b, 2] = e[0], e[1], e[2]
                 S[b, 3] = S[b, 4] = S[b, 5] = 0.0
             qd = v[k, 5 + b]
@@ -173,22 +177,18 @@ def _terms_loop(q, v, tau, parent, Rp, pp, axis, kind, mass, com, Ic, g, P, u):
         # body momenta and gravity wrenches at O
         for b in range(NB):
             m = mass[b]
-            c = np.empty(3)
             for i in range(3):
                 c[i] = pos[b, i] + R[b, i, 0] * com[b, 0] + R[b, i, 1] * com[b, 1] + R[b, i, 2] * com[b, 2]
-            wv = tw[b, 3:6]
-            vc0 = tw[b, 0] + wv[1] * c[2] - wv[2] * c[1]
-            vc1 = tw[b, 1] + wv[2] * c[0] - wv[0] * c[2]
-            vc2 = tw[b, 2] + wv[0] * c[1] - wv[1] * c[0]
+            w0_, w1_, w2_ = tw[b, 3], tw[b, 4], tw[b, 5]
+            vc0 = tw[b, 0] + w1_ * c[2] - w2_ * c[1]
+            vc1 = tw[b, 1] + w2_ * c[0] - w0_ * c[2]
+            vc2 = tw[b, 2] + w0_ * c[1] - w1_ * c[0]
             p0, p1, p2 = m * vc0, m * vc1, m * vc2
             # I_world ω = R Ic Rᵀ ω
-            wb = np.empty(3)
             for i in range(3):
-                wb[i] = R[b, 0, i] * wv[0] + R[b, 1, i] * wv[1] + R[b, 2, i] * wv[2]
-            Iw = np.empty(3)
+                wb[i] = R[b, 0, i] * w0_ + R[b, 1, i] * w1_ + R[b, 2, i] * w2_
             for i in range(3):
                 Iw[i] = Ic[b, i, 0] * wb[0] + Ic[b, i, 1] * wb[1] + Ic[b, i, 2] * wb[2]
-            L = np.empty(3)
             for i in range(3):
                 L[i] = R[b, i, 0] * Iw[0] + R[b, i, 1] * Iw[1] + R[b, i, 2] * Iw[2]
             H[b, 0], H[b, 1], H[b, 2] = p0, p1, p2
@@ -238,22 +238,47 @@ def _terms_loop(q, v, tau, parent, Rp, pp, axis, kind, mass, com, Ic, g, P, u):
             u[k, r] = tau[k, r] + ctv + grav
 
 
-_COMPILED = None
-USE_NUMBA = True            # False: the same loop in plain Python (tests compare the two)
+def _stat_loop(r, rows, Lb, block, out):
+    """out[k] = ‖Lb[block[k]] r[k, rows]‖² (the whitened residual's squared norm)."""
+    nu = rows.shape[0]
+    for k in range(r.shape[0]):
+        L = Lb[block[k]]
+        s = 0.0
+        for i in range(nu):
+            z = 0.0
+            for j in range(i + 1):
+                z += L[i, j] * r[k, rows[j]]
+            s += z * z
+        out[k] = s
 
 
-def _kernel():
-    global _COMPILED
+_COMPILED = {}
+USE_NUMBA = True            # False: the same loops in plain Python (tests compare the two)
+
+
+def _compiled(fn):
     if not USE_NUMBA:
-        return _terms_loop
-    if _COMPILED is None:
+        return fn
+    if fn.__name__ not in _COMPILED:
         try:
             import numba
 
-            _COMPILED = numba.njit(cache=True, fastmath=False)(_terms_loop)
+            _COMPILED[fn.__name__] = numba.njit(cache=True, fastmath=False)(fn)
         except ImportError:
-            _COMPILED = _terms_loop
-    return _COMPILED
+            _COMPILED[fn.__name__] = fn
+    return _COMPILED[fn.__name__]
+
+
+def _kernel():
+    return _compiled(_terms_loop)
+
+
+def whitened_statistic(r, rows, Lb, block) -> np.ndarray:
+    """s_k = ‖L_b r_k‖² over the rows ``rows`` with lower-triangular L_b = Lb[block[k]]."""
+    out = np.empty(len(r))
+    _compiled(_stat_loop)(np.ascontiguousarray(r), np.asarray(rows, np.int64),
+                          np.ascontiguousarray(Lb), np.asarray(block, np.int64), out)
+    return out
 
 
 def momentum_terms(tree: Tree, q, v, tau):
