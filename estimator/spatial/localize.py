@@ -56,8 +56,12 @@ def _solve(A, b):
 
 
 def localize(model, surfaces, q, r, Linv, *, min_force_N=0.05, max_condition=20.0,
-             ambiguity_chi2=6.63, position_tol_m=0.005) -> SpatialLocalization:
-    """Per sample (q (S, nq), r (S, nv) all rows, Linv (nu, nu) or (S, nu, nu)): module doc."""
+             ambiguity_chi2=6.63, position_tol_m=0.005, ambiguity_tol=None) -> SpatialLocalization:
+    """Per sample (q (S, nq), r (S, nv) all rows, Linv (nu, nu) or (S, nu, nu)): module doc.
+
+    ``ambiguity_tol`` (the planar dynamic method's rule, for an unweighted fit, Linv = I): two
+    bodies are ambiguous when their residual norms √χ² differ by less than it (instead of χ²
+    by less than ``ambiguity_chi2``)."""
     q = np.atleast_2d(q)
     r = np.atleast_2d(r)
     S_ = len(q)
@@ -119,7 +123,10 @@ def localize(model, surfaces, q, r, Linv, *, min_force_N=0.05, max_condition=20.
     if NB > 1:
         second = order[:, 1]
         with np.errstate(invalid="ignore"):
-            close = cost[idx, second] - c_best < ambiguity_chi2
+            if ambiguity_tol is None:
+                close = cost[idx, second] - c_best < ambiguity_chi2
+            else:
+                close = np.sqrt(cost[idx, second]) - np.sqrt(c_best) < ambiguity_tol
         far = np.linalg.norm(pw[idx, second] - pw[idx, best], axis=1) > position_tol_m
         reason[(reason == OK) & close & far] = AMBIGUOUS
     condition = cond[idx, best]

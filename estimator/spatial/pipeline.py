@@ -49,7 +49,16 @@ class SpatialStream:
     def __init__(self, model, period_s: float, *, gain_per_s=100.0, noise=None, timing=None,
                  false_alarm_rate=(1.0, "h"), lag_compensation: bool = True,
                  cov_stride_s: float = 0.01, min_force_N: float = 0.05, max_condition: float = 20.0,
-                 position_tol_m: float = 0.005, threshold: float | None = None):
+                 position_tol_m: float = 0.005, threshold: float | None = None,
+                 weighting: str = "whitened"):
+        """``weighting``: the localizer's least squares on the residual whitened by its
+        no-contact covariance ("whitened", default), or unweighted ("identity": the planar
+        dynamic method's fit, with its ambiguity rule 2·√tr R on the residual norm)."""
+        from estimator.errors import InputError
+
+        if weighting not in ("whitened", "identity"):
+            raise InputError(f"weighting: use 'whitened' or 'identity', got {weighting!r}")
+        self.weighting = weighting
         self.model = model
         self.dt = float(period_s)
         self.gain = gain_per_s
@@ -94,6 +103,7 @@ class SpatialStream:
             self._floor = max(self.min_force_N, 5.0 * float(np.sqrt(np.max(np.diagonal(R[0])[:3]))))
             self.info["min_force_N"] = self._floor
             self.info["residual_sigma"] = np.sqrt(np.diagonal(R[0])).tolist()
+            self._amb = 2.0 * float(np.sqrt(np.trace(R[0])))
         return Linv, np.searchsorted(first, np.arange(T), side="right") - 1
 
     def _process(self, rows):
@@ -124,9 +134,12 @@ class SpatialStream:
         F = np.full((T, 3), np.nan)
         reason = np.full(T, loc.REASONS[loc.NO_CONTACT], dtype=object)
         if sel.size:
-            res = loc.localize(self.model, self.surfaces, q_loc[sel], r[sel], Lb[block[sel]],
+            ident = self.weighting == "identity"
+            W = np.eye(len(self.rows)) if ident else Lb[block[sel]]
+            res = loc.localize(self.model, self.surfaces, q_loc[sel], r[sel], W,
                                min_force_N=self._floor, max_condition=self.max_condition,
-                               position_tol_m=self.position_tol_m)
+                               position_tol_m=self.position_tol_m,
+                               ambiguity_tol=self._amb if ident else None)
             R, p, _, _ = body_poses(self.model.tree, q[sel])
             bi = np.maximum(res.body, 0)
             ii = np.arange(sel.size)
