@@ -60,7 +60,8 @@ def estimate(args) -> int:
     chunks = iter(reader)
     first = next(chunks)
     stream = SpatialStream(model, reader.period_s, gain_per_s=args.gain, noise=noise, timing=timing,
-                           false_alarm_rate=rate, threshold=args.threshold)
+                           false_alarm_rate=rate, threshold=args.threshold,
+                           weighting=getattr(args, "weighting", "whitened"))
     stream.feed(first)
     for c in chunks:
         stream.feed(c)

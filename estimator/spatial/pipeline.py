@@ -80,6 +80,7 @@ class SpatialStream:
         self.min_force_N, self.max_condition, self.position_tol_m = min_force_N, max_condition, position_tol_m
         self.parts, self.residuals = [], []
         self._floor = None
+        self._cur = None                 # (block index, L⁻¹) of the block the last chunk ended in
         self.info = {"detector": ("chi-square on the whitened residual" if threshold is None
                                   else "||r|| > threshold"),
                      "false_alarm_probability_per_sample": self.alpha,
@@ -92,18 +93,26 @@ class SpatialStream:
 
     def _whiteners(self, q, v, g0):
         """(L⁻¹ per block (B, nu, nu), block of each sample (T,)): one covariance per stride
-        block (block index (g0 + i) // stride), evaluated at the block's first sample here."""
+        block (block index (g0 + i) // stride) at the block's first sample; a block that began
+        in the previous chunk keeps its L⁻¹ (the numbers do not depend on the chunk sizes)."""
         T = len(q)
         blocks = (g0 + np.arange(T)) // self.stride
         first = np.r_[0, np.flatnonzero(np.diff(blocks)) + 1]
-        R = snoise.residual_covariance(self.model, q[first], v[first], self.noise, self.gain,
-                                       self.dt, self.timing)
-        Linv = np.linalg.inv(np.linalg.cholesky(R))
-        if self._floor is None:
-            self._floor = max(self.min_force_N, 5.0 * float(np.sqrt(np.max(np.diagonal(R[0])[:3]))))
-            self.info["min_force_N"] = self._floor
-            self.info["residual_sigma"] = np.sqrt(np.diagonal(R[0])).tolist()
-            self._amb = 2.0 * float(np.sqrt(np.trace(R[0])))
+        carried = self._cur is not None and self._cur[0] == blocks[0]
+        new = first[1:] if carried else first
+        Linv = np.empty((len(first), len(self.rows), len(self.rows)))
+        if new.size:
+            R = snoise.residual_covariance(self.model, q[new], v[new], self.noise, self.gain,
+                                           self.dt, self.timing)
+            Linv[1 if carried else 0:] = np.linalg.inv(np.linalg.cholesky(R))
+            if self._floor is None:
+                self._floor = max(self.min_force_N, 5.0 * float(np.sqrt(np.max(np.diagonal(R[0])[:3]))))
+                self.info["min_force_N"] = self._floor
+                self.info["residual_sigma"] = np.sqrt(np.diagonal(R[0])).tolist()
+                self._amb = 2.0 * float(np.sqrt(np.trace(R[0])))
+        if carried:
+            Linv[0] = self._cur[1]
+        self._cur = (int(blocks[-1]), Linv[-1].copy())
         return Linv, np.searchsorted(first, np.arange(T), side="right") - 1
 
     def _process(self, rows):

@@ -91,6 +91,10 @@ def add_arguments(parser) -> None:
                         help="write t,contact,link,alpha,Fx,Fz,px,pz,rnorm per sample (s, -, -, -, N, N, m, m, -); "
                              "Parquet for .parquet, else CSV; its directory is created, an existing file is kept unless --force")
     parser.add_argument("--force", action="store_true", help="replace an existing --out file")
+    parser.add_argument("--weighting", choices=["whitened", "identity"], default="whitened",
+                        help="URDF robots: the localizer's least squares on the residual whitened by "
+                             "its no-contact covariance, or unweighted (the planar dynamic method's "
+                             "fit; the paper leg as a URDF then reproduces it) (default: %(default)s)")
     parser.add_argument("--png", type=Path, default=None, metavar="OUT.png",
                         help="URDF robots: the robot in 3-D at each contact interval's middle sample, the "
                              "estimated contact and force arrow beside the true one (LOG.truth.csv, if "
@@ -188,6 +192,8 @@ def run(args) -> int:
         return estimate_3d(args)
     if getattr(args, "png", None) is not None:
         raise InputError("--png: the 3-D contact picture is drawn for URDF robots (--robot LEG.urdf)")
+    if getattr(args, "weighting", "whitened") != "whitened":
+        raise InputError("--weighting: for URDF robots; the planar dynamic method's fit is unweighted")
     robot = load_robot(args.robot or PAPER_LEG_TOML)
     noise, quiet, rate = _detector_options(args, robot.n_links)
     if noise is None and quiet is None:           # LOG.noise.toml beside the log, if any
