@@ -65,7 +65,7 @@ def test_bad_input_exits_2_naming_file_and_element(tmp_path):
 @pytest.mark.slow
 def test_simulate_3d_scene(tmp_path):
     out = tmp_path / "leg.csv"
-    res = _cli("simulate", "scenes/quadruped_leg_pokes.toml", "--out", str(out), "--duration", "0.4", "--json")
+    res = _cli("simulate", "scenes/spatial/quadruped_leg_pokes.toml", "--out", str(out), "--duration", "0.4", "--json")
     assert res.returncode == 0, res.stderr
     assert json.loads(res.stdout)["samples"] == 401
     for side in ("leg.truth.csv", "leg.timing.toml", "leg.noise.toml"):

@@ -53,7 +53,9 @@ def is_spatial_scene(path) -> bool:
 
 
 def _resolve(scene_path: Path, name: str) -> Path | None:
-    for cand in (scene_path.parent / name, scene_path.parent.parent / "robots" / name, Path(name)):
+    """``name`` beside the scene, else in a ``robots/`` directory beside one of its parents."""
+    cands = [scene_path.parent / name] + [d / "robots" / name for d in scene_path.resolve().parents]
+    for cand in cands:
         if cand.is_file():
             return cand
     return None

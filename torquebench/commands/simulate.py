@@ -15,7 +15,7 @@ HELP = "simulate a scene file: write a sensor log CSV (docs/conventions.md), LOG
 EXAMPLES = """\
 torquebench simulate scenes/paper_floating_link1.toml --out out/floating_link1.csv
 torquebench simulate scenes/paper_fixed_link2.toml --out out/fixed_link2.csv --seed 7 --duration 1.0 --json
-torquebench simulate scenes/quadruped_leg_pokes.toml --out out/leg_pokes.csv
+torquebench simulate scenes/spatial/quadruped_leg_pokes.toml --out out/leg_pokes.csv --duration 0.3
 """
 
 
