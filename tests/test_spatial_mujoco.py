@@ -87,3 +87,42 @@ def test_mujoco_contact_free_motion_false_alarms(leg, tmp_path):
     frac = est.frame.contact.mean()
     print(f"flagged {frac:.2e} of {len(log.t)} contact-free samples")
     assert frac < 1e-3
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", ["fixed_base", "unsensed_knee"])
+def test_mujoco_fixed_base_and_unsensed_knee(leg, tmp_path, case):
+    """A welded base (the log without base columns; the sensor reads the weld's wrench) and a
+    knee without a torque sensor (no tau_knee column): the pokes, whose lines of action enter
+    only the poked link, are still located on the right link."""
+    import shutil
+
+    import pandas as pd
+
+    robot, model = leg
+    if case == "fixed_base":
+        robot = robot.with_base(False)
+        kw = {"floating": False}
+    else:
+        shutil.copy(URDF, tmp_path / "leg.urdf")
+        (tmp_path / "leg.toml").write_text('urdf = "leg.urdf"\nft_frame = "ft_sensor"\n'
+                                           'torque_sensed = ["hip_abd", "hip_flex"]\n')
+        robot = load_spatial_robot(tmp_path / "leg.toml")
+        kw = {"sensed": ["hip_abd", "hip_flex"]}
+    model = UrdfModel(robot)
+    surfs = body_surfaces(robot, model.tree)
+    pokes = [("shank", surface_point(surfs[3], "shank", 0.35, 0.8)[0], np.array([-4.0, -2.5, 1.0]), 0.3, 0.6),
+             ("thigh", surface_point(surfs[2], "thigh", 0.6, 2.2)[0], np.array([4.0, -3.0, 0.5]), 0.7, 1.0)]
+    path = simulate_mujoco(URDF, tmp_path / "leg.csv", q0=[0.2, 0.6, -1.2], pokes=pokes, duration_s=1.1,
+                           amplitude=[0.05, 0.1, 0.1], noise=(0.005, 0.1, 0.01), **kw)
+    log = read_spatial_log(path, robot, model)
+    assert log.floating == (case != "fixed_base")
+    truth = pd.read_csv(tmp_path / "leg.truth.csv", keep_default_na=False, na_values=["nan", ""])
+    f = estimate_log(model, [log], log.period_s, noise=read_noise(path, robot)).frame
+    contact = f.contact.to_numpy().astype(bool)
+    on = truth.link.fillna("").to_numpy() != ""
+    ok = contact & on & (f.reason.to_numpy() == "ok")
+    assert not contact[:300].any() and ok.sum() >= 0.98 * on.sum()
+    assert (f.link.to_numpy()[ok] == truth.link.to_numpy()[ok]).all()
+    err = np.linalg.norm(f[["px", "py", "pz"]].to_numpy()[ok] - truth[["px", "py", "pz"]].to_numpy()[ok], axis=1)
+    assert np.median(err) < 2e-3
