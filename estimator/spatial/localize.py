@@ -50,9 +50,10 @@ class SpatialLocalization:
 
 
 def _solve(A, b):
-    """Batched least squares by the normal equations (A (S, m, k) full column rank)."""
-    At = A.transpose(0, 2, 1)
-    return np.linalg.solve(At @ A, At @ b[..., None])[..., 0]
+    """Batched least squares by the normal equations (A (S, m, k) full column rank), compiled."""
+    from estimator.spatial.tree import lstsq_small
+
+    return lstsq_small(A, b)
 
 
 def localize(model, surfaces, q, r, Linv, *, min_force_N=0.05, max_condition=20.0,

@@ -201,6 +201,18 @@ class UrdfModel:
         out[:, :3] = quat_rotate(q[:, 3:7], f_b)
         return out
 
+    def ft_map(self, q: np.ndarray) -> np.ndarray:
+        """The linear map of ``base_rows_from_ft`` at each posture, (T, 6, 6):
+        [[R R_bs, 0], [[p_bs]× R_bs, R_bs]]."""
+        Rbs, pbs = self._ft
+        q = np.atleast_2d(q)
+        R = tree_mod.quat_matrix(q[:, 3:7])
+        out = np.zeros((len(q), 6, 6))
+        out[:, :3, :3] = R @ Rbs
+        out[:, 3:, :3] = _skew(pbs) @ Rbs
+        out[:, 3:, 3:] = Rbs
+        return out
+
     def ft_from_base_rows(self, q: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """The inverse of ``base_rows_from_ft``: the sensor-frame wrench (T, 6)."""
         Rbs, pbs = self._ft

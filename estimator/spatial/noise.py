@@ -53,7 +53,7 @@ def filter_terms(model, q, v, noise: SpatialNoise, gain_per_s, dt_s: float, timi
     c1 = np.where(mean, 1.0, 0.5)
     c0 = np.where(mean, 0.0, 0.5)
     # FT channels → base rows (linear in the wrench: the map's columns at each posture)
-    Bft = np.stack([model.base_rows_from_ft(q, np.broadcast_to(e, (Bn, 6))) for e in np.eye(6)], axis=2)
+    Bft = model.ft_map(q)
     sens = np.flatnonzero(model.sensed_joints)
     blocks0, blocks1 = [], []
     W = np.zeros((Bn, nv, 6))

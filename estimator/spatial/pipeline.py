@@ -74,6 +74,8 @@ class SpatialStream:
         self.h = float(chdtri(len(self.rows), self.alpha))
         self.stride = max(1, int(round(cov_stride_s / self.dt)))
         self.surfaces = body_surfaces(model.robot, model.tree)
+        self._link_names = sorted({""} | {sf.name for sf in self.surfaces}
+                                  | {n for sf in self.surfaces for n, _ in sf.solids})
         self.lag = float(np.mean(obs.lag_s(self.K, self.dt))) if lag_compensation else 0.0
         self.past = None
         self.g = 0
@@ -81,7 +83,27 @@ class SpatialStream:
         self.parts, self.residuals = [], []
         self._floor = None
         self._cur = None                 # (block index, L⁻¹) of the block the last chunk ended in
-        self.info = {"detector": ("chi-square on the whitened residual" if threshold is None
+        # Without joint-rate or encoder noise the covariance depends on the posture only through
+        # the base orientation, which turns the world force rows: R(q) = D R₀ Dᵀ with
+        # D = diag(R_wb, I) (the six wrench channels share one timing and the force rows one
+        # gain). Then ‖L(q) r‖ = ‖L₀ Dᵀ r‖ with one constant L₀: exact, and no covariance per block.
+        self.info = {}
+        K = self.K[:3]
+        self._L0 = None
+        if (self.noise.velocity_sigma_rad_per_s == 0 and self.noise.encoder_counts == 0
+                and np.all(K == K[0])):
+            q0 = model.robot.rest_q()
+            q0[3:7] = [0.0, 0.0, 0.0, 1.0]
+            R0 = snoise.residual_covariance(model, q0[None], np.zeros((1, model.n_v)), self.noise,
+                                            self.gain, self.dt, timing)[0]
+            self._L0 = np.linalg.inv(np.linalg.cholesky(R0))
+            self._floor = max(min_force_N, 5.0 * float(np.sqrt(np.max(np.diagonal(R0)[:3]))))
+            self._amb = 2.0 * float(np.sqrt(np.trace(R0)))
+            self.info.update(min_force_N=self._floor, residual_sigma=np.sqrt(np.diagonal(R0)).tolist(),
+                             covariance="posture-independent up to the base orientation (one whitener)")
+        else:
+            self.info["covariance"] = f"posture-dependent, one per {self.stride} samples"
+        self.info.update({"detector": ("chi-square on the whitened residual" if threshold is None
                                   else "||r|| > threshold"),
                      "false_alarm_probability_per_sample": self.alpha,
                      "false_alarm_rate_per_s": self.alpha / self.dt, "chi2_threshold": self.h,
@@ -89,7 +111,7 @@ class SpatialStream:
                      "rows": ["Fx_world", "Fy_world", "Fz_world", "Mx_base", "My_base", "Mz_base"]
                      + [f"tau_{model.joint_names[k - 6]}" for k in self.rows[6:]],
                      "lag_compensation_s": self.lag,
-                     "identifiability": loc.identifiability(model, self.surfaces)}
+                     "identifiability": loc.identifiability(model, self.surfaces)})
 
     def _whiteners(self, q, v, g0):
         """(L⁻¹ per block (B, nu, nu), block of each sample (T,)): one covariance per stride
@@ -120,8 +142,15 @@ class SpatialStream:
 
         t, q, v, r = rows["t"], rows["q"], rows["v"], rows["r"]
         T = len(t)
-        Lb, block = self._whiteners(q, v, self.g)
-        stat = whitened_statistic(r, self.rows, Lb, block)
+        if self._L0 is not None:
+            from estimator.spatial.model import quat_rotate
+
+            rb = r.copy()
+            rb[:, :3] = quat_rotate(q[:, 3:7], r[:, :3], inverse=True)     # Dᵀ r
+            stat = whitened_statistic(rb, self.rows, self._L0[None], np.zeros(T, np.int64))
+        else:
+            Lb, block = self._whiteners(q, v, self.g)
+            stat = whitened_statistic(r, self.rows, Lb, block)
         if self.threshold is None:
             contact, rnorm = stat > self.h, np.sqrt(stat)
         else:
@@ -144,7 +173,15 @@ class SpatialStream:
         reason = np.full(T, loc.REASONS[loc.NO_CONTACT], dtype=object)
         if sel.size:
             ident = self.weighting == "identity"
-            W = np.eye(len(self.rows)) if ident else Lb[block[sel]]
+            if ident:
+                W = np.eye(len(self.rows))
+            elif self._L0 is not None:                      # L₀ Dᵀ at the localization posture
+                from estimator.spatial.tree import quat_matrix
+
+                W = np.broadcast_to(self._L0, (sel.size,) + self._L0.shape).copy()
+                W[:, :, :3] = self._L0[:, :3] @ quat_matrix(q_loc[sel, 3:7]).transpose(0, 2, 1)
+            else:
+                W = Lb[block[sel]]
             res = loc.localize(self.model, self.surfaces, q_loc[sel], r[sel], W,
                                min_force_N=self._floor, max_condition=self.max_condition,
                                position_tol_m=self.position_tol_m,
@@ -160,11 +197,14 @@ class SpatialStream:
             reason[sel] = np.asarray(loc.REASONS, dtype=object)[res.reason]
         self.g += T
         self.residuals.append(r)
-        self.parts.append(pd.DataFrame({"t": t, "contact": contact.astype(int), "link": link,
+        self.parts.append(pd.DataFrame({"t": t, "contact": contact.astype(int),
+                                        "link": pd.Categorical(link, categories=self._link_names),
                                         "px": pw[:, 0], "py": pw[:, 1], "pz": pw[:, 2],
                                         "Fx": F[:, 0], "Fy": F[:, 1], "Fz": F[:, 2],
                                         "lx": pl[:, 0], "ly": pl[:, 1], "lz": pl[:, 2],
-                                        "rnorm": rnorm, "reason": reason}, columns=OUT_COLUMNS))
+                                        "rnorm": rnorm,
+                                        "reason": pd.Categorical(reason, categories=loc.REASONS)},
+                                       columns=OUT_COLUMNS))
 
     def feed(self, log):
         rows = self.obs.feed(log.t, log.q, log.v, log.tau_meas(self.model))
@@ -180,6 +220,8 @@ class SpatialStream:
         if rows is not None:
             self._process(rows)
         frame = pd.concat(self.parts, ignore_index=True) if self.parts else pd.DataFrame(columns=OUT_COLUMNS)
+        for c in ("link", "reason"):             # plain strings for the reader of the frame
+            frame[c] = frame[c].astype(object)
         r = np.concatenate(self.residuals) if self.residuals else np.zeros((0, nv))
         return SpatialEstimate(frame=frame, residual=r, intervals=intervals(frame), info=self.info)
 

@@ -252,6 +252,62 @@ def _stat_loop(r, rows, Lb, block, out):
         out[k] = s
 
 
+def _lstsq_loop(A, b, x):
+    """x[s] = argmin ‖A[s] x − b[s]‖ by the normal equations and a Cholesky factorization
+    (A[s] (m, k) of full column rank, k ≤ 8); NaN where AᵀA is not positive definite."""
+    S, m, k = A.shape
+    N = np.empty((k, k))
+    y = np.empty(k)
+    for s in range(S):
+        for i in range(k):
+            acc = 0.0
+            for r in range(m):
+                acc += A[s, r, i] * b[s, r]
+            y[i] = acc
+            for j in range(i + 1):
+                acc = 0.0
+                for r in range(m):
+                    acc += A[s, r, i] * A[s, r, j]
+                N[i, j] = acc
+        ok = True
+        for j in range(k):                       # Cholesky N = L Lᵀ in the lower triangle
+            d = N[j, j]
+            for p in range(j):
+                d -= N[j, p] * N[j, p]
+            if not d > 0.0:
+                ok = False
+                break
+            d = np.sqrt(d)
+            N[j, j] = d
+            for i in range(j + 1, k):
+                v = N[i, j]
+                for p in range(j):
+                    v -= N[i, p] * N[j, p]
+                N[i, j] = v / d
+        if not ok:
+            for i in range(k):
+                x[s, i] = np.nan
+            continue
+        for i in range(k):                       # L z = y
+            v = y[i]
+            for p in range(i):
+                v -= N[i, p] * y[p]
+            y[i] = v / N[i, i]
+        for i in range(k - 1, -1, -1):           # Lᵀ x = z
+            v = y[i]
+            for p in range(i + 1, k):
+                v -= N[p, i] * x[s, p]
+            x[s, i] = v / N[i, i]
+
+
+def lstsq_small(A, b) -> np.ndarray:
+    """Batched small least squares (compiled): A (S, m, k), b (S, m) → x (S, k)."""
+    A = np.ascontiguousarray(A, dtype=float)
+    x = np.empty((A.shape[0], A.shape[2]))
+    _compiled(_lstsq_loop)(A, np.ascontiguousarray(b, dtype=float), x)
+    return x
+
+
 _COMPILED = {}
 USE_NUMBA = True            # False: the same loops in plain Python (tests compare the two)
 
