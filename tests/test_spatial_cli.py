@@ -72,3 +72,31 @@ def test_simulate_3d_scene(tmp_path):
         assert (tmp_path / side).exists()
     head = out.read_text().split("\n", 1)[0]
     assert head.startswith("t,x,y,z,qx,qy,qz,qw,q_hip_abd") and head.endswith("Fx,Fy,Fz,Mx,My,Mz")
+
+
+def _short_scene(tmp_path):
+    text = open("scenes/spatial/quadruped_leg_pokes.toml").read()
+    text = text.replace("duration_s = 1.2", "duration_s = 0.75").replace("substeps = 10", "substeps = 4")
+    p = tmp_path / "short.toml"
+    p.write_text(text)
+    return p
+
+
+@pytest.mark.slow
+def test_run_and_sweep_on_a_3d_scene(tmp_path):
+    """run: measured against the truth and predicted at the pokes; sweep/compare tabulate 3-D
+    points with the planar keys (a noisier torque sensor: larger predicted error)."""
+    scene = _short_scene(tmp_path)
+    res = _cli("run", str(scene), "--json")
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    me, pr = out["measured"]["dynamic"], out["predicted"]["dynamic"]
+    assert me["isolation_fraction"] > 0.95 and me["position_error_median_m"] < 2e-3
+    assert me["false_alarm_fraction"] < 1e-3
+    assert 0.3 < pr["position_rms_m"] / me["position_error_median_m"] < 3
+    res = _cli("sweep", str(scene), "--vary", "sensors.torque_noise_Nm=0.001,0.05", "--executor", "local", "--json")
+    assert res.returncode == 0, res.stderr
+    pts = json.loads(res.stdout)["points"]
+    assert [p["point"]["sensors.torque_noise_Nm"] for p in pts] == [0.001, 0.05]
+    preds = [p["result"]["predicted"]["dynamic"]["position_rms_m"] for p in pts]
+    assert preds[1] > preds[0]

@@ -81,42 +81,47 @@ def surface_samples(shape, mesh):
     return V @ shape.rotation.T + shape.origin, N @ shape.rotation.T
 
 
-def error_map(model, q, noise, magnitude_N=5.0, gain_per_s=100.0, dt_s=1e-3, h=1e-4,
-              resolution: int = 24) -> list[SurfaceMap]:
-    """One SurfaceMap per collision solid at posture q (nq,) (module doc)."""
+def point_errors(model, surfaces, q, body, points_body, forces_world, R, h=1e-4):
+    """RMS position error √tr(J R Jᵀ) (V,) and the exact answer's reason (V,) of contacts at
+    ``points_body`` (V, 3) on ``body`` with forces (V, 3, world) at posture q (nq,)."""
     q = np.asarray(q, float)[None]
-    surfaces = body_surfaces(model.robot, model.tree)
     rows = used_rows(model)
-    R = residual_covariance(model, q, np.zeros((1, model.n_v)), noise, gain_per_s, dt_s)[0]
     Linv = np.linalg.inv(np.linalg.cholesky(R))
     S, *_ = columns(model.tree, q)
     Rb, pb, _, _ = body_poses(model.tree, q, relative=True)
-    mv = moves(model.tree)
+    pw = pb[0, body] + np.asarray(points_body, float) @ Rb[0, body].T
+    F = np.asarray(forces_world, float)
+    W = np.concatenate([F, np.cross(pw, F)], axis=1)
+    r0 = (W @ S[0].T) * moves(model.tree)[:, body]                      # (V, nv)
+    nu, V = len(rows), len(F)
+    pert = np.zeros((2 * nu + 1, model.n_v))
+    pert[1:nu + 1, rows] = np.eye(nu) * h
+    pert[nu + 1:, rows] = -np.eye(nu) * h
+    rr = (r0[:, None, :] + pert[None]).reshape(-1, model.n_v)
+    res = loc.localize(model, surfaces, np.repeat(q, len(rr), axis=0), rr, Linv)
+    pts = res.point_body.reshape(V, 2 * nu + 1, 3)
+    reason = res.reason.reshape(V, 2 * nu + 1)
+    J = (pts[:, 1:nu + 1] - pts[:, nu + 1:]) / (2 * h)                    # (V, nu, 3)
+    err = np.sqrt(np.trace(np.einsum("vik,ij,vjl->vkl", J, R, J), axis1=1, axis2=2))
+    bad = (reason != loc.OK).any(axis=1)
+    return np.where(bad, np.nan, err), reason[:, 0]
+
+
+def error_map(model, q, noise, magnitude_N=5.0, gain_per_s=100.0, dt_s=1e-3, h=1e-4,
+              resolution: int = 24) -> list[SurfaceMap]:
+    """One SurfaceMap per collision solid at posture q (nq,) (module doc)."""
+    q = np.asarray(q, float)
+    surfaces = body_surfaces(model.robot, model.tree)
+    R = residual_covariance(model, q[None], np.zeros((1, model.n_v)), noise, gain_per_s, dt_s)[0]
+    Rb = body_poses(model.tree, q[None], relative=True)[0][0]
     out = []
     for surf in surfaces:
         b = surf.body
         for link, shape in surf.solids:
             mesh = solid_mesh(shape, resolution)
             V, N = surface_samples(shape, mesh)
-            pw = pb[0, b] + V @ Rb[0, b].T
-            F = -magnitude_N * (N @ Rb[0, b].T)
-            W = np.concatenate([F, np.cross(pw, F)], axis=1)
-            r0 = (W @ S[0].T) * mv[:, b]                                  # (V, nv)
-            nu = len(rows)
-            pert = np.zeros((2 * nu + 1, model.n_v))
-            pert[1:nu + 1, rows] = np.eye(nu) * h
-            pert[nu + 1:, rows] = -np.eye(nu) * h
-            rr = (r0[:, None, :] + pert[None]).reshape(-1, model.n_v)
-            qq = np.repeat(q, len(rr), axis=0)
-            res = loc.localize(model, surfaces, qq, rr, Linv)
-            pts = res.point_body.reshape(len(V), 2 * nu + 1, 3)
-            reason = res.reason.reshape(len(V), 2 * nu + 1)
-            J = (pts[:, 1:nu + 1] - pts[:, nu + 1:]) / (2 * h)                # (V, nu, 3)
-            cov = np.einsum("vik,ij,vjl->vkl", J, R, J)
-            err = np.sqrt(np.trace(cov, axis1=1, axis2=2))
-            bad = (reason != loc.OK).any(axis=1)
-            out.append(SurfaceMap(link, b, V, np.asarray(mesh.faces), np.where(bad, np.nan, err),
-                                  reason[:, 0]))
+            err, reason = point_errors(model, surfaces, q, b, V, -magnitude_N * (N @ Rb[b].T), R, h)
+            out.append(SurfaceMap(link, b, V, np.asarray(mesh.faces), err, reason))
     return out
 
 

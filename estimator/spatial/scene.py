@@ -53,15 +53,40 @@ def is_spatial_scene(path) -> bool:
 
 
 def _resolve(scene_path: Path, name: str) -> Path | None:
-    """``name`` beside the scene, else in a ``robots/`` directory beside one of its parents."""
-    cands = [scene_path.parent / name] + [d / "robots" / name for d in scene_path.resolve().parents]
+    """``name`` beside the scene, else in a ``robots/`` directory beside one of its parents, else
+    in the repository's ``robots/`` (as the planar scenes find theirs)."""
+    cands = ([scene_path.parent / name] + [d / "robots" / name for d in scene_path.resolve().parents]
+             + [Path(__file__).resolve().parents[2] / "robots" / name])
     for cand in cands:
         if cand.is_file():
             return cand
     return None
 
 
-def load_spatial_scene(path) -> SpatialScene:
+def _apply_overrides(data: dict, overrides: dict | None, path) -> dict:
+    """Dotted keys (``sensors.torque_noise_Nm``) set in the scene's TOML data before it is read;
+    ``poke.2.magnitude_N`` addresses the second [[poke]]."""
+    import copy
+
+    data = copy.deepcopy(data)
+    for key, value in (overrides or {}).items():
+        parts = str(key).split(".")
+        node = data
+        for i, part in enumerate(parts[:-1]):
+            if isinstance(node, list):
+                try:
+                    node = node[int(part) - 1]
+                except (ValueError, IndexError):
+                    raise InputError(f"{path}: {key}: no item {part} of {'.'.join(parts[:i])}") from None
+            else:
+                node = node.setdefault(part, {})
+        if not isinstance(node, dict):
+            raise InputError(f"{path}: {key}: not a table key")
+        node[parts[-1]] = value
+    return data
+
+
+def load_spatial_scene(path, overrides: dict | None = None) -> SpatialScene:
     from estimator.spatial.geometry import body_surfaces
     from estimator.spatial.logs import make_noise
     from estimator.spatial.robot import load_spatial_robot, robot_from_urdf
@@ -71,7 +96,7 @@ def load_spatial_scene(path) -> SpatialScene:
     from userio.files import read_toml
 
     path = Path(path)
-    data = read_toml(path)
+    data = _apply_overrides(read_toml(path), overrides, path)
     f = Fields(path)
     f.known(data, TOP, "")
     rob = data.get("robot")
