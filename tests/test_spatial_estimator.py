@@ -210,3 +210,30 @@ def _simulate(model, spec):
     from estimator.spatial.sim import simulate
 
     return simulate(model.robot, spec)
+
+
+def test_collision_overrides_in_the_declaration(tmp_path):
+    """[[collision]] replaces a link's URDF solids (a capsule shank) or removes them (none)."""
+    shutil.copy("robots/quadruped_leg.urdf", tmp_path / "leg.urdf")
+    (tmp_path / "leg.toml").write_text(
+        'urdf = "leg.urdf"\nft_frame = "ft_sensor"\n'
+        '[[collision]]\nlink = "shank"\nkind = "capsule"\nsize = [0.015, 0.17]\nxyz = [0, 0, -0.1]\n'
+        '[[collision]]\nlink = "foot"\nkind = "none"\n')
+    robot = load_spatial_robot(tmp_path / "leg.toml")
+    assert [s.kind for s in robot.shapes["shank"]] == ["capsule"] and robot.shapes["foot"] == []
+    model = UrdfModel(robot)
+    surfs = body_surfaces(robot, model.tree)
+    p, n = surface_point(surfs[3], "shank", 0.5, 1.0)
+    assert abs(np.hypot(p[0], p[1]) - 0.015) < 1e-12
+    q = _postures(np.random.default_rng(4), 1)
+    F = (body_poses(model.tree, q)[0][0, 3] @ -n)[None] * 5
+    r, _ = _exact_residual(model, q, 3, p[None], F)
+    res = loc.localize(model, surfs, q, r, _whitener(model, q))
+    assert res.reason[0] == loc.OK and np.linalg.norm(res.point_body[0] - p) < 1e-9
+    (tmp_path / "bad.toml").write_text('urdf = "leg.urdf"\n[[collision]]\nlink = "shin"\nkind = "sphere"\nsize = [0.01]\n')
+    from estimator.errors import InputError
+    with pytest.raises(InputError, match="collision: no link 'shin'"):
+        load_spatial_robot(tmp_path / "bad.toml")
+    (tmp_path / "bad.toml").write_text('urdf = "leg.urdf"\n[[collision]]\nlink = "shank"\nkind = "cone"\n')
+    with pytest.raises(InputError, match="collision\\[1\\].kind: must be one of"):
+        load_spatial_robot(tmp_path / "bad.toml")

@@ -246,7 +246,41 @@ def build_model(urdf_text: str, source: str, gravity: float = 9.81):
     return model
 
 
-TOP_KEYS = {"name", "urdf", "base", "torque_sensed", "ft_frame", "gravity_m_per_s2", "mount"}
+TOP_KEYS = {"name", "urdf", "base", "torque_sensed", "ft_frame", "gravity_m_per_s2", "mount",
+            "collision"}
+COLLISION_KEYS = {"link", "kind", "size", "xyz", "rpy", "mesh"}
+SIZES = {"box": 3, "cylinder": 2, "capsule": 2, "sphere": 1, "mesh": 3}
+
+
+def _collision_overrides(f, data, path: Path) -> dict:
+    """``[[collision]]`` tables: link → [Shape] replacing the URDF's solids of that link
+    (kind "none": no geometry, the link is then located on its segment)."""
+    out = {}
+    items = data.get("collision", [])
+    if not isinstance(items, list):
+        raise f.err("collision", "expected [[collision]] tables")
+    for i, c in enumerate(items, start=1):
+        where = f"collision[{i}]"
+        if not isinstance(c, dict):
+            raise f.err(where, "expected a table")
+        f.known(c, COLLISION_KEYS, where)
+        link = f.string(c, "link", where)
+        kind = f.choice(c, "kind", where, tuple(SIZES) + ("none",), None)
+        shapes = out.setdefault(link, [])
+        if kind == "none":
+            continue
+        size = tuple(f.vector(c, "size", where, SIZES[kind], [1.0, 1.0, 1.0] if kind == "mesh" else None,
+                              positive=True))
+        R = rpy_matrix(f.vector(c, "rpy", where, 3, [0.0, 0.0, 0.0]))
+        xyz = f.vector(c, "xyz", where, 3, [0.0, 0.0, 0.0])
+        mesh = None
+        if kind == "mesh":
+            mesh = path.parent / f.string(c, "mesh", where)
+            if not mesh.is_file():
+                raise f.err(f"{where}.mesh", f"file {mesh} not found")
+            mesh = str(mesh)
+        shapes.append(Shape(kind, size, R, xyz, mesh))
+    return out
 MOUNT_KEYS = {"pose_xyz", "pose_rpy", "stiffness", "damping"}
 
 
@@ -281,12 +315,13 @@ def load_spatial_robot(path) -> SpatialRobot:
         mount_rpy=f.vector(mount, "pose_rpy", "mount", 3, [0.0, 0.0, 0.0]),
         stiffness=f.vector(mount, "stiffness", "mount", 6, [2e4] * 3 + [800.0] * 3, nonneg=True),
         damping=f.vector(mount, "damping", "mount", 6, [150.0] * 3 + [4.0] * 3, nonneg=True),
-        declaration=str(path))
+        declaration=str(path), collision=_collision_overrides(f, data, path))
 
 
 def robot_from_urdf(urdf_path, *, name=None, floating=True, sensed_names=None, ft_frame=None,
                     gravity=9.81, mount_xyz=(0, 0, 0), mount_rpy=(0, 0, 0), stiffness=None,
-                    damping=None, declaration: str | None = None) -> SpatialRobot:
+                    damping=None, declaration: str | None = None,
+                    collision: dict | None = None) -> SpatialRobot:
     urdf_path = Path(urdf_path)
     source = str(urdf_path)
     try:
@@ -300,6 +335,11 @@ def robot_from_urdf(urdf_path, *, name=None, floating=True, sensed_names=None, f
     if not joints:
         raise InputError(f"{source}: the URDF has no movable joint")
     where = declaration or source
+    for link, solids in (collision or {}).items():          # the declaration's overrides
+        if link not in shapes:
+            from userio.fields import nearest
+            raise InputError(f"{where}: collision: no link '{link}' in {source}{nearest(link, list(shapes))}")
+        shapes[link] = solids
     if sensed_names is None:
         sensed = tuple(True for _ in joints)
     else:
