@@ -158,38 +158,68 @@ def _mesh(shape: Shape):
     return m
 
 
-def _mesh_entry(shape: Shape, o, d):
-    """Möller–Trumbore on every (line, triangle) pair (lines in blocks so that a block holds
-    ≤ 2·10⁶ pairs): the smallest s among the triangles the line crosses against their normal."""
+MAX_CROSSINGS = 8
+
+
+def _mesh_entries(shape: Shape, o, d):
+    """Every inward crossing of the line with a mesh (a concave part can have several):
+    Möller–Trumbore on every (line, triangle) pair (lines in blocks of ≤ 2·10⁶ pairs); s (S, K)
+    sorted, NaN-padded, K ≤ ``MAX_CROSSINGS``; crossings within 1 µm (a shared edge) count once."""
     m = _mesh(shape)
     v0 = m.vertices[m.faces[:, 0]]
     e1 = m.vertices[m.faces[:, 1]] - v0
     e2 = m.vertices[m.faces[:, 2]] - v0
     nrm = np.asarray(m.face_normals)
     S = len(o)
-    s_out = np.full(S, np.nan)
-    n_out = np.zeros((S, 3))
+    K = MAX_CROSSINGS
+    s_out = np.full((S, K), np.nan)
+    n_out = np.zeros((S, K, 3))
     step = max(1, int(2e6 // max(len(v0), 1)))
     for a in range(0, S, step):
         oo, dd = o[a:a + step, None, :], d[a:a + step, None, :]
         pv = np.cross(dd, e2[None])
         det = np.einsum("sfi,fi->sf", pv, e1)
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(all="ignore"):                # parallel triangles: det = 0 → inf, NaN
             inv = 1.0 / det
             tv = oo - v0[None]
             uu = np.einsum("sfi,sfi->sf", tv, pv) * inv
             qv = np.cross(tv, e1[None])
             vv = np.einsum("sfi,sfi->sf", np.broadcast_to(dd, qv.shape), qv) * inv
             ss = np.einsum("sfi,fi->sf", qv, e2) * inv
-        inward = np.einsum("sfi,fi->sf", np.broadcast_to(dd, (dd.shape[0], len(v0), 3)), nrm) < 0
-        ok = (np.abs(det) > 1e-15) & (uu >= 0) & (vv >= 0) & (uu + vv <= 1) & inward
+            inward = np.einsum("sfi,fi->sf", np.broadcast_to(dd, (dd.shape[0], len(v0), 3)), nrm) < 0
+            ok = (np.abs(det) > 1e-15) & (uu >= 0) & (vv >= 0) & (uu + vv <= 1) & inward
         ss = np.where(ok, ss, np.inf)
-        k = np.argmin(ss, axis=1)
-        best = ss[np.arange(len(k)), k]
-        found = np.isfinite(best)
-        s_out[a:a + step] = np.where(found, best, np.nan)
-        n_out[a:a + step] = np.where(found[:, None], nrm[k], 0.0)
+        order = np.argsort(ss, axis=1)[:, :4 * K]
+        for i in range(ss.shape[0]):
+            row = a + i
+            k = 0
+            last = -np.inf
+            for f in order[i]:
+                sv = ss[i, f]
+                if not np.isfinite(sv) or k == K:
+                    break
+                if sv - last > 1e-6:
+                    s_out[row, k], n_out[row, k] = sv, nrm[f]
+                    k += 1
+                    last = sv
     return s_out, n_out
+
+
+def _inside(shape: Shape, p: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """p (S, 3, body frame) strictly inside a primitive solid (meshes: never)."""
+    x = (p - shape.origin) @ shape.rotation
+    if shape.kind == "sphere":
+        return np.linalg.norm(x, axis=1) < shape.size[0] - tol
+    if shape.kind == "box":
+        return np.all(np.abs(x) < np.asarray(shape.size) / 2 - tol, axis=1)
+    if shape.kind == "cylinder":
+        r, L = shape.size
+        return (np.hypot(x[:, 0], x[:, 1]) < r - tol) & (np.abs(x[:, 2]) < L / 2 - tol)
+    if shape.kind == "capsule":
+        r, L = shape.size
+        z = np.clip(x[:, 2], -L / 2, L / 2)
+        return np.linalg.norm(x - np.c_[np.zeros((len(x), 2)), z], axis=1) < r - tol
+    return np.zeros(len(p), bool)
 
 
 def entry(shape: Shape, o: np.ndarray, d: np.ndarray):
@@ -205,7 +235,18 @@ def entry(shape: Shape, o: np.ndarray, d: np.ndarray):
     elif shape.kind == "capsule":
         s, n = _capsule(ol, dl, *shape.size)
     else:
-        s, n = _mesh_entry(shape, ol, dl)
+        s, n = _mesh_entries(shape, ol, dl)
+        return s[:, 0], n[:, 0] @ shape.rotation.T
+    return s, n @ shape.rotation.T
+
+
+def entries(shape: Shape, o: np.ndarray, d: np.ndarray):
+    """Every inward crossing: s (S, K), n (S, K, 3) (a convex primitive has one: K = 1)."""
+    if shape.kind != "mesh":
+        s, n = entry(shape, o, d)
+        return s[:, None], n[:, None]
+    ol, dl = _to_local(shape, o, d)
+    s, n = _mesh_entries(shape, ol, dl)
     return s, n @ shape.rotation.T
 
 
@@ -223,6 +264,30 @@ def body_entry(surface: BodySurface, o: np.ndarray, d: np.ndarray):
         normal = np.where(take[:, None], n, normal)
         which = np.where(take, i, which)
     return best, o + best[:, None] * d, normal, which
+
+
+def body_entries(surface: BodySurface, o: np.ndarray, d: np.ndarray):
+    """Every inward crossing of the line with the body's surface (the union of its solids: a
+    crossing inside another of its primitive solids is not on the surface), sorted along the
+    line: s (S, K) NaN-padded, outward normals (S, K, 3), solid index (S, K) (−1 padding)."""
+    cols_s, cols_n, cols_i = [], [], []
+    for i, (_, shape) in enumerate(surface.solids):
+        s, n = entries(shape, o, d)
+        p = o[:, None, :] + np.nan_to_num(s)[..., None] * d[:, None, :]
+        for j, (_, other) in enumerate(surface.solids):
+            if j != i:
+                hidden = np.stack([_inside(other, p[:, k]) for k in range(s.shape[1])], axis=1)
+                s = np.where(hidden, np.nan, s)
+        cols_s.append(s)
+        cols_n.append(n)
+        cols_i.append(np.full(s.shape, i))
+    s = np.concatenate(cols_s, axis=1)
+    n = np.concatenate(cols_n, axis=1)
+    idx = np.concatenate(cols_i, axis=1)
+    order = np.argsort(np.where(np.isfinite(s), s, np.inf), axis=1, kind="stable")
+    rows = np.arange(len(s))[:, None]
+    s, n, idx = s[rows, order], n[rows, order], idx[rows, order]
+    return s, n, np.where(np.isfinite(s), idx, -1)
 
 
 def segment_point(surface: BodySurface, o: np.ndarray, d: np.ndarray):

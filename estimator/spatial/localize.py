@@ -34,8 +34,31 @@ from estimator.spatial.model import _skew, columns, cross, moves
 from estimator.spatial.observer import used_rows
 
 REASONS = ("ok", "no_contact", "small_force", "grazing", "off_surface", "ambiguous_link",
-           "no_geometry")
-OK, NO_CONTACT, SMALL_FORCE, GRAZING, OFF_SURFACE, AMBIGUOUS, NO_GEOMETRY = range(7)
+           "no_geometry", "several_entries")
+OK, NO_CONTACT, SMALL_FORCE, GRAZING, OFF_SURFACE, AMBIGUOUS, NO_GEOMETRY, SEVERAL = range(8)
+
+
+def _choose_entry(s_all, n_all, i_all, d, tol, cone_condition):
+    """One crossing per line among a body's inward crossings (sorted along the line): the first
+    if they all lie within ``tol`` of it; else the first inside the friction cone (the force
+    within arccos(1/cone_condition) of the inward normal) if the cone's crossings lie within
+    ``tol`` of each other; else the first, flagged ``several`` (a concave surface the line enters
+    more than once: the wrench cannot tell where)."""
+    S = len(s_all)
+    rows = np.arange(S)
+    valid = np.isfinite(s_all)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cond = 1.0 / np.abs(np.einsum("ski,si->sk", n_all, d))
+    last = np.max(np.where(valid, s_all, -np.inf), axis=1)
+    single = ~(last - s_all[:, 0] > tol)
+    in_cone = valid & (cond <= cone_condition)
+    k_in = np.argmax(in_cone, axis=1)
+    with np.errstate(invalid="ignore"):
+        spread_in = np.max(np.where(in_cone, s_all, -np.inf), axis=1) - s_all[rows, k_in]
+    use_cone = ~single & in_cone.any(axis=1) & ~(spread_in > tol)
+    k = np.where(use_cone, k_in, 0)
+    several = ~single & ~use_cone
+    return s_all[rows, k], n_all[rows, k], i_all[rows, k], several
 
 
 @dataclass
@@ -57,7 +80,8 @@ def _solve(A, b):
 
 
 def localize(model, surfaces, q, r, Linv, *, min_force_N=0.05, max_condition=20.0,
-             ambiguity_chi2=6.63, position_tol_m=0.005, ambiguity_tol=None) -> SpatialLocalization:
+             ambiguity_chi2=6.63, position_tol_m=0.005, ambiguity_tol=None,
+             cone_condition=2.0) -> SpatialLocalization:
     """Per sample (q (S, nq), r (S, nv) all rows, Linv (nu, nu) or (S, nu, nu)): module doc.
 
     ``ambiguity_tol`` (the planar dynamic method's rule, for an unweighted fit, Linv = I): two
@@ -80,6 +104,7 @@ def localize(model, surfaces, q, r, Linv, *, min_force_N=0.05, max_condition=20.
     cond = np.full((S_, NB), np.inf)
     which = np.full((S_, NB), -1)
     fnorm = np.zeros((S_, NB))
+    several = np.zeros((S_, NB), bool)
     for b in range(NB):
         Ab = A * mv[:, b][None, :, None]
         Aw = L @ Ab
@@ -99,7 +124,10 @@ def localize(model, surfaces, q, r, Linv, *, min_force_N=0.05, max_condition=20.
         d_b = (RbT @ d[..., None])[..., 0]
         surf = surfaces[b]
         if surf.has_geometry:
-            s, point, normal, hit = geo.body_entry(surf, o_b, d_b)
+            s, normal, hit, sev = _choose_entry(*geo.body_entries(surf, o_b, d_b), d_b,
+                                                position_tol_m, cone_condition)
+            point = o_b + s[:, None] * d_b
+            several[:, b] = sev
             ok = np.isfinite(s)
             with np.errstate(divide="ignore"):
                 cond[:, b] = np.where(ok, 1.0 / np.abs(np.einsum("si,si->s", normal, d_b)), np.inf)
@@ -131,6 +159,7 @@ def localize(model, surfaces, q, r, Linv, *, min_force_N=0.05, max_condition=20.
         far = np.linalg.norm(pw[idx, second] - pw[idx, best], axis=1) > position_tol_m
         reason[(reason == OK) & close & far] = AMBIGUOUS
     condition = cond[idx, best]
+    reason[(reason == OK) & several[idx, best]] = SEVERAL
     reason[(reason == OK) & (condition > max_condition)] = GRAZING
     reason[(reason == OK) & np.array([not surfaces[b].has_geometry for b in best])] = NO_GEOMETRY
     F_best = force[idx, best]
