@@ -174,6 +174,13 @@ def simulate(args) -> int:
     return 0
 
 
+def _identifiability(model) -> list:
+    from estimator.spatial.geometry import body_surfaces
+    from estimator.spatial.localize import identifiability
+
+    return identifiability(model, body_surfaces(model.robot, model.tree))
+
+
 def propagate(args) -> int:
     """``torquebench propagate --robot leg.toml``: the 3-D error map (estimator.spatial.predict)
     at a posture, for a force of the given magnitude pushing into every surface point."""
@@ -204,7 +211,7 @@ def propagate(args) -> int:
                      resolution=max(8, 4 * args.grid))
     results = {"robot": robot.name, "urdf": str(robot.urdf_path), "posture_rad": q[7:].tolist(),
                "force_N": magnitude, "torque_noise_std_Nm": float(tau), "ft_noise": noise.ft_sigma.tolist(),
-               "links": summarize(maps),
+               "links": summarize(maps), "identifiability": _identifiability(model),
                "method": "first-order propagation of the residual's no-contact covariance through "
                          "the surface localizer, force pushing straight into each surface point"}
     if args.png:
@@ -222,4 +229,8 @@ def propagate(args) -> int:
         print(f"  {link:12s} median {med * 1e3 if med is not None else float('nan'):7.2f} mm, "
               f"max {mx * 1e3 if mx is not None else float('nan'):7.2f} mm, refused "
               f"{100 * s['refused_fraction']:.0f} % of {s['points']} surface points")
+    for d in results["identifiability"]:
+        if d["confused_with"]:
+            print(f"  {d['link']}: told apart from {', '.join(d['confused_with'])} only by where the line "
+                  f"of action meets their surfaces (no torque sensor between them)")
     return 0
