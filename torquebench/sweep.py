@@ -49,6 +49,10 @@ def run_point(scene_path: str, overrides: dict, outputs, cache_dir) -> dict:
     from torquebench.scenes import load_scene
 
     try:
+        from estimator.spatial.scene import is_spatial_scene
+        if is_spatial_scene(scene_path):          # a URDF robot: the 3-D scene runner
+            from torquebench.spatial_scene import run_scene
+            return {"point": overrides, "result": run_scene(scene_path, overrides)}
         scene = load_scene(scene_path, overrides)
         arts, timing = P.execute(scene, outputs, Cache(cache_dir))
         res = summarize(arts)

@@ -9,6 +9,7 @@ HELP = "estimate contacts (link, α, force, point) sample by sample from a senso
 EXAMPLES = """\
 torquebench estimate examples/leg_poke/leg_poke.csv
 torquebench estimate examples/sim/paper_fixed_link2.csv --method paper --out out/fixed_link2_estimate.csv --json
+torquebench estimate examples/spatial/leg_pokes.csv --robot robots/quadruped_leg.toml
 """
 
 
@@ -48,7 +49,8 @@ def _chunk(text: str) -> int:
 def add_arguments(parser) -> None:
     parser.add_argument("log", type=Path, metavar="LOG.csv", help="sensor log: CSV (or Parquet for .parquet) with t,[x,z,theta,]q1,q2,[dx,dz,dtheta,]dq1,dq2,tau1,tau2,Fx,Fz,My in SI units (docs/conventions.md)")
     parser.add_argument("--robot", type=Path, default=None,
-                        help="robot TOML (default: robots/paper_leg.toml)")
+                        help="robot TOML (default: robots/paper_leg.toml), or a URDF robot: a .urdf or "
+                             "a declaration TOML naming one (robots/quadruped_leg.toml): the 3-D estimator")
     parser.add_argument("--method", choices=["paper", "dynamic"], default="dynamic",
                         help="localization: 'dynamic' (observer residual, least squares; default) "
                              "or 'paper' (eqs. 6-9, quasi-static)")
@@ -89,6 +91,14 @@ def add_arguments(parser) -> None:
                         help="write t,contact,link,alpha,Fx,Fz,px,pz,rnorm per sample (s, -, -, -, N, N, m, m, -); "
                              "Parquet for .parquet, else CSV; its directory is created, an existing file is kept unless --force")
     parser.add_argument("--force", action="store_true", help="replace an existing --out file")
+    parser.add_argument("--weighting", choices=["whitened", "identity"], default="whitened",
+                        help="URDF robots: the localizer's least squares on the residual whitened by "
+                             "its no-contact covariance, or unweighted (the planar dynamic method's "
+                             "fit; the paper leg as a URDF then reproduces it) (default: %(default)s)")
+    parser.add_argument("--png", type=Path, default=None, metavar="OUT.png",
+                        help="URDF robots: the robot in 3-D at each contact interval's middle sample, the "
+                             "estimated contact and force arrow beside the true one (LOG.truth.csv, if "
+                             "there); one picture per interval, OUT_1.png, OUT_2.png, ...")
     parser.add_argument("--chunk-samples", type=_chunk, default=65536, metavar="N",
                         help="samples read, estimated and written per chunk: memory is bounded by "
                              "this, not by the log's length; results do not depend on it "
@@ -176,6 +186,14 @@ def run(args) -> int:
             raise InputError(f"--out {args.out}: is the input log; refusing to overwrite it")
     from torquebench.outputs import prepare_file
     prepare_file(args.out, "--out", force=args.force, inputs=(args.log, args.robot))
+    from estimator.spatial.robot import is_spatial_robot_file
+    if args.robot is not None and is_spatial_robot_file(args.robot):   # a URDF robot: the 3-D path
+        from torquebench.spatial_cli import estimate as estimate_3d
+        return estimate_3d(args)
+    if getattr(args, "png", None) is not None:
+        raise InputError("--png: the 3-D contact picture is drawn for URDF robots (--robot LEG.urdf)")
+    if getattr(args, "weighting", "whitened") != "whitened":
+        raise InputError("--weighting: for URDF robots; the planar dynamic method's fit is unweighted")
     robot = load_robot(args.robot or PAPER_LEG_TOML)
     noise, quiet, rate = _detector_options(args, robot.n_links)
     if noise is None and quiet is None:           # LOG.noise.toml beside the log, if any

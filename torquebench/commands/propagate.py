@@ -21,6 +21,7 @@ HELP = "propagate sensor noise and calibration uncertainty into contact-localiza
 EXAMPLES = """\
 torquebench propagate --grid 4 --draws 200
 torquebench propagate --calibration calibration/data/paper_link1_cal.json --grid 6 --png out/position_error.png --json
+torquebench propagate --robot robots/quadruped_leg.toml --posture 0.2,0.6,-1.2 --force 5 --png out/leg_error_map.png
 """
 
 
@@ -47,7 +48,10 @@ def _finite_args(args) -> None:
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--robot", type=Path, help="robot TOML (default: robots/paper_leg.toml)")
+    parser.add_argument("--robot", type=Path, help="robot TOML (default: robots/paper_leg.toml), or a URDF robot "
+                        "(a .urdf or a declaration naming one): the 3-D error map over its link surfaces")
+    parser.add_argument("--posture", default=None, metavar="RAD,RAD,...",
+                        help="URDF robots: joint angles of the 3-D error map, rad (default: all 0)")
     parser.add_argument("--sensor", type=Path, help="sensor TOML (default: scenes/paper_sensor.toml)")
     parser.add_argument("--strain-per-Nm", type=float, dest="strain_per_Nm",
                         help="gauge strain per N·m of joint torque, 1/(N·m) (default: the sensor file's, or the paper's)")
@@ -103,6 +107,10 @@ def run(args) -> int:
 
     seed(args.seed)                              # negative seeds → exit 2
     _finite_args(args)
+    from estimator.spatial.robot import is_spatial_robot_file
+    if args.robot is not None and is_spatial_robot_file(args.robot):   # a URDF robot: the 3-D map
+        from torquebench.spatial_cli import propagate as propagate_3d
+        return propagate_3d(args)
     from estimator.robot import load_robot, paper_leg
     from torquebench import pipeline as P
     from torquebench.cache import Cache

@@ -68,6 +68,9 @@ def run(args) -> int:
     from torquebench.io import print_json
     from torquebench.scenes import load_scene, scene_path
 
+    from estimator.spatial.scene import is_spatial_scene
+    if is_spatial_scene(scene_path(str(args.scene))):       # a URDF robot: the 3-D scene runner
+        return _run_3d(args)
     scene = load_scene(scene_path(str(args.scene)))
     cache = Cache(args.cache_dir)
     if args.explain:
@@ -118,4 +121,27 @@ def run(args) -> int:
         print(f"report: {r['summary']}" + (f" + {', '.join(r['areas'])} in {r['dir']}" if r["areas"] else ""))
     if "flagged_samples" in out:
         print(f"saturated/out-of-range samples kept out of detection: {out['flagged_samples']}")
+    return 0
+
+
+def _run_3d(args) -> int:
+    """A 3-D scene: simulate, estimate, measured against the truth, predicted at the pokes."""
+    from torquebench.errors import InputError
+    from torquebench.io import print_json
+    from torquebench.scenes import scene_path
+    from torquebench.spatial_scene import run_scene
+
+    if args.explain or args.only:
+        raise InputError("--explain/--only: a 3-D scene runs whole (simulate → estimate → compare)")
+    out = run_scene(scene_path(str(args.scene)), seed=args.seed)
+    if args.json:
+        print_json(out)
+        return 0
+    me, pr = out["measured"]["dynamic"], out["predicted"]["dynamic"]
+    f = (lambda v: f"{v * 1e3:.3f} mm" if v is not None else "—")   # noqa: E731
+    print(f"{out['scene']} ({out['robot']}, URDF): {me['contact_samples']} contact samples, link right on "
+          f"{100 * (me['isolation_fraction'] or 0):.1f} %, position RMS {f(me['position_error_rms_m'])} "
+          f"(median {f(me['position_error_median_m'])}); predicted {f(pr['position_rms_m'])}; "
+          f"false alarms {100 * (me['false_alarm_fraction'] or 0):.3f} % of {me['contact_free_samples']} "
+          f"contact-free samples; {out['run_time_s']:.1f} s")
     return 0

@@ -15,6 +15,7 @@ HELP = "simulate a scene file: write a sensor log CSV (docs/conventions.md), LOG
 EXAMPLES = """\
 torquebench simulate scenes/paper_floating_link1.toml --out out/floating_link1.csv
 torquebench simulate scenes/paper_fixed_link2.toml --out out/fixed_link2.csv --seed 7 --duration 1.0 --json
+torquebench simulate scenes/spatial/quadruped_leg_pokes.toml --out out/leg_pokes.csv --duration 0.3
 """
 
 
@@ -84,6 +85,10 @@ def run(args) -> int:
     if out.suffix == ".toml":
         raise InputError(f"--out: {out} looks like a scene/robot file; refusing to overwrite it "
                          "with a log (the log is a CSV)")
+    from estimator.spatial.scene import is_spatial_scene
+    if is_spatial_scene(args.scene):                  # a URDF robot: the 3-D simulator
+        from torquebench.spatial_cli import simulate as simulate_3d
+        return simulate_3d(args)
     tol = getattr(args, "error_tolerance", None)
     if tol is not None:
         finite(tol, "--error-tolerance", positive=True)
