@@ -32,6 +32,7 @@ def warm() -> bool:
     robot = full_robot(paper_leg())
     q = np.zeros((2, 5))
     PT, uT = momentum_terms_T(robot, q, q, q)
+    momentum_regressor(robot, q, q)
     for q_now in (q, None):         # the estimator passes the current posture; localize alone not
         localize_dynamic(robot, q, uT.T + 1.0, _weights(5, None), q_now, min_force_N=0.05,
                          max_condition=20.0, ambiguity_tol=1e-3, position_tol_m=0.005,
@@ -61,7 +62,7 @@ def _load():
     return _KERNELS or None
 
 
-def _terms_py(q, dq, tau, m, l, rc, Irot, g, Gz, msuf, PT, uT):
+def _terms_py(q, dq, tau, m, l, rc, rp, Irot, g, Gz, msuf, PT, uT):
     """P = M q̇ and u = τ + Cᵀq̇ − G (observer._FastTerms) for every sample, link-major."""
     T, n = q.shape
     N = n - 3
@@ -89,10 +90,10 @@ def _terms_py(q, dq, tau, m, l, rc, Irot, g, Gz, msuf, PT, uT):
             oz[i] = jz
             vox[i] = vjx
             voz[i] = vjz
-            cx[i] = jx + rc[i] * s
-            cz[i] = jz - rc[i] * c
-            vx[i] = vjx + rc[i] * dphi * c
-            vz[i] = vjz + rc[i] * dphi * s
+            cx[i] = jx + rc[i] * s + rp[i] * c
+            cz[i] = jz - rc[i] * c + rp[i] * s
+            vx[i] = vjx + dphi * (rc[i] * c - rp[i] * s)
+            vz[i] = vjz + dphi * (rc[i] * s + rp[i] * c)
             jx = jx + l[i] * s
             jz = jz - l[i] * c
             vjx = vjx + l[i] * dphi * c
@@ -123,6 +124,89 @@ def _terms_py(q, dq, tau, m, l, rc, Irot, g, Gz, msuf, PT, uT):
             uT[3 + i, k] += Cang - Gang
         PT[0, k] += Bx
         PT[1, k] += Bz
+
+def _regressor_py(q, dq, l, g, YP, Yu):
+    """The momentum regressor (estimator.inertial.regressor_numpy) per sample: YP, Yu (T, n, n_θ),
+    zero on entry."""
+    T, n = q.shape
+    N = n - 3
+    px = np.empty(N + 1)
+    pz = np.empty(N + 1)
+    vx = np.empty(N + 1)
+    vz = np.empty(N + 1)
+    ex = np.empty(N)
+    nx = np.empty(N)
+    nz = np.empty(N)
+    w = np.empty(N)
+    Lx = np.empty(4)
+    Lz = np.empty(4)
+    H = np.empty(4)
+    for k in range(T):
+        phi = q[k, 2]
+        dphi = dq[k, 2]
+        px[0] = 0.0
+        pz[0] = 0.0
+        vx[0] = dq[k, 0]
+        vz[0] = dq[k, 1]
+        for i in range(N):
+            phi += q[k, 3 + i]
+            dphi += dq[k, 3 + i]
+            s = math.sin(phi)
+            c = math.cos(phi)
+            ex[i] = s
+            nx[i] = c
+            nz[i] = s
+            w[i] = dphi
+            px[i + 1] = px[i] + l[i] * s
+            pz[i + 1] = pz[i] - l[i] * c
+            vx[i + 1] = vx[i] + l[i] * dphi * c
+            vz[i + 1] = vz[i] + l[i] * dphi * s
+        YP[k, 0, 0] = dq[k, 0]
+        YP[k, 1, 0] = dq[k, 1]
+        YP[k, 2, 1] = dq[k, 2]
+        Yu[k, 1, 0] = -g
+        for i in range(N):
+            c0 = 2 + 4 * i
+            ez = -nx[i]                        # e_z = −cos φ
+            Lx[0] = vx[i]
+            Lz[0] = vz[i]
+            Lx[1] = w[i] * nx[i]
+            Lz[1] = w[i] * nz[i]
+            Lx[2] = -w[i] * ex[i]
+            Lz[2] = -w[i] * ez
+            Lx[3] = 0.0
+            Lz[3] = 0.0
+            H[0] = 0.0
+            H[1] = ex[i] * vz[i] - ez * vx[i]
+            H[2] = nx[i] * vz[i] - nz[i] * vx[i]
+            H[3] = w[i]
+            for j in range(4):
+                YP[k, 0, c0 + j] = Lx[j]
+                YP[k, 1, c0 + j] = Lz[j]
+            Yu[k, 1, c0] = -g
+            for a in range(i + 2):
+                o = a - 1 if a > 0 else 0
+                dx = px[i] - px[o]
+                dz = pz[i] - pz[o]
+                for j in range(4):
+                    YP[k, 2 + a, c0 + j] = H[j] + dx * Lz[j] - dz * Lx[j]
+                    Yu[k, 2 + a, c0 + j] = -(vx[o] * Lz[j] - vz[o] * Lx[j])
+                Yu[k, 2 + a, c0] -= g * dx
+                Yu[k, 2 + a, c0 + 1] -= g * ex[i]
+                Yu[k, 2 + a, c0 + 2] -= g * nx[i]
+
+
+def momentum_regressor(robot, q, v):
+    """(Y_P, Y_u) (T, n, n_θ) of estimator.inertial with the compiled ``_regressor_py``."""
+    k = _load()
+    q = np.ascontiguousarray(q, float)
+    v = np.ascontiguousarray(v, float)
+    T, n = q.shape
+    YP = np.zeros((T, n, 2 + 4 * (n - 3)))
+    Yu = np.zeros_like(YP)
+    k["regressor"](q, v, np.asarray(robot.lengths_m, float), float(robot.gravity_m_per_s2), YP, Yu)
+    return YP, Yu
+
 
 def _fit_py(rd, wr, kappa, jx, jz, c, N, out):
     """Link c (1-based): weighted LS of (F, μ), α clipped to [0, 1] and F re-fitted there
@@ -594,7 +678,8 @@ def _compile():
     _put_float = jit(_put_float_py)
     return {"terms": jit(_terms_py), "localize": jit(_localize_py), "split": jit(_split_rows_py),
             "steps": jit(_check_steps_py), "rows": jit(_format_rows_py),
-            "plaus": jit(_plausibility_py), "filter": jit(_first_order_py)}
+            "plaus": jit(_plausibility_py), "filter": jit(_first_order_py),
+            "regressor": jit(_regressor_py)}
 
 
 
@@ -614,7 +699,8 @@ def momentum_terms_T(robot, q, dq, tau):
     uT = np.empty((n, T))
     msuf = np.cumsum(m[::-1])[::-1].copy()
     k["terms"](q, dq, tau, m, np.asarray(robot.lengths_m, float), np.asarray(robot.com_m, float),
-               _irot(robot), g, g * (float(robot.base_mass_kg) + float(m.sum())), msuf, PT, uT)
+               np.asarray(robot.com_perp_m, float), _irot(robot), g,
+               g * (float(robot.base_mass_kg) + float(m.sum())), msuf, PT, uT)
     return PT, uT
 
 
