@@ -208,6 +208,100 @@ def momentum_regressor(robot, q, v):
     return YP, Yu
 
 
+def _model_chi2_py(YP, Yu, S, tri, a, b, K, t, dt, exact, has_prev, t_prev, PP, PU, PF, rT, Rn,
+                   blk, G, stat):
+    """The detector's statistic with the model-error term (estimator.model_error), per sample k:
+
+        D_k = (Y_P,k − Y_P,k−1)/Δt − ½ (Y_u,k−1 + Y_u,k)      (explicit: − Y_u,k−1)
+        Φ_k = a ∘ Φ_k−1 + b ∘ D_k      (per row; a step ≠ Δt: its own a, b; Φ_0 = 0)
+        G_k = Φ_k S,   s_k = r_kᵀ (Rn[blk_k] + G_k G_kᵀ)⁻¹ r_k   (Cholesky in place; NaN if not PD)
+
+    S (n_θ, r) is lower triangular when ``tri`` (the Cholesky factor of Σ_θ). PP, PU, PF: the
+    previous sample's Y_P, Y_u, Φ (n, n_θ), updated in place; G (T, n, r) and stat (T,) out."""
+    T, n, k = YP.shape
+    r = S.shape[1]
+    L = np.empty((n, n))
+    z = np.empty(n)
+    for s in range(T):
+        if s == 0 and not has_prev:
+            for i in range(n):
+                for j in range(k):
+                    PF[i, j] = 0.0
+        else:
+            tp = t_prev if s == 0 else t[s - 1]
+            h = t[s] - tp
+            regular = abs(h - dt) <= 0.01 * dt
+            for i in range(n):
+                if regular:
+                    ai = a[i]
+                    bi = b[i]
+                    div = dt
+                elif exact:
+                    ai = math.exp(-K[i] * h)
+                    bi = -math.expm1(-K[i] * h)
+                    div = h
+                else:
+                    ai = 1.0 - K[i] * h
+                    bi = K[i] * h
+                    div = h
+                for j in range(k):
+                    ub = 0.5 * (PU[i, j] + Yu[s, i, j]) if exact else PU[i, j]
+                    PF[i, j] = bi * ((YP[s, i, j] - PP[i, j]) / div - ub) + ai * PF[i, j]
+        for i in range(n):
+            for j in range(k):
+                PP[i, j] = YP[s, i, j]
+                PU[i, j] = Yu[s, i, j]
+            for c in range(r):
+                acc = 0.0
+                for j in range(c if tri else 0, k):
+                    acc += PF[i, j] * S[j, c]
+                G[s, i, c] = acc
+        B = blk[s]
+        for i in range(n):
+            for j in range(i + 1):
+                acc = Rn[B, i, j]
+                for c in range(r):
+                    acc += G[s, i, c] * G[s, j, c]
+                L[i, j] = acc
+        ok = True
+        for j in range(n):
+            d = L[j, j]
+            for m in range(j):
+                d -= L[j, m] * L[j, m]
+            if not d > 0.0:
+                ok = False
+                break
+            d = math.sqrt(d)
+            L[j, j] = d
+            for i in range(j + 1, n):
+                v = L[i, j]
+                for m in range(j):
+                    v -= L[i, m] * L[j, m]
+                L[i, j] = v / d
+        if not ok:
+            stat[s] = math.nan
+            continue
+        ss = 0.0
+        for i in range(n):
+            v = rT[i, s]
+            for m in range(i):
+                v -= L[i, m] * z[m]
+            z[i] = v / L[i, i]
+            ss += z[i] * z[i]
+        stat[s] = ss
+
+
+def model_chi2(YP, Yu, S, tri, a, b, K, t, dt, exact, has_prev, t_prev, PP, PU, PF, rT, Rn, blk,
+               G, stat) -> bool:
+    """``_model_chi2_py`` compiled (state arrays PP, PU, PF updated in place); False without numba."""
+    k = _load() if ENABLED else None
+    if k is None:
+        return False
+    k["modelchi2"](YP, Yu, S, bool(tri), a, b, K, t, float(dt), bool(exact), bool(has_prev),
+                   float(t_prev), PP, PU, PF, rT, Rn, blk, G, stat)
+    return True
+
+
 def _fit_py(rd, wr, kappa, jx, jz, c, N, out):
     """Link c (1-based): weighted LS of (F, μ), α clipped to [0, 1] and F re-fitted there
     (localization._fit_link). rd, wr: merged rows [x, z, hip, q_2…q_N]; out ← α_free, α,
@@ -679,7 +773,7 @@ def _compile():
     return {"terms": jit(_terms_py), "localize": jit(_localize_py), "split": jit(_split_rows_py),
             "steps": jit(_check_steps_py), "rows": jit(_format_rows_py),
             "plaus": jit(_plausibility_py), "filter": jit(_first_order_py),
-            "regressor": jit(_regressor_py)}
+            "regressor": jit(_regressor_py), "modelchi2": jit(_model_chi2_py)}
 
 
 

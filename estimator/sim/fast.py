@@ -39,9 +39,10 @@ class FastRHS:
         self.q0 = [float(v) for v in c.q0_rad]
         self.traj = c.amplitude_rad is not None
         if self.traj:
-            self.A = [float(v) for v in c.amplitude_rad]
-            self.w = [2 * math.pi * float(v) for v in c.frequency_Hz]
-            self.ph = [float(v) for v in c.phase_rad]
+            a, f, ph = c.harmonics()
+            self.A = a.tolist()
+            self.w = (2 * math.pi * f).tolist()
+            self.ph = ph.tolist()
         self.gc = c.gravity_compensation
 
     def kinematics(self, q):
@@ -119,9 +120,10 @@ class FastRHS:
         for j in range(self.N):
             qd, dqd = self.q0[j], 0.0
             if self.traj:
-                arg = self.w[j] * t + self.ph[j]
-                qd += self.A[j] * math.sin(arg)
-                dqd = self.A[j] * self.w[j] * math.cos(arg)
+                for a, w, ph in zip(self.A[j], self.w[j], self.ph[j]):
+                    arg = w * t + ph
+                    qd += a * math.sin(arg)
+                    dqd += a * w * math.cos(arg)
             tau = self.plant.kp * (qd - q[nb + j]) + self.plant.kd * (dqd - dq[nb + j])
             if self.gc and G is not None:
                 tau += G[nb + j]
