@@ -29,7 +29,7 @@ class MjPoke:
 
 def mjcf(robot, kp: float, kd: float, pokes=(), timestep: float = 5e-5) -> str:
     """The MJCF text of a planar chain on a floating base (module doc): joint servos as general
-    actuators force = ctrl − kp q − kd q̇; per poke a site on its link and two actuators applying
+    actuators force = act − kp q − kd q̇ with an integrator activation (ȧ = ctrl); per poke a site on its link and two actuators applying
     world-frame x and z forces there (site transmission with the world's ``origin`` as refsite)."""
     K, D = robot.base_stiffness, robot.base_damping
     g = robot.gravity_m_per_s2
@@ -50,8 +50,9 @@ def mjcf(robot, kp: float, kd: float, pokes=(), timestep: float = 5e-5) -> str:
                  f'mass="{robot.masses_kg[i]:.17g}" diaginertia="{I:.17g} {I:.17g} {I:.17g}"/>{sites}')
         close += "</body>"
         offset = robot.lengths_m[i]
-    acts = "".join(f'<general joint="q{i + 1}" gear="1" gainprm="1" biastype="affine" '
-                   f'biasprm="0 {-kp:.17g} {-kd:.17g}"/>' for i in range(robot.n_links))
+    acts = "".join(f'<general joint="q{i + 1}" gear="1" dyntype="integrator" gainprm="1" '
+                   f'biastype="affine" biasprm="0 {-kp:.17g} {-kd:.17g}"/>'
+                   for i in range(robot.n_links))
     acts += "".join(f'<general site="poke{j}" refsite="origin" gear="1 0 0 0 0 0"/>'
                     f'<general site="poke{j}" refsite="origin" gear="0 0 1 0 0 0"/>'
                     for j in range(len(pokes)))
@@ -76,9 +77,12 @@ def mujoco_log(robot, q0, duration_s, *, amplitude=None, frequency_Hz=None, phas
     """(SensorLog, truth dict) of a MuJoCo run (module doc). q_d(t) = q0 + Σ_h A sin(2π f t + φ)
     per joint (arrays (N, H), or None to hold q0); the leg starts at q_d(0), q̇_d(0), base at rest.
 
-    The servo is MuJoCo's general actuator force = ctrl − K_P q − K_D q̇ with ctrl = K_P q_d + K_D q̇_d
-    set every step (the feedback is continuous inside RK4's stages, the reference held for one
-    step); the whole run is one ``mujoco.rollout`` call (open-loop controls, no Python per step)."""
+    The servo is MuJoCo's general actuator force = a − K_P q − K_D q̇ whose activation a (an
+    integrator, ȧ = ctrl) is the reference force K_P q_d + K_D q̇_d: ctrl is its secant over each
+    step, so a is exact at every step and linear inside it (a reference held over a step would
+    be a sawtooth that the joint's fast velocity loop, K_D/I ≈ 3·10⁴ s⁻¹, shows in q̇). The
+    feedback is continuous inside RK4's stages; the logged torque is the servo law at the sample
+    time. The whole run is one ``mujoco.rollout`` call (open-loop controls, no Python per step)."""
     import mujoco
     from mujoco import rollout
 
@@ -97,17 +101,22 @@ def mujoco_log(robot, q0, duration_s, *, amplitude=None, frequency_Hz=None, phas
     T = int(math.floor(duration_s * rate_Hz + 1e-9)) + 1
     n_steps = (T - 1) * per
     ts = np.arange(n_steps + 1) * timestep
-    arg = w[None] * ts[:, None, None] + ph[None]
-    qd = q0 + np.sum(A * np.sin(arg), axis=2)                      # (steps, N)
-    dqd = np.sum(A * w * np.cos(arg), axis=2)
+
+    def reference(tt):
+        arg = w[None] * tt[:, None, None] + ph[None]
+        return q0 + np.sum(A * np.sin(arg), axis=2), np.sum(A * w * np.cos(arg), axis=2)
+
+    qd, dqd = reference(ts)                                        # (steps, N)
+    act = kp * qd + kd * dqd                 # the servo's reference force, the actuator's state
     ctrl = np.zeros((n_steps + 1, model.nu))
-    ctrl[:, :N] = kp * qd + kd * dqd
+    ctrl[:-1, :N] = np.diff(act, axis=0) / timestep                # its secant rate per step
     for j, p in enumerate(pokes):
         on = (ts >= p.t_on_s) & (ts < p.t_off_s)
         ctrl[on, N + 2 * j] = p.force_N[0]
         ctrl[on, N + 2 * j + 1] = p.force_N[1]
     data.qpos[3:] = qd[0]
     data.qvel[3:] = dqd[0]
+    data.act[:N] = act[0]
     mujoco.mj_forward(model, data)
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     x0 = np.zeros(mujoco.mj_stateSize(model, spec))
@@ -120,7 +129,7 @@ def mujoco_log(robot, q0, duration_s, *, amplitude=None, frequency_Hz=None, phas
     dq = traj[:, 1 + nq:1 + 2 * nq].copy()
     t_log = np.arange(T) / rate_Hz
     assert np.allclose(traj[:, 0], t_log, atol=1e-9)
-    tau = ctrl[::per, :N] - kp * q[:, 3:] - kd * dq[:, 3:]
+    tau = kp * (qd[::per] - q[:, 3:]) + kd * (dqd[::per] - dq[:, 3:])   # the servo law at t
     K, D = np.asarray(robot.base_stiffness, float), np.asarray(robot.base_damping, float)
     W = -K * q[:, :3] - D * dq[:, :3]
     truth = {"t": t_log, "link": np.zeros(T, int), "alpha": np.full(T, np.nan),
