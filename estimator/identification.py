@@ -185,24 +185,30 @@ def identify(model, eqs: list[Equations], prior_cov: np.ndarray, *, max_rounds: 
                              f"(scenes/identification_excitation.toml)")
         e.keep = np.ones(len(e.b), bool)
     h_out = float(chdtri(n, OUTLIER_PROBABILITY))
-    med0 = float(chdtri(n, 0.5))
+    q25 = float(chdtri(n, 0.75))                   # the lower quartile of χ²_n
     excluded = {}
-    for _ in range(max_rounds):
+
+    def solve():
         A, b, Ls = _whiten(eqs)
-        H = A.T @ A + P0inv
-        theta = np.linalg.solve(H, A.T @ b + P0inv @ theta0)
+        return np.linalg.solve(A.T @ A + P0inv, A.T @ b + P0inv @ theta0), Ls
+
+    # concentration steps: refit on the half of each log's windows that fits best, so that a
+    # contact covering up to half a log cannot drag the fit onto itself
+    theta, Ls = solve()
+    for _ in range(6):
+        for e, Linv in zip(eqs, Ls):
+            s_w, _ = _window_stat(e, Linv, theta)
+            e.keep = s_w <= np.median(s_w)
+        theta, Ls = solve()
+    for _ in range(max_rounds + 1):
         changed = False
         for e, Linv in zip(eqs, Ls):
-            s, _ = _window_stat(e, Linv, theta)
-            scale = max(1.0, float(np.median(s[e.keep])) / med0)
-            spans = _spans(s > h_out * scale, e.t0, e.t1)
-            if spans:
-                spans, wide = spans
-                keep = ~wide
-            else:
-                spans, keep = [], np.ones(len(s), bool)
-            if not np.array_equal(keep, e.keep):
-                changed = True
+            s_w, _ = _window_stat(e, Linv, theta)
+            best = s_w <= np.median(s_w)
+            scale = max(1.0, float(np.quantile(s_w[best], 0.5)) / q25)   # unmodelled, everywhere
+            found = _spans(s_w > h_out * scale, e.t0, e.t1)
+            spans, keep = (found[0], ~found[1]) if found else ([], np.ones(len(s_w), bool))
+            changed |= not np.array_equal(keep, e.keep)
             e.keep = keep
             excluded[e.source] = spans
             frac = 1.0 - keep.mean()
@@ -213,6 +219,7 @@ def identify(model, eqs: list[Equations], prior_cov: np.ndarray, *, max_rounds: 
                                  f"much to exclude; identify on a contact-free log")
         if not changed:
             break
+        theta, Ls = solve()
     A, b, Ls = _whiten(eqs)
     Hd = A.T @ A
     H = Hd + P0inv
@@ -294,13 +301,16 @@ def _constrained(model, H, theta_free, theta0, P0):
     Hs = H * np.outer(sig, sig)
     x_free = (theta_free - theta0) / sig
     floor = 1e-6 * np.abs(margins(theta0))
-    cons = {"type": "ineq", "fun": lambda x: margins(theta0 + sig * x) - floor}
+    scale = np.abs(margins(theta0)) + 1e-300
+    cons = {"type": "ineq", "fun": lambda x: (margins(theta0 + sig * x) - floor) / scale}
+    Hs = Hs / max(float(x_free @ Hs @ x_free), 1e-300)       # the objective is 1 at θ₀
     out = minimize(lambda x: (x - x_free) @ Hs @ (x - x_free), np.zeros_like(x_free),
                    jac=lambda x: 2 * Hs @ (x - x_free), constraints=[cons], method="SLSQP",
-                   options={"maxiter": 500, "ftol": 1e-12})
+                   options={"maxiter": 1000, "ftol": 1e-14})
     theta = theta0 + sig * out.x
     if model.consistency_problems(theta):
         raise InputError(f"identification: no physically consistent fit found ({out.message})")
     m = margins(theta) - floor
-    active = [f"margin {j}" for j in np.flatnonzero(m < 1e-6 * (np.abs(floor) + 1e-12) + 1e-12)]
-    return theta, active
+    names = getattr(model, "consistency_margin_names", None) or [f"consistency margin {j}"
+                                                                  for j in range(m.size)]
+    return theta, [names[j] for j in np.flatnonzero(m < 1e-3 * np.abs(margins(theta0)))]

@@ -78,6 +78,14 @@ def consistency_margins(robot, theta) -> np.ndarray:
     return np.concatenate([[mb, Ib], links.ravel()])
 
 
+def margin_names(n_links: int) -> list[str]:
+    """What each entry of ``consistency_margins`` bounds."""
+    per = ("mass > 0", "inertia about the COM > 0", "COM along the axis ≥ 0",
+           "COM along the axis ≤ length", "COM across the axis ≤ length", "COM across the axis ≥ −length")
+    return ["base mass > 0", "base inertia > 0"] + [f"link {i}: {p}" for i in range(1, n_links + 1)
+                                                    for p in per]
+
+
 def consistency_problems(robot, theta) -> list[str]:
     """What makes θ unphysical, one message per violated condition ([] when consistent)."""
     mb, Ib, L = _split(theta, robot.n_links)

@@ -109,6 +109,12 @@ class Robot:
 
         return inertial.consistency_margins(self, theta)
 
+    @property
+    def consistency_margin_names(self) -> list[str]:
+        from estimator import inertial
+
+        return inertial.margin_names(self.n_links)
+
     def parameter_covariance(self, uncertainty) -> np.ndarray:
         from estimator import inertial
 
