@@ -292,9 +292,12 @@ def bench_end_to_end(n_samples: int = 2_000_000, ten_million: bool = False) -> d
             _write_log_csv(small, _log_blocks(5000))
             cli(["estimate", str(small), "--out", str(tmp / "warm.csv"), "--force", "--json"])
             cli(["estimate", str(small), "--out", str(tmp / "warm.parquet"), "--force", "--json"])
-        for name, src, dst in (("csv", csv, tmp / "est.csv"), ("parquet", parquet, tmp / "est.parquet"),
-                               ("csv_to_parquet", csv, tmp / "est2.parquet"), ("csv_no_out", csv, None)):
-            argv = ["estimate", str(src), "--json"] + ([] if dst is None else ["--out", str(dst), "--force"])
+        for name, src, dst, extra in (
+                ("csv", csv, tmp / "est.csv", []), ("parquet", parquet, tmp / "est.parquet", []),
+                ("csv_to_parquet", csv, tmp / "est2.parquet", []), ("csv_no_out", csv, None, []),
+                ("csv_model", csv, tmp / "est4.csv", ["--model-uncertainty", "0.05"])):
+            argv = ["estimate", str(src), "--json", *extra] + \
+                ([] if dst is None else ["--out", str(dst), "--force"])
             buf = io.StringIO()
             t0, c0 = time.perf_counter(), time.process_time()
             with contextlib.redirect_stdout(buf):
@@ -305,6 +308,7 @@ def bench_end_to_end(n_samples: int = 2_000_000, ten_million: bool = False) -> d
             out[f"{name}_s"], out[f"{name}_cpu_s"] = wall, cpu
             out[f"{name}_samples_per_s"] = n_samples / wall
             out[f"{name}_samples_per_cpu_s"] = n_samples / cpu
+        out["ratio_csv_model_to_csv"] = out["csv_model_s"] / out["csv_s"]
         out["ratio_csv_to_pandas_anchor"] = out["csv_s"] / out["anchor_pandas_read_csv_s"]
         out["ratio_csv_to_pyarrow_anchor"] = out["csv_s"] / out["anchor_pyarrow_read_csv_s"]
         for name, src, dst in (("csv", csv, tmp / "est3.csv"), ("parquet", parquet, tmp / "est3.parquet")):
@@ -340,9 +344,12 @@ def main(argv=None) -> dict:
         print(f"torquebench estimate LOG --out OUT, {n:,} samples ({e['csv_MB']:.0f} MB CSV, "
               f"9 significant digits), in process (target >= 500,000 samples/s):")
         for key, label in (("csv", "CSV -> CSV"), ("parquet", "Parquet -> Parquet"),
-                           ("csv_to_parquet", "CSV -> Parquet"), ("csv_no_out", "CSV, no --out")):
+                           ("csv_to_parquet", "CSV -> Parquet"), ("csv_no_out", "CSV, no --out"),
+                           ("csv_model", "CSV -> CSV, model term")):
             print(f"  {label:20s} {e[key + '_s']:6.2f} s = {e[key + '_samples_per_s']:>10,.0f} samples/s wall; "
                   f"CPU {e[key + '_cpu_s']:.2f} s = {e[key + '_samples_per_cpu_s']:,.0f} samples per CPU-second")
+        print(f"  the model-error term (--model-uncertainty 0.05: R_k = R_noise + Φ_k Σ_θ Φ_kᵀ per "
+              f"sample) costs {e['ratio_csv_model_to_csv']:.2f}x the plain CSV -> CSV run")
         print(f"  anchors, the same CSV read alone: pandas.read_csv {e['anchor_pandas_read_csv_s']:.2f} s "
               f"(CPU {e['anchor_pandas_read_csv_cpu_s']:.2f} s), pyarrow.csv.read_csv "
               f"{e['anchor_pyarrow_read_csv_s']:.2f} s (CPU {e['anchor_pyarrow_read_csv_cpu_s']:.2f} s); "

@@ -241,13 +241,15 @@ def monte_carlo(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise,
 
 def interval_rms(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise, parameter_cov,
                  draws: int = 2000, rng: np.random.Generator | int = 0,
-                 method: str = "dynamic") -> np.ndarray:
+                 method: str = "dynamic", samples: int | None = None) -> np.ndarray:
     """The RMS position error over a held contact's samples, one value per robot draw, (B, draws).
 
     A robot differs from its file by δθ ~ N(0, Σ_θ) (and a gain error g), fixed for the robot; the
     settled residual Jᵀ F + Y δθ (module doc) is localized without noise: the bias b(δθ, g); the
-    per-sample noise adds σ_p (first order, noise only) around it, so the RMS over the contact is
-    √(|b|² + σ_p²): the distribution a set of robots' measured interval errors should follow."""
+    per-sample noise adds σ_p (first order, noise only) around it. Over ``samples`` samples of
+    the observer's residual (n_eff = samples (1 − a)/(1 + a) independent values, a = e^{−KΔt})
+    the RMS is √((b + n̄)² + σ_p² χ²_{n_eff}/n_eff), n̄ ~ N(0, σ_p²/n_eff) (without ``samples``:
+    √(b² + σ_p²)): the distribution a set of robots' measured interval errors should follow."""
     rng = np.random.default_rng(rng)
     q_joint, link, alpha, force = _check(robot, q_joint, link, alpha, force_N)
     q, readings, r_true = _truth(robot, q_joint, link, alpha, force)
@@ -264,5 +266,11 @@ def interval_rms(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise
     quiet = SensorNoise(torque_std_Nm=noise.torque_std_Nm, wrench_std=noise.wrench_std,
                         torque_gain_rel_std=np.zeros(1), sample_rate_Hz=noise.sample_rate_Hz,
                         gain_per_s=noise.gain_per_s)
-    sig = first_order(robot, q_joint, link, alpha, force, quiet, method=method).position_rms_m
-    return np.sqrt(bias ** 2 + sig[:, None] ** 2)
+    sig = first_order(robot, q_joint, link, alpha, force, quiet, method=method).position_rms_m[:, None]
+    if samples is None:
+        return np.sqrt(bias ** 2 + sig ** 2)
+    a = np.exp(-noise.gain_per_s / noise.sample_rate_Hz)
+    n_eff = max(1.0, samples * (1 - a) / (1 + a))
+    mean = sig / np.sqrt(n_eff) * rng.standard_normal(bias.shape)
+    spread = sig ** 2 * rng.chisquare(n_eff, bias.shape) / n_eff
+    return np.sqrt((bias + mean) ** 2 + spread)

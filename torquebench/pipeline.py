@@ -119,7 +119,8 @@ STAGES = (
 # scene's report only when the scene computes that artifact; None: not about one scene
 REPORT_INPUTS = {"bridge": "chain", "flexure": "flexure", "fem": "flexure",
                  "calibration": "calibration", "estimator": "estimates", "detection": "estimates",
-                 "reproduction": "paper_scores", "stability": None, "error_vs_runtime": None}
+                 "reproduction": "paper_scores", "stability": None, "error_vs_runtime": None,
+                 "model_error": None}
 BY_GIVES = {s.gives: s for s in STAGES}
 ALIASES = {"sensitivity": "chain", "noise_budget": "chain"}
 DEFAULT_OUTPUTS = ("localization_error", "predicted_error")

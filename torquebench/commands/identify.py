@@ -12,8 +12,8 @@ from torquebench.errors import InputError
 
 HELP = "identify a robot's inertial parameters from contact-free logs; write an identified robot TOML"
 EXAMPLES = """\
-torquebench identify out/excitation.csv --robot robots/paper_leg.toml --out out/leg_identified.toml
-torquebench identify run1.csv run2.csv --robot robots/paper_leg.toml --out out/leg_id.toml --prior 0.2 --json
+torquebench identify examples/identification/excitation.csv --robot robots/paper_leg.toml --out out/leg_identified.toml
+torquebench identify examples/identification/excitation.csv --out out/leg_id.toml --prior 0.2 --json
 """
 DEFAULT_PRIOR = 0.3
 
@@ -181,9 +181,11 @@ def run(args) -> int:
     warnings = []
     if result.unexcited:
         warnings.append(f"the logs excite {stats['excited_directions']} of {stats['parameters']} "
-                        f"parameter directions: {', '.join(result.unexcited)} kept at their nominal "
-                        f"values within the prior ({prior.describe()}); to identify them, record "
-                        f"a log with more motion (scenes/identification_excitation.toml)")
+                        f"parameter directions: {', '.join(result.unexcited)} not determined by "
+                        f"them, kept near their nominal values within the prior "
+                        f"({prior.describe()}); more or other motion may identify them "
+                        f"(scenes/identification_excitation.toml; base motion for the base and "
+                        f"the masses apart)")
     for info in logs_info:
         if info["excluded_s"]:
             spans = ", ".join(f"{a:.3f}–{b:.3f} s" for a, b in info["excluded_s"])
