@@ -208,60 +208,65 @@ def momentum_regressor(robot, q, v):
     return YP, Yu
 
 
-def _model_chi2_py(YP, Yu, S, tri, a, b, K, t, dt, exact, has_prev, t_prev, PP, PU, PF, rT, Rn,
-                   blk, G, stat):
+def _model_chi2_py(YP, Yu, act_ptr, act, S, a, b, K, t, dt, exact, has_prev, t_prev, PP, PU, PF,
+                   rT, Rn, blk, G, stat):
     """The detector's statistic with the model-error term (estimator.model_error), per sample k:
 
         D_k = (Y_P,k − Y_P,k−1)/Δt − ½ (Y_u,k−1 + Y_u,k)      (explicit: − Y_u,k−1)
         Φ_k = a ∘ Φ_k−1 + b ∘ D_k      (per row; a step ≠ Δt: its own a, b; Φ_0 = 0)
         G_k = Φ_k S,   s_k = r_kᵀ (Rn[blk_k] + G_k G_kᵀ)⁻¹ r_k   (Cholesky in place; NaN if not PD)
 
-    S (n_θ, r) is lower triangular when ``tri`` (the Cholesky factor of Σ_θ). PP, PU, PF: the
-    previous sample's Y_P, Y_u, Φ (n, n_θ), updated in place; G (T, n, r) and stat (T,) out."""
+    Only the regressor's structurally nonzero entries are carried (row i's columns
+    act[act_ptr[i]:act_ptr[i+1]]); S is (n_θ, r). PP, PU, PF: the previous sample's Y_P, Y_u, Φ
+    (n, n_θ; zeros before the first sample), updated in place; G (T, n, r) and stat (T,) out."""
     T, n, k = YP.shape
     r = S.shape[1]
     L = np.empty((n, n))
     z = np.empty(n)
+    g = np.empty((n, r))
     for s in range(T):
-        if s == 0 and not has_prev:
-            for i in range(n):
-                for j in range(k):
-                    PF[i, j] = 0.0
-        else:
-            tp = t_prev if s == 0 else t[s - 1]
-            h = t[s] - tp
+        inv = 1.0 / dt
+        regular = True
+        h = dt
+        if s > 0 or has_prev:
+            h = t[s] - (t_prev if s == 0 else t[s - 1])
             regular = abs(h - dt) <= 0.01 * dt
-            for i in range(n):
-                if regular:
-                    ai = a[i]
-                    bi = b[i]
-                    div = dt
-                elif exact:
-                    ai = math.exp(-K[i] * h)
-                    bi = -math.expm1(-K[i] * h)
-                    div = h
-                else:
-                    ai = 1.0 - K[i] * h
-                    bi = K[i] * h
-                    div = h
-                for j in range(k):
-                    ub = 0.5 * (PU[i, j] + Yu[s, i, j]) if exact else PU[i, j]
-                    PF[i, j] = bi * ((YP[s, i, j] - PP[i, j]) / div - ub) + ai * PF[i, j]
+            if not regular:
+                inv = 1.0 / h
         for i in range(n):
-            for j in range(k):
-                PP[i, j] = YP[s, i, j]
-                PU[i, j] = Yu[s, i, j]
+            if s == 0 and not has_prev:          # Φ_0 = 0 (the observer's r_0 = 0)
+                ai = 0.0
+                bi = 0.0
+            elif regular:
+                ai = a[i]
+                bi = b[i]
+            elif exact:
+                ai = math.exp(-K[i] * h)
+                bi = -math.expm1(-K[i] * h)
+            else:
+                ai = 1.0 - K[i] * h
+                bi = K[i] * h
             for c in range(r):
-                acc = 0.0
-                for j in range(c if tri else 0, k):
-                    acc += PF[i, j] * S[j, c]
-                G[s, i, c] = acc
+                g[i, c] = 0.0
+            for p in range(act_ptr[i], act_ptr[i + 1]):
+                j = act[p]
+                yp = YP[s, i, j]
+                yu = Yu[s, i, j]
+                ub = 0.5 * (PU[i, j] + yu) if exact else PU[i, j]
+                f = bi * ((yp - PP[i, j]) * inv - ub) + ai * PF[i, j]
+                PF[i, j] = f
+                PP[i, j] = yp
+                PU[i, j] = yu
+                for c in range(r):
+                    g[i, c] += f * S[j, c]
         B = blk[s]
         for i in range(n):
+            for c in range(r):
+                G[s, i, c] = g[i, c]
             for j in range(i + 1):
                 acc = Rn[B, i, j]
                 for c in range(r):
-                    acc += G[s, i, c] * G[s, j, c]
+                    acc += g[i, c] * g[j, c]
                 L[i, j] = acc
         ok = True
         for j in range(n):
@@ -273,11 +278,12 @@ def _model_chi2_py(YP, Yu, S, tri, a, b, K, t, dt, exact, has_prev, t_prev, PP, 
                 break
             d = math.sqrt(d)
             L[j, j] = d
+            di = 1.0 / d
             for i in range(j + 1, n):
                 v = L[i, j]
                 for m in range(j):
                     v -= L[i, m] * L[j, m]
-                L[i, j] = v / d
+                L[i, j] = v * di
         if not ok:
             stat[s] = math.nan
             continue
@@ -291,13 +297,46 @@ def _model_chi2_py(YP, Yu, S, tri, a, b, K, t, dt, exact, has_prev, t_prev, PP, 
         stat[s] = ss
 
 
-def model_chi2(YP, Yu, S, tri, a, b, K, t, dt, exact, has_prev, t_prev, PP, PU, PF, rT, Rn, blk,
-               G, stat) -> bool:
-    """``_model_chi2_py`` compiled (state arrays PP, PU, PF updated in place); False without numba."""
+FUSED_BLOCK = 64                # samples per regressor block in the fused loop (stays in L1/L2)
+
+
+def _planar_model_chi2_py(q, dq, l, g, bufP, bufU, act_ptr, act, S, a, b, K, t, dt, exact,
+                          has_prev, t_prev, PP, PU, PF, rT, Rn, blk, G, stat):
+    """``_model_chi2_py`` on the planar chain's regressor (``_regressor_py``) computed block by
+    block into the small buffers bufP, bufU (FUSED_BLOCK, n, n_θ): the regressor never leaves the
+    cache. The buffers are zero outside the entries the regressor writes, every sample the same."""
+    T = q.shape[0]
+    for s0 in range(0, T, FUSED_BLOCK):
+        s1 = min(T, s0 + FUSED_BLOCK)
+        m = s1 - s0
+        _regressor(q[s0:s1], dq[s0:s1], l, g, bufP[:m], bufU[:m])
+        _mchi2(bufP[:m], bufU[:m], act_ptr, act, S, a, b, K, t[s0:s1], dt, exact,
+               has_prev or s0 > 0, t_prev if s0 == 0 else t[s0 - 1], PP, PU, PF, rT[:, s0:s1], Rn,
+               blk[s0:s1], G[s0:s1], stat[s0:s1])
+
+
+def planar_model_chi2(robot, q, dq, bufs, pattern, a, b, K, t, dt, exact, has_prev, t_prev, PP, PU,
+                      PF, rT, Rn, blk, G, stat) -> bool:
+    """The fused loop for a planar Robot (``bufs``: two zeroed (FUSED_BLOCK, n, n_θ) arrays kept by
+    the caller); False without numba."""
     k = _load() if ENABLED else None
     if k is None:
         return False
-    k["modelchi2"](YP, Yu, S, bool(tri), a, b, K, t, float(dt), bool(exact), bool(has_prev),
+    k["planarmodel"](np.ascontiguousarray(q, float), np.ascontiguousarray(dq, float),
+                     np.asarray(robot.lengths_m, float), float(robot.gravity_m_per_s2), *bufs,
+                     *pattern, a, b, K, t, float(dt), bool(exact), bool(has_prev), float(t_prev),
+                     PP, PU, PF, rT, Rn, blk, G, stat)
+    return True
+
+
+def model_chi2(YP, Yu, pattern, a, b, K, t, dt, exact, has_prev, t_prev, PP, PU, PF, rT, Rn, blk,
+               G, stat) -> bool:
+    """``_model_chi2_py`` compiled; ``pattern``: (act_ptr, act, S) of estimator.model_error.ModelTerm
+    (state arrays PP, PU, PF updated in place); False without numba."""
+    k = _load() if ENABLED else None
+    if k is None:
+        return False
+    k["modelchi2"](YP, Yu, *pattern, a, b, K, t, float(dt), bool(exact), bool(has_prev),
                    float(t_prev), PP, PU, PF, rT, Rn, blk, G, stat)
     return True
 
@@ -757,23 +796,31 @@ def format_rows(part, digits: int = 9) -> bytes | None:
 
 
 _fit = None                     # the compiled _fit_py, a global for _localize_py
+_regressor = None               # the compiled _regressor_py and _model_chi2_py, globals for the
+_mchi2 = None                   # fused loop _planar_model_chi2_py
 _put_uint = None                # the compiled _put_uint_py and _put_float_py, globals for the rows
 _put_float = None
 
 
 def _compile():
     """Compile the loops (numba, cached beside this file); ImportError without numba."""
-    global _fit, _put_uint, _put_float
+    global _fit, _put_uint, _put_float, _regressor, _mchi2
     from numba import njit
 
     jit = njit(cache=True, nogil=True, error_model="numpy")
     _fit = jit(_fit_py)
+    _regressor = jit(_regressor_py)
+    # reassociation and fused multiply-add let LLVM vectorize the short dot products; NaN/inf
+    # semantics kept (the not-positive-definite check must survive)
+    _mchi2 = njit(cache=True, nogil=True, error_model="numpy",
+                  fastmath={"reassoc", "contract", "arcp"})(_model_chi2_py)
     _put_uint = jit(_put_uint_py)
     _put_float = jit(_put_float_py)
     return {"terms": jit(_terms_py), "localize": jit(_localize_py), "split": jit(_split_rows_py),
             "steps": jit(_check_steps_py), "rows": jit(_format_rows_py),
             "plaus": jit(_plausibility_py), "filter": jit(_first_order_py),
-            "regressor": jit(_regressor_py), "modelchi2": jit(_model_chi2_py)}
+            "regressor": _regressor, "modelchi2": _mchi2,
+            "planarmodel": jit(_planar_model_chi2_py)}
 
 
 

@@ -60,7 +60,7 @@ def resolve(robot, model_uncertainty=None):
     return get() if get is not None else (None, "the robot model states no uncertainty")
 
 
-SUB_BLOCK = 2048                # samples per compiled call (the regressor's arrays stay in cache)
+SUB_BLOCK = 1024                 # samples per compiled call: the regressor's arrays (100 kB) stay in cache
 
 
 class ModelTerm:
@@ -76,6 +76,23 @@ class ModelTerm:
         self.a, self.b = observer.coefficients(self.K, self.dt, method)
         self.n, self.k, self.r = self.K.size, self.S.shape[0], self.S.shape[1]
         self.prev = None                 # (t, Y_P, Y_u, Φ) of the last sample
+        self.pattern = self._pattern()
+        # a model with a compiled regressor runs it fused with the loop (the planar chain)
+        self.fused = getattr(robot, "fused_model_chi2", None)
+        self._bufs = None
+
+    def _pattern(self):
+        """The regressor's structurally nonzero (row, column) entries, for the compiled loop:
+        nonzero at any of 16 random states (an entry not identically zero is almost surely
+        nonzero there); Φ stays zero where Y is."""
+        rng = np.random.default_rng(0)
+        qs = rng.uniform(-np.pi, np.pi, (16, self.n))
+        vs = rng.normal(0.0, 2.0, (16, self.n))
+        YP, Yu = self.robot.momentum_regressor(qs, vs)
+        live = np.any((YP != 0) | (Yu != 0), axis=0)                  # (n, k)
+        act_ptr = np.r_[0, np.cumsum(live.sum(axis=1))].astype(np.int64)
+        act = np.concatenate([np.flatnonzero(row) for row in live]).astype(np.int64)
+        return act_ptr, act, self.S
 
     def statistic(self, t, q, dq, rT, Rn, blk):
         """(s (T,), G (T, n, r)) for the next samples: s_k = r_kᵀ (Rn[blk_k] + G_k G_kᵀ)⁻¹ r_k."""
@@ -86,13 +103,25 @@ class ModelTerm:
         stat, G = np.empty(T), np.empty((T, self.n, self.r))
         Rn = np.ascontiguousarray(Rn, float)
         blk = np.ascontiguousarray(blk, np.int64)
+        if self.fused is not None and T:
+            has = self.prev is not None
+            tp, PP, PU, PF = self.prev if has else (0.0, *(np.zeros((self.n, self.k)) for _ in range(3)))
+            if self._bufs is None:
+                from estimator.kernels import FUSED_BLOCK
+
+                self._bufs = tuple(np.zeros((FUSED_BLOCK, self.n, self.k)) for _ in range(2))
+            if self.fused(q, dq, self._bufs, self.pattern, self.a, self.b, self.K, t, self.dt,
+                          self.method == "exact", has, tp, PP, PU, PF, np.ascontiguousarray(rT),
+                          Rn, blk, G, stat):
+                self.prev = (float(t[-1]), PP, PU, PF)
+                return stat, G
         for s0 in range(0, T, SUB_BLOCK):
             sl = slice(s0, min(T, s0 + SUB_BLOCK))
             YP, Yu = self.robot.momentum_regressor(q[sl], dq[sl])
             has = self.prev is not None
             tp, PP, PU, PF = self.prev if has else (0.0, *(np.zeros((self.n, self.k)) for _ in range(3)))
-            if not kernels.model_chi2(np.ascontiguousarray(YP), np.ascontiguousarray(Yu), self.S,
-                                      self.tri, self.a, self.b, self.K, t[sl], self.dt,
+            if not kernels.model_chi2(np.ascontiguousarray(YP), np.ascontiguousarray(Yu), self.pattern,
+                                      self.a, self.b, self.K, t[sl], self.dt,
                                       self.method == "exact", has, tp, PP, PU, PF,
                                       np.ascontiguousarray(rT[:, sl]), Rn, blk[sl], G[sl], stat[sl]):
                 G[sl], (PP, PU, PF) = self._phi_numpy(t[sl], YP, Yu, has, tp, PP, PU, PF)

@@ -99,6 +99,13 @@ class Robot:
 
         return inertial.momentum_regressor(self, q, v)
 
+    def fused_model_chi2(self, q, dq, bufs, *args) -> bool:
+        """The model-error statistic with this chain's compiled regressor fused into its loop
+        (estimator.model_error.ModelTerm; kernels.planar_model_chi2); False without numba."""
+        from estimator import kernels
+
+        return kernels.planar_model_chi2(self, q, dq, bufs, *args)
+
     def consistency_problems(self, theta) -> list[str]:
         from estimator import inertial
 
