@@ -218,7 +218,8 @@ def _model_chi2_py(YP, Yu, act_ptr, act, S, a, b, K, t, dt, exact, has_prev, t_p
 
     Only the regressor's structurally nonzero entries are carried (row i's columns
     act[act_ptr[i]:act_ptr[i+1]]); S is (n_θ, r). PP, PU, PF: the previous sample's Y_P, Y_u, Φ
-    (n, n_θ; zeros before the first sample), updated in place; G (T, n, r) and stat (T,) out."""
+    (n, n_θ; zeros before the first sample), updated in place at the end; G (T, n, r) and stat
+    (T,) out."""
     T, n, k = YP.shape
     r = S.shape[1]
     L = np.empty((n, n))
@@ -246,17 +247,21 @@ def _model_chi2_py(YP, Yu, act_ptr, act, S, a, b, K, t, dt, exact, has_prev, t_p
             else:
                 ai = 1.0 - K[i] * h
                 bi = K[i] * h
+            c1 = bi * inv
+            c2 = 0.5 * bi if exact else bi
+            c3 = 0.5 * bi if exact else 0.0
             for c in range(r):
                 g[i, c] = 0.0
             for p in range(act_ptr[i], act_ptr[i + 1]):
                 j = act[p]
-                yp = YP[s, i, j]
-                yu = Yu[s, i, j]
-                ub = 0.5 * (PU[i, j] + yu) if exact else PU[i, j]
-                f = bi * ((yp - PP[i, j]) * inv - ub) + ai * PF[i, j]
+                if s > 0:                        # the previous sample: in the block, else state
+                    pp = YP[s - 1, i, j]
+                    pu = Yu[s - 1, i, j]
+                else:
+                    pp = PP[i, j]
+                    pu = PU[i, j]
+                f = c1 * (YP[s, i, j] - pp) - c2 * pu - c3 * Yu[s, i, j] + ai * PF[i, j]
                 PF[i, j] = f
-                PP[i, j] = yp
-                PU[i, j] = yu
                 for c in range(r):
                     g[i, c] += f * S[j, c]
         B = blk[s]
@@ -295,6 +300,11 @@ def _model_chi2_py(YP, Yu, act_ptr, act, S, a, b, K, t, dt, exact, has_prev, t_p
             z[i] = v / L[i, i]
             ss += z[i] * z[i]
         stat[s] = ss
+    if T > 0:
+        for i in range(n):
+            for j in range(k):
+                PP[i, j] = YP[T - 1, i, j]
+                PU[i, j] = Yu[T - 1, i, j]
 
 
 FUSED_BLOCK = 64                # samples per regressor block in the fused loop (stays in L1/L2)
