@@ -208,8 +208,8 @@ def momentum_regressor(robot, q, v):
     return YP, Yu
 
 
-def _model_chi2_py(YP, Yu, act_ptr, act, S, a, b, K, t, dt, exact, has_prev, t_prev, PP, PU, PF,
-                   rT, Rn, blk, G, stat):
+def _model_chi2_py(YP, Yu, act_ptr, act, S, ncol, a, b, K, t, dt, exact, has_prev, t_prev, PP, PU,
+                   PF, rT, Rn, blk, G, stat):
     """The detector's statistic with the model-error term (estimator.model_error), per sample k:
 
         D_k = (Y_P,k − Y_P,k−1)/Δt − ½ (Y_u,k−1 + Y_u,k)      (explicit: − Y_u,k−1)
@@ -217,7 +217,8 @@ def _model_chi2_py(YP, Yu, act_ptr, act, S, a, b, K, t, dt, exact, has_prev, t_p
         G_k = Φ_k S,   s_k = r_kᵀ (Rn[blk_k] + G_k G_kᵀ)⁻¹ r_k   (Cholesky in place; NaN if not PD)
 
     Only the regressor's structurally nonzero entries are carried (row i's columns
-    act[act_ptr[i]:act_ptr[i+1]]); S is (n_θ, r). PP, PU, PF: the previous sample's Y_P, Y_u, Φ
+    act[act_ptr[i]:act_ptr[i+1]]); S is (n_θ, r), row j nonzero in its first ncol[j] columns (a
+    Cholesky factor: j + 1). PP, PU, PF: the previous sample's Y_P, Y_u, Φ
     (n, n_θ; zeros before the first sample), updated in place at the end; G (T, n, r) and stat
     (T,) out."""
     T, n, k = YP.shape
@@ -262,7 +263,7 @@ def _model_chi2_py(YP, Yu, act_ptr, act, S, a, b, K, t, dt, exact, has_prev, t_p
                     pu = PU[i, j]
                 f = c1 * (YP[s, i, j] - pp) - c2 * pu - c3 * Yu[s, i, j] + ai * PF[i, j]
                 PF[i, j] = f
-                for c in range(r):
+                for c in range(ncol[j]):
                     g[i, c] += f * S[j, c]
         B = blk[s]
         for i in range(n):
@@ -310,7 +311,7 @@ def _model_chi2_py(YP, Yu, act_ptr, act, S, a, b, K, t, dt, exact, has_prev, t_p
 FUSED_BLOCK = 64                # samples per regressor block in the fused loop (stays in L1/L2)
 
 
-def _planar_model_chi2_py(q, dq, l, g, bufP, bufU, act_ptr, act, S, a, b, K, t, dt, exact,
+def _planar_model_chi2_py(q, dq, l, g, bufP, bufU, act_ptr, act, S, ncol, a, b, K, t, dt, exact,
                           has_prev, t_prev, PP, PU, PF, rT, Rn, blk, G, stat):
     """``_model_chi2_py`` on the planar chain's regressor (``_regressor_py``) computed block by
     block into the small buffers bufP, bufU (FUSED_BLOCK, n, n_θ): the regressor never leaves the
@@ -320,7 +321,7 @@ def _planar_model_chi2_py(q, dq, l, g, bufP, bufU, act_ptr, act, S, a, b, K, t, 
         s1 = min(T, s0 + FUSED_BLOCK)
         m = s1 - s0
         _regressor(q[s0:s1], dq[s0:s1], l, g, bufP[:m], bufU[:m])
-        _mchi2(bufP[:m], bufU[:m], act_ptr, act, S, a, b, K, t[s0:s1], dt, exact,
+        _mchi2(bufP[:m], bufU[:m], act_ptr, act, S, ncol, a, b, K, t[s0:s1], dt, exact,
                has_prev or s0 > 0, t_prev if s0 == 0 else t[s0 - 1], PP, PU, PF, rT[:, s0:s1], Rn,
                blk[s0:s1], G[s0:s1], stat[s0:s1])
 
@@ -341,7 +342,7 @@ def planar_model_chi2(robot, q, dq, bufs, pattern, a, b, K, t, dt, exact, has_pr
 
 def model_chi2(YP, Yu, pattern, a, b, K, t, dt, exact, has_prev, t_prev, PP, PU, PF, rT, Rn, blk,
                G, stat) -> bool:
-    """``_model_chi2_py`` compiled; ``pattern``: (act_ptr, act, S) of estimator.model_error.ModelTerm
+    """``_model_chi2_py`` compiled; ``pattern``: (act_ptr, act, S, ncol) of estimator.model_error.ModelTerm
     (state arrays PP, PU, PF updated in place); False without numba."""
     k = _load() if ENABLED else None
     if k is None:

@@ -92,7 +92,9 @@ class ModelTerm:
         live = np.any((YP != 0) | (Yu != 0), axis=0)                  # (n, k)
         act_ptr = np.r_[0, np.cumsum(live.sum(axis=1))].astype(np.int64)
         act = np.concatenate([np.flatnonzero(row) for row in live]).astype(np.int64)
-        return act_ptr, act, self.S
+        ncol = (np.minimum(np.arange(self.k) + 1, self.r) if self.tri else
+                np.full(self.k, self.r)).astype(np.int64)
+        return act_ptr, act, self.S, ncol
 
     def statistic(self, t, q, dq, rT, Rn, blk):
         """(s (T,), G (T, n, r)) for the next samples: s_k = r_kᵀ (Rn[blk_k] + G_k G_kᵀ)⁻¹ r_k."""
