@@ -27,6 +27,10 @@ posterior of an identification (``torquebench identify``), or a declared physica
 (``ModelUncertainty``: relative masses and inertias, centres of mass in metres) mapped to θ by
 ``parameter_covariance``. Identification keeps θ physically consistent through
 ``consistency_margins`` (every entry ≥ 0 exactly when θ is consistent).
+
+Optional, used when a model has them: ``consistency_margin_names`` (what each margin bounds, for
+messages) and ``fused_model_chi2`` (the model-error statistic with the model's own compiled
+regressor inside the loop; estimator.model_error falls back to ``momentum_regressor``).
 """
 
 from __future__ import annotations
