@@ -71,7 +71,10 @@ class ModelTerm:
         self.robot = robot
         S, self.tri = covariance_sqrt(cov)
         self.S = np.ascontiguousarray(S)
-        self.K = observer.gains(robot, gain_per_s)
+        K = np.asarray(gain_per_s, float)            # one gain per observer row (n_v of the model)
+        self.K = np.broadcast_to(K, (robot.n_v,)).copy() if K.ndim == 0 else K.copy()
+        if self.K.shape != (robot.n_v,) or not np.all(self.K > 0):
+            raise InputError(f"gain: expected a scalar or {robot.n_v} values > 0, got {K.tolist()}")
         self.dt, self.method = float(dt_s), method
         self.a, self.b = observer.coefficients(self.K, self.dt, method)
         self.n, self.k, self.r = self.K.size, self.S.shape[0], self.S.shape[1]

@@ -192,3 +192,23 @@ def test_bad_input_is_one_line(tmp_path, identified):
     _one_line_exit_2(_tb("identify", d / "exc.csv", "--out", d / "id.toml"), "exists", "--force")
     _one_line_exit_2(_tb("identify", d / "exc.csv", "--out", tmp_path / "a.toml", "--prior", "0"),
                      "--prior")
+
+
+def test_declared_timing_sets_the_quadrature():
+    """Forces read as interval means (an integrating ADC): declared `mean`, the fit's residual is
+    noise (χ²/dof ≈ 1) and θ within its σ; read as if instantaneous, the window sums are off by
+    half a step of the force's change and the fit says so (χ²/dof far above 1)."""
+    from estimator.timing import uniform
+    from torquebench.reports.detection import simulated_log
+
+    log = simulated_log(TRUE, 6.0, "moving", readout="mean", seed=4)
+    fits = {}
+    for kind in ("mean", "instant"):
+        eq = ident.window_equations(NOMINAL, log.t, log.q, log.dq, log.tau_meas, NOISE,
+                                    uniform(kind, 2), 0.005, source="log.csv")
+        fits[kind] = ident.identify(NOMINAL, [eq], PRIOR)
+    good, bad = fits["mean"], fits["instant"]
+    z = (good.theta - TRUE.parameters()) / np.sqrt(np.diag(good.covariance))
+    print("χ²/dof mean", good.statistics["chi2_per_dof"], "instant", bad.statistics["chi2_per_dof"])
+    assert good.statistics["chi2_per_dof"] < 1.2 and np.all(np.abs(z) < 3)
+    assert bad.statistics["chi2_per_dof"] > 2 * good.statistics["chi2_per_dof"]
