@@ -1,4 +1,4 @@
-"""Issue 30's "done when", on logs from a simulator that is not ours (MuJoCo, tests/mujoco_leg.py)
+"""The model-error acceptance, on logs from a simulator that is not ours (MuJoCo, tests/mujoco_leg.py)
 of a leg whose inertial data differ from robots/paper_leg.toml by what a CAD model misses (link
 masses ±5 %, centres of mass ±3 mm along and across the link, link inertias ±10 %, base mass 4 %,
 base inertia 20 %), with seeded sensor noise (τ σ 0.005 N·m, FT σ 0.1 N / 0.01 N·m) declared
