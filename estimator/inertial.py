@@ -167,12 +167,12 @@ def perturbed(robot, unc, seed: int):
 def momentum_regressor(robot, q, v):
     """(Y_P, Y_u), each (T, N+3, n_θ), floating coordinates (module doc): compiled when numba is
     available, else ``regressor_numpy``."""
-    from estimator import kernels
+    from estimator import model_kernels
 
     q = np.atleast_2d(np.asarray(q, float))
     v = np.atleast_2d(np.asarray(v, float))
-    if kernels.available():
-        return kernels.momentum_regressor(robot, q, v)
+    if model_kernels.available():
+        return model_kernels.momentum_regressor(robot, q, v)
     return regressor_numpy(robot, q, v)
 
 

@@ -12,7 +12,7 @@ posterior, or a declared uncertainty)
 which depends on the posture, the velocity and (through ΔY_P) the acceleration, sample by sample.
 The chi-square detector keeps its structure (s_k = r_kᵀ R_k⁻¹ r_k against χ²_n at the stated
 rate); only R_k changes. Per sample: the regressor, its (n × n_θ) filter, the product Φ S (S
-triangular) and an n × n Cholesky, in one compiled loop (estimator.kernels ``model_chi2``; the
+triangular) and an n × n Cholesky, in one compiled loop (estimator.model_kernels ``model_chi2``; the
 numpy form below is its reference).
 """
 
@@ -101,7 +101,7 @@ class ModelTerm:
 
     def statistic(self, t, q, dq, rT, Rn, blk):
         """(s (T,), G (T, n, r)) for the next samples: s_k = r_kᵀ (Rn[blk_k] + G_k G_kᵀ)⁻¹ r_k."""
-        from estimator import kernels
+        from estimator import model_kernels
 
         t = np.ascontiguousarray(t, float)
         T = len(t)
@@ -112,7 +112,7 @@ class ModelTerm:
             has = self.prev is not None
             tp, PP, PU, PF = self.prev if has else (0.0, *(np.zeros((self.n, self.k)) for _ in range(3)))
             if self._bufs is None:
-                from estimator.kernels import FUSED_BLOCK
+                from estimator.model_kernels import FUSED_BLOCK
 
                 self._bufs = tuple(np.zeros((FUSED_BLOCK, self.n, self.k)) for _ in range(2))
             if self.fused(q, dq, self._bufs, self.pattern, self.a, self.b, self.K, t, self.dt,
@@ -125,7 +125,7 @@ class ModelTerm:
             YP, Yu = self.robot.momentum_regressor(q[sl], dq[sl])
             has = self.prev is not None
             tp, PP, PU, PF = self.prev if has else (0.0, *(np.zeros((self.n, self.k)) for _ in range(3)))
-            if not kernels.model_chi2(np.ascontiguousarray(YP), np.ascontiguousarray(Yu), self.pattern,
+            if not model_kernels.model_chi2(np.ascontiguousarray(YP), np.ascontiguousarray(Yu), self.pattern,
                                       self.a, self.b, self.K, t[sl], self.dt,
                                       self.method == "exact", has, tp, PP, PU, PF,
                                       np.ascontiguousarray(rT[:, sl]), Rn, blk[sl], G[sl], stat[sl]):
@@ -136,7 +136,7 @@ class ModelTerm:
 
     def _phi_numpy(self, t, YP, Yu, has, tp, PP, PU, PF):
         """G = Φ S with Φ from the observer's own ``residual_window`` on the n·k channels of the
-        regressor (the numpy form of kernels._model_chi2_py's recursion)."""
+        regressor (the numpy form of model_kernels._model_chi2_py's recursion)."""
         n, k = self.n, self.k
         if has:
             tw = np.r_[tp, t]

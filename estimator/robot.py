@@ -101,10 +101,10 @@ class Robot:
 
     def fused_model_chi2(self, q, dq, bufs, *args) -> bool:
         """The model-error statistic with this chain's compiled regressor fused into its loop
-        (estimator.model_error.ModelTerm; kernels.planar_model_chi2); False without numba."""
-        from estimator import kernels
+        (estimator.model_error.ModelTerm; model_kernels.planar_model_chi2); False without numba."""
+        from estimator import model_kernels
 
-        return kernels.planar_model_chi2(self, q, dq, bufs, *args)
+        return model_kernels.planar_model_chi2(self, q, dq, bufs, *args)
 
     def consistency_problems(self, theta) -> list[str]:
         from estimator import inertial

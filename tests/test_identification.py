@@ -4,8 +4,6 @@ the stated σ, the unexcited directions, physical consistency, contacts excluded
 bad input in one line, and the identified file read back by estimate and propagate."""
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -127,9 +125,22 @@ def _write(log, path):
     return path
 
 
-def _tb(*args, cwd=ROOT):
-    return subprocess.run([sys.executable, "-m", "torquebench", *map(str, args)], capture_output=True,
-                          text=True, cwd=cwd)
+def _tb(*args):
+    """``torquebench ARGS`` in process (exit code, stdout, stderr): the CLI's own error handling,
+    without a fresh interpreter's start-up."""
+    import contextlib
+    import io
+    from types import SimpleNamespace
+
+    from torquebench.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main([str(a) for a in args])
+        except SystemExit as exc:                  # argparse: a bad option
+            code = exc.code
+    return SimpleNamespace(returncode=code, stdout=out.getvalue(), stderr=err.getvalue())
 
 
 @pytest.fixture(scope="module")

@@ -5,8 +5,6 @@ from it, held and moving; --quiet-window reads the sensor noise, not the model e
 refuses a stretch its stated uncertainty does not explain; CLI options in one line."""
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -150,8 +148,21 @@ def test_quiet_window_on_a_moving_log_needs_the_model_uncertainty():
 
 
 def _tb(*args):
-    return subprocess.run([sys.executable, "-m", "torquebench", *map(str, args)], capture_output=True,
-                          text=True, cwd=ROOT)
+    """``torquebench ARGS`` in process (exit code, stdout, stderr): the CLI's own error handling,
+    without a fresh interpreter's start-up."""
+    import contextlib
+    import io
+    from types import SimpleNamespace
+
+    from torquebench.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main([str(a) for a in args])
+        except SystemExit as exc:                  # argparse: a bad option
+            code = exc.code
+    return SimpleNamespace(returncode=code, stdout=out.getvalue(), stderr=err.getvalue())
 
 
 def test_estimate_option_and_its_errors():

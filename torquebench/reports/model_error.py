@@ -234,7 +234,6 @@ def build(out_dir: Path, quick: bool = False) -> list[Path]:
     pct = lambda v: f"{100 * v:.3g} %"                                   # noqa: E731
     mm = lambda v: "—" if not np.isfinite(v) else f"{1e3 * v:.2f} mm"    # noqa: E731
     worst = max(r["z_max"] for r in rows)
-    i5 = LEVELS.index(0.05)
     L = ["# Model error: what an inexact robot file costs, and identification", "",
          f"**Headline:** at ε = 5 % parameter error the nominal file flags "
          f"{pct(agg('nominal_held', 0.05))} (held) and {pct(agg('nominal_moving', 0.05))} (moving) of "
