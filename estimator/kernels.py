@@ -32,6 +32,9 @@ def warm() -> bool:
     robot = full_robot(paper_leg())
     q = np.zeros((2, 5))
     PT, uT = momentum_terms_T(robot, q, q, q)
+    from estimator import model_kernels
+
+    model_kernels.warm(robot)
     for q_now in (q, None):         # the estimator passes the current posture; localize alone not
         localize_dynamic(robot, q, uT.T + 1.0, _weights(5, None), q_now, min_force_N=0.05,
                          max_condition=20.0, ambiguity_tol=1e-3, position_tol_m=0.005,
@@ -61,7 +64,7 @@ def _load():
     return _KERNELS or None
 
 
-def _terms_py(q, dq, tau, m, l, rc, Irot, g, Gz, msuf, PT, uT):
+def _terms_py(q, dq, tau, m, l, rc, rp, Irot, g, Gz, msuf, PT, uT):
     """P = M q̇ and u = τ + Cᵀq̇ − G (observer._FastTerms) for every sample, link-major."""
     T, n = q.shape
     N = n - 3
@@ -89,10 +92,10 @@ def _terms_py(q, dq, tau, m, l, rc, Irot, g, Gz, msuf, PT, uT):
             oz[i] = jz
             vox[i] = vjx
             voz[i] = vjz
-            cx[i] = jx + rc[i] * s
-            cz[i] = jz - rc[i] * c
-            vx[i] = vjx + rc[i] * dphi * c
-            vz[i] = vjz + rc[i] * dphi * s
+            cx[i] = jx + rc[i] * s + rp[i] * c
+            cz[i] = jz - rc[i] * c + rp[i] * s
+            vx[i] = vjx + dphi * (rc[i] * c - rp[i] * s)
+            vz[i] = vjz + dphi * (rc[i] * s + rp[i] * c)
             jx = jx + l[i] * s
             jz = jz - l[i] * c
             vjx = vjx + l[i] * dphi * c
@@ -614,7 +617,8 @@ def momentum_terms_T(robot, q, dq, tau):
     uT = np.empty((n, T))
     msuf = np.cumsum(m[::-1])[::-1].copy()
     k["terms"](q, dq, tau, m, np.asarray(robot.lengths_m, float), np.asarray(robot.com_m, float),
-               _irot(robot), g, g * (float(robot.base_mass_kg) + float(m.sum())), msuf, PT, uT)
+               np.asarray(robot.com_perp_m, float), _irot(robot), g,
+               g * (float(robot.base_mass_kg) + float(m.sum())), msuf, PT, uT)
     return PT, uT
 
 

@@ -1,187 +1,151 @@
-"""An independent generator of 3-D leg logs: MuJoCo loads the URDF itself (its own importer), the
-base rides six spring-damper joints (a test rig's mount), PD servos on motors, pokes through
-``xfrc_applied``, MuJoCo's own force/torque sensors at the FT frame. Written to a CSV with the
-column contract of docs/conventions.md by pandas here (not by torquebench's writer), with its
-truth, timing and noise side files. Test-only (mujoco is a test dependency)."""
+"""A test-only simulator of the planar leg that shares no code with estimator.sim: MuJoCo.
+
+``mujoco_log(robot, ...)`` writes the robot into an MJCF (floating base on slide x, slide z and a
+hinge, each with the mount's spring and damper; one hinge per link; centres of mass off the link
+axis at (com_perp_m, 0, −com_m) in the joint frame; no contacts), servos the joints with a PD
+law on a sum of sines evaluated every MuJoCo step (RK4 at 20 kHz), applies pokes as
+``xfrc_applied`` and samples at 1 kHz: the state, the servo torques and the mount's wrench, each
+the instantaneous value at the sample time, then seeded white sensor noise. Frames: our angles
+are counter-clockwise in x–z (x right, z up), a rotation about −y, so every hinge axis is
+(0, −1, 0) and a link hangs along −z at zero angle (docs/conventions.md).
+"""
 
 from __future__ import annotations
 
 import math
-import xml.etree.ElementTree as ET
-from pathlib import Path
+from dataclasses import dataclass
 
 import numpy as np
 
 
-def mjcf_from_urdf(urdf_path, stiffness=(2e4, 2e4, 2e4, 800, 800, 800),
-                   damping=(150, 150, 150, 4, 4, 4), mount_xyz=(0, 0, 0.6), ft_frame="ft_sensor",
-                   floating=True, rigid=False) -> str:
+@dataclass
+class MjPoke:
+    link: int
+    alpha: float
+    force_N: tuple          # (Fx, Fz)
+    t_on_s: float
+    t_off_s: float
+
+
+def mjcf(robot, kp: float, kd: float, pokes=(), timestep: float = 5e-5) -> str:
+    """The MJCF text of a planar chain on a floating base (module doc): joint servos as general
+    actuators force = act − kp q − kd q̇ with an integrator activation (ȧ = ctrl); per poke a site on its link and two actuators applying
+    world-frame x and z forces there (site transmission with the world's ``origin`` as refsite)."""
+    K, D = robot.base_stiffness, robot.base_damping
+    g = robot.gravity_m_per_s2
+    Ib = robot.base_inertia_kgm2
+    base_joints = (f'<joint name="x" type="slide" axis="1 0 0" stiffness="{K[0]}" damping="{D[0]}"/>'
+                   f'<joint name="z" type="slide" axis="0 0 1" stiffness="{K[1]}" damping="{D[1]}"/>'
+                   f'<joint name="theta" type="hinge" axis="0 -1 0" stiffness="{K[2]}" damping="{D[2]}"/>')
+    body = ""
+    close = ""
+    offset = 0.0
+    for i in range(robot.n_links):
+        I = robot.inertias_kgm2[i]
+        sites = "".join(f'<site name="poke{j}" pos="0 0 {-p.alpha * robot.lengths_m[i]:.17g}"/>'
+                        for j, p in enumerate(pokes) if p.link == i + 1)
+        body += (f'<body name="link{i + 1}" pos="0 0 {-offset:.17g}">'
+                 f'<joint name="q{i + 1}" type="hinge" axis="0 -1 0"/>'
+                 f'<inertial pos="{robot.com_perp_m[i]:.17g} 0 {-robot.com_m[i]:.17g}" '
+                 f'mass="{robot.masses_kg[i]:.17g}" diaginertia="{I:.17g} {I:.17g} {I:.17g}"/>{sites}')
+        close += "</body>"
+        offset = robot.lengths_m[i]
+    acts = "".join(f'<general joint="q{i + 1}" gear="1" dyntype="integrator" gainprm="1" '
+                   f'biastype="affine" biasprm="0 {-kp:.17g} {-kd:.17g}"/>'
+                   for i in range(robot.n_links))
+    acts += "".join(f'<general site="poke{j}" refsite="origin" gear="1 0 0 0 0 0"/>'
+                    f'<general site="poke{j}" refsite="origin" gear="0 0 1 0 0 0"/>'
+                    for j in range(len(pokes)))
+    return f"""<mujoco model="{robot.name}">
+  <option timestep="{timestep}" integrator="RK4" gravity="0 0 {-g}">
+    <flag contact="disable"/>
+  </option>
+  <worldbody>
+    <site name="origin" pos="0 0 0"/>
+    <body name="base">{base_joints}
+      <inertial pos="0 0 0" mass="{robot.base_mass_kg:.17g}" diaginertia="{Ib:.17g} {Ib:.17g} {Ib:.17g}"/>
+      {body}{close}
+    </body>
+  </worldbody>
+  <actuator>{acts}</actuator>
+</mujoco>"""
+
+
+def mujoco_log(robot, q0, duration_s, *, amplitude=None, frequency_Hz=None, phase=None,
+               kp=500.0, kd=10.0, pokes=(), rate_Hz=1000.0, timestep=5e-5, tau_sigma=0.0,
+               ft_sigma=(0.0, 0.0, 0.0), seed=0):
+    """(SensorLog, truth dict) of a MuJoCo run (module doc). q_d(t) = q0 + Σ_h A sin(2π f t + φ)
+    per joint (arrays (N, H), or None to hold q0); the leg starts at q_d(0), q̇_d(0), base at rest.
+
+    The servo is MuJoCo's general actuator force = a − K_P q − K_D q̇ whose activation a (an
+    integrator, ȧ = ctrl) is the reference force K_P q_d + K_D q̇_d: ctrl is its secant over each
+    step, so a is exact at every step and linear inside it (a reference held over a step would
+    be a sawtooth that the joint's fast velocity loop, K_D/I ≈ 3·10⁴ s⁻¹, shows in q̇). The
+    feedback is continuous inside RK4's stages; the logged torque is the servo law at the sample
+    time. The whole run is one ``mujoco.rollout`` call (open-loop controls, no Python per step)."""
     import mujoco
+    from mujoco import rollout
 
-    text = Path(urdf_path).read_text()
-    head = text.index(">", text.index("<robot")) + 1
-    text = (text[:head] + '<mujoco><compiler discardvisual="true" fusestatic="false" '
-            'balanceinertia="false"/></mujoco>' + text[head:])
-    m = mujoco.MjModel.from_xml_string(text)
-    tmp = Path("/tmp") / f"mj_{abs(hash(text))}.xml"
-    mujoco.mj_saveLastXML(str(tmp), m)
-    root = ET.fromstring(tmp.read_text())
-    tmp.unlink()
-    root.insert(0, ET.fromstring('<option timestep="0.0001" integrator="RK4"/>'))
-    world = root.find("worldbody")
-    base = world.find("body")
-    base.set("pos", " ".join(map(str, mount_xyz)))
-    if floating:
-        for i, (ax, kind) in enumerate(zip(["1 0 0", "0 1 0", "0 0 1"] * 2, ["slide"] * 3 + ["hinge"] * 3)):
-            j = ET.Element("joint", name=f"mount{i}", type=kind, axis=ax, pos="0 0 0",
-                           stiffness=str(stiffness[i]), damping=str(damping[i]))
-            base.insert(0, j)
-    if rigid:                                 # every joint welded (a static check)
-        for parent in list(root.iter()):
-            for j in list(parent.findall("joint")):
-                parent.remove(j)
-    for j in root.iter("joint"):
-        j.attrib.pop("actuatorfrcrange", None)
-        j.attrib.pop("range", None)
-    ft = next(b for b in base.iter("body") if b.get("name") == ft_frame)
-    # the sensor measures the interaction of the site's body with its parent: the site sits on
-    # the base itself, at the FT frame's pose (a child of the base in the URDF)
-    ET.SubElement(base, "site", name="ft", pos=ft.get("pos", "0 0 0"), quat=ft.get("quat", "1 0 0 0"))
-    ET.SubElement(base, "site", name="base_origin", pos="0 0 0")
-    names = [j.get("name") for j in root.iter("joint") if not j.get("name").startswith("mount")]
-    act = ET.SubElement(root, "actuator") if names else ET.Element("actuator")
-    for n in names:
-        ET.SubElement(act, "motor", name=n, joint=n, gear="1")
-    sens = ET.SubElement(root, "sensor")
-    ET.SubElement(sens, "force", name="ft_force", site="ft")
-    ET.SubElement(sens, "torque", name="ft_torque", site="ft")
-    ET.SubElement(sens, "framelinvel", name="base_v", objtype="site", objname="base_origin")
-    ET.SubElement(sens, "gyro", name="base_w", site="base_origin")
-    return ET.tostring(root, encoding="unicode")
+    from estimator.log import SensorLog
 
-
-def simulate_mujoco(urdf_path, out_csv, *, q0, pokes, duration_s=1.0, rate_Hz=1000.0,
-                    kp=60.0, kd=1.5, amplitude=None, frequency_Hz=1.0, noise=None, seed=0,
-                    floating=True, sensed=None):
-    """pokes: [(link, point in the link frame, force (world), t_on, t_off)]; noise: (τ σ,
-    force σ, moment σ) or None. Writes out_csv, .truth.csv, .timing.toml, (.noise.toml)."""
-    import mujoco
-    import pandas as pd
-
-    global SENSOR_SIGN
-    SENSOR_SIGN = sensor_sign(urdf_path)
-    model = mujoco.MjModel.from_xml_string(mjcf_from_urdf(urdf_path, floating=floating))
+    N = robot.n_links
+    model = mujoco.MjModel.from_xml_string(mjcf(robot, kp, kd, pokes, timestep))
     data = mujoco.MjData(model)
-    joints = [model.joint(i).name for i in range(model.njnt) if not model.joint(i).name.startswith("mount")]
-    qadr = np.array([model.joint(n).qposadr[0] for n in joints])
-    vadr = np.array([model.joint(n).dofadr[0] for n in joints])
-    base = model.body("base").id
     q0 = np.asarray(q0, float)
-    amp = np.zeros(len(joints)) if amplitude is None else np.asarray(amplitude, float)
-    data.qpos[qadr] = q0
-    w = 2 * math.pi * frequency_Hz
+    if amplitude is None:
+        A = f = ph = np.zeros((N, 1))
+    else:
+        A, f, ph = (np.atleast_2d(np.asarray(x, float)) for x in (amplitude, frequency_Hz, phase))
+    w = 2 * math.pi * f
+    per = int(round(1.0 / (rate_Hz * timestep)))
+    T = int(math.floor(duration_s * rate_Hz + 1e-9)) + 1
+    n_steps = (T - 1) * per
+    ts = np.arange(n_steps + 1) * timestep
 
-    def ref(t):
-        x = min(t / 0.25, 1.0)
-        e, de = x * x * (3 - 2 * x), (6 * x * (1 - x) / 0.25 if x < 1 else 0.0)
-        return q0 + e * amp * np.sin(w * t), amp * (de * np.sin(w * t) + e * w * np.cos(w * t))
+    def reference(tt):
+        arg = w[None] * tt[:, None, None] + ph[None]
+        return q0 + np.sum(A * np.sin(arg), axis=2), np.sum(A * w * np.cos(arg), axis=2)
 
-    # settle on the springs under gravity with the servos holding q0 (no poke), then log
-    sub = int(round(1.0 / (rate_Hz * model.opt.timestep)))
-    for _ in range(int(1.5 / model.opt.timestep)):
-        data.ctrl[:] = kp * (q0 - data.qpos[qadr]) - kd * data.qvel[vadr]
-        mujoco.mj_step(model, data)
-    data.qvel[:] = 0.0
-    T = int(round(duration_s * rate_Hz)) + 1
-    ft_site = model.site("ft").id
-    rows, truth = [], []
-    vel = np.zeros(6)
-    for k in range(T):
-        t = k / rate_Hz
-        for i in range(sub):
-            ts = t + i * model.opt.timestep
-            qr, dqr = ref(ts)
-            data.ctrl[:] = kp * (qr - data.qpos[qadr]) + kd * (dqr - data.qvel[vadr])
-            data.xfrc_applied[:] = 0.0
-            active = None
-            for link, p_local, F, t_on, t_off in pokes:
-                if t_on <= ts < t_off:
-                    b = model.body(link).id
-                    p = data.xpos[b] + data.xmat[b].reshape(3, 3) @ np.asarray(p_local, float)
-                    data.xfrc_applied[b, :3] = F
-                    data.xfrc_applied[b, 3:] = np.cross(p - data.xipos[b], F)
-                    active = (link, p_local, p, F)
-            if i == 0:
-                mujoco.mj_forward(model, data)
-                mujoco.mj_rnePostConstraint(model, data)
-                sample = _sample(model, data, base, ft_site, qadr, vadr, vel)
-                rows.append((t, *sample))
-                if active is None:
-                    truth.append((t, "", *[np.nan] * 9))
-                else:
-                    link, pl, p, F = active
-                    truth.append((t, link, *pl, *p, *F))
-            if k == T - 1:
-                break
-            mujoco.mj_step(model, data)
-    cols = (["t", "x", "y", "z", "qx", "qy", "qz", "qw"] + [f"q_{n}" for n in joints]
-            + ["vx", "vy", "vz", "wx", "wy", "wz"] + [f"dq_{n}" for n in joints]
-            + [f"tau_{n}" for n in joints] + ["Fx", "Fy", "Fz", "Mx", "My", "Mz"])
-    frame = pd.DataFrame(rows, columns=cols)
-    if not floating:
-        frame = frame.drop(columns=["x", "y", "z", "qx", "qy", "qz", "qw", "vx", "vy", "vz", "wx", "wy", "wz"])
-    if sensed is not None:
-        frame = frame.drop(columns=[f"tau_{n}" for n in joints if n not in sensed])
-    if noise is not None:
-        rng = np.random.default_rng(seed)
-        tau_cols = [c for c in frame.columns if c.startswith("tau_")]
-        frame[tau_cols] += rng.normal(size=(T, len(tau_cols))) * noise[0]
-        frame[["Fx", "Fy", "Fz"]] += rng.normal(size=(T, 3)) * noise[1]
-        frame[["Mx", "My", "Mz"]] += rng.normal(size=(T, 3)) * noise[2]
-    out_csv = Path(out_csv)
-    frame.to_csv(out_csv, index=False, float_format="%.17g")
-    pd.DataFrame(truth, columns=["t", "link", "lx", "ly", "lz", "px", "py", "pz", "Fx", "Fy", "Fz"]).to_csv(
-        out_csv.with_name(out_csv.stem + ".truth.csv"), index=False)
-    out_csv.with_name(out_csv.stem + ".timing.toml").write_text('[timing]\ndefault = "instant"\n')
-    if noise is not None:
-        out_csv.with_name(out_csv.stem + ".noise.toml").write_text(
-            f"[noise]\ntorque_sigma_Nm = [{noise[0]}]\nft_sigma = [{noise[1]}, {noise[2]}]\n")
-    return out_csv
-
-
-def _sample(model, data, base, ft_site, qadr, vadr, vel):
-    """(base pose, joints, base twist, joint rates, actuator torques, FT wrench ON the robot).
-
-    MuJoCo's force/torque sensors give the interaction between the site's body (the base) and
-    its parent (the rig) in the site frame; checked by ``sensor_sign`` (at rest the rig holds the
-    leg up: +M g along the world z) and used with that sign."""
-    import mujoco
-
-    pos = data.xpos[base].copy()
-    w, x, y, z = data.xquat[base]
-    lin_world = data.sensor("base_v").data.copy()        # the base origin's velocity, world
-    ang_local = data.sensor("base_w").data.copy()        # a gyro at the base origin: base frame
-    force = data.sensor("ft_force").data.copy() * SENSOR_SIGN
-    torque = data.sensor("ft_torque").data.copy() * SENSOR_SIGN
-    tau = data.qfrc_actuator[vadr].copy()
-    return (*pos, x, y, z, w, *data.qpos[qadr], *lin_world, *ang_local, *data.qvel[vadr], *tau,
-            *force, *torque)
-
-
-SENSOR_SIGN = 1.0
-
-
-def sensor_sign(urdf_path) -> float:
-    """+1 if MuJoCo's force sensor reports the force ON the base (from its parent), −1 if the
-    force BY the base: a leg hanging at rest on the rig must be pushed up with its weight."""
-    import mujoco
-
-    model = mujoco.MjModel.from_xml_string(mjcf_from_urdf(urdf_path, floating=False, rigid=True))
-    data = mujoco.MjData(model)
+    qd, dqd = reference(ts)                                        # (steps, N)
+    act = kp * qd + kd * dqd                 # the servo's reference force, the actuator's state
+    ctrl = np.zeros((n_steps + 1, model.nu))
+    ctrl[:-1, :N] = np.diff(act, axis=0) / timestep                # its secant rate per step
+    for j, p in enumerate(pokes):
+        on = (ts >= p.t_on_s) & (ts < p.t_off_s)
+        ctrl[on, N + 2 * j] = p.force_N[0]
+        ctrl[on, N + 2 * j + 1] = p.force_N[1]
+    data.qpos[3:] = qd[0]
+    data.qvel[3:] = dqd[0]
+    data.act[:N] = act[0]
     mujoco.mj_forward(model, data)
-    mujoco.mj_rnePostConstraint(model, data)
-    R = data.site_xmat[model.site("ft").id].reshape(3, 3)
-    fz = (R @ data.sensor("ft_force").data)[2]
-    weight = float(model.body_subtreemass[model.body("base").id] * 9.81)
-    assert abs(abs(fz) - weight) < 1e-6 * weight, (fz, weight)
-    return float(np.sign(fz))
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    x0 = np.zeros(mujoco.mj_stateSize(model, spec))
+    mujoco.mj_getState(model, data, x0, spec)
+    states, _ = rollout.rollout(model, data, x0[None], ctrl[None, :n_steps], nstep=n_steps)
+    # FULLPHYSICS state: [time, qpos, qvel, act, ...]; row k holds the state after step k + 1
+    traj = np.concatenate([x0[None], states[0]])[::per]
+    nq = model.nq
+    q = traj[:, 1:1 + nq].copy()
+    dq = traj[:, 1 + nq:1 + 2 * nq].copy()
+    t_log = np.arange(T) / rate_Hz
+    assert np.allclose(traj[:, 0], t_log, atol=1e-9)
+    tau = kp * (qd[::per] - q[:, 3:]) + kd * (dqd[::per] - dq[:, 3:])   # the servo law at t
+    K, D = np.asarray(robot.base_stiffness, float), np.asarray(robot.base_damping, float)
+    W = -K * q[:, :3] - D * dq[:, :3]
+    truth = {"t": t_log, "link": np.zeros(T, int), "alpha": np.full(T, np.nan),
+             "Fx": np.zeros(T), "Fz": np.zeros(T), "px": np.full(T, np.nan), "pz": np.full(T, np.nan)}
+    for j, p in enumerate(pokes):
+        on = np.flatnonzero((t_log >= p.t_on_s - 1e-12) & (t_log < p.t_off_s - 1e-12))
+        site = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f"poke{j}")
+        for i in on:
+            data.qpos[:] = q[i]
+            mujoco.mj_kinematics(model, data)
+            truth["px"][i], truth["pz"][i] = data.site_xpos[site][0], data.site_xpos[site][2]
+        truth["link"][on], truth["alpha"][on] = p.link, p.alpha
+        truth["Fx"][on], truth["Fz"][on] = p.force_N
+    rng = np.random.default_rng(seed)
+    tau_m = tau + tau_sigma * rng.standard_normal(tau.shape)
+    W_m = W + np.asarray(ft_sigma, float) * rng.standard_normal(W.shape)
+    log = SensorLog(t=t_log, q=q, dq=dq, tau_Nm=tau_m, wrench=W_m, floating=True,
+                    source=f"mujoco:{robot.name}")
+    return log, truth

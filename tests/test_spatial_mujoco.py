@@ -1,5 +1,5 @@
 """The 3-D estimator on logs from an independent simulator: MuJoCo loads the URDF with its own
-importer (tests/mujoco_leg.py: a rig of six spring-damper joints, PD motors, pokes through
+importer (tests/mujoco_spatial_leg.py: a rig of six spring-damper joints, PD motors, pokes through
 xfrc_applied, MuJoCo's own force/torque sensor, gyro and velocimeter), written to a CSV by
 pandas with the documented column contract, read back by our reader. Checks the conventions
 (quaternion order, ṗ world / ω base frame, the sensor-frame wrench ON the robot) end to end."""
@@ -17,7 +17,7 @@ from estimator.spatial.logs import read_noise, read_spatial_log  # noqa: E402
 from estimator.spatial.model import UrdfModel  # noqa: E402
 from estimator.spatial.pipeline import estimate_log  # noqa: E402
 from estimator.spatial.robot import load_spatial_robot  # noqa: E402
-from tests.mujoco_leg import sensor_sign, simulate_mujoco  # noqa: E402
+from tests.mujoco_spatial_leg import sensor_sign, simulate_mujoco  # noqa: E402
 
 URDF = "robots/quadruped_leg.urdf"
 

@@ -119,7 +119,8 @@ STAGES = (
 # scene's report only when the scene computes that artifact; None: not about one scene
 REPORT_INPUTS = {"bridge": "chain", "flexure": "flexure", "fem": "flexure",
                  "calibration": "calibration", "estimator": "estimates", "detection": "estimates",
-                 "reproduction": "paper_scores", "stability": None, "error_vs_runtime": None}
+                 "reproduction": "paper_scores", "stability": None, "error_vs_runtime": None,
+                 "model_error": None}
 BY_GIVES = {s.gives: s for s in STAGES}
 ALIASES = {"sensitivity": "chain", "noise_budget": "chain"}
 DEFAULT_OUTPUTS = ("localization_error", "predicted_error")
@@ -201,7 +202,8 @@ def _params(scene, stage: str, seed) -> dict:
     if stage == "calibrated_torques":
         return {"cal": _file_hash(c.calibration_file)}
     if stage in ("estimates", "localization_error", "predicted_error"):
-        return {"est": _canon(scene.estimator), "poke": _canon(scene.sim.pokes if scene.sim else None)}
+        return {"est": _canon(scene.estimator), "poke": _canon(scene.sim.pokes if scene.sim else None),
+                "robot": _canon(scene.robot)}        # the file the estimator reads
     return {}
 
 
@@ -500,7 +502,7 @@ def run_estimates(scene, inp):
     from estimator.pipeline import estimate
 
     rd, tq = inp["readings"], inp["torques"]
-    robot = scene.robot if scene.sim is None else scene.sim.robot
+    robot = scene.robot                 # the file the estimator reads (the simulation: sim.robot)
     tau = tq["tau_Nm"]
     keep = np.all(np.isfinite(tau), axis=1)             # flagged samples stay out of detection
     log = SensorLog(t=rd["t"][keep], q=rd["q"][keep], dq=rd["dq"][keep], tau_Nm=tau[keep],
@@ -542,8 +544,11 @@ def run_localization_error(scene, inp):
 
 def run_predicted_error(scene, inp, draws=2000):
     """Monte Carlo (estimator.uncertainty) at the mean posture of the collision phase, with the
-    chain's σ_τ and the calibration's relative slope uncertainty; MC standard error of the RMS
-    from the draws (σ_RMS ≈ RMS·√(kurtosis-1)/(2√n) estimated by the delta method)."""
+    chain's σ_τ, the calibration's relative slope uncertainty and the robot file's parameter
+    uncertainty (its identification or declared [model_uncertainty]: estimator.model_error);
+    MC standard error of the RMS from the draws (σ_RMS ≈ RMS·√(kurtosis-1)/(2√n) estimated by
+    the delta method)."""
+    from estimator.model_error import resolve
     from estimator.uncertainty import SensorNoise, monte_carlo
 
     chain, cal = inp["chain"], inp.get("calibration")
@@ -561,10 +566,12 @@ def run_predicted_error(scene, inp, draws=2000):
     noise = SensorNoise(torque_std_Nm=chain.noise_std_Nm, wrench_std=cfg.sensors.ft_noise,
                         torque_gain_rel_std=gain_rel, sample_rate_Hz=cfg.sensors.sample_rate_Hz,
                         gain_per_s=scene.estimator.gain_per_s)
+    cov, cov_source = resolve(scene.robot)
     out = {"torque_noise_std_Nm": chain.noise_std_Nm, "gain_error_rel_std": gain_rel,
-           "posture_rad": q.tolist()}
+           "posture_rad": q.tolist(), "model_uncertainty_source": cov_source}
     for m in METHODS:
-        mc = monte_carlo(cfg.robot, q, poke.link, poke.alpha, force, noise, draws=draws, rng=0, method=m)
+        mc = monte_carlo(scene.robot, q, poke.link, poke.alpha, force, noise, draws=draws, rng=0,
+                         method=m, parameter_cov=cov)
         rms = float(mc.position_rms_m[0])
         out[m] = {"position_rms_m": rms, "position_p95_m": float(mc.position_p95_m[0]),
                   "position_rms_m_error_estimate": rms / math.sqrt(2 * draws),
@@ -630,7 +637,8 @@ def run_paper_scores(scene, inp):
 def run_error_map(scene, inp):
     """Localization error over the posture grid q ∈ [0, π]^n (estimator.uncertainty): Monte Carlo
     and first order, per method, with σ_τ from the sensor chain (or given), the calibration's
-    relative slope std as a gain error (or given) and the FT noise."""
+    relative slope std as a gain error (or given), the FT noise and the robot's parameter
+    uncertainty (given, else the robot file's identification or declared uncertainty)."""
     from estimator.uncertainty import SensorNoise, first_order, monte_carlo
 
     pr, robot = scene.prediction, scene.robot
@@ -644,13 +652,21 @@ def run_error_map(scene, inp):
                         torque_gain_rel_std=gain_error or 0.0, sample_rate_Hz=pr.sample_rate_Hz,
                         gain_per_s=pr.gain_per_s)
     force = pr.magnitude_N * np.array([math.cos(pr.direction_rad), math.sin(pr.direction_rad)])
+    from estimator.model import ModelUncertainty
+    from estimator.model_error import resolve
+
+    mu = pr.model_uncertainty
+    cov, cov_source = resolve(robot, None if mu is None else
+                              (ModelUncertainty.uniform(mu) if mu > 0 else False))
     axes = [np.linspace(0.0, math.pi, pr.grid)] * robot.n_links
     postures = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, robot.n_links)
-    out = {"noise": noise, "axes": axes, "postures": len(postures), "methods": {}, "maps": {}}
+    out = {"noise": noise, "axes": axes, "postures": len(postures), "methods": {}, "maps": {},
+           "model_uncertainty_source": cov_source}
     for method in METHODS:
         mc = monte_carlo(robot, postures, pr.link, pr.alpha, force, noise, draws=pr.draws,
-                         rng=pr.seed, method=method)
-        fo = first_order(robot, postures, pr.link, pr.alpha, force, noise, method=method)
+                         rng=pr.seed, method=method, parameter_cov=cov)
+        fo = first_order(robot, postures, pr.link, pr.alpha, force, noise, method=method,
+                         parameter_cov=cov)
         usable = mc.flagged_fraction < 0.05
         pos = mc.position_rms_m[usable]
         ratio = mc.position_rms_m[usable] / fo.position_rms_m[usable]

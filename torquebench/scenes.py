@@ -104,7 +104,8 @@ class PredictionSpec:
     """A posture-grid localization-error prediction (what `propagate` asks): contact (link, α),
     force (magnitude, direction from +x), ``grid`` postures per joint over [0, π], Monte Carlo
     ``draws`` and ``seed``, sample rate, observer gain, FT noise σ (Fx, Fz, My); an optional
-    given joint-torque σ (else the sensor chain's) and gain error (else the calibration's)."""
+    given joint-torque σ (else the sensor chain's) and gain error (else the calibration's), and the
+    robot's model uncertainty."""
 
     link: int
     alpha: float
@@ -118,6 +119,8 @@ class PredictionSpec:
     ft_noise: tuple = (0.1, 0.1, 0.01)
     torque_noise_Nm: float | None = None
     gain_error: float | None = None
+    model_uncertainty: float | None = None   # relative 1σ of the inertial data (0: none; None: the
+                                             # robot file's identification or [model_uncertainty])
 
 
 @dataclass(frozen=True)
@@ -135,20 +138,60 @@ class Scene:
     max_run_time_s: float = 600.0          # a run limit, not an input: not part of any cache key
 
 
-def _resolve_robot(f: _Fields, data: dict) -> Robot:
-    name = data.get("robot", "paper_leg.toml")
-    if isinstance(name, dict):                       # [robot] file = "..."
-        f.known(name, {"file"}, "robot")
-        name = f.string(name, "file", "robot", "paper_leg.toml")
+ROBOT_KEYS = {"file", "true_parameters", "perturbation", "perturbation_seed"}
+
+
+def _robot_file(f: _Fields, name, where: str) -> Robot:
     if not isinstance(name, str):
-        raise f.err("robot", f"expected a file name, got {name!r}")
+        raise f.err(where, f"expected a file name, got {name!r}")
     for cand in (f.path.parent / name, REPO_ROOT / "robots" / name, Path(name)):
         if cand.is_file():
             try:
                 return load_robot(cand)
             except InputError as exc:
-                raise InputError(f"{f.path}: robot: {exc}") from None
-    raise f.err("robot", f"file {name!r} not found beside the scene or in robots/")
+                raise InputError(f"{f.path}: {where}: {exc}") from None
+    raise f.err(where, f"file {name!r} not found beside the scene or in robots/")
+
+
+def _resolve_robot(f: _Fields, data: dict) -> Robot:
+    """The robot file the estimator reads: ``robot = "x.toml"`` or ``[robot] file = "x.toml"``."""
+    name = data.get("robot", "paper_leg.toml")
+    if isinstance(name, dict):                       # [robot] file = "..."
+        f.known(name, ROBOT_KEYS, "robot")
+        name = f.string(name, "file", "robot", "paper_leg.toml")
+    return _robot_file(f, name, "robot")
+
+
+def _true_robot(f: _Fields, data: dict, robot: Robot, kind: str) -> Robot:
+    """The robot the simulator simulates: the file's, or (a dynamic scene's [robot] table)
+    ``true_parameters = "other.toml"`` (same links, other inertial data) or a ``perturbation``
+    (relative 1σ of masses, inertias and, × link length, centres of mass; drawn with
+    ``perturbation_seed``, estimator.inertial.perturbed)."""
+    from estimator.inertial import perturbed
+    from estimator.model import ModelUncertainty
+
+    t = data.get("robot")
+    if not isinstance(t, dict) or not (set(t) & {"true_parameters", "perturbation"}):
+        if isinstance(t, dict) and "perturbation_seed" in t:
+            raise f.err("robot.perturbation_seed", "is the seed of a perturbation; set robot.perturbation")
+        return robot
+    if kind != "dynamic":
+        raise f.err("robot", "true_parameters / perturbation: only a dynamic scene simulates a "
+                    "robot other than its file")
+    if "true_parameters" in t and "perturbation" in t:
+        raise f.err("robot.perturbation", "give either true_parameters or a perturbation, not both")
+    if "true_parameters" in t:
+        true = _robot_file(f, t["true_parameters"], "robot.true_parameters")
+        if true.n_links != robot.n_links or not np.allclose(true.lengths_m, robot.lengths_m):
+            raise f.err("robot.true_parameters", f"{true.name} has links {true.lengths_m.tolist()} m, "
+                        f"the file {robot.name} {robot.lengths_m.tolist()} m: only inertial data "
+                        "may differ")
+        from dataclasses import replace
+
+        return replace(true, floating=robot.floating)
+    rel = f.number(t, "perturbation", "robot", lo=0.0, hi=0.5)
+    seed = f.integer(t, "perturbation_seed", "robot", 0, lo=0)
+    return perturbed(robot, ModelUncertainty.uniform(rel), seed) if rel > 0 else robot
 
 
 def _sensors(f: _Fields, data: dict) -> Sensors:
@@ -231,6 +274,22 @@ def _poke(f: _Fields, p: dict, where: str, n_links: int, duration: float) -> Pok
                 ramp_s=f.number(p, "ramp_s", where, 0.0, nonneg=True))
 
 
+def _harmonics(f: _Fields, c: dict, key: str, n: int, H=None, default=None, nonneg=False):
+    """[controller] amplitude_rad / frequency_Hz / phase_rad: one number per joint, or per joint a
+    list of H harmonics (a Fourier excitation); a list of lists must match the amplitudes' shape."""
+    v = c.get(key)
+    if v is None and default is not None:
+        return np.asarray(default, float)
+    if isinstance(v, list) and v and all(isinstance(row, list) for row in v):
+        if len(v) != n:
+            raise f.err(f"controller.{key}", f"expected {n} rows (one per joint), got {len(v)}")
+        width = H if H else len(v[0])                 # every joint: the same harmonics
+        return np.stack([f.vector({key: row}, key, "controller", width, nonneg=nonneg) for row in v])
+    if H is not None:
+        raise f.err(f"controller.{key}", f"expected {n} lists of {H} harmonics (as amplitude_rad)")
+    return f.vector(c, key, "controller", n, default, nonneg=nonneg)
+
+
 def _dynamic(f: _Fields, data: dict, robot: Robot, name: str) -> SimConfig:
     base = f.choice(data, "base", "", ("floating", "fixed", "rigid"), "floating")
     duration = f.number(data, "duration_s", "", 1.5, positive=True)
@@ -240,9 +299,11 @@ def _dynamic(f: _Fields, data: dict, robot: Robot, name: str) -> SimConfig:
                 "phase_rad", "gravity_compensation"}, "controller")
     traj = {}
     if any(k in c for k in ("amplitude_rad", "frequency_Hz", "phase_rad")):
-        traj = dict(amplitude_rad=f.vector(c, "amplitude_rad", "controller", n),
-                    frequency_Hz=f.vector(c, "frequency_Hz", "controller", n, nonneg=True),
-                    phase_rad=f.vector(c, "phase_rad", "controller", n, np.zeros(n)))
+        amp = _harmonics(f, c, "amplitude_rad", n)
+        H = amp.shape[1] if amp.ndim == 2 else None
+        traj = dict(amplitude_rad=amp,
+                    frequency_Hz=_harmonics(f, c, "frequency_Hz", n, H, nonneg=True),
+                    phase_rad=_harmonics(f, c, "phase_rad", n, H, np.zeros(amp.shape)))
     gc = c.get("gravity_compensation", False)
     if not isinstance(gc, bool):
         raise f.err("controller.gravity_compensation", f"expected true or false, got {gc!r}")
@@ -535,6 +596,7 @@ def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
         raise f.err("name", f"expected a string, got {name!r}")
     kind = f.choice(data, "kind", "", KINDS, "dynamic")
     robot = _resolve_robot(f, data)
+    true_robot = _true_robot(f, data, robot, kind)
     desc = str(data.get("description", ""))
     est = _estimator(f, data)
     chain = _chain_spec(f, data, kind)
@@ -544,7 +606,8 @@ def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
             raise f.err(sim_keys[0], "a scene with a recorded log (source.log) has no simulation keys")
         return Scene(name, kind, path, desc, None, None, est, chain, robot)
     if kind == "dynamic":
-        return Scene(name, kind, path, desc, _dynamic(f, data, robot, name), None, est, chain, robot)
+        return Scene(name, kind, path, desc, _dynamic(f, data, true_robot, name), None, est, chain,
+                     robot)
     return Scene(name, kind, path, desc, None, _static(f, data, robot, name, kind), est, chain, robot)
 
 

@@ -57,8 +57,10 @@ class Poke:
 class Controller:
     """Joint PD: τ = K_P (q_d(t) − q) + K_D (q̇_d(t) − q̇) [+ G_joint(q)].
 
-    q_d(t) = q0 + A sin(2π f t + φ) per joint (A = 0: hold q0). ``mode`` "continuous" evaluates
-    τ at every integrator stage; "zoh" holds it over 1/rate_Hz.
+    q_d(t) = q0 + Σ_h A_h sin(2π f_h t + φ_h) per joint (A = 0: hold q0): one sine per joint
+    (amplitude, frequency, phase of shape (N,)) or several harmonics (shape (N, H): a Fourier
+    excitation trajectory). ``mode`` "continuous" evaluates τ at every integrator stage; "zoh"
+    holds it over 1/rate_Hz.
     """
 
     q0_rad: np.ndarray
@@ -77,10 +79,18 @@ class Controller:
         q0 = np.asarray(self.q0_rad, float)
         if self.amplitude_rad is None:
             return np.broadcast_to(q0, t.shape[:-1] + q0.shape), np.zeros(t.shape[:-1] + q0.shape)
-        w = 2 * np.pi * np.asarray(self.frequency_Hz, float)
-        arg = w * t + np.asarray(self.phase_rad, float)
-        a = np.asarray(self.amplitude_rad, float)
-        return q0 + a * np.sin(arg), a * w * np.cos(arg)
+        a, f, ph = self.harmonics()
+        w = 2 * np.pi * f
+        arg = w * t[..., None] + ph                                   # (..., N, H)
+        return q0 + np.sum(a * np.sin(arg), axis=-1), np.sum(a * w * np.cos(arg), axis=-1)
+
+    def harmonics(self):
+        """(A, f, φ) as (N, H) arrays (one column for a single sine per joint)."""
+        a, f, ph = (np.asarray(x, float) for x in (self.amplitude_rad, self.frequency_Hz,
+                                                    self.phase_rad))
+        if a.ndim == 1:
+            a, f, ph = a[:, None], f[:, None], ph[:, None]
+        return a, f, ph
 
 
 @dataclass(frozen=True)

@@ -78,6 +78,12 @@ def add_arguments(parser) -> None:
                         help="joint-rate noise σ per sample (default 0)")
     parser.add_argument("--encoder-counts", default=None, metavar="COUNTS",
                         help="encoder counts per revolution (quantization noise; default 0 = none)")
+    parser.add_argument("--model-uncertainty", default=None, metavar="REL|none",
+                        help="how far the robot may be from its file, 1σ relative (masses, "
+                             "inertias, and centres of mass as a fraction of each link's length): "
+                             "the detector's covariance gains the model-error term; 'none' turns "
+                             "it off (default: the robot file's [identification] covariance, else "
+                             "its [model_uncertainty], else none)")
     parser.add_argument("--debounce", type=_count, default=0, metavar="N",
                         help="samples ||r|| must stay above EPS before a contact is declared (default: %(default)s)")
     parser.add_argument("--stance-foot", action="store_true",
@@ -146,6 +152,21 @@ def _detector_options(args, n_links):
                       encoder_counts=enc, source=src), quiet, rate
 
 
+def model_uncertainty_option(text):
+    """--model-uncertainty REL | none → ModelUncertainty, False, or None (not given)."""
+    from estimator.model import ModelUncertainty
+    from torquebench.errors import InputError
+
+    if text is None:
+        return None
+    if str(text).strip().lower() == "none":
+        return False
+    rel = _floats(text, "--model-uncertainty", 1)[0]
+    if not (math.isfinite(rel) and 0 < rel <= 1):
+        raise InputError(f"--model-uncertainty: expected a relative 1σ in (0, 1] or 'none', got {text!r}")
+    return ModelUncertainty.uniform(rel)
+
+
 def _peak_memory_MB() -> float:
     """Peak resident memory of this process so far, MB: VmHWM (Linux; ru_maxrss would carry the
     parent's peak across fork + exec), else ru_maxrss."""
@@ -211,7 +232,8 @@ def run(args) -> int:
                          threshold=args.threshold, debounce=args.debounce,
                          expected_contacts="foot" if args.stance_foot else None, timing=timing,
                          noise=noise, quiet_window=quiet, false_alarm_rate=rate,
-                         detector=args.detector, quiet_chunks=lambda: LogReader(args.log, robot, chunk_samples=chunk))
+                         detector=args.detector, model_uncertainty=model_uncertainty_option(args.model_uncertainty),
+                         quiet_chunks=lambda: LogReader(args.log, robot, chunk_samples=chunk))
     with contextlib.ExitStack() as stack:
         writer = None
         if args.out is not None:                  # formatting runs beside the next chunk's work

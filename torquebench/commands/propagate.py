@@ -71,6 +71,12 @@ def add_arguments(parser) -> None:
                         help="refuse, before any work, a run of more than N localizations "
                              "(postures × draws × 2 methods) (default: %(default)g)")
     parser.add_argument("--seed", type=int, default=0, help="Monte Carlo seed (default: %(default)s)")
+    parser.add_argument("--model-uncertainty", default=None, metavar="REL|none",
+                        help="relative 1σ of the robot's inertial data (masses, inertias, and "
+                             "centres of mass as a fraction of each link's length), a systematic "
+                             "error drawn once per robot; 'none' leaves it out (default: the robot "
+                             "file's [identification] covariance, else its [model_uncertainty], "
+                             "else none)")
     parser.add_argument("--png", type=Path, help="write a heat map of the position error (m) over the posture grid; directory created, an existing file is never replaced")
 
 
@@ -86,6 +92,14 @@ def provenance_from_args(args) -> dict:
     return provenance
 
 
+def _model_uncertainty(text):
+    """--model-uncertainty REL | none → REL, 0.0 (none) or None (the robot file's)."""
+    from torquebench.commands.estimate import model_uncertainty_option
+
+    mu = model_uncertainty_option(text)
+    return None if mu is None else (0.0 if mu is False else mu.relative)
+
+
 def scene_from_args(args, robot, link, alpha, magnitude, direction):
     """The prediction scene of the command line: robot, [sensor] file, strain per N·m and
     calibration file as the chain's inputs, and the posture-grid settings."""
@@ -98,7 +112,8 @@ def scene_from_args(args, robot, link, alpha, magnitude, direction):
     pred = PredictionSpec(link=link, alpha=alpha, magnitude_N=magnitude, direction_rad=direction,
                           grid=args.grid, draws=args.draws, seed=args.seed, sample_rate_Hz=args.rate,
                           gain_per_s=args.gain, ft_noise=tuple(_floats(args.ft_noise, 3, "--ft-noise")),
-                          torque_noise_Nm=args.torque_noise_Nm, gain_error=args.gain_error)
+                          torque_noise_Nm=args.torque_noise_Nm, gain_error=args.gain_error,
+                          model_uncertainty=_model_uncertainty(args.model_uncertainty))
     return prediction_scene(robot, chain, pred)
 
 
@@ -150,6 +165,7 @@ def run(args) -> int:
                "gain_error_rel_std": float(noise.torque_gain_rel_std[0]),
                "ft_noise": noise.wrench_std.tolist(), "postures": em["postures"],
                "contact": {"link": link, "alpha": alpha, "force_N": magnitude, "direction_rad": direction},
+               "model_uncertainty_source": em["model_uncertainty_source"],
                **provenance, "methods": dict(em["methods"])}
     if args.png:
         _heat_map(args.png, maps, axes)
@@ -159,6 +175,7 @@ def run(args) -> int:
         return 0
     print(f"σ_τ = {results['torque_noise_std_Nm']:.4g} N·m ({provenance.get('torque_noise_source')}), "
           f"gain error {results['gain_error_rel_std']:.3g}, σ_FT = {results['ft_noise']}")
+    print(f"model uncertainty: {results['model_uncertainty_source']}")
     print(f"contact: link {link}, α = {alpha}, |F| = {magnitude} N at {direction:.3f} rad; "
           f"{results['postures']} postures × {args.draws} draws")
     print(f"{'method':8s} {'median |p| RMS':>15s} {'max |p| RMS':>12s} {'max p95':>9s} "
