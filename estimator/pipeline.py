@@ -25,6 +25,7 @@ import numpy as np
 
 from estimator import detection, kernels, localization as loc_mod, observer
 from estimator import noise as noise_mod
+from estimator import intervals, onset, release
 from estimator import sequential
 from estimator import timing as timing_mod
 from estimator.errors import InputError
@@ -150,6 +151,17 @@ def _whitened(rT: np.ndarray, Linv: np.ndarray) -> np.ndarray:
     return out
 
 
+def _fit_weights(rec, sel, T: int, n: int, row_weights):
+    """The localization's weights for the selected samples: W = L⁻ᵀL⁻¹ = R⁻¹ from the detector's
+    whitening blocks (the maximum-likelihood fit; the noise covariance R is the detector's, per
+    posture block), else the diagonal ``row_weights`` (the paper rule: no noise model)."""
+    if rec.get("Linv") is None:
+        return loc_mod.weight_blocks(n, T, row_weights)[0], \
+            np.zeros(T, np.int64)[sel]
+    Linv, idx = rec["Linv"]
+    return np.einsum("bki,bkj->bij", Linv, Linv), idx[sel]
+
+
 ERROR_METHOD = ("first-order propagation of the residual's no-contact covariance through the "
                 "least-squares localization at one sample of the episode (the kept sample 2^j − 1 "
                 "samples after its start nearest below its middle), 1σ per sample")
@@ -162,7 +174,7 @@ def _episode_errors(robot, q_rows, r_rows, R, loc_kwargs, h=1e-4):
     eye = np.eye(n) * h
     rp = np.concatenate([r_rows[:, None] + eye, r_rows[:, None] - eye], axis=1).reshape(-1, n)
     qp = np.repeat(q_rows, 2 * n, axis=0)
-    res = loc_mod.localize_dynamic(robot, qp, rp, **loc_kwargs)
+    res = loc_mod.localize_dynamic(robot, qp, rp, weight=np.linalg.inv(R), **loc_kwargs)
     y = np.concatenate([res.alpha[:, None], res.force_N, res.point_m], axis=1).reshape(E, 2 * n, 5)
     J = (y[:, :n] - y[:, n:]) / (2 * h)                           # (E, n, 5)
     out = []
@@ -242,14 +254,23 @@ class _EpisodeAccumulator:
                 "good": np.zeros(self.nb), "same": np.zeros(self.nb),
                 "sums": {k: np.zeros(self.nb) for k in self.KEYS}, "kept": []}
 
-    def feed(self, g0, t, contact, link, alpha, Fx, Fz, px, pz, q_loc, rT):
+    def feed(self, g0, t, contact, link, alpha, Fx, Fz, px, pz, q_loc, rT, breaks=None):
+        """``breaks`` (T,) bool: a new interval starts at this contact sample (a slide)."""
         c = contact.astype(np.int8)
+        if breaks is not None and len(c) and breaks[0] and self.open is not None:
+            self.closed.append(self.open)
+            self.open = None
         prev = 1 if self.open is not None else 0
         edges = np.diff(np.concatenate([[prev], c, [0]]))
         starts = np.flatnonzero(edges == 1)
         stops = np.flatnonzero(edges == -1)
         if prev:
             starts = np.r_[0, starts]
+        if breaks is not None:
+            cut = np.flatnonzero(np.asarray(breaks, bool) & contact.astype(bool))
+            cut = cut[cut > 0]
+            starts = np.sort(np.r_[starts, cut])
+            stops = np.sort(np.r_[stops, cut])
         if not starts.size:
             return
         # segment id per sample (valid where contact): index of the start at or before it
@@ -347,7 +368,8 @@ class EstimatorStream:
                  timing_source: str = "option", noise=None, residual_cov=None,
                  residual_cov_source: str = "", false_alarm_rate=DEFAULT_FALSE_ALARM_RATE,
                  cov_stride_s: float = 0.01, stats_samples: int = STATS_SAMPLES,
-                 detector: str = "chi2", cusum_calibration=None, isolation_quiet: bool = False):
+                 detector: str = "chi2", cusum_calibration=None, isolation_quiet: bool = False,
+                 residual_drive=None):
         if method not in METHODS:
             raise InputError(f"method: unknown {method!r}; use one of {', '.join(METHODS)}")
         if detector not in sequential.DETECTORS:
@@ -374,6 +396,7 @@ class EstimatorStream:
         self.state = DetectorState()
         self.info = {"timing": timing_mod.describe(timing), "timing_source": timing_source}
         self.R = self.Linv = None
+        self._post = None                # posture(s) of the covariance block(s): (q, q̇)
         self.stride = None
         self._R_head = []                # posture-dependent covariances of the head's blocks
         self.detector, self.cusum_cal = detector, cusum_calibration
@@ -403,6 +426,9 @@ class EstimatorStream:
                               "false_alarm_probability_per_sample": alpha,
                               "false_alarm_rate_per_s": alpha / self.dt, "chi2_threshold": self.h,
                               "chi2_dof": self.n, "residual_noise_source": source})
+        # the localization reads the observer restarted at each contact's onset (estimator.onset)
+        self.restart = onset.RestartState() if method == "dynamic" and discretization == "exact" \
+            else None
         self.lag = None
         if method == "dynamic" and lag_compensation:
             self.lag = float(np.mean(observer.lag_s(self.K, self.dt, discretization)))
@@ -413,6 +439,17 @@ class EstimatorStream:
         self.queue = []                      # detected chunks waiting for the noise floors
         self.stats = None
         self.episodes = _EpisodeAccumulator(robot.n_links)
+        self.episode_stage = None            # the episode estimate: dynamic, chi-square, no stance
+        self.release = None                  # the release test: with the chi-square detector
+        if method == "dynamic" and self.chi2 and not self.expected and discretization == "exact":
+            self.episode_stage = intervals.EpisodeStage(
+                robot, self.K, self.dt, self.noise, gain_per_s, timing, residual_drive)
+            if detector == "chi2" and self.debounce == 0:
+                self.release = release.ReleaseState()
+                self.h_release = float(np.log(1.0 / self.alpha))
+                self.info.update(release_test="CUSUM of the released/held log-likelihood ratio "
+                                              "on the observer's drive (estimator.release)",
+                                 release_threshold=self.h_release)
         self.intervals = []
         self.reason_counts = np.zeros(len(loc_mod.REASONS), dtype=np.int64)
         self.samples = self.contact_samples = 0
@@ -433,25 +470,32 @@ class EstimatorStream:
                                               self.dt, self.timing)[0]
             self._set_R(R)
         if self.stride is None:
+            if self._post is None:
+                self._post = (q[:1].copy(), dq[:1].copy())
+            self._weights = (self.Linv[None], np.zeros(T, np.int64))
             return _whitened(unexpT, self.Linv)
         st = self.stride
         blocks = np.arange(g0 // st, (g0 + T - 1) // st + 1)
         new = blocks[blocks * st >= g0]
-        Ls = {}
+        Ls, Ps = {}, {}
         if self._cur_block is not None:
             Ls[self._cur_block[0]] = self._cur_block[1]
+            Ps[self._cur_block[0]] = self._cur_block[2]
         if new.size:
             Rb = noise_mod.residual_covariance(self.robot, q[new * st - g0], dq[new * st - g0],
                                                self.noise, self.gain_per_s, self.dt, self.timing)
             Lb = np.linalg.inv(np.linalg.cholesky(Rb))
             for b, R, L in zip(new, Rb, Lb):
                 Ls[int(b)] = L
+                Ps[int(b)] = (q[b * st - g0].copy(), dq[b * st - g0].copy())
                 if b * st < self.stats_samples:
                     self._R_head.append(R)
         L_all = np.stack([Ls[int(b)] for b in blocks])
-        self._cur_block = (int(blocks[-1]), L_all[-1])
-        per = L_all[(g0 + np.arange(T)) // st - blocks[0]]
-        return _whitened(unexpT, per)
+        self._cur_block = (int(blocks[-1]), L_all[-1], Ps[int(blocks[-1])])
+        idx = (g0 + np.arange(T)) // st - blocks[0]
+        self._weights = (L_all, idx)
+        self._post = (np.stack([Ps[int(b)][0] for b in blocks]), np.stack([Ps[int(b)][1] for b in blocks]))
+        return _whitened(unexpT, L_all[idx])
 
     def _detect(self, stat, q0, dq0):
         """(contact, rnorm) from the statistic; the detector's state carries across chunks.
@@ -483,8 +527,17 @@ class EstimatorStream:
             unexpT = np.ascontiguousarray(unexp.T)
         else:
             unexpT = rT
+        self._weights = None
         stat = self._statistic(self.g, q, dq, unexpT)
-        contact, rnorm = self._detect(stat, q[0], dq[0])
+        rec = {"Linv": self._weights, "post": self._post}
+        if self.release is not None:             # chi-square with the release test (estimator.release)
+            W = np.linalg.inv(self.episode_stage.terms(rec).Omega)
+            contact, stat, rec["released"] = release.detect(
+                t, r, self.K, self._weights[0], W, self._weights[1], self.h, self.h_release,
+                self.release)
+            rnorm = np.sqrt(stat)
+        else:
+            contact, rnorm = self._detect(stat, q[0], dq[0])
         if self.method == "paper" and not self.isolation_quiet and self._R_iso is None:
             self._R_iso = noise_mod.residual_covariance(self.robot, q[:1], dq[:1], self.noise,
                                                         self.gain_per_s, self.dt, self.timing)[0]
@@ -496,8 +549,8 @@ class EstimatorStream:
             for k in range(q.shape[1]):
                 q_loc[:, k] = np.interp(x, pt, pq[:, k])
             self._past = (pt[-self._past_rows:], pq[-self._past_rows:])
-        rec = {"g0": self.g, "t": t, "q": q, "dq": dq, "tau": tau, "rT": rT, "r": r,
-               "contact": contact, "rnorm": rnorm, "q_loc": q_loc, "ef": ef}
+        rec.update({"g0": self.g, "t": t, "q": q, "dq": dq, "tau": tau, "rT": rT, "r": r,
+                    "contact": contact, "rnorm": rnorm, "q_loc": q_loc, "ef": ef})
         self.g += T
         return rec
 
@@ -515,7 +568,7 @@ class EstimatorStream:
         info = {}
         force_floor = float(detection.noise_thresholds(quiet_r[:, :2], None, floor=self.min_force_N).max())
         if Rm is not None:
-            ambiguity_tol = 2.0 * float(np.sqrt(np.trace(Rm)))
+            ambiguity_tol = 2.0 * float(np.sqrt(self.n))   # 2 noise norms: the fit is whitened
             force_floor = max(self.min_force_N, 5.0 * float(np.sqrt(max(Rm[0, 0], Rm[1, 1]))))
             info["residual_sigma"] = np.sqrt(np.diag(Rm)).tolist()
         else:
@@ -546,6 +599,9 @@ class EstimatorStream:
     def _stage2(self, rec) -> ContactEstimate:
         t, q, r, contact = rec["t"], rec["q"], rec["r"], rec["contact"]
         T, N = len(t), self.robot.n_links
+        r_obs = r
+        if self.restart is not None:         # localize on the observer restarted at the onset
+            r, rec["since_s"] = onset.restart(t, r, contact, self.K, self.restart)
         sel = np.flatnonzero(contact)
         if sel.size == T:
             sel = slice(None)                          # every sample: views, no copies
@@ -559,17 +615,17 @@ class EstimatorStream:
         expected_force = None
         fused = False
         if self.method == "dynamic":
+            weight = _fit_weights(rec, sel, T, self.n, self.row_weights)
+            kw = {k: v for k, v in self.loc_kwargs.items() if k != "row_weights"}
             if n_sel and not self.expected and kernels.available():
                 # one compiled pass: the fit at q(t − lag), the point at the current posture
-                w = loc_mod._weights(self.n, self.row_weights)
-                kw = {k: v for k, v in self.loc_kwargs.items() if k != "row_weights"}
-                out = kernels.localize_dynamic(self.full, rec["q_loc"][sel], r[sel], w, q[sel],
+                out = kernels.localize_dynamic(self.full, rec["q_loc"][sel], r[sel], weight, q[sel],
                                                position_tol_m=0.005, bound_tol=0.05, **kw)
                 res = loc_mod.Localization(*out[:6], cost=out[6])
                 fused = True
             elif n_sel:
                 res = loc_mod.localize_dynamic(self.robot, rec["q_loc"][sel], r[sel],
-                                               expected=self.expected, **self.loc_kwargs)
+                                               expected=self.expected, weight=weight, **kw)
             if self.expected:
                 expected_force = np.full((T, len(self.expected), 2), np.nan)
                 quiet = np.flatnonzero(~contact)
@@ -599,12 +655,16 @@ class EstimatorStream:
         self.samples += T
         self.contact_samples += int(contact.sum())
         self.reason_counts += np.bincount(reason[contact], minlength=len(loc_mod.REASONS))
+        breaks = None
+        if self.episode_stage is not None:       # episode estimates and bounds (estimator.intervals)
+            breaks = self.episode_stage.feed(rec, t, q, r_obs, contact, link, alpha, force,
+                                             rec["q_loc"], rec["since_s"])
         self.episodes.feed(rec["g0"], t, contact, link, alpha, force[:, 0], force[:, 1],
-                           point[:, 0], point[:, 1], rec["q_loc"], rec["rT"])
+                           point[:, 0], point[:, 1], rec["q_loc"], r.T, breaks)
         self._close_episodes()
         return ContactEstimate(t=t, contact=contact, link=link, alpha=alpha, Fx=force[:, 0],
                                Fz=force[:, 1], px=point[:, 0], pz=point[:, 1], rnorm=rec["rnorm"],
-                               condition=condition, reason=reason, residual=r, method=self.method,
+                               condition=condition, reason=reason, residual=r_obs, method=self.method,
                                expected_force_N=expected_force)
 
     def _close_episodes(self):
@@ -619,6 +679,9 @@ class EstimatorStream:
                                    np.stack([b for _, b in reps]), self.Rm, self.loc_kwargs)
             for row, err in zip(rows, errs):
                 row.update(err)
+        if self.episode_stage is not None:
+            for row in rows:
+                row.update(self.episode_stage.fields(row["link"], row["well_conditioned_fraction"] > 0))
         self.intervals.extend(rows)
 
     # ------------------------------------------------------------------ driving
@@ -653,6 +716,8 @@ class EstimatorStream:
             self.queue.append(self._stage1(rows))
         out = self._drain(True)
         self.episodes.close_all()
+        if self.episode_stage is not None:
+            self.episode_stage.finish()
         self._close_episodes()
         return out
 
@@ -778,11 +843,14 @@ def open_stream(robot, log, method="dynamic", gain_per_s=100.0, threshold=None, 
     timing, timing_source = _resolve_timing(robot, log, timing)
     if period_s is None:
         period_s = getattr(log, "period_s", None) or observer.regular_period(log.t)
-    cov, cov_source, cal = None, "", None
+    cov, cov_source, cal, drive = None, "", None, None
     if quiet_window is not None and method == "dynamic" and threshold is None:
         cov, r_quiet = quiet_window_covariance(robot, quiet_chunks(), quiet_window, gain_per_s,
                                                period_s, kw.get("discretization", "exact"), timing,
                                                quiet_where)
+        from estimator.bounds import sample_terms      # the drive's noise for the episode estimate
+
+        drive = sample_terms(r_quiet, cov, np.exp(-observer.gains(robot, gain_per_s) * period_s))
         cov_source = (f"robust estimate over the quiet window {quiet_window[0]:g}–"
                       f"{quiet_window[1]:g} s")
         if kw.get("detector") == "cusum":         # CUSUM calibrated on the stretch's correlation
@@ -792,6 +860,7 @@ def open_stream(robot, log, method="dynamic", gain_per_s=100.0, threshold=None, 
     return EstimatorStream(robot, method, gain_per_s, threshold, debounce, expected,
                            period_s=period_s, timing=timing, timing_source=timing_source,
                            residual_cov=cov, residual_cov_source=cov_source, cusum_calibration=cal,
+                           residual_drive=drive,
                            isolation_quiet=quiet_window is not None and method == "paper", **kw)
 
 
