@@ -216,3 +216,38 @@ def test_restarted_episode_carries_the_long_run_information_of_its_steps(velocit
             assert exact / ((L + 1) * per) == pytest.approx(1.0, abs=0.002)
         else:       # the q̇ noise's per-step share averages out over the first steps
             assert 1 - 2.5 / L < exact / ((L + 1) * per) < 1.0
+
+
+def test_bound_maps_estimator_reaches_the_bound_and_refuses_along_the_link():
+    """estimator.bound_maps: where the force is well off the link our estimator's RMS equals the
+    bound (Monte Carlo, 400 draws: ±4 %); within 1° of the link the bound has grown ≥ 50× and the
+    estimator refuses (parallel_to_link) rather than answer."""
+    from estimator.bound_maps import localization_maps
+
+    postures = np.array([[0.4, -1.1], [1.2, 0.6], [-0.7, 1.9]])
+    joints, _ = D.forward_kinematics(FULL, np.c_[np.zeros((3, 3)), postures])
+    phi = np.arctan2(*(joints[0, 2] - joints[0, 1])[::-1])            # link 2 at the first posture
+    dirs = phi + np.array([np.pi / 2, 1.0, 0.5, np.radians(0.5), -np.radians(0.8)])
+    m = localization_maps(ROBOT, postures, 2, 0.6, 4.0, dirs, NOISE, draws=400, seed=2)
+    good = m["sin_angle"] > 0.3
+    ratio = m["estimator_rms_m"][good] / m["bound_per_sample_m"][good]
+    assert np.all((ratio > 0.88) & (ratio < 1.15)), ratio
+    assert np.all(m["bound_episode_m"] < m["bound_per_sample_m"])
+    near = m["sin_angle"][0] < np.sin(np.radians(1.0))
+    assert near.sum() == 2
+    assert np.all(m["refused_fraction"][0, near] > 0.5) and np.all(np.isnan(m["estimator_rms_m"][0, near]))
+    assert np.all(m["bound_per_sample_m"][0, near] > 50 * m["bound_per_sample_m"][0, 0])
+
+
+def test_propagate_json_carries_the_bound_maps(capsys):
+    import json
+
+    from torquebench.cli import main
+
+    assert main(["propagate", "--grid", "2", "--draws", "50", "--directions", "8", "--json"]) == 0
+    b = json.loads(capsys.readouterr().out)["bounds"]
+    assert len(b["per_sample_bound_m"]) == 4 and len(b["per_sample_bound_m"][0]) == 8
+    assert len(b["directions_rad"]) == 8 and b["directions_rad"][0] == pytest.approx(-np.pi / 3)
+    assert 0 < b["episode_bound_median_m"] < b["per_sample_bound_median_m"]
+    assert 0.8 < b["estimator_over_bound_median"] < 1.25
+    assert "Cramér–Rao" in b["method"]

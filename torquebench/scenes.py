@@ -104,7 +104,8 @@ class PredictionSpec:
     """A posture-grid localization-error prediction (what `propagate` asks): contact (link, α),
     force (magnitude, direction from +x), ``grid`` postures per joint over [0, π], Monte Carlo
     ``draws`` and ``seed``, sample rate, observer gain, FT noise σ (Fx, Fz, My); an optional
-    given joint-torque σ (else the sensor chain's) and gain error (else the calibration's)."""
+    given joint-torque σ (else the sensor chain's) and gain error (else the calibration's); the
+    bound maps' hold time and number of force directions."""
 
     link: int
     alpha: float
@@ -118,6 +119,8 @@ class PredictionSpec:
     ft_noise: tuple = (0.1, 0.1, 0.01)
     torque_noise_Nm: float | None = None
     gain_error: float | None = None
+    hold_s: float = 0.5                  # the episode bound's hold time (estimator.bound_maps)
+    directions: int = 24                 # force directions of the bound maps
 
 
 @dataclass(frozen=True)
