@@ -202,3 +202,89 @@ def sample_terms(r: np.ndarray, R: np.ndarray, a: np.ndarray) -> ResidualNoise:
     floor = np.maximum(w, 1e-6 * w.max()) - w
     S0 = 0.5 * (S0 + S0.T) + (V * floor) @ V.T
     return ResidualNoise(np.asarray(R, float)[None], S0[None], S1[None], a, b)
+
+
+# ----------------------------------------------------------------------------- compiled, per sample
+def _alpha_bound_loop(q, link, alpha, F, Rinv, ui, lengths, out):
+    """out[k] = (I⁻¹)_αα of sample k (``per_sample_alpha_var``), one loop (compiled with numba)."""
+    T, n = q.shape
+    N = n - 3
+    jx = np.empty(N + 1)
+    jz = np.empty(N + 1)
+    H = np.empty((n, 3))
+    RH = np.empty((n, 3))
+    for k in range(T):
+        c = link[k]
+        phi = q[k, 2]
+        jx[0] = 0.0
+        jz[0] = 0.0
+        for i in range(N):
+            phi += q[k, 3 + i]
+            jx[i + 1] = jx[i] + lengths[i] * np.sin(phi)
+            jz[i + 1] = jz[i] - lengths[i] * np.cos(phi)
+        dx = jx[c] - jx[c - 1]
+        dz = jz[c] - jz[c - 1]
+        px = jx[c - 1] + alpha[k] * dx
+        pz = jz[c - 1] + alpha[k] * dz
+        g = dx * F[k, 1] - dz * F[k, 0]
+        for i in range(n):
+            H[i, 0] = 0.0
+            H[i, 1] = 0.0
+            H[i, 2] = 0.0
+        H[0, 1] = 1.0
+        H[1, 2] = 1.0
+        for m in range(2, 3 + c):
+            o = m - 3 if m > 3 else 0
+            H[m, 0] = g
+            H[m, 1] = -(pz - jz[o])
+            H[m, 2] = px - jx[o]
+        Rk = Rinv[ui[k]]
+        for i in range(n):
+            for j in range(3):
+                acc = 0.0
+                for m in range(n):
+                    acc += Rk[i, m] * H[m, j]
+                RH[i, j] = acc
+        I00 = I01 = I02 = I11 = I12 = I22 = 0.0
+        for i in range(n):
+            I00 += H[i, 0] * RH[i, 0]
+            I01 += H[i, 0] * RH[i, 1]
+            I02 += H[i, 0] * RH[i, 2]
+            I11 += H[i, 1] * RH[i, 1]
+            I12 += H[i, 1] * RH[i, 2]
+            I22 += H[i, 2] * RH[i, 2]
+        det = I11 * I22 - I12 * I12
+        prof = I00 - (I01 * (I22 * I01 - I12 * I02) + I02 * (I11 * I02 - I12 * I01)) / det
+        out[k] = 1.0 / prof if prof > 0 else np.nan
+
+
+_BOUND_LOOP = None
+
+
+def per_sample_alpha_var(robot, q, link, alpha, force_N, Rinv, ui) -> np.ndarray:
+    """The per-sample bound² of α, (I⁻¹)_αα, for samples with their own link (T,), α, F (T, 2) at
+    postures q (T, n), sample k's inverse covariance Rinv[ui[k]]: one compiled loop (numba), or the
+    numpy form (``design_fast``, ``fisher``, ``profiled``) without it."""
+    from estimator import kernels
+
+    full = robot if robot.floating else robot.with_base(True)
+    q = np.ascontiguousarray(q, float)
+    link = np.asarray(link, np.int64)
+    out = np.full(len(q), np.nan)
+    if kernels.available():
+        global _BOUND_LOOP
+        if _BOUND_LOOP is None:
+            from numba import njit
+
+            _BOUND_LOOP = njit(cache=True, nogil=True, error_model="numpy")(_alpha_bound_loop)
+        _BOUND_LOOP(q, link, np.ascontiguousarray(alpha, float), np.ascontiguousarray(force_N, float),
+                    np.ascontiguousarray(Rinv, float), np.asarray(ui, np.int64),
+                    np.asarray(full.lengths_m, float), out)
+        return out
+    for c in np.unique(link):
+        m = np.flatnonzero(link == c)
+        H = design_fast(full, q[m], int(c), np.asarray(alpha)[m], np.asarray(force_N)[m])
+        with np.errstate(all="ignore"):
+            prof = profiled(np.swapaxes(H, 1, 2) @ Rinv[np.asarray(ui)[m]] @ H)
+        out[m] = np.where(prof > 0, 1.0 / prof, np.nan)
+    return out

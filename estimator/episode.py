@@ -34,6 +34,8 @@ the new one starts after it (the segment mixes both points and is left out of bo
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 ALPHA_LO, ALPHA_HI = -0.05, 1.05
@@ -148,17 +150,21 @@ def _cross(A, S, B, out, SB):
             out[i, j] = acc
 
 
-def _nodes_loop(x, jx, jz, W, S0, S1, first, grid, lk, bins, pn, pv, plink, out, lagfirst):
+def _nodes_loop(x, qm, qn, lengths, Wb, S0b, S1b, widx, first, grid, lk, bins, pn, pv, plink,
+                out, lagfirst, ext):
     """``node_terms`` as one loop (compiled with numba), each row on its own link lk[k], summed
     per bin: out[bins[k], lk[k] − 1] += the row's terms (KEYS order), and lagfirst[b, link − 1]
     holds the lag-one terms (V1, Vb1) of bin b's first row. A row has a lag-one term with the row
-    before when that one was fitted (not ``first``) on the same link.
+    before when that one was fitted (not ``first``) on the same link. The joints come from the
+    step's posture qm (floating coordinates); ext[b, i] += (p_i, Δ_i, |Δ_i|) of every link i at
+    the sample's posture qn. Row k's noise is Wb, S0b, S1b[widx[k]].
 
     u = W e_c s_u + W J0ᵀ w_u and z = W e_c s_z + W J0ᵀ w_z (s scalar, w 2-vector per node), so
     every quadratic form is O(1) per node from per-sample n×n products. Carried state: pn
     (N, G, 7) = (g, s_u, w_u, s_z, w_z) per link and node, pv (N, n, 3) = [W e_c, W J0ᵀ] of the
     link's last row, plink[0] the link of the last row (0: none)."""
     T, n = x.shape
+    N = n - 3
     G = grid.size
     J0 = np.zeros((n, 2))
     M = np.empty((n, 3))                     # [W e_c, W J0ᵀ]
@@ -169,20 +175,47 @@ def _nodes_loop(x, jx, jz, W, S0, S1, first, grid, lk, bins, pn, pv, plink, out,
     A0 = np.zeros(3)
     b0 = np.zeros(2)
     Jw = np.zeros(2)
+    jx = np.empty(N + 1)
+    jz = np.empty(N + 1)
     for k in range(T):
         c = lk[k]
         bk = bins[k]
         head = k == 0 or bins[k - 1] != bk
-        Wk = W[k]
+        Wk = Wb[widx[k]]
+        S0k = S0b[widx[k]]
+        S1k = S1b[widx[k]]
+        # the links at the sample's posture: Σ p_i, Δ_i, |Δ_i| per bin
+        phi = qn[k, 2]
+        px = qn[k, 0]
+        pz = qn[k, 1]
+        for i in range(N):
+            phi += qn[k, 3 + i]
+            dx = lengths[i] * math.sin(phi)
+            dz = -lengths[i] * math.cos(phi)
+            ext[bk, i, 0] += px
+            ext[bk, i, 1] += pz
+            ext[bk, i, 2] += dx
+            ext[bk, i, 3] += dz
+            ext[bk, i, 4] += lengths[i]
+            px += dx
+            pz += dz
+        # the joints at the step's posture (relative to the base origin)
+        phi = qm[k, 2]
+        jx[0] = 0.0
+        jz[0] = 0.0
+        for i in range(N):
+            phi += qm[k, 3 + i]
+            jx[i + 1] = jx[i] + lengths[i] * math.sin(phi)
+            jz[i + 1] = jz[i] - lengths[i] * math.cos(phi)
         J0[:, :] = 0.0
         J0[0, 0] = 1.0
         J0[1, 1] = 1.0
         for m in range(2, 3 + c):
             o = m - 3 if m > 3 else 0
-            J0[m, 0] = -(jz[c - 1, k] - jz[o, k])
-            J0[m, 1] = jx[c - 1, k] - jx[o, k]
-        d0 = -(jz[c, k] - jz[c - 1, k])
-        d1 = jx[c, k] - jx[c - 1, k]
+            J0[m, 0] = -(jz[c - 1] - jz[o])
+            J0[m, 1] = jx[c - 1] - jx[o]
+        d0 = -(jz[c] - jz[c - 1])
+        d1 = jx[c] - jx[c - 1]
         for i in range(n):
             s0 = 0.0
             s1 = 0.0
@@ -216,10 +249,10 @@ def _nodes_loop(x, jx, jz, W, S0, S1, first, grid, lk, bins, pn, pv, plink, out,
             b0[1] += J0[i, 1] * Wx[i]
             Jw[0] += J0[i, 0] * M[i, 0]
             Jw[1] += J0[i, 1] * M[i, 0]
-        _cross(M, S0[k], M, P0, SB)
+        _cross(M, S0k, M, P0, SB)
         lag = (not first[k]) and plink[0] == c
         if lag:
-            _cross(M, S1[k], pv[c - 1], P1, SB)
+            _cross(M, S1k, pv[c - 1], P1, SB)
         p00, p01, p02, p11, p12, p22 = P0[0, 0], P0[0, 1], P0[0, 2], P0[1, 1], P0[1, 2], P0[2, 2]
         r00, r01, r02, r10, r11, r12 = P1[0, 0], P1[0, 1], P1[0, 2], P1[1, 0], P1[1, 1], P1[1, 2]
         r20, r21, r22 = P1[2, 0], P1[2, 1], P1[2, 2]
@@ -318,43 +351,57 @@ def _compiled_loop():
     return _LOOP
 
 
-def binned_terms(x, jx, jz, lk, W, S0, S1, first, bins, K: int, state: dict | None):
-    """Node terms of fitted rows (each on its own link lk, 1…N) summed per bin (bins (T,)
-    non-decreasing, 0…K−1): (sums (K, N, 8, G), lagfirst (K, N, 2, G): the lag-one terms of
-    each bin's first row, state). ``state`` carries the lag-one terms across calls (None: none).
-    The compiled loop when numba is there; else ``node_terms`` per link (the reference)."""
+def binned_terms(robot, x, qm, qn, lk, Wb, S0b, S1b, widx, first, bins, K: int, state: dict | None):
+    """Node terms of fitted rows (each on its own link lk, 1…N; joints at the step postures qm)
+    summed per bin (bins (T,) non-decreasing, 0…K−1), row k's noise Wb, S0b, S1b[widx[k]]:
+    (sums (K, N, 9, G), lagfirst (K, N, 2, G): the lag-one terms of each bin's first row,
+    ext (K, N, 5): Σ (p_i, Δ_i, |Δ_i|) of every link at the sample postures qn, state). ``state``
+    carries the lag-one terms across calls (None: none). The compiled loop when numba is there;
+    else ``node_terms`` per link (the reference)."""
+    from estimator.localization import _joints_link_major
+
     T, n = x.shape
-    N = jx.shape[0] - 1
+    N = n - 3
     G = GRID.size
     lk = np.asarray(lk, np.int64)
     bins = np.asarray(bins, np.int64)
+    widx = np.asarray(widx, np.int64)
     first = np.asarray(first, bool)
     sums = np.zeros((K, N, len(KEYS), G))
     lagfirst = np.zeros((K, N, 2, G))
+    ext = np.zeros((K, N, 5))
+    lengths = np.asarray(robot.lengths_m, float)
     loop = _compiled_loop()
     if loop is not None:
         st = state if state and "fast" in state else {"fast": (np.zeros((N, G, 7)), np.zeros((N, n, 3)),
                                                                np.zeros(1, np.int64))}
         pn, pv, pl = st["fast"]
-        loop(np.ascontiguousarray(x, float), np.ascontiguousarray(jx), np.ascontiguousarray(jz),
-             np.ascontiguousarray(W), np.ascontiguousarray(S0), np.ascontiguousarray(S1),
-             np.ascontiguousarray(first, np.bool_), GRID, lk, bins, pn, pv, pl, sums, lagfirst)
-        return sums, lagfirst, st
+        loop(np.ascontiguousarray(x, float), np.ascontiguousarray(qm, float), np.ascontiguousarray(qn, float),
+             lengths, np.ascontiguousarray(Wb), np.ascontiguousarray(S0b), np.ascontiguousarray(S1b), widx,
+             np.ascontiguousarray(first, np.bool_), GRID, lk, bins, pn, pv, pl, sums, lagfirst, ext)
+        return sums, lagfirst, ext, st
     st = state if state and "ref" in state else {"ref": {}, "last": 0}
+    jx, jz = _joints_link_major(robot, qm)
     prev_link = np.r_[st["last"], lk[:-1]]
     first = first | (prev_link != lk)                 # a lag-one term only on the same link
     head = np.r_[True, bins[1:] != bins[:-1]]
+    W, S0, S1 = Wb[widx], S0b[widx], S1b[widx]
     for c in np.unique(lk):
         m = np.flatnonzero(lk == c)
         part, st["ref"][int(c)] = node_terms(x[m], jx[:, m], jz[:, m], int(c), W[m], S0[m], S1[m],
                                             st["ref"].get(int(c)), first[m])
-        rows = np.stack([part[key] for key in KEYS], axis=1)           # (m, 8, G)
+        rows = np.stack([part[key] for key in KEYS], axis=1)           # (m, 9, G)
         np.add.at(sums[:, c - 1], bins[m], rows)
         h = head[m]
         lagfirst[bins[m][h], c - 1] = rows[h][:, 6:8]
+    nx, nz = _joints_link_major(robot, qn)
+    per = np.stack([qn[:, 0, None] + nx[:-1].T, qn[:, 1, None] + nz[:-1].T,
+                    np.diff(nx, axis=0).T, np.diff(nz, axis=0).T,
+                    np.broadcast_to(lengths, (T, N))], -1)             # (T, N, 5)
+    np.add.at(ext, bins, per)
     if T:
         st["last"] = int(lk[-1])
-    return sums, lagfirst, st
+    return sums, lagfirst, ext, st
 
 
 # ----------------------------------------------------------------------------- episode sums
@@ -380,27 +427,21 @@ class Layout:
     def S(self, v):
         return v[..., :self.nS].reshape(v.shape[:-1] + (self.N, len(KEYS), self.G))
 
-    def bins(self, sums, lk, p0, dl, bound2, bins, K) -> np.ndarray:
-        """(K, size) bin vectors: the binned node terms ``sums`` (K, N, 8, G) and the rows' point
-        sums (their postures), per-sample bounds on their own link and counts."""
-        T = len(lk)
+    def bins(self, sums, ext, lk, bound2, bins, K) -> np.ndarray:
+        """(K, size) bin vectors: the binned node terms ``sums`` (K, N, 9, G), the binned point
+        sums ``ext`` (K, N, 5: p, Δ, |Δ| of every link), and the rows' counts per link and
+        per-sample bounds on their own link."""
         N = self.N
-        e = np.zeros((T, self.size - self.nS))       # the small per-row parts
-        o = self.nS
-        ar = np.arange(T)
-        e[ar, self.counts.start - o + lk - 1] = 1.0
-        e[:, self.p0.start - o:self.p0.stop - o] = p0.reshape(T, 2 * N)
-        e[:, self.dl.start - o:self.dl.stop - o] = dl.reshape(T, 2 * N)
-        e[:, self.length.start - o:self.length.stop - o] = np.hypot(dl[:, :, 0], dl[:, :, 1])
-        ok = np.flatnonzero(np.isfinite(bound2))
-        e[ok, self.b2.start - o + lk[ok] - 1] = bound2[ok]
-        e[ok, self.bc.start - o + lk[ok] - 1] = 1.0
-        e[:, self.samples - o] = 1.0
-        starts = np.flatnonzero(np.r_[True, bins[1:] != bins[:-1]])
-        v = np.empty((K, self.size))
+        v = np.zeros((K, self.size))
         v[:, :self.nS] = sums.reshape(K, -1)
-        v[:, o:] = 0.0
-        v[bins[starts], o:] = np.add.reduceat(e, starts, axis=0)
+        v[:, self.p0] = ext[:, :, 0:2].reshape(K, 2 * N)
+        v[:, self.dl] = ext[:, :, 2:4].reshape(K, 2 * N)
+        v[:, self.length] = ext[:, :, 4]
+        np.add.at(v, (bins, self.counts.start + lk - 1), 1.0)
+        ok = np.flatnonzero(np.isfinite(bound2))
+        np.add.at(v, (bins[ok], self.b2.start + lk[ok] - 1), bound2[ok])
+        np.add.at(v, (bins[ok], self.bc.start + lk[ok] - 1), 1.0)
+        np.add.at(v, (bins, self.samples), 1.0)
         return v
 
     def link(self, v) -> np.ndarray:

@@ -15,7 +15,6 @@ from __future__ import annotations
 import numpy as np
 
 from estimator import episode as ep
-from estimator.localization import _joints_link_major
 
 SEGMENT_SAMPLES = 40
 SPLIT_Z = 5.0
@@ -113,10 +112,11 @@ class EpisodeTracker:
                 self.pending = True                   # decided on the piece's last row
 
     # ------------------------------------------------------------------ stream
-    def feed(self, t, r, q, contact, link, bound2, W, S0, S1) -> np.ndarray:
+    def feed(self, t, r, q, contact, link, bound2, noise) -> np.ndarray:
         """Consecutive samples: t (T,), observer residual r (T, n), posture q (T, n) (floating
-        coordinates), the flags, per-sample link and bound² of α, the drive's noise W = Ω⁻¹, S0,
-        S1 (T, n, n); returns ``breaks`` (T,) bool: a new episode (a slide) starts here."""
+        coordinates), the flags, per-sample link and bound² of α, the drive's noise (W = Ω⁻¹, S0,
+        S1 (B, n, n) per block, block index (T,)); returns ``breaks`` (T,) bool: a new episode (a
+        slide) starts here."""
         T = len(t)
         breaks = np.zeros(T, bool)
         if T == 0:
@@ -160,7 +160,7 @@ class EpisodeTracker:
                 bins = pos // SEGMENT_SAMPLES
                 bins -= bins[0]
                 V, lagfirst = self._rows(rows, bins, t, r, q, t0, r0, q0,
-                                         first[rowof[b]:rowof[e - 1] + 1], link, bound2, W, S0, S1)
+                                         first[rowof[b]:rowof[e - 1] + 1], link, bound2, noise)
                 heads = np.flatnonzero(np.r_[True, bins[1:] != bins[:-1]])
                 self._consume(V, lagfirst, b + heads, breaks)
             j = stop
@@ -168,24 +168,24 @@ class EpisodeTracker:
             self.pending = False
         return breaks
 
-    def _rows(self, rows, bins, t, r, q, t0, r0, q0, first, link, bound2, W, S0, S1):
+    def _rows(self, rows, bins, t, r, q, t0, r0, q0, first, link, bound2, noise):
         """Bin vectors (K, size) of the fitted samples ``rows`` (indices into this feed) summed by
         ``bins``, and each bin's first-row lag-one terms (K, N, 2, G)."""
+        Wb, S0b, S1b, widx = noise
         prev = rows - 1
-        tp = np.where(prev >= 0, t[np.maximum(prev, 0)], t0)
-        rp = np.where((prev >= 0)[:, None], r[np.maximum(prev, 0)], r0)
-        qp = np.where((prev >= 0)[:, None], q[np.maximum(prev, 0)], q0)
+        ok = prev >= 0
+        pi = np.maximum(prev, 0)
+        tp = np.where(ok, t[pi], t0)
+        rp = np.where(ok[:, None], r[pi], r0)
+        qp = np.where(ok[:, None], q[pi], q0)
         a = np.exp(-np.outer(t[rows] - tp, self.K))   # the step's own coefficients
         x = (r[rows] - a * rp) / (1.0 - a)            # the drive: step mean of τ_ext
-        jx, jz = _joints_link_major(self.robot, 0.5 * (q[rows] + qp))
         lk = np.clip(link[rows], 1, self.N)
         K = int(bins[-1]) + 1
-        sums, lagfirst, self.state = ep.binned_terms(x, jx, jz, lk, W[rows], S0[rows], S1[rows],
-                                                     first, bins, K, self.state)
-        nx, nz = _joints_link_major(self.robot, q[rows])          # the point at the sample's posture
-        p0 = np.stack([q[rows, 0, None] + nx[:-1].T, q[rows, 1, None] + nz[:-1].T], -1)
-        dl = np.stack([np.diff(nx, axis=0).T, np.diff(nz, axis=0).T], -1)
-        return self.lay.bins(sums, lk, p0, dl, bound2[rows], bins, K), lagfirst
+        sums, lagfirst, ext, self.state = ep.binned_terms(self.robot, x, 0.5 * (q[rows] + qp), q[rows], lk,
+                                                          Wb, S0b, S1b, widx[rows], first, bins, K,
+                                                          self.state)
+        return self.lay.bins(sums, ext, lk, bound2[rows], bins, K), lagfirst
 
     def finish(self):
         self._close()

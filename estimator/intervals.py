@@ -85,18 +85,11 @@ class EpisodeStage:
             with np.errstate(all="ignore"):
                 Rinv = np.linalg.inv(np.where((uniq % (j_max + 1) > 0)[:, None, None], Rt,
                                               np.eye(len(nt.a))))
-            for c in range(1, self.N + 1):
-                m = link[ok] == c
-                if not m.any():
-                    continue
-                rows = ok[m]
-                H = bounds.design_fast(self.robot, q_loc[rows], c, alpha[rows], force[rows])
-                with np.errstate(all="ignore"):
-                    I = np.swapaxes(H, 1, 2) @ Rinv[inv[m]] @ H
-                    Ia = bounds.profiled(I)          # 1/(I⁻¹)_αα
-                bound2[rows] = np.where((Ia > 0) & (j[m] > 0), 1.0 / Ia, np.nan)
+            b2 = bounds.per_sample_alpha_var(self.robot, q_loc[ok], link[ok], alpha[ok], force[ok],
+                                             Rinv, inv)
+            bound2[ok] = np.where(j > 0, b2, np.nan)
         W = np.linalg.inv(nt.Omega)
-        return self.tracker.feed(t, r_obs, q, contact, link, bound2, W[idx], nt.S0[idx], nt.S1[idx])
+        return self.tracker.feed(t, r_obs, q, contact, link, bound2, (W, nt.S0, nt.S1, idx))
 
     def finish(self):
         self.tracker.finish()

@@ -369,7 +369,7 @@ class EstimatorStream:
                  residual_cov_source: str = "", false_alarm_rate=DEFAULT_FALSE_ALARM_RATE,
                  cov_stride_s: float = 0.01, stats_samples: int = STATS_SAMPLES,
                  detector: str = "chi2", cusum_calibration=None, isolation_quiet: bool = False,
-                 residual_drive=None):
+                 residual_drive=None, release_test: bool = True):
         if method not in METHODS:
             raise InputError(f"method: unknown {method!r}; use one of {', '.join(METHODS)}")
         if detector not in sequential.DETECTORS:
@@ -444,7 +444,7 @@ class EstimatorStream:
         if method == "dynamic" and self.chi2 and not self.expected and discretization == "exact":
             self.episode_stage = intervals.EpisodeStage(
                 robot, self.K, self.dt, self.noise, gain_per_s, timing, residual_drive)
-            if detector == "chi2" and self.debounce == 0:
+            if detector == "chi2" and self.debounce == 0 and release_test:
                 self.release = release.ReleaseState()
                 self.h_release = float(np.log(1.0 / self.alpha))
                 self.info.update(release_test="CUSUM of the released/held log-likelihood ratio "
@@ -772,7 +772,8 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
              lag_compensation: bool = True, timing=None, noise=None, quiet_window=None,
              false_alarm_rate=DEFAULT_FALSE_ALARM_RATE, cov_stride_s: float = 0.01,
              stats_samples: int = STATS_SAMPLES, chunk_samples: int | None = None,
-             detector: str = "chi2", quiet_where: str = "--quiet-window") -> ContactEstimate:
+             detector: str = "chi2", quiet_where: str = "--quiet-window",
+             release_test: bool = True) -> ContactEstimate:
     """Run observer, detection and localization on a whole log (offline, vectorized).
 
     ``EstimatorStream`` on the log in one chunk (or in chunks of ``chunk_samples``: the same
@@ -782,10 +783,16 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     [(link, α), …]: contacts the robot expects; their forces are estimated jointly and never
     reported as a collision. ``False`` or ``()`` forces none.
 
+    Localization (``dynamic``): the fit is weighted by R⁻¹, the detector's noise covariance (the
+    maximum-likelihood fit; the paper rule's ``threshold`` has no R: unweighted), on the
+    observer restarted at each contact's onset (estimator.onset). Each interval's point and ±
+    come from its episode estimate, with the Cramér–Rao bounds beside them (estimator.intervals).
+
     Flags (estimator.localization): |F| below max(min_force_N, 5 σ of the force rows without
-    contact) → small_force; two links fitting within max(1e-3, 2 · median ‖r‖ without contact)
-    at points > 5 mm apart → ambiguous_link; 1/|sin∠(F, link)| > max_condition → parallel_to_link.
-    (σ and the median: over the contact-free samples among the first ``stats_samples``.)
+    contact) → small_force; two links fitting within 2√n noise norms (R known; else max(1e-3,
+    2 · median ‖r‖ without contact)) at points > 5 mm apart → ambiguous_link; 1/|sin∠(F, link)| >
+    max_condition → parallel_to_link. (σ and the median: over the contact-free samples among the
+    first ``stats_samples``.)
 
     lag_compensation (``dynamic`` only): r lags τ_ext by ≈ 1/K (``observer.lag_s``), so r_k is
     paired with the posture q(t_k − lag) (linear interpolation in time, held at q(t_0) before
@@ -800,7 +807,9 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     no-contact covariance (estimator.noise) from ``noise`` (a NoiseModel; default the paper leg's
     sensors) or from the ``quiet_window`` (t0, t1) of the log, at ``false_alarm_rate`` = (value,
     unit) with unit 'sample', 's' or 'h' (default one per hour); ``rnorm`` is then √(rᵀR⁻¹r).
-    ``detector="cusum"``: a CUSUM on the same statistic (estimator.sequential) instead. ``paper``
+    ``detector="cusum"``: a CUSUM on the same statistic (estimator.sequential) instead. With the
+    chi-square test (and no debounce) a contact ends at its release (estimator.release;
+    ``release_test=False``: when ‖r‖ has decayed under the threshold, as before). ``paper``
     isolates on rows whitened by the noise model (detection.whitened_thresholds) at the per-row
     probability of ``false_alarm_rate``; with a ``quiet_window``, on the robust σ of the stretch.
     """
@@ -814,7 +823,8 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
                          timing=timing, noise=noise, quiet_window=quiet_window,
                          quiet_chunks=lambda: [log], quiet_where=quiet_where,
                          false_alarm_rate=false_alarm_rate,
-                         cov_stride_s=cov_stride_s, stats_samples=stats_samples, detector=detector)
+                         cov_stride_s=cov_stride_s, stats_samples=stats_samples, detector=detector,
+                         release_test=release_test)
     T = len(log.t)
     step = T if not chunk_samples else int(chunk_samples)
     parts = []

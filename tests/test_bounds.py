@@ -251,3 +251,23 @@ def test_propagate_json_carries_the_bound_maps(capsys):
     assert 0 < b["episode_bound_median_m"] < b["per_sample_bound_median_m"]
     assert 0.8 < b["estimator_over_bound_median"] < 1.25
     assert "Cramér–Rao" in b["method"]
+
+
+def test_per_sample_alpha_variance_loop_matches_the_numpy_form(monkeypatch):
+    from estimator import kernels
+
+    rng = np.random.default_rng(8)
+    T = 40
+    q = np.c_[rng.normal(0, 0.02, (T, 3)), rng.uniform(-2, 2, (T, 2))]
+    link = rng.integers(1, 3, T)
+    alpha = rng.uniform(0, 1, T)
+    F = rng.normal(0, 3, (T, 2))
+    M = rng.normal(size=(3, 5, 5))
+    Rinv = M @ np.swapaxes(M, 1, 2) + np.eye(5)
+    ui = rng.integers(0, 3, T)
+    fast = bounds.per_sample_alpha_var(ROBOT, q, link, alpha, F, Rinv, ui)
+    monkeypatch.setattr(kernels, "ENABLED", False)
+    ref = bounds.per_sample_alpha_var(ROBOT, q, link, alpha, F, Rinv, ui)
+    np.testing.assert_allclose(fast, ref, rtol=1e-9)
+    one = bounds.per_sample(ROBOT, q[:1], int(link[0]), alpha[0], F[0], np.linalg.inv(Rinv[ui[0]]))
+    assert np.sqrt(ref[0]) == pytest.approx(one.alpha_std[0], rel=1e-9)

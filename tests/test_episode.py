@@ -10,7 +10,6 @@ from scipy.stats import binom
 from estimator import episode as E
 from estimator import kernels
 from estimator import dynamics as D
-from estimator.localization import _joints_link_major
 from estimator.log import SensorLog
 from estimator.noise import NoiseModel
 from estimator.pipeline import estimate
@@ -50,14 +49,10 @@ def test_grid_minimum_matches_a_direct_minimization(monkeypatch, enabled):
     x, q, W = _rows()
     T = len(x)
     lay = E.Layout(2)
-    jx, jz = _joints_link_major(FULL, q)
-    Wt = np.broadcast_to(W, (T, 5, 5))
-    S0 = np.broadcast_to(np.diag(SIG ** 2), (T, 5, 5))
-    sums, _, _ = E.binned_terms(x, jx, jz, np.full(T, 2), Wt, S0, 0 * S0, np.zeros(T, bool),
-                                np.zeros(T, int), 1, None)
-    p0 = np.zeros((T, 2, 2))
-    dl = np.ones((T, 2, 2))
-    v = lay.bins(sums, np.full(T, 2), p0, dl, np.full(T, np.nan), np.zeros(T, int), 1)[0]
+    S0 = np.diag(SIG ** 2)[None]
+    sums, _, ext, _ = E.binned_terms(FULL, x, q, q, np.full(T, 2), W[None], S0, 0 * S0,
+                                     np.zeros(T, int), np.zeros(T, bool), np.zeros(T, int), 1, None)
+    v = lay.bins(sums, ext, np.full(T, 2), np.full(T, np.nan), np.zeros(T, int), 1)[0]
     got = E.solve(lay, v, 2)
     ref = minimize_scalar(lambda a: _profile_cost(x, q, 2, a, W), bounds=(0.0, 1.0), method="bounded",
                           options={"xatol": 1e-10})
@@ -74,22 +69,23 @@ def test_compiled_loop_matches_the_numpy_reference(monkeypatch):
     rng = np.random.default_rng(4)
     T = 90
     x, q, W = _rows(T=T, seed=2)
-    jx, jz = _joints_link_major(FULL, q)
-    M = rng.normal(size=(T, 5, 5))
+    qn = q + 0.01
+    M = rng.normal(size=(7, 5, 5))                     # 7 noise blocks
     S0 = M @ np.swapaxes(M, 1, 2) + np.eye(5)
-    S1 = 0.3 * rng.normal(size=(T, 5, 5))
-    Wt = np.linalg.inv(S0)
+    S1 = 0.3 * rng.normal(size=(7, 5, 5))
+    Wb = np.linalg.inv(S0)
+    widx = np.arange(T) // 13
     lk = np.where(np.arange(T) % 17 < 12, 2, 1)        # links change: no lag-one term across
     first = np.arange(T) % 31 == 0
     bins = np.arange(T) // 20
     out = []
     for enabled in (True, False):
         monkeypatch.setattr(kernels, "ENABLED", enabled)
-        a, lf, st = E.binned_terms(x[:50], jx[:, :50], jz[:, :50], lk[:50], Wt[:50], S0[:50], S1[:50],
-                                   first[:50], bins[:50], 5, None)
-        b, lf2, _ = E.binned_terms(x[50:], jx[:, 50:], jz[:, 50:], lk[50:], Wt[50:], S0[50:], S1[50:],
-                                   first[50:], bins[50:] - 2, 3, st)          # the state carried
-        out.append((a, lf, b, lf2))
+        a, lf, ea, st = E.binned_terms(FULL, x[:50], q[:50], qn[:50], lk[:50], Wb, S0, S1, widx[:50],
+                                       first[:50], bins[:50], 3, None)
+        b, lf2, eb, _ = E.binned_terms(FULL, x[50:], q[50:], qn[50:], lk[50:], Wb, S0, S1, widx[50:],
+                                       first[50:], bins[50:] - 2, 3, st)      # the state carried
+        out.append((a, lf, ea, b, lf2, eb))
     for u, v in zip(*out):
         np.testing.assert_allclose(u, v, rtol=1e-9, atol=1e-9 * np.abs(v).max())
 
