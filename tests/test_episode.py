@@ -213,3 +213,19 @@ def test_a_sliding_contact_is_split_into_pieces_that_follow_it():
         span = (t >= iv["t_start_s"] - 0.012) & (t <= iv["t_end_s"])     # the residual lags 1/K
         lo, hi = alpha[span & on].min(), alpha[span & on].max()
         assert lo - 0.005 / L <= iv["alpha"] <= hi + 0.005 / L, (iv["t_start_s"], iv["alpha"], lo, hi)
+
+
+@pytest.mark.slow
+def test_bounds_report_builds_and_states_its_figures(tmp_path):
+    """The report builder (quick: 4 simulated cases × 4 seeds, 3 release forces, 4 MuJoCo seeds)
+    writes bounds.md and its two pictures; its figures meet the targets it states."""
+    import re
+
+    from torquebench.reports import bounds as report
+
+    paths = report.build(tmp_path, quick=True)
+    assert [p.name for p in paths] == ["bounds.md", "bounds_efficiency.png", "bounds_release.png"]
+    text = paths[0].read_text()
+    head = re.search(r"per-sample RMS ([\d.]+)× .*max ([\d.]+)\); episode RMS ([\d.]+)×", text)
+    assert head and float(head.group(2)) < 1.15 and float(head.group(3)) < 1.25, head
+    assert "release flagged within 1 ms" in text or "release flagged within 0 ms" in text
