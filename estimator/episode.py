@@ -1,35 +1,30 @@
 """One contact point per episode: the maximum-likelihood α from all of an episode's samples, with
-its covariance and the episode's Cramér–Rao bound, in bounded memory (streaming).
+its covariance and the episode's Cramér–Rao bound, from sums that do not grow with the episode.
 
 Data. The observer's drive x_k = (r_k − A r_{k−1})/b = d_{k−1}, the step mean of τ_ext over
-[t_{k−1}, t_k] plus a moving average of order one of the sensor noise (estimator.noise:
-Cov x_k = S0, Cov(x_k, x_{k−1}) = S1, long-run Ω = S0 + S1 + S1ᵀ). It is the residual seen
-through the inverse of the observer's filter (exact, no lag: the step's posture is the mean of its
-end postures), and it skips what the observer's trapezoid misreads at a contact's onset
-(estimator.onset): a run's first flagged sample s holds the onset step, so its episode reads
-x_{s+1}, x_{s+2}, … only.
+[t_{k−1}, t_k] plus a moving average of order one of the sensor noise (estimator.bounds.
+ResidualNoise: Cov x_k = S0, Cov(x_k, x_{k−1}) = S1, long-run Ω = S0 + S1 + S1ᵀ). It is the
+residual seen through the inverse of the observer's filter (exact, no lag: the step's posture is
+the mean of its end postures), and it skips what the observer's trapezoid misreads at a contact's
+onset (estimator.onset): a run's first flagged sample s holds the onset step, so its episode
+reads x_{s+1}, x_{s+2}, … only.
 
 Model. x_k = J_k(α)ᵀG_k + ν_k, α fixed over the episode, the force G_k free per step.
 Estimate. α̂ = argmin C(α), C(α) = Σ_k min_G ‖x_k − J_k(α)ᵀG‖²_W, W = Ω⁻¹ (per posture block):
-a separable least squares (for fixed α, G_k = A⁻¹b with A = J W Jᵀ, b = J W x; the profile
-C(α) is exact). The sums of C and dC/dα are accumulated per sample on a grid of α per link
-(``GRID``); α̂ is the minimum of the cubic Hermite interpolant between grid nodes. Nothing per
-sample is kept: memory does not grow with the episode.
+a separable least squares (for fixed α, G_k = A⁻¹b with A = J W Jᵀ, b = J W x, and
+C_k = xᵀWx − bᵀA⁻¹b exactly). C, dC/dα and d²C/dα² are summed per sample on a grid of α per link
+(``GRID``); α̂ is the minimum of the quintic Hermite interpolant between the grid nodes.
 Covariance. With g_k = Δ_k × G_k and u_k = W⊥ e_c (W⊥ = W − W Jᵀ A⁻¹ J W, e_c ones on the
 moment rows θ, q_1…q_c) the score is Σ g_k u_kᵀ ν_k, so (sandwich, the MA(1) noise exactly)
 
-    Var α̂ = V / I²,  I = Σ g_k² u_kᵀ W⁻¹... = Σ g_k² κ_k (κ = e_cᵀ W⊥ e_c),
+    Var α̂ = V / I²,   I = Σ g_k² κ_k (κ = e_cᵀ W⊥ e_c),
     V = Σ g_k² u_kᵀ S0 u_k + 2 Σ g_k g_{k−1} u_kᵀ S1 u_{k−1};
 
 g_k² is replaced by g_k² − Var ĝ_k (and the lag-one products likewise) so the plug-in of the
 fitted forces does not overstate the information at low signal-to-noise. With W = Ω⁻¹, I is the
-episode's Fisher information (estimator.bounds; the exact finite-L information of these steps is
+episode's Fisher information (estimator.bounds; the exact information of these L steps is
 (L + 1)/L of it, tests/test_bounds.py), so the stated bound is 1/√I and V/I² → 1/I: the
-estimator reaches it.
-Sliding. Every ``SEGMENT_SAMPLES`` samples the latest segment's own α̂ is compared with the
-episode's so far: a move by more than ``SPLIT_Z`` standard errors and more than the position
-tolerance splits the episode there (estimator.episode_tracker): the old episode ends before the segment,
-the new one starts after it (the segment mixes both points and is left out of both fits).
+estimator reaches it. The episodes themselves (runs, slides) are estimator.episode_tracker's.
 """
 
 from __future__ import annotations
@@ -40,9 +35,6 @@ import numpy as np
 
 ALPHA_LO, ALPHA_HI = -0.05, 1.05
 GRID = np.linspace(ALPHA_LO, ALPHA_HI, 12)      # 0.1 apart: quintic Hermite, α̂ within 1 % of σ (tests/test_episode.py)
-SEGMENT_SAMPLES = 40
-SPLIT_Z = 5.0
-BLOCK = 128                                       # samples per vectorized piece (bounded memory)
 KEYS = ("C", "dC", "I", "Ib", "V", "Vb", "V1", "Vb1", "d2C")   # V1, Vb1: the lag-one parts
 
 

@@ -62,7 +62,8 @@ def restart(t: np.ndarray, r: np.ndarray, contact: np.ndarray, K: np.ndarray,
         t_s = np.where(carried, state.t_s if prev else np.nan, t[np.maximum(s, 0)])
         r_s = np.where(carried[:, None], state.r_s if prev else np.nan, r[np.maximum(s, 0)])
         since[on] = t[on] - t_s
-        out[on] = r[on] - np.exp(-np.outer(since[on], K)) * r_s
+        u, inv = np.unique(since[on], return_inverse=True)     # few distinct ages per chunk
+        out[on] = r[on] - np.exp(-np.outer(u, K))[inv.ravel()] * r_s
     if contact[-1]:
         s = src[-1]
         if s >= 0:

@@ -14,6 +14,11 @@ sizes give the same per-sample numbers, bit for bit) and carries everything that
 boundary in its state: the observer (last row's r, P, u, τ), the rows a group delay reads ahead,
 the past postures for the lag compensation, the detector's state (``DetectorState``: debounce run),
 the open contact episode's running sums. ``estimate()`` is the one-chunk case.
+
+Hooks of the localization limit: the chi-square detector's contacts end at their release
+(estimator.release); the fit reads the observer restarted at each onset (estimator.onset),
+weighted by R⁻¹; each interval's point, ± and Cramér–Rao bounds come from its episode
+(estimator.intervals: the episode estimate, slides split an episode).
 """
 
 from __future__ import annotations
@@ -356,8 +361,9 @@ class EstimatorStream:
       contact-free samples (covariance blocks) among the first ``stats_samples`` samples of the
       log (65 536 by default; the whole log when it is shorter). Localization waits until those
       samples are in (they are held, observer and detection done);
-    * an episode's error estimate: at the sample 2^j − 1 samples after its start nearest below
-      its middle (``_EpisodeAccumulator``), not its exact middle (which needs the episode's end).
+    * an episode's per-sample error estimate of F: at the sample 2^j − 1 samples after its start
+      nearest below its middle (``_EpisodeAccumulator``), not its exact middle (which needs the
+      episode's end); its point and ± (estimator.intervals) are sums over all its samples.
     """
 
     def __init__(self, robot: Robot, method: str = "dynamic", gain_per_s=100.0,
