@@ -48,7 +48,6 @@ class EpisodeStage:
         R = np.linalg.inv(np.einsum("bki,bkj->bij", Linv, Linv))
         if self.drive is not None:
             d = self.drive
-            B = len(Linv)
             return bounds.ResidualNoise(R, np.broadcast_to(d.S0[0], R.shape), np.broadcast_to(d.S1[0], R.shape),
                                         d.a, d.b)
         qb, dqb = post

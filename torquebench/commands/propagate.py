@@ -5,7 +5,11 @@ scene. A sensor configuration (bridge/ADC, ``scenes/paper_sensor.toml``) and a
 strain per N·m (given, or from the bridge default) give the joint-torque noise σ_τ; a calibration
 file gives the slope uncertainty (a systematic gain error); the FT sensor noise is Table II's.
 ``estimator.uncertainty`` then propagates them through the localizer over a grid of postures
-(the paper's sweep: q ∈ [0, π]²), by Monte Carlo and to first order.
+(the paper's sweep: q ∈ [0, π]²), by Monte Carlo and to first order. Beside it, over the same
+postures × ``--directions`` force directions, the Cramér–Rao bound of the contact point (per
+sample and over a ``--hold``) and our estimator's predicted error (``estimator.bound_maps``):
+where a contact can be localized and where not (the bound diverges as the force turns along the
+link, where the estimator refuses); in the JSON under ``bounds`` and in the ``--png`` picture.
 """
 
 from __future__ import annotations
