@@ -132,10 +132,20 @@ def _check(robot: Robot, q_joint, link, alpha, force_N):
     return q_joint, link, alpha, force
 
 
-def _localize(robot, method, q, r, link, ambiguity_tol=1e-3):
+def _fit_weights(noise: SensorNoise, n_links: int, method: str):
+    """The estimator's fit weights: the inverse of the residual's white-noise variance per row
+    (estimator.pipeline whitens by its noise covariance R; white sensor noise makes R diagonal,
+    (f σ)²), or None (unweighted) where a σ is zero or for the paper method."""
+    sig_n, _ = noise.per_row(n_links)
+    if method != "dynamic" or not np.all(sig_n > 0):
+        return None
+    return 1.0 / (noise.filter_factor(method) * sig_n) ** 2
+
+
+def _localize(robot, method, q, r, link, ambiguity_tol=1e-3, weights=None):
     """(α, F) from residual-form readings r = G − τ_meas (rows [x, z, θ, q…])."""
     if method == "dynamic":
-        out = loc.localize_dynamic(robot, q, r, ambiguity_tol=ambiguity_tol)
+        out = loc.localize_dynamic(robot, q, r, ambiguity_tol=ambiguity_tol, row_weights=weights)
     else:
         G = dyn.gravity_vector(robot.with_base(True), q)
         out = loc.localize_paper(robot, q, np.zeros_like(q), G - r, link, bias=G)
@@ -186,7 +196,7 @@ def first_order(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise,
     eye = np.eye(n) * step
     r_pert = np.concatenate([r_true[:, None, :] + eye, r_true[:, None, :] - eye], axis=1)   # (B, 2n, n)
     a_out, f_out = _localize(robot, method, np.repeat(q, 2 * n, axis=0), r_pert.reshape(-1, n),
-                             np.repeat(link, 2 * n))
+                             np.repeat(link, 2 * n), weights=_fit_weights(noise, robot.n_links, method))
     y = np.concatenate([a_out[:, None], f_out], axis=1).reshape(B, 2 * n, 3)
     jac = (y[:, :n] - y[:, n:]) / (2 * step)                        # (B, n, 3): ∂(α, Fx, Fz)/∂r_k
     cov = np.einsum("bki,bkl,blj->bij", jac, cov_r, jac)
@@ -218,8 +228,11 @@ def monte_carlo(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise,
     if Ym is not None:                            # r = Jᵀ F + Y δθ − e, δθ = S z per draw
         e = e - np.einsum("bnr,bdr->bdn", Ym, rng.standard_normal((B, draws, Ym.shape[2])))
     r = (r_true[:, None, :] - e).reshape(-1, n)
+    weights = _fit_weights(noise, robot.n_links, method)
+    tol = noise.ambiguity_tol(robot.n_links, method) if weights is None else \
+        AMBIGUITY_N_SIGMA * np.sqrt(robot.n_links + 3)          # whitened cost: noise norm √n
     a_out, f_out = _localize(robot, method, np.repeat(q, draws, axis=0), r, np.repeat(link, draws),
-                             noise.ambiguity_tol(robot.n_links, method))
+                             tol, weights)
     a_err = a_out.reshape(B, draws) - alpha[:, None]
     f_err = np.hypot(*(f_out.reshape(B, draws, 2) - force[:, None, :]).transpose(2, 0, 1))
     length = _link_length(robot, q, link)

@@ -689,7 +689,27 @@ def run_error_map(scene, inp):
             "monte_carlo_over_first_order_median": float(np.median(ratio)) if pos.size else None,
         }
         out["maps"][method] = np.where(usable, mc.position_rms_m, np.nan)
+    out["bounds"] = bound_maps(robot, postures, pr, sigma_tau)
     return out
+
+
+def bound_maps(robot, postures, pr, sigma_tau) -> dict:
+    """The Cramér–Rao bound and our estimator's predicted error over the postures × force
+    directions (estimator.bound_maps), the scene's direction first; {} with a reason when a zero
+    σ leaves nothing to whiten."""
+    from estimator.bound_maps import localization_maps
+    from estimator.noise import NoiseModel
+
+    if not (sigma_tau > 0 and all(v > 0 for v in pr.ft_noise)):
+        return {"reason": "a zero sensor σ: the residual cannot be whitened, no bound"}
+    dirs = pr.direction_rad + 2 * math.pi * np.arange(pr.directions) / pr.directions
+    dirs = (dirs + math.pi) % (2 * math.pi) - math.pi
+    noise = NoiseModel(torque_sigma_Nm=[sigma_tau], ft_sigma=list(pr.ft_noise))
+    m = localization_maps(robot, postures, pr.link, pr.alpha, pr.magnitude_N, dirs, noise,
+                          pr.gain_per_s, 1.0 / pr.sample_rate_Hz, pr.hold_s,
+                          draws=min(pr.draws, 200), seed=pr.seed)
+    m["directions_rad"] = dirs
+    return m
 
 
 def run_report(scene, inp):

@@ -104,8 +104,8 @@ class PredictionSpec:
     """A posture-grid localization-error prediction (what `propagate` asks): contact (link, α),
     force (magnitude, direction from +x), ``grid`` postures per joint over [0, π], Monte Carlo
     ``draws`` and ``seed``, sample rate, observer gain, FT noise σ (Fx, Fz, My); an optional
-    given joint-torque σ (else the sensor chain's) and gain error (else the calibration's), and the
-    robot's model uncertainty."""
+    given joint-torque σ (else the sensor chain's) and gain error (else the calibration's), the
+    robot's model uncertainty; the bound maps' hold time and number of force directions."""
 
     link: int
     alpha: float
@@ -121,6 +121,8 @@ class PredictionSpec:
     gain_error: float | None = None
     model_uncertainty: float | None = None   # relative 1σ of the inertial data (0: none; None: the
                                              # robot file's identification or [model_uncertainty])
+    hold_s: float = 0.5                  # the episode bound's hold time (estimator.bound_maps)
+    directions: int = 24                 # force directions of the bound maps
 
 
 @dataclass(frozen=True)

@@ -281,6 +281,11 @@ def run(args) -> int:
         print(f"  contact {iv['t_start_s']:.4f}-{iv['t_end_s']:.4f} s: link {iv['link']}, "
               f"alpha {pm('alpha', '.3f')}, F = ({pm('Fx_N', '.3f')}, {pm('Fz_N', '.3f')}) N, "
               f"p = ({pm('px_m', '.4f')}, {pm('pz_m', '.4f')}) m")
+        if iv.get("error_over_bound") is not None:          # the episode estimate and its bounds
+            ps = iv.get("position_bound_per_sample_m")
+            print(f"    along the link ± {iv['position_m_error_estimate'] * 1e3:.3f} mm over "
+                  f"{iv['episode_samples']} samples; Cramér–Rao bound {iv['position_bound_m'] * 1e3:.3f} mm "
+                  f"({iv['error_over_bound']:.2f}×)" + (f", per sample {ps * 1e3:.3f} mm" if ps else ""))
     if args.out is not None:
         print(f"wrote {args.out}")
     return 0
