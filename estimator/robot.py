@@ -50,6 +50,37 @@ class Robot:
         return replace(self, floating=floating)
 
 
+def _physical_ranges():
+    """The physical range of each Robot field, with its unit (userio.fields.Range), keyed by the
+    field and naming the TOML key: checked once a description is read (``check_physical``)."""
+    from userio.fields import Range
+
+    return {
+        "lengths_m": ("link[{i}].length_m", Range(1e-3, 10.0, "m", low="µm? a link is longer than 1 mm",
+                                                  high="mm typed as m?")),
+        "masses_kg": ("link[{i}].mass_kg", Range(1e-4, 1e3, "kg", low="below 0.1 g", high="g typed as kg?")),
+        "inertias_kgm2": ("link[{i}].inertia_kgm2", Range(1e-10, 1e3, "kg·m²", high="g·mm² or kg·cm² mix-up?")),
+        "base_mass_kg": ("base_body.mass_kg", Range(1e-4, 1e4, "kg", high="g typed as kg?")),
+        "base_inertia_kgm2": ("base_body.inertia_kgm2", Range(1e-10, 1e4, "kg·m²")),
+        "gravity_m_per_s2": ("gravity_m_per_s2", Range(1.0, 30.0, "m/s²", low="with g ≈ 0 nothing "
+                                                       "weighs on the sensors the estimator reads "
+                                                       "(the Moon's is 1.6)", high="mm/s² typed as m/s²?")),
+        "base_stiffness": ("base_mount.stiffness", Range(0.0, 1e12, "N/m or N·m/rad")),
+        "base_damping": ("base_mount.damping", Range(0.0, 1e9, "N·s/m or N·m·s/rad")),
+    }
+
+
+def check_physical(robot: Robot, source: str = "robot") -> Robot:
+    """Every field of ``robot`` inside its physical range (InputError naming file and key)."""
+    for name, (key, rng) in _physical_ranges().items():
+        values = np.atleast_1d(np.asarray(getattr(robot, name), float))
+        for i, v in enumerate(values, start=1):
+            why = rng.problem(float(v))
+            if why:
+                raise InputError(f"{source}: {key.format(i=i)}: {why}")
+    return robot
+
+
 def _number(table: dict, key: str, where: str, *, positive=False, nonneg=False) -> float:
     if key not in table:
         raise InputError(f"{where}: missing field '{key}'")
@@ -132,7 +163,7 @@ def robot_from_dict(data: dict, source: str = "robot") -> Robot:
     if "friction_coefficient" in data and _number(data, "friction_coefficient", source) > 10:
         raise InputError(f"{source}.friction_coefficient: must lie in [0, 10], "
                          f"got {data['friction_coefficient']}")
-    return Robot(
+    return check_physical(Robot(
         lengths_m=lengths, com_m=coms, masses_kg=masses, inertias_kgm2=inertias,
         base_mass_kg=_number(body, "mass_kg", f"{source}: base_body", positive=True),
         base_inertia_kgm2=_number(body, "inertia_kgm2", f"{source}: base_body", positive=True),
@@ -144,7 +175,7 @@ def robot_from_dict(data: dict, source: str = "robot") -> Robot:
         friction_coefficient=_number(data, "friction_coefficient", source, nonneg=True)
         if "friction_coefficient" in data else 0.3,
         name=_name(data, source),
-    )
+    ), source)
 
 
 def _name(data: dict, source: str) -> str:

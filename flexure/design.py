@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from flexure.errors import InputError
+from userio.fields import Range
 from userio.files import read_toml
 from flexure.gauges import Gauge
 from flexure.geometry import SpokeDisc
@@ -37,6 +38,32 @@ MATERIAL_PRESETS = {"6061-T6": dict(E_Pa=68.9e9, nu=0.33, yield_Pa=276e6, name="
                     "17-4PH-H900": dict(E_Pa=196e9, nu=0.272, yield_Pa=1170e6, name="steel 17-4PH H900")}
 SIZES = ("coarse", "medium", "fine")
 TABLES = {"name", "description", "geometry", "material", "gauges", "loads", "bridge", "mesh"}
+
+# physical ranges of a design's fields, in the file's units (userio.fields.Range)
+LENGTH_MM = Range(0.01, 5000.0, "mm", low="below 10 µm: m or µm typed as mm?",
+                  high="a flexure over 5 m: µm typed as mm?")
+FIELD_RANGES = {
+    "geometry.spokes": Range(2, 360, "spokes"), "geometry.hub_bolts": Range(0, 360, "holes"),
+    "geometry.rim_bolts": Range(0, 360, "holes"), "geometry.phase_deg": Range(-360.0, 360.0, "deg"),
+    "material.E_GPa": Range(0.01, 1500.0, "GPa", low="MPa or kPa? (E is in GPa: aluminium 68.9, "
+                            "steel 200)", high="E given in Pa or MPa? the key is E_GPa (aluminium "
+                            "68.9, steel 200)"),
+    "material.yield_MPa": Range(1.0, 1e5, "MPa", high="yield given in Pa? the key is yield_MPa"),
+    "material.nu": Range(-0.99, 0.49999, "", high="ν ≥ 0.5 is not an elastic solid"),
+    "gauges.gauge_factor": Range(0.1, 1000.0, ""), "gauges.resistance_ohm": Range(1.0, 1e7, "Ω"),
+    "loads.rated_torque_Nm": Range(1e-6, 1e6, "N·m", lo_open=True, high="N·mm typed as N·m?"),
+}
+NEAR_INCOMPRESSIBLE_NU = 0.49         # from here linear tetrahedra lock and CG slows down
+MIN_ELEMENTS_ACROSS = 2               # elements across the thinnest wall of a mesh
+
+
+def _field_range(key: str, value, where: str):
+    rng = FIELD_RANGES.get(key) or (LENGTH_MM if key.endswith("_mm") else None)
+    if rng is not None:
+        why = rng.problem(float(value))
+        if why:
+            raise InputError(f"{where}: {key}: {why}")
+    return value
 
 
 @dataclass
@@ -146,9 +173,14 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
         for key, (fld, scale) in DISC_KEYS.items():
             if key in geo:
                 if scale is None and fld in ("spokes", "hub_bolts", "rim_bolts"):
-                    kw[fld] = _get(geo, key, w, int)
+                    kw[fld] = _field_range(f"geometry.{key}", _get(geo, key, w, int), f)
                 else:
-                    kw[fld] = _get(geo, key, w) * (scale or 1.0)
+                    value = _get(geo, key, w)
+                    if key.endswith("_mm") and value != 0:       # 0: an optional feature left out
+                        _field_range(f"geometry.{key}", value, f)
+                    elif key in FIELD_RANGES or f"geometry.{key}" in FIELD_RANGES:
+                        _field_range(f"geometry.{key}", value, f)
+                    kw[fld] = value * (scale or 1.0)
         disc = SpokeDisc(**kw)
         try:
             disc.check(where=w)
@@ -179,11 +211,13 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
     from flexure.material import Material
     base = dict(MATERIAL_PRESETS[preset])
     if "E_GPa" in mat:
-        base["E_Pa"] = _get(mat, "E_GPa", w) * 1e9
+        base["E_Pa"] = _field_range("material.E_GPa", _get(mat, "E_GPa", w), f) * 1e9
     if "nu" in mat:
         base["nu"] = _get(mat, "nu", w)
+        if -1 < base["nu"] < 0.5:
+            _field_range("material.nu", base["nu"], f)
     if "yield_MPa" in mat:
-        base["yield_Pa"] = _get(mat, "yield_MPa", w) * 1e6
+        base["yield_Pa"] = _field_range("material.yield_MPa", _get(mat, "yield_MPa", w), f) * 1e6
     if "name" in mat:
         base["name"] = _get(mat, "name", w, str)
     if not base["E_Pa"] > 0:
@@ -208,9 +242,13 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
     gf = _get(gt, "gauge_factor", w, float, 2.0)
     if gf <= 0:
         raise InputError(f"{w}.gauge_factor: must be > 0")
+    _field_range("gauges.gauge_factor", gf, f)
     r_ohm = _get(gt, "resistance_ohm", w, float, 1000.0)
     if r_ohm <= 0:
         raise InputError(f"{w}.resistance_ohm: must be > 0")
+    _field_range("gauges.resistance_ohm", r_ohm, f)
+    for key, v in (("grid_length_mm", L * 1e3), ("grid_width_mm", Wd * 1e3)):
+        _field_range(f"gauges.{key}", v, f)
     layout = _get(gt, "layout", w, str, "shear_45" if kind == "spoke_disc" else "explicit")
     if layout == "shear_45":
         if disc is None:
@@ -252,6 +290,7 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
     rated = _get(ld, "rated_torque_Nm", w, float, 2.0)
     if rated <= 0:
         raise InputError(f"{w}.rated_torque_Nm: must be > 0")
+    _field_range("loads.rated_torque_Nm", rated, f)
     fixed = _get(ld, "fixed", w, str, ("rim_bolts" if disc is not None and disc.rim_bolts else
                                         "rim_outer" if disc is not None else "radius"))
     if fixed not in ("rim_bolts", "rim_outer", "radius"):

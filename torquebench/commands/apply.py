@@ -25,6 +25,18 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
+    from torquebench.outputs import Outputs
+
+    plan = Outputs(force=args.force)
+    plan.input("calibration", args.calibration)
+    plan.input("readings", args.readings)
+    plan.input("--data", args.data)
+    plan.file("--out", args.out)
+    with plan.active():                         # checked now; the write obeys it
+        return _apply(args, plan)
+
+
+def _apply(args, plan) -> int:
     import io
 
     import numpy as np
@@ -33,15 +45,7 @@ def run(args) -> int:
     import calibration
     from calibration.errors import InputError
     from torquebench.io import print_json, write_text_atomic
-    from torquebench.outputs import prepare_file
 
-    from userio.files import plan_outputs
-
-    if args.out is not None:
-        prepare_file(args.out, "--out", force=args.force,
-                     inputs=(args.calibration, args.readings, args.data))   # mkdir, --force
-        plan_outputs({"calibration": args.calibration, "readings": args.readings, "--data": args.data},
-                     {"--out": args.out})
     model = calibration.load(args.calibration, data_path=args.data)
     try:
         with open(args.readings, encoding="utf-8", errors="replace") as fh:
@@ -86,7 +90,7 @@ def run(args) -> int:
     buf = io.StringIO()
     out.to_csv(buf, index=False, float_format="%.9g")
     if args.out is not None:
-        write_text_atomic(args.out, buf.getvalue(), overwrite=True)
+        write_text_atomic(args.out, buf.getvalue(), overwrite=args.force)
     if args.json:
         res = {"n": int(vals.size), "sensor_id": model.sensor_id, "model": model.model,
                "out_of_range": n_nan, "saturated_adc": n_sat, "outside_calibrated_range": n_range,
