@@ -83,7 +83,7 @@ def build_fixture(root: Path) -> Path:
     (fx / "existing.png").write_bytes(b"\x89PNG user picture")
     # a tiny end-to-end scene (no FEM, no report) for run/compare/sweep
     e2e = (REPO / "scenes" / "paper_floating_link2.toml").read_text()
-    (fx / "e2e.toml").write_text(e2e.replace("duration_s = 1.5", "duration_s = 0.4"))
+    (fx / "e2e.toml").write_text(e2e.replace("duration_s = 1.5", "duration_s = 0.8"))
     del np, pd
     return fx
 
@@ -243,7 +243,8 @@ def gen_paths(rng) -> list[Case]:
     # acquire: an existing .part (kept by an interrupted run) and a .part that is a symlink
     cases.append(Case("paths", "acquire with a kept .part", ["acquire", "--port", "loop://", "--out", "cap.bin",
                                                              "--duration-s", "0.3"],
-                      lambda w: (w / "cap.bin.part").write_bytes(b"\xa5\x5a earlier capture"), "any"))
+                      lambda w: (w / "cap.bin.part").write_bytes(b"\xa5\x5a earlier capture"), "any",
+                      outputs=("cap.bin.part",)))      # moved into cap.bin with the new bytes appended
     cases.append(Case("paths", "acquire .part symlink onto notes", ["acquire", "--port", "loop://", "--out", "cap.bin",
                                                                     "--duration-s", "0.3"],
                       lambda w: os.symlink("notes.md", w / "cap.bin.part"), "any"))
@@ -674,7 +675,9 @@ def gen_valid(rng) -> list[Case]:
     # repeated run into the same --out-dir: the demo's own files are its to replace
     cases.append(Case("valid", "demo twice into one --out-dir", ["demo", "--out-dir", "d2"],
                       lambda w: subprocess.run([PY, "-m", "torquebench", "demo", "--out-dir", "d2"], cwd=w,
-                                               capture_output=True, env=_env(w)), "ok"))
+                                               capture_output=True, env=_env(w)), "ok",
+                      outputs=tuple(f"d2/{n}" for n in ("log.csv", "log.truth.csv", "estimate_dynamic.csv",
+                                                        "estimate_paper.csv", ".torquebench-outputs.json"))))
     return cases
 
 
@@ -799,14 +802,13 @@ def changes(before, after, case, work, croot) -> list[str]:
     """Files that existed and changed/vanished (not allowed), and files outside the work dir."""
     wrel = str(work.relative_to(croot))
     bad = []
-    named = {os.path.normpath(os.path.join(wrel, a)) for a in case.argv if isinstance(a, str)}
+    allowed = {os.path.normpath(os.path.join(wrel, a)) for a in case.outputs}
     for rel, was in before.items():
         now = after.get(rel)
         if was is None or was[0] == "d":
             continue
         if now is None or now[:2] != was[:2]:
-            if case.force and rel in named and now is not None and now[0] == "f":
-                # a named output replaced with --force: allowed unless it is also read by the command
+            if rel in allowed:          # a file the case names as replaceable (with --force)
                 continue
             bad.append(f"{'removed' if now is None else 'changed'}: {rel}")
     for rel in after:

@@ -375,3 +375,83 @@ def shear_45_layout(disc: SpokeDisc, length_m: float, width_m: float, position: 
         gauges.append(Gauge(tuple(r * r_hat + np.array([0, 0, disc.thickness])), tuple(axis), (0.0, 0.0, 1.0),
                             length_m, width_m, arm, f"g{arm}"))
     return gauges
+
+
+def thinnest_wall(design: Design) -> tuple[float, str] | None:
+    """(thickness in m, what it is) of the thinnest wall of a parametric disc: the disc itself,
+    a spoke, the hub and rim rings, the ligaments beside and between bolt holes (None for an
+    STL/STEP part, whose walls are not declared)."""
+    d = design.disc
+    if d is None:
+        return None
+    walls = [(d.thickness, "geometry.thickness_mm"), (d.spoke_width, "geometry.spoke_width_mm"),
+             (d.hub_radius - d.bore_radius, "the hub ring (hub_radius_mm − bore_radius_mm)"),
+             (d.outer_radius - d.rim_inner_radius, "the rim ring (outer_radius_mm − rim_inner_radius_mm)")]
+    for prefix, rin, rout in (("hub", d.bore_radius, d.hub_radius), ("rim", d.rim_inner_radius, d.outer_radius)):
+        n = getattr(d, f"{prefix}_bolts")
+        if n:
+            rc, dia = getattr(d, f"{prefix}_bolt_circle_radius"), getattr(d, f"{prefix}_bolt_diameter")
+            walls += [(rc - dia / 2 - rin, f"the {prefix} bolt holes' inner ligament"),
+                      (rout - rc - dia / 2, f"the {prefix} bolt holes' outer ligament"),
+                      (2 * math.pi * rc / n - dia, f"the ligament between {prefix} bolt holes")]
+    return min(walls)
+
+
+def preflight(design: Design, size: str | None = None, order: int | None = None,
+              max_elements: float | None = None, levels: int = 3) -> dict:
+    """Cost and soundness before any meshing, for ``levels`` mesh levels (1: the answer's; 2: a
+    sweep row's h and h·√2; 3: the error estimate's h·√2, h, h/√2):
+
+    - tetrahedra per level from the mesh size field, whose element size is bounded by the part's
+      own thickness (flexure.meshing.estimate_elements); a level above ``max_elements`` is refused
+      now, naming the thinnest wall that sets the size and the knob to turn — not after the
+      coarser levels ran;
+    - near-incompressible material: P1 from ν ≥ 0.49 locks (its numbers would be withheld) and P2
+      from ν ≥ 0.49999 is beyond its measured accuracy: refused; P2 from 0.49 warned (the solver
+      needs more iterations).
+    Returns {"elements_estimate" (at the answer's level), "levels", "warnings"}."""
+    from flexure.meshing import MAX_ELEMENTS, SIZES, estimate_elements, size_field
+    from flexure.solve import NU_LOCKING
+
+    size = size or design.size
+    order = order or design.order
+    cap = max_elements or MAX_ELEMENTS
+    warnings: list[str] = []
+    nu = design.material.nu
+    where = f"{design.path}: material.nu"
+    if nu >= NU_LOCKING[order]:
+        raise InputError(f"{where}: ν = {nu:g} is near-incompressible for P{order} tetrahedra (from "
+                         f"{NU_LOCKING[order]:g} they lock or leave their measured accuracy: the numbers "
+                         "would be withheld after a long solve)" + ("; use order 2 (P2)" if order == 1 else ""))
+    if nu >= NEAR_INCOMPRESSIBLE_NU:
+        warnings.append(f"material.nu = {nu:g} is near-incompressible: the solve needs more iterations "
+                        "and its result carries a condition warning if it is ill-posed")
+    out = {"elements_estimate": None, "levels": [], "warnings": warnings}
+    if design.disc is None or size not in SIZES:
+        return out
+    from flexure.geometry import profile
+
+    d = design.disc
+    poly = profile(d, 3)
+    V = poly.area * d.thickness
+    A = 2 * poly.area + (poly.exterior.length + sum(r.length for r in poly.interiors)) * d.thickness
+    centres = np.array([g.centre_m for g in design.gauges])
+    extent = 0.5 * max(g.length_m + g.width_m for g in design.gauges) / math.sqrt(2) * 1.3
+    gw = min(min(g.width_m, g.length_m) for g in design.gauges)
+    factors = {1: (1.0,), 2: (2 ** 0.5, 1.0), 3: (2 ** 0.5, 1.0, 2 ** -0.5)}.get(levels, (1.0,))
+    for f in factors:
+        field = size_field(size, d.thickness, centres, extent, gw, f)
+        n = estimate_elements(field, V, 2 * V / A)
+        out["levels"].append({"h_factor": f, "elements_estimate": n})
+        if f == 1.0:
+            out["elements_estimate"] = n
+        if not np.isfinite(n) or n > cap:
+            wall, what = thinnest_wall(design)
+            lvl = "" if f == 1.0 else f" level h × {f:.3g}{' (the finest)' if f < 1 else ''}"
+            raise InputError(
+                f"{design.path}: the mesh{lvl} would have ~{n:.3g} tetrahedra, above --max-elements "
+                f"{cap:.3g}: the thinnest wall, {what} = {wall * 1e3:.3g} mm, bounds the element size "
+                f"(h ≤ {min(field.h_far, 2 * V / A) * 1e3:.3g} mm over {V * 1e9:.4g} mm³); refused before "
+                "meshing. Thicken the wall, use --single-level"
+                + (" or --size coarse" if size != "coarse" else "") + ", or raise --max-elements")
+    return out

@@ -89,11 +89,27 @@ def _quiet_broken_pipe() -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run one command; Ctrl-C anywhere (parsing, imports, the work, the cleanup) is exit 130."""
+    """Run one command; Ctrl-C anywhere (parsing, imports, the work, the cleanup) is exit 130.
+
+    Called as the program (``argv`` None), Ctrl-C is ignored once the command has returned: the
+    interpreter's shutdown (joining worker threads, atexit handlers) runs with the default SIGINT
+    action, which would end the process by the signal with no message."""
     try:
-        return _main(argv)
+        code = _main(argv)
     except KeyboardInterrupt:
-        return _interrupted("torquebench")
+        code = _interrupted("torquebench")
+    if argv is None:
+        _ignore_sigint()
+    return code
+
+
+def _ignore_sigint() -> None:
+    import signal
+
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except (ValueError, OSError):          # not the main thread
+        pass
 
 
 def _interrupted(where: str, note: str = "") -> int:

@@ -411,6 +411,7 @@ def _static(f: _Fields, data: dict, robot: Robot, name: str, kind: str) -> Stati
 OUTPUTS = ("sensitivity", "noise_budget", "flexure", "calibration", "estimates",
            "localization_error", "predicted_error", "report")
 SESSION_KEYS = {"masses_g", "lever_arm_m", "repeats", "n_avg", "seed"}
+MAX_SESSION_SAMPLES = 2e7            # ADC codes a simulated calibration session draws (160 MB)
 
 
 def _file(f: _Fields, table: dict, key: str, where: str, shipped: str) -> Path:
@@ -447,11 +448,23 @@ def _chain_spec(f: _Fields, data: dict, kind: str) -> ChainSpec:
                           default=[10, 20, 50, 100, 200, 300, 500, 700, 850, 1000])
         if masses.size < 3:
             raise f.err("calibration.masses_g", f"need at least 3 load levels, got {masses.size}")
+        from calibration.session import LEVER_ARM_RANGE_M, MASS_RANGE_G
+
+        for m_g in masses:
+            if MASS_RANGE_G.problem(float(m_g)):
+                raise f.err("calibration.masses_g", MASS_RANGE_G.problem(float(m_g)))
         session = {"masses_g": masses.tolist(),
                    "lever_arm_m": f.number(ca, "lever_arm_m", "calibration", 0.205, positive=True),
-                   "repeats": f.integer(ca, "repeats", "calibration", 3, lo=1),
-                   "n_avg": f.integer(ca, "n_avg", "calibration", 256, lo=1),
+                   "repeats": f.integer(ca, "repeats", "calibration", 3, lo=1, hi=10_000),
+                   "n_avg": f.integer(ca, "n_avg", "calibration", 256, lo=1, hi=10_000_000),
                    "seed": f.integer(ca, "seed", "calibration", 0, lo=0)}
+        if LEVER_ARM_RANGE_M.problem(session["lever_arm_m"]):
+            raise f.err("calibration.lever_arm_m", LEVER_ARM_RANGE_M.problem(session["lever_arm_m"]))
+        n = len(masses) * session["repeats"] * session["n_avg"]
+        if n > MAX_SESSION_SAMPLES:          # the simulated session holds every ADC code at once
+            raise f.err("calibration.n_avg", f"{len(masses)} masses × {session['repeats']} repeats × "
+                        f"n_avg {session['n_avg']} = {n:.3g} ADC samples ({8 * n / 2**30:.3g} GiB) to "
+                        f"simulate, above {MAX_SESSION_SAMPLES:.0e}; lower n_avg or repeats")
     so = f.table(data, "source")
     f.known(so, {"log", "counts_columns", "reading_unit"}, "source")
     log_file = _file(f, so, "log", "source", "samples") if "log" in so else None

@@ -130,8 +130,15 @@ def run_sweep(scene_path, vary, outputs=None, executor="processes:2", cache_dir=
     if workers is not None:
         from concurrent.futures import ProcessPoolExecutor
 
-        with ProcessPoolExecutor(workers) as pool:
+        pool = ProcessPoolExecutor(workers, initializer=_ignore_sigint)
+        try:
             done = list(pool.map(run_point, *todo)) if rest else []
+        except BaseException:          # Ctrl-C (only this process sees it): stop the workers now
+            for proc in list((getattr(pool, "_processes", None) or {}).values()):
+                proc.terminate()
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown()
     else:
         from distributed import Client
 
@@ -148,6 +155,13 @@ def run_sweep(scene_path, vary, outputs=None, executor="processes:2", cache_dir=
 
 
 MAX_POINTS = 100_000
+
+
+def _ignore_sigint() -> None:
+    """A worker leaves Ctrl-C to the parent (which stops it): no traceback from every worker."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _say_cost(n_points: int, first_s: float, workers: int | None) -> None:

@@ -114,6 +114,13 @@ def check_ranges(obj, prefix: str = "", keys: dict | None = None) -> None:
             rng.check(value, name)
 
 
+def _interval(lo, hi, positive: bool = False) -> str:
+    """'[lo, hi]', '(0, hi]', '[lo, ∞)' for a message."""
+    left = f"[{lo:g}" if lo is not None else ("(0" if positive else "(−∞")
+    right = f"{hi:g}]" if hi is not None else "∞)"
+    return f"{left}, {right}"
+
+
 def _dotted(where: str, key: str) -> str:
     return f"{where}.{key}" if where else key
 
@@ -165,7 +172,7 @@ class Fields:
         if nonneg and v < 0:
             raise self.err(name, f"must be ≥ 0, got {v}")
         if lo is not None and v < lo or hi is not None and v > hi:
-            raise self.err(name, f"must lie in [{lo}, {hi}], got {v}")
+            raise self.err(name, f"must lie in {_interval(lo, hi, positive)}, got {v:g}")
         return float(v)
 
     def integer(self, table, key, where, default=None, *, lo=None, hi=None) -> int:
@@ -178,7 +185,7 @@ class Fields:
         if isinstance(v, bool) or not isinstance(v, int):
             raise self.err(name, f"expected an integer, got {v!r}")
         if lo is not None and v < lo or hi is not None and v > hi:
-            raise self.err(name, f"must lie in [{lo}, {hi}], got {v}")
+            raise self.err(name, f"must lie in {_interval(lo, hi)}, got {v}")
         return v
 
     def string(self, table, key, where, default=None) -> str:

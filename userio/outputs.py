@@ -75,6 +75,8 @@ def kind_of(path: Path) -> str | None:
         st = os.lstat(path)
     except FileNotFoundError:
         return None
+    except NotADirectoryError:
+        raise InputError(f"{path}: a parent of it is not a directory") from None
     except OSError as exc:
         raise InputError(f"{path}: cannot inspect it: {exc.strerror}") from None
     m = st.st_mode
