@@ -14,6 +14,7 @@ Every error is a torquebench.errors.InputError naming the file and the field.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -579,9 +580,7 @@ def set_key(data: dict, key: str, value, path) -> None:
 def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
     """Read and validate a scene file (``overrides``: dotted keys set before validation)."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: scene file not found")
-    data = read_toml(path)
+    data = read_toml(path)                         # a regular file: not found, a directory or a device say so
     for key, value in (overrides or {}).items():
         set_key(data, key, value, path)
     f = _Fields(path)
@@ -612,8 +611,12 @@ def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
 
 def scene_path(name: str) -> Path:
     """A shipped scene by name (``paper_floating_link1``) or a path."""
+    from userio.files import check_input
+
     p = Path(name)
-    if p.suffix == ".toml" and p.is_file():
+    if os.path.lexists(p) and (p.suffix == ".toml" or os.sep in str(name) or not p.is_file()):
+        return check_input(p, what="scene TOML")            # a path the user named: what it is
+    if p.is_file():
         return p
     cand = REPO_ROOT / "scenes" / (name if name.endswith(".toml") else f"{name}.toml")
     if not cand.is_file():
