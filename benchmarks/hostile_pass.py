@@ -822,6 +822,9 @@ def classify(rec, case, work) -> str:
     lines = [ln for ln in err.splitlines() if ln.strip()]
     code = rec["exit"]
     if rec["killed"]:
+        # a run the user asked to be long is fine once its estimated cost was shown first
+        if case.expect == "cost" and "estimated" in err.lower() and rec["killed"] == "timeout":
+            return "ok"
         return "runaway"
     if "Traceback (most recent call last)" in err or "internal error" in err or code == 1 or \
             (code is not None and code < 0 and case.expect != "interrupt"):

@@ -105,6 +105,7 @@ def _triple(table: dict, key: str, where: str) -> np.ndarray:
     return arr
 
 
+MAX_LINKS = 64                       # links of one planar chain (a leg has 2–4)
 TOP_KEYS = {"name", "base", "gravity_m_per_s2", "friction_coefficient", "link", "base_body",
             "base_mount"}
 LINK_KEYS = {"length_m", "com_m", "mass_kg", "inertia_kgm2"}
@@ -139,6 +140,9 @@ def robot_from_dict(data: dict, source: str = "robot") -> Robot:
     links = data.get("link")
     if not isinstance(links, list) or not links:
         raise InputError(f"{source}: missing [[link]] tables (at least one link is needed)")
+    if len(links) > MAX_LINKS:
+        raise InputError(f"{source}: {len(links)} [[link]] tables, above the {MAX_LINKS} links of a "
+                         "planar chain this estimator handles")
     rows = []
     for i, link in enumerate(links, start=1):
         where = f"{source}: link[{i}]"

@@ -53,6 +53,7 @@ FIELD_RANGES = {
     "gauges.gauge_factor": Range(0.1, 1000.0, ""), "gauges.resistance_ohm": Range(1.0, 1e7, "Ω"),
     "loads.rated_torque_Nm": Range(1e-6, 1e6, "N·m", lo_open=True, high="N·mm typed as N·m?"),
 }
+MAX_CAD_BYTES = 512 << 20            # an STL/STEP flexure part (a fine STL of one part is ~10–50 MB)
 NEAR_INCOMPRESSIBLE_NU = 0.49         # from here linear tetrahedra lock and CG slows down
 MIN_ELEMENTS_ACROSS = 2               # elements across the thinnest wall of a mesh
 
@@ -131,9 +132,9 @@ def _unknown(table: dict, allowed, where: str):
 
 def load_design(path: str | Path, overrides: dict | None = None) -> Design:
     """Read a design TOML; ``overrides`` {"spoke_width_mm": 5.0, "mesh.size": "fine", ...} apply on top."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: design file not found")
+    from userio.files import check_input
+
+    path = check_input(path, what="design file")    # not found, a directory or a device: say which
     return design_from_dict(read_toml(path), path, overrides)
 
 
@@ -192,6 +193,8 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
     elif kind in ("stl", "step"):
         _unknown(geo, {"kind", "file", "unit_mm"}, w)
         file_path = (path.parent / _get(geo, "file", w, str, required=True))
+        from userio.files import check_input
+        check_input(file_path, f"{w}.file", max_bytes=MAX_CAD_BYTES, what=f"{kind.upper()} file")
         if kind == "step" and "unit_mm" in geo:
             raise InputError(f"{w}.unit_mm: a STEP file declares its own length unit (OpenCASCADE reads it "
                              "and converts to mm); unit_mm is for STL files, which have none")
