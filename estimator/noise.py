@@ -22,15 +22,27 @@ number of alarm onsets per second is at most α/Δt.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from pathlib import Path
 
 import numpy as np
 
 from estimator.errors import InputError
+from userio.fields import Range, check_ranges
+
+# physical ranges of the sensor noise (1σ per sample), declared once (userio.fields.Range)
+TORQUE_SIGMA_RANGE = Range(1e-9, 1e4, "N·m", low="below any real sensor's noise: the residual "
+                           "covariance would be singular", high="N·mm typed as N·m?")
+FT_SIGMA_RANGE = Range(1e-9, 1e5, "N or N·m", low="below any real FT sensor's noise: the residual "
+                       "covariance would be singular", high="mN typed as N?")
+VELOCITY_SIGMA_RANGE = Range(0.0, 1e3, "rad/s", high="deg/s typed as rad/s?")
+ENCODER_COUNTS_RANGE = Range(4, 2.0 ** 40, "counts/rev", zero_ok=True,
+                             low="an encoder has at least 4 counts per revolution (0: no quantization)")
 
 DEFAULT_FALSE_ALARMS_PER_S = 1.0 / 3600.0
+QUIET_SEGMENTS = 8          # a quiet window's eighths must agree with each other (6 standard errors)
+QUIET_MAX_OFFSET = 4.0      # and its residual's median sit within this many σ of zero
 
 
 @dataclass(frozen=True)
@@ -38,10 +50,10 @@ class NoiseModel:
     """White sensor noise per sample (1σ): joint torques (N,), FT wrench [Fx N, Fz N, My N·m],
     joint-rate noise and encoder resolution (0 = none)."""
 
-    torque_sigma_Nm: np.ndarray
-    ft_sigma: np.ndarray
-    velocity_sigma_rad_per_s: float = 0.0
-    encoder_counts: int = 0
+    torque_sigma_Nm: np.ndarray = field(metadata={"range": TORQUE_SIGMA_RANGE})
+    ft_sigma: np.ndarray = field(metadata={"range": FT_SIGMA_RANGE})
+    velocity_sigma_rad_per_s: float = field(default=0.0, metadata={"range": VELOCITY_SIGMA_RANGE})
+    encoder_counts: int = field(default=0, metadata={"range": ENCODER_COUNTS_RANGE})
     source: str = "option"
 
     def __post_init__(self):
@@ -54,8 +66,12 @@ class NoiseModel:
             raise InputError(f"{self.source}: FT sigma: needs 3 values [Fx, Fz, My], got {self.ft_sigma.size}")
         if not (np.isfinite(self.velocity_sigma_rad_per_s) and self.velocity_sigma_rad_per_s >= 0):
             raise InputError(f"{self.source}: velocity sigma must be finite and ≥ 0")
-        if int(self.encoder_counts) != self.encoder_counts or self.encoder_counts < 0:
+        if not np.isfinite(self.encoder_counts) or int(self.encoder_counts) != self.encoder_counts \
+                or self.encoder_counts < 0:
             raise InputError(f"{self.source}: encoder counts must be a whole number ≥ 0")
+        check_ranges(self, keys={k: f"{self.source}: {v}" for k, v in (
+            ("torque_sigma_Nm", "torque sigma"), ("ft_sigma", "FT sigma"),
+            ("velocity_sigma_rad_per_s", "velocity sigma"), ("encoder_counts", "encoder counts"))})
 
     def describe(self) -> str:
         return (f"{self.source}: τ σ {np.round(self.torque_sigma_Nm, 6).tolist()} N·m, FT σ "
@@ -122,6 +138,11 @@ def per_sample_rate(value: float, unit: str, dt_s: float, where: str = "--false-
     if not (np.isfinite(alpha) and 0 < alpha < 1):
         raise InputError(f"{where}: the false-alarm rate must be in (0, 1) per sample, got "
                          f"{alpha:g} per sample ({value:g}/{unit} at Δt = {dt_s:g} s)")
+    from estimator.limits import FALSE_ALARM_PER_SAMPLE_RANGE
+
+    why = FALSE_ALARM_PER_SAMPLE_RANGE.problem(alpha)
+    if why:
+        raise InputError(f"{where}: {value:g}/{unit} at Δt = {dt_s:g} s gives {why}")
     return alpha
 
 
@@ -241,6 +262,17 @@ def quiet_covariance(r: np.ndarray, t: np.ndarray, t0: float, t1: float, gain_pe
         raise InputError(f"{where}: the residual changes within {t0:g}–{t1:g} s ({z.max():.0f} "
                          f"standard errors between its first and last quarter): it contains a "
                          f"contact or a drift; mark a stretch without contact")
+    # a contact inside the stretch (not at its ends): any eighth away from the stretch's median
+    k = len(x) // QUIET_SEGMENTS
+    if k >= 4 * tau_c:
+        seg = np.median(x[:k * QUIET_SEGMENTS].reshape(QUIET_SEGMENTS, k, -1), axis=1)
+        zs = np.abs(seg - np.median(x, axis=0)) / (sig * np.sqrt(1.57 * tau_c / k))
+        if np.any(zs > 6):
+            i = int(np.argmax(zs.max(axis=1)))
+            raise InputError(f"{where}: the residual changes within {t0:g}–{t1:g} s (around "
+                             f"{t0 + (i + 0.5) * (t1 - t0) / QUIET_SEGMENTS:.3g} s it sits {zs.max():.0f} "
+                             f"standard errors from the rest): it contains a contact; mark a stretch "
+                             f"without contact")
     a, b = observer.coefficients(K, dt_s, method)
     regular = np.abs(np.diff(tx) - dt_s) <= 0.01 * dt_s
     d = (x[1:] - a * x[:-1]) / b                     # innovations (the drive), (T−1, n)

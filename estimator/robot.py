@@ -146,6 +146,37 @@ class Robot:
         return replace(self, floating=floating)
 
 
+def _physical_ranges():
+    """The physical range of each Robot field, with its unit (userio.fields.Range), keyed by the
+    field and naming the TOML key: checked once a description is read (``check_physical``)."""
+    from userio.fields import Range
+
+    return {
+        "lengths_m": ("link[{i}].length_m", Range(1e-3, 10.0, "m", low="µm? a link is longer than 1 mm",
+                                                  high="mm typed as m?")),
+        "masses_kg": ("link[{i}].mass_kg", Range(1e-4, 1e3, "kg", low="below 0.1 g", high="g typed as kg?")),
+        "inertias_kgm2": ("link[{i}].inertia_kgm2", Range(1e-10, 1e3, "kg·m²", high="g·mm² or kg·cm² mix-up?")),
+        "base_mass_kg": ("base_body.mass_kg", Range(1e-4, 1e4, "kg", high="g typed as kg?")),
+        "base_inertia_kgm2": ("base_body.inertia_kgm2", Range(1e-10, 1e4, "kg·m²")),
+        "gravity_m_per_s2": ("gravity_m_per_s2", Range(1.0, 30.0, "m/s²", low="with g ≈ 0 nothing "
+                                                       "weighs on the sensors the estimator reads "
+                                                       "(the Moon's is 1.6)", high="mm/s² typed as m/s²?")),
+        "base_stiffness": ("base_mount.stiffness", Range(0.0, 1e12, "N/m or N·m/rad")),
+        "base_damping": ("base_mount.damping", Range(0.0, 1e9, "N·s/m or N·m·s/rad")),
+    }
+
+
+def check_physical(robot: Robot, source: str = "robot") -> Robot:
+    """Every field of ``robot`` inside its physical range (InputError naming file and key)."""
+    for name, (key, rng) in _physical_ranges().items():
+        values = np.atleast_1d(np.asarray(getattr(robot, name), float))
+        for i, v in enumerate(values, start=1):
+            why = rng.problem(float(v))
+            if why:
+                raise InputError(f"{source}: {key.format(i=i)}: {why}")
+    return robot
+
+
 def _number(table: dict, key: str, where: str, *, positive=False, nonneg=False) -> float:
     if key not in table:
         raise InputError(f"{where}: missing field '{key}'")
@@ -170,6 +201,7 @@ def _triple(table: dict, key: str, where: str) -> np.ndarray:
     return arr
 
 
+MAX_LINKS = 64                       # links of one planar chain (a leg has 2–4)
 TOP_KEYS = {"name", "base", "gravity_m_per_s2", "friction_coefficient", "link", "base_body",
             "base_mount", "model_uncertainty", "identification"}
 LINK_KEYS = {"length_m", "com_m", "com_perp_m", "mass_kg", "inertia_kgm2"}
@@ -204,6 +236,9 @@ def robot_from_dict(data: dict, source: str = "robot") -> Robot:
     links = data.get("link")
     if not isinstance(links, list) or not links:
         raise InputError(f"{source}: missing [[link]] tables (at least one link is needed)")
+    if len(links) > MAX_LINKS:
+        raise InputError(f"{source}: {len(links)} [[link]] tables, above the {MAX_LINKS} links of a "
+                         "planar chain this estimator handles")
     rows = []
     for i, link in enumerate(links, start=1):
         where = f"{source}: link[{i}]"
@@ -249,7 +284,7 @@ def robot_from_dict(data: dict, source: str = "robot") -> Robot:
         from estimator import inertial
 
         robot = inertial.read_tables(robot, data, source)
-    return robot
+    return check_physical(robot, source)
 
 
 def _name(data: dict, source: str) -> str:

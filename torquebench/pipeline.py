@@ -726,7 +726,7 @@ def run_report(scene, inp):
     written = {}
     for area in areas:
         written[area] = [str(p) for p in importlib.import_module(f"torquebench.reports.{area}").build(out_dir)]
-    summary = out_dir / f"{scene.name}.md"
+    summary = out_dir / summary_name(scene)
     write_text_atomic(summary, scene_summary(scene, inp))
     return {"dir": str(out_dir), "areas": areas, "written": written, "summary": str(summary)}
 
@@ -810,10 +810,20 @@ def _feasible(scene, art: str) -> str | None:
 
 
 def report_dir(scene) -> Path:
-    """Where the scene's reports go: [outputs].dir, else ./out/<scene name> (never the shipped
-    reports/ unless [outputs].regenerate_shipped)."""
+    """Where the scene's reports go: [outputs].dir, else ./out/<scene name as a safe file stem>
+    (never the shipped reports/ unless [outputs].regenerate_shipped)."""
+    from userio.outputs import safe_stem
+
     d = scene.chain.report_dir
-    return Path(d) if d is not None else Path("out") / scene.name
+    return Path(d) if d is not None else Path("out") / safe_stem(scene.name, "scene")
+
+
+def summary_name(scene) -> str:
+    """The scene summary's file name: ``<scene name as a safe file stem>.md`` (a name like
+    "../x" or "notes" never leaves the report directory nor takes another file's name there)."""
+    from userio.outputs import safe_stem
+
+    return f"{safe_stem(scene.name, 'scene')}.md"
 
 
 def report_areas(scene, have: set) -> tuple[list[str], list[tuple[str, str]]]:

@@ -25,6 +25,22 @@ def _positive(text: str) -> float:
     return value
 
 
+def _in_range(rng_name: str):
+    """An argparse type: a finite number inside a Range of estimator.limits (unit in the message)."""
+    import argparse
+
+    def parse(text: str) -> float:
+        from estimator import limits
+
+        value = _positive(text)
+        why = getattr(limits, rng_name).problem(value)
+        if why:
+            raise argparse.ArgumentTypeError(why)
+        return value
+    parse.__name__ = "number"
+    return parse
+
+
 def _count(text: str) -> int:
     import argparse
 
@@ -54,9 +70,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--method", choices=["paper", "dynamic"], default="dynamic",
                         help="localization: 'dynamic' (observer residual, least squares; default) "
                              "or 'paper' (eqs. 6-9, quasi-static)")
-    parser.add_argument("--gain", type=_positive, default=100.0, metavar="K",
+    parser.add_argument("--gain", type=_in_range("GAIN_RANGE"), default=100.0, metavar="K",
                         help="observer gain K in 1/s on every row (default: %(default)s)")
-    parser.add_argument("--threshold", type=_positive, default=None, metavar="EPS",
+    parser.add_argument("--threshold", type=_in_range("THRESHOLD_RANGE"), default=None, metavar="EPS",
                         help="use the paper's rule ||r|| > EPS (default for --method paper, EPS 0.06)")
     parser.add_argument("--false-alarm-rate", default="1/h", metavar="RATE",
                         help="dynamic detector: target false alarms, e.g. 1/h (default), 0.01/s, "
@@ -185,6 +201,21 @@ def _peak_memory_MB() -> float:
 
 
 def run(args) -> int:
+    import time
+
+    from torquebench.outputs import Outputs
+
+    start = time.perf_counter()
+
+    plan = Outputs(force=args.force)
+    plan.input("LOG.csv", args.log, log=True)           # the log and its side files
+    plan.input("--robot", args.robot)
+    plan.file("--out", args.out)
+    with plan.active():                                 # checked now; every write obeys it
+        return _run(args, start)
+
+
+def _run(args, start) -> int:
     import contextlib
     import time
 
@@ -194,19 +225,8 @@ def run(args) -> int:
     from estimator.outframe import BackgroundWriter, FrameWriter
     from estimator.pipeline import open_stream
     from estimator.robot import PAPER_LEG_TOML, load_robot
-    from torquebench.errors import InputError
     from torquebench.io import print_json
 
-    start = time.perf_counter()
-    if args.out is not None:
-        try:
-            same = args.out.resolve() == args.log.resolve()
-        except OSError:
-            same = False
-        if same:
-            raise InputError(f"--out {args.out}: is the input log; refusing to overwrite it")
-    from torquebench.outputs import prepare_file
-    prepare_file(args.out, "--out", force=args.force, inputs=(args.log, args.robot))
     from estimator.spatial.robot import is_spatial_robot_file
     if args.robot is not None and is_spatial_robot_file(args.robot):   # a URDF robot: the 3-D path
         from torquebench.spatial_cli import estimate as estimate_3d
@@ -228,6 +248,10 @@ def run(args) -> int:
     reader = LogReader(args.log, robot, chunk_samples=chunk)
     chunks = iter(reader)
     first = next(chunks)                          # the head: the sampling period is known
+    from estimator.plausibility import check_head, whole_log_contact
+
+    # the head against the robot's dynamics: unit/channel mix-ups refused, oddities warned about
+    found = check_head(robot, first, noise, expected_contact=args.stance_foot)
     stream = open_stream(robot, reader, method=args.method, gain_per_s=args.gain,
                          threshold=args.threshold, debounce=args.debounce,
                          expected_contacts="foot" if args.stance_foot else None, timing=timing,
@@ -262,6 +286,15 @@ def run(args) -> int:
                "chunk_samples": chunk, "peak_memory_MB": _peak_memory_MB()}
     if args.out is not None:
         summary["out"] = str(args.out)
+    found += [w for w in [whole_log_contact(summary, found)] if w]
+    found += list(getattr(reader, "plausibility_warnings", []) or []) + reader.constant_channels()
+    if found:
+        summary["warnings"] = found
+        import warnings
+
+        from estimator.plausibility import PlausibilityWarning
+        for w in found:
+            warnings.warn(w, PlausibilityWarning, stacklevel=2)
     if args.json:
         print_json(summary)
         return 0

@@ -146,16 +146,21 @@ def run(args) -> int:
     from torquebench.io import print_json
 
     robot = load_robot(args.robot) if args.robot else paper_leg()
-    link_text, alpha_text = (args.contact.split(",") + [""])[:2]
+    parts = str(args.contact).split(",")
     try:
-        link, alpha = int(link_text), float(alpha_text)
+        if len(parts) != 2:
+            raise ValueError
+        link, alpha = int(parts[0]), float(parts[1])
     except ValueError:
-        raise InputError(f"--contact: expected LINK,ALPHA (e.g. 2,0.8), got {args.contact!r}") from None
+        raise InputError(f"--contact: expected exactly LINK,ALPHA (two values, e.g. 2,0.8), got "
+                         f"{args.contact!r}") from None
     if not (1 <= link <= robot.n_links and 0.0 <= alpha <= 1.0):
         raise InputError(f"--contact: link must be 1…{robot.n_links} and α in [0, 1], got {args.contact!r}")
     magnitude, direction = _floats(args.force, 2, "--force")
     if args.grid < 1 or args.draws < 2:
         raise InputError("--grid must be ≥ 1 and --draws ≥ 2")
+    if magnitude < 0:
+        raise InputError(f"--force: the magnitude must be ≥ 0 N (the direction carries the sign), got {magnitude:g}")
     work = float(args.grid) ** robot.n_links * (args.draws * 2 + args.directions * min(args.draws, 200))
     if work > finite(args.max_localizations, "--max-localizations", positive=True):
         raise InputError(f"--grid/--draws/--directions: {args.grid}^{robot.n_links} postures × ({args.draws} "
@@ -164,9 +169,22 @@ def run(args) -> int:
                          f"{args.max_localizations:.3g}; reduce them or raise the limit")
     if args.png and robot.n_links != 2:
         raise InputError("--png: the heat map is drawn for two-link robots only")
-    from torquebench.outputs import prepare_file
-    prepare_file(args.png, "--png", force_flag=None)
+    from torquebench.outputs import Outputs
+
+    plan = Outputs(force_flag=None)              # --force is the contact force here: never replace
+    for label, p in (("--robot", args.robot), ("--sensor", args.sensor), ("--calibration", args.calibration)):
+        plan.input(label, p)
+    plan.file("--png", args.png)
     scene = scene_from_args(args, robot, link, alpha, magnitude, direction)
+    with plan.active():                          # checked now; the write obeys it
+        return _propagate(args, scene, robot, link, alpha, magnitude, direction)
+
+
+def _propagate(args, scene, robot, link, alpha, magnitude, direction) -> int:
+    from torquebench import pipeline as P
+    from torquebench.cache import Cache
+    from torquebench.io import print_json
+
     arts, _ = P.execute(scene, ["error_map"], Cache())       # sensor_chain → error_map (stage graph)
     em = arts["error_map"]
     noise, axes, maps = em["noise"], em["axes"], em["maps"]

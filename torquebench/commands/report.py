@@ -31,6 +31,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--only", action="append", metavar="AREA",
                         help="build only this area (repeatable; default: all); see --list")
     parser.add_argument("--list", action="store_true", help="list the report areas and exit")
+    parser.add_argument("--force", action="store_true",
+                        help="replace report files in --out-dir that `report` did not write there")
 
 
 def run(args) -> int:
@@ -47,9 +49,26 @@ def run(args) -> int:
     unknown = sorted(set(chosen) - set(areas))
     if unknown:
         raise InputError(f"--only: unknown report area {unknown[0]!r}; known: {', '.join(areas)}")
+    from torquebench.outputs import Outputs, foreign_files
+
+    shipped = args.out_dir is None                 # the repository's reports: regenerated in place
     out_dir = args.out_dir or REPO_ROOT / "reports"
-    from torquebench.outputs import prepare_dir
-    prepare_dir(out_dir, "--out-dir")
+    plan = Outputs(force=args.force)
+    plan.directory("--out-dir", out_dir, shipped=shipped)
+    plan.check()
+    if not shipped:
+        clash = foreign_files(out_dir, [*chosen, "README"], plan.force)
+        if clash:
+            raise InputError(f"--out-dir: {clash[0]} exists and was not written by `report` "
+                             f"({len(clash)} such file(s) with a report's name); add --force to "
+                             "replace them or choose another directory")
+    with plan.active():                            # every builder's write obeys it
+        return _build(args, areas, chosen, out_dir)
+
+
+def _build(args, areas, chosen, out_dir) -> int:
+    from torquebench.io import print_json
+
     written, timings = {}, {}
     for area in chosen:
         start = time.perf_counter()

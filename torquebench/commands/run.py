@@ -24,6 +24,9 @@ def add_arguments(parser) -> None:
                              "scene's [outputs] want)")
     parser.add_argument("--explain", action="store_true", help="print the plan; run nothing")
     parser.add_argument("--force", action="store_true", help="ignore cached results")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace report files in the scene's [outputs] dir that torquebench did "
+                             "not write (default: refuse, before any work)")
     parser.add_argument("--seed", type=int, default=None, help="sensor-noise seed (default: the scene's)")
     parser.add_argument("--cache-dir", type=Path, default=None,
                         help="cache directory (default $TORQUEBENCH_CACHE or .torquebench-cache)")
@@ -69,6 +72,10 @@ def run(args) -> int:
     from torquebench.scenes import load_scene, scene_path
 
     from estimator.spatial.scene import is_spatial_scene
+    from torquebench.outputs import run_plan
+    from userio.errors import seed
+
+    seed(args.seed)
     if is_spatial_scene(scene_path(str(args.scene))):       # a URDF robot: the 3-D scene runner
         return _run_3d(args)
     scene = load_scene(scene_path(str(args.scene)))
@@ -82,7 +89,8 @@ def run(args) -> int:
             for r in rows:
                 print(f"{r['stage']:20s} {r['action']:7s} {r['reason']}")
         return 0
-    arts, timing = P.execute(scene, args.only, cache, args.seed, args.force)
+    with run_plan(scene, args.only, force=args.overwrite).active():     # inputs kept, reports checked
+        arts, timing = P.execute(scene, args.only, cache, args.seed, args.force)
     out = {"scene": scene.name, **summarize(arts),
            "stages": [{"stage": n, "action": a, "time_s": t} for n, a, t in timing]}
     if args.json:
