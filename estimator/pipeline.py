@@ -884,9 +884,10 @@ def quiet_window_covariance(robot, chunks, window, gain_per_s, period_s, discret
         cover = (f"the model uncertainty ({model_source}) does not cover it" if model_cov is not None
                  else "the robot file states no model uncertainty")
         raise InputError(f"{where}: the residual over {t0:g}–{t1:g} s is {np.sqrt(ratio):.2g}× what "
-                         f"its sensor noise explains: model error, not stationary noise, and {cover}; "
-                         f"identify the robot (torquebench identify) or declare its model "
-                         f"uncertainty (--model-uncertainty, a [model_uncertainty] table)")
+                         f"its sensor noise explains: a contact held through the stretch, or model "
+                         f"error and {cover}; mark a stretch without contact, or identify the robot "
+                         f"(torquebench identify) or declare its model uncertainty "
+                         f"(--model-uncertainty, a [model_uncertainty] table)")
     return R, r
 
 

@@ -160,7 +160,7 @@ def scene_inputs(scene: Scene) -> list[tuple[str, Path]]:
     return [(label, Path(p)) for label, p in items if p is not None and not str(p).startswith("<")]
 
 
-def _robot_file(f: _Fields, data: dict) -> Path | None:
+def _robot_path(f: _Fields, data: dict) -> Path | None:
     """The robot file a scene names, resolved as ``_resolve_robot`` resolves it (None: not found)."""
     name = data.get("robot", "paper_leg.toml")
     if isinstance(name, dict):
@@ -390,9 +390,9 @@ def _dynamic(f: _Fields, data: dict, robot: Robot, name: str) -> SimConfig:
     sensors = _sensors(f, data)
     if controller.frequency_Hz is not None:
         nyq = 0.5 * sensors.sample_rate_Hz
-        k = int(np.argmax(controller.frequency_Hz))
-        if controller.frequency_Hz[k] >= nyq:
-            raise f.err("controller.frequency_Hz", f"{controller.frequency_Hz[k]:g} Hz is at or above the "
+        f_max = float(np.max(controller.frequency_Hz))       # every joint's every harmonic
+        if f_max >= nyq:
+            raise f.err("controller.frequency_Hz", f"{f_max:g} Hz is at or above the "
                         f"log's Nyquist frequency {nyq:g} Hz (sensors.sample_rate_Hz = "
                         f"{sensors.sample_rate_Hz:g}): the motion could not be sampled")
     return f.ranges(SimConfig(
@@ -660,7 +660,7 @@ def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
     desc = str(data.get("description", ""))
     est = _estimator(f, data)
     chain = _chain_spec(f, data, kind)
-    rfile = _robot_file(f, data)
+    rfile = _robot_path(f, data)
     if kind == "dynamic" and chain.log_file is not None:
         sim_keys = sorted(set(data) & {"controller", "poke", "ground", "integrator", "mount"})
         if sim_keys:
