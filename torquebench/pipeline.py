@@ -634,6 +634,32 @@ def run_paper_scores(scene, inp):
     return rr.evaluate_dynamic(scene, res, chain=inp.get("chain"))
 
 
+def calibration_noise(cal, chain=None) -> tuple[float, str, list]:
+    """σ_τ of one torque reading from a calibration: its reading noise through its slope,
+    σ_τ = σ_reading / |slope| · 10⁻³ g L (N·m), and how it compares with the sensor chain's noise
+    budget and sensitivity (a warning when they differ by more than 2×: another sensor, another
+    unit, or readings averaged over several ADC samples)."""
+    i = list(cal.coef_names).index("slope")
+    slope = abs(float(cal.coef_mean[i]))
+    per_Nm = slope / cal._torque_per_g()                 # reading units per N·m
+    sigma = float(cal.sigma) / per_Nm
+    source = (f"the calibration's reading noise ({cal.sigma:.3g} {cal.reading_unit or 'reading units'} "
+              f"through its slope, {cal.source})")
+    warnings = []
+    if chain is not None:
+        ratio = sigma / chain.noise_std_Nm
+        if not 0.5 <= ratio <= 2.0:
+            warnings.append(f"the calibration's σ_τ {sigma:.3g} N·m is {ratio:.2g}× the sensor chain's "
+                            f"{chain.noise_std_Nm:.3g} N·m: is the chain (sensor file, strain per N·m) "
+                            f"this sensor's, or were its readings averages of several samples?")
+        if cal.reading_unit == "counts":
+            s_ratio = per_Nm / abs(chain.counts_per_Nm)
+            if not 0.5 <= s_ratio <= 2.0:
+                warnings.append(f"the calibration's sensitivity {per_Nm:.4g} counts/N·m is {s_ratio:.2g}× "
+                                f"the sensor chain's {abs(chain.counts_per_Nm):.4g}")
+    return sigma, source, warnings
+
+
 def run_error_map(scene, inp):
     """Localization error over the posture grid q ∈ [0, π]^n (estimator.uncertainty): Monte Carlo
     and first order, per method, with σ_τ from the sensor chain (or given), the calibration's
@@ -642,10 +668,14 @@ def run_error_map(scene, inp):
     from estimator.uncertainty import SensorNoise, first_order, monte_carlo
 
     pr, robot = scene.prediction, scene.robot
-    sigma_tau = pr.torque_noise_Nm if pr.torque_noise_Nm is not None else inp["chain"].noise_std_Nm
+    cal, chain = inp.get("calibration"), inp.get("chain")
+    sigma_tau, tau_source, warnings = pr.torque_noise_Nm, "given", []
+    if sigma_tau is None and cal is not None and cal.lever_arm_m is not None:
+        sigma_tau, tau_source, warnings = calibration_noise(cal, chain)
+    elif sigma_tau is None:
+        sigma_tau, tau_source = chain.noise_std_Nm, "the sensor chain's noise budget"
     gain_error = pr.gain_error
-    if gain_error is None and inp.get("calibration") is not None:
-        cal = inp["calibration"]
+    if gain_error is None and cal is not None:
         i = list(cal.coef_names).index("slope")
         gain_error = math.sqrt(cal.coef_cov[i, i]) / abs(cal.coef_mean[i])
     noise = SensorNoise(torque_std_Nm=sigma_tau, wrench_std=list(pr.ft_noise),
@@ -661,7 +691,8 @@ def run_error_map(scene, inp):
     axes = [np.linspace(0.0, math.pi, pr.grid)] * robot.n_links
     postures = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, robot.n_links)
     out = {"noise": noise, "axes": axes, "postures": len(postures), "methods": {}, "maps": {},
-           "model_uncertainty_source": cov_source}
+           "model_uncertainty_source": cov_source, "torque_noise_source": tau_source,
+           "warnings": warnings}
     for method in METHODS:
         mc = monte_carlo(robot, postures, pr.link, pr.alpha, force, noise, draws=pr.draws,
                          rng=pr.seed, method=method, parameter_cov=cov)

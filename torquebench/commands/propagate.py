@@ -64,7 +64,9 @@ def add_arguments(parser) -> None:
                         help="gauge strain per N·m of joint torque, 1/(N·m) (default: the sensor file's, or the paper's)")
     parser.add_argument("--torque-noise-Nm", type=float, dest="torque_noise_Nm",
                         help="joint-torque noise std per sample in N·m (default: from the sensor's bridge and ADC)")
-    parser.add_argument("--calibration", type=Path, help="calibration JSON from `calibrate`: its slope uncertainty becomes a gain error")
+    parser.add_argument("--calibration", type=Path, help="calibration JSON from `calibrate`: its reading noise through its slope gives σ_τ "
+                             "(unless --torque-noise-Nm), checked against the sensor chain's; its slope "
+                             "uncertainty becomes a gain error")
     parser.add_argument("--gain-error", type=float, default=None,
                         help="relative calibration gain error std, dimensionless (default: from --calibration, else 0)")
     parser.add_argument("--ft-noise", default="0.1,0.1,0.01", help="σ of the base wrench Fx [N], Fz [N], My [N·m] (default: %(default)s, the paper's Table II)")
@@ -191,6 +193,8 @@ def _propagate(args, scene, robot, link, alpha, magnitude, direction) -> int:
     provenance = provenance_from_args(args)
     if "chain" in arts:
         provenance["strain_per_Nm"] = arts["chain"].strain_per_Nm
+    if args.torque_noise_Nm is None and args.calibration is not None:
+        provenance["torque_noise_source"] = em["torque_noise_source"]
     if args.gain_error is None and args.calibration is not None:
         provenance["gain_error_source"] = str(args.calibration)
 
@@ -200,7 +204,8 @@ def _propagate(args, scene, robot, link, alpha, magnitude, direction) -> int:
                "contact": {"link": link, "alpha": alpha, "force_N": magnitude, "direction_rad": direction},
                "model_uncertainty_source": em["model_uncertainty_source"],
                **provenance, "methods": dict(em["methods"]),
-               "bounds": bounds_json(em.get("bounds", {}), link, alpha, magnitude)}
+               "bounds": bounds_json(em.get("bounds", {}), link, alpha, magnitude),
+               "warnings": list(em.get("warnings", []))}
     if args.png:
         _heat_map(args.png, maps, axes, em.get("bounds", {}))
         results["png"] = str(args.png)
@@ -210,6 +215,8 @@ def _propagate(args, scene, robot, link, alpha, magnitude, direction) -> int:
     print(f"σ_τ = {results['torque_noise_std_Nm']:.4g} N·m ({provenance.get('torque_noise_source')}), "
           f"gain error {results['gain_error_rel_std']:.3g}, σ_FT = {results['ft_noise']}")
     print(f"model uncertainty: {results['model_uncertainty_source']}")
+    for w in results["warnings"]:
+        print(f"WARNING: {w}")
     print(f"contact: link {link}, α = {alpha}, |F| = {magnitude} N at {direction:.3f} rad; "
           f"{results['postures']} postures × {args.draws} draws")
     print(f"{'method':8s} {'median |p| RMS':>15s} {'max |p| RMS':>12s} {'max p95':>9s} "
