@@ -1,4 +1,4 @@
-"""`torquebench compare SCENE.toml --vary flexure.design=a.toml,b.toml`: designs end to end.
+"""`torquebench compare SCENE.toml --vary flexure=a.toml,b.toml`: designs end to end.
 
 Each value of the varied key (any dotted scene key) runs the scene's stage graph (torquebench.sweep);
 per variant: sensitivity, torsional stiffness and safety factor (when the scene has a flexure
@@ -19,7 +19,8 @@ torquebench compare scenes/end_to_end.toml --vary flexure=5e-5,5e-4 --png out/co
 def add_arguments(parser) -> None:
     parser.add_argument("scene", type=Path, help="scene TOML (e.g. scenes/end_to_end.toml)")
     parser.add_argument("--vary", action="append", required=True, metavar="KEY=V1,V2",
-                        help="dotted scene key and its values, e.g. flexure.design=a.toml,b.toml")
+                        help="dotted scene key and its values; for designs flexure=a.toml,b.toml (each value a design file "
+                             "or a strain per N·m, e.g. flexure=5e-5,5e-4)")
     parser.add_argument("--executor", default="local", help="local (default), processes:N, dask://HOST:PORT")
     parser.add_argument("--png", type=Path, default=None,
                         help="write a bar chart of the comparison (directory created; an existing "

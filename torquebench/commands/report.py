@@ -25,6 +25,45 @@ def builders() -> dict:
             if not info.name.startswith("_")}
 
 
+#: where `report` keeps how long each area took the last time it rebuilt the shipped reports
+TIMES_FILE = "build_times.json"
+
+
+def describe(module_name: str) -> str:
+    """The first sentence of a builder's docstring, without its ``reports/x.md:`` prefix."""
+    import ast
+    import importlib.util
+
+    spec = importlib.util.find_spec(module_name)
+    doc = ast.get_docstring(ast.parse(Path(spec.origin).read_text(encoding="utf-8"))) or ""
+    import re
+
+    para = " ".join(doc.split("\n\n")[0].split())
+    first = re.split(r"(?<!eq)(?<!eqs)(?<!Fig)\. (?=[A-Z(`])", para)[0].rstrip(".") + "."
+    if first.startswith("reports/") and ": " in first:
+        first = first.split(": ", 1)[1]
+    return first[:1].upper() + first[1:]
+
+
+def recorded_times(reports_dir: Path) -> dict:
+    """{area: {"s": seconds, "date": "YYYY-MM-DD"}} of the last rebuild of the shipped reports."""
+    import json
+
+    try:
+        return json.loads((reports_dir / TIMES_FILE).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+
+
+def _listing(areas: dict) -> list[dict]:
+    from torquebench.io import REPO_ROOT
+
+    times = recorded_times(REPO_ROOT / "reports")
+    return [{"area": a, "description": describe(m),
+             "last_build_s": times.get(a, {}).get("s"), "last_build_date": times.get(a, {}).get("date")}
+            for a, m in areas.items()]
+
+
 def add_arguments(parser) -> None:
     parser.add_argument("--out-dir", type=Path, default=None,
                         help="directory to write the reports to, created if missing; reports are regenerated in place (default: the repository's reports/)")
@@ -40,10 +79,14 @@ def run(args) -> int:
 
     areas = builders()
     if args.list:
+        rows = _listing(areas)
         if args.json:
-            print_json({"areas": list(areas)})
-        else:
-            print("\n".join(areas))
+            print_json({"areas": list(areas), "reports": rows})
+            return 0
+        for r in rows:
+            took = (f"{r['last_build_s']:.0f} s when last built ({r['last_build_date']})"
+                    if r["last_build_s"] is not None else "not timed yet")
+            print(f"{r['area']:17s} {r['description']}\n{'':17s} run time: {took}")
         return 0
     chosen = args.only or list(areas)
     unknown = sorted(set(chosen) - set(areas))
@@ -67,7 +110,7 @@ def run(args) -> int:
 
 
 def _build(args, areas, chosen, out_dir) -> int:
-    from torquebench.io import print_json
+    from torquebench.io import REPO_ROOT, print_json
 
     written, timings = {}, {}
     for area in chosen:
@@ -78,6 +121,16 @@ def _build(args, areas, chosen, out_dir) -> int:
         written[area] = [str(p) for p in paths]
     from torquebench.reports_index import write_index
     index = write_index(out_dir, list(areas))
+    if out_dir == REPO_ROOT / "reports":           # the shipped reports: keep how long each took
+        import datetime
+        import json
+
+        from userio.files import write_text_atomic
+
+        times = recorded_times(out_dir)
+        today = datetime.date.today().isoformat()
+        times.update({a: {"s": round(timings[f"{a}_s"], 1), "date": today} for a in written})
+        write_text_atomic(out_dir / TIMES_FILE, json.dumps(times, indent=1, sort_keys=True) + "\n")
     if args.json:
         print_json({"written": written, "index": str(index), "build_time_s": timings})
     else:
