@@ -1,7 +1,7 @@
-"""An adversarial pass over all 16 subcommands: a few hundred hostile inputs per class, each run
+"""An adversarial pass over all 17 subcommands: a few hundred hostile inputs per class, each run
 as a real `torquebench` process in a fresh work directory, and its outcome classified.
 
-    python benchmarks/hostile_pass.py [--seed 1] [--jobs 2] [--only CLASS] [--limit N] [--json OUT]
+    python benchmarks/hostile_pass.py [--seed 1] [--jobs 2] [--only CLASS] [--match TEXT] [--limit N] [--json OUT]
 
 Classes of input (each generated from a seed, so a second seed gives fresh inputs of the same kinds):
   paths      outputs that are inputs under another name (sidecars, symlinks, hard links, ``..``),
@@ -84,6 +84,14 @@ def build_fixture(root: Path) -> Path:
     # a tiny end-to-end scene (no FEM, no report) for run/compare/sweep
     e2e = (REPO / "scenes" / "paper_floating_link2.toml").read_text()
     (fx / "e2e.toml").write_text(e2e.replace("duration_s = 1.5", "duration_s = 0.8"))
+    # identification: an excitation log and its side files; a URDF robot and one of its 3-D logs
+    for suf in (".csv", ".timing.toml", ".noise.toml"):
+        shutil.copy(REPO / "examples" / "identification" / f"excitation{suf}", fx / f"excite{suf}")
+        shutil.copy(REPO / "examples" / "spatial" / f"leg_pokes{suf}", fx / f"leg3d{suf}")
+    for suf in (".urdf", ".toml"):
+        shutil.copy(REPO / "robots" / f"quadruped_leg{suf}", fx / f"quad{suf}")
+    q = (fx / "quad.toml").read_text().replace("quadruped_leg.urdf", "quad.urdf")
+    (fx / "quad.toml").write_text(q)
     del np, pd
     return fx
 
@@ -653,6 +661,51 @@ def gen_interrupt(rng) -> list[Case]:
     return cases
 
 
+def gen_identify_and_3d(rng) -> list[Case]:
+    """The commands and robots that came after the first passes: `identify`, URDF robots."""
+    ident = ["identify", "excite.csv", "--robot", "robot.toml"]
+    cases = []
+    # paths: the identified robot may not replace the log, the robot it starts from or a user file
+    for target, expect in (("robot.toml", "refuse"), ("excite.csv", "refuse"), ("excite.noise.toml", "refuse"),
+                           ("notes.md", "refuse")):
+        p, setup, kind = alias(rng, target)
+        cases.append(Case("paths", f"identify --out={target} via {kind}", ident + ["--out", p], setup, expect))
+    p, setup, kind = alias(rng, "leg3d.csv")
+    cases.append(Case("paths", f"estimate 3-D --out=the log via {kind}",
+                      ["estimate", "leg3d.csv", "--robot", "quad.toml", "--out", p], setup, "refuse"))
+    p, setup, kind = alias(rng, "quad.urdf")
+    cases.append(Case("paths", f"estimate 3-D --png=the URDF via {kind}",
+                      ["estimate", "leg3d.csv", "--robot", "quad.toml", "--png", p], setup, "refuse"))
+    # nonsense: a log with a contact over its whole length, too short, in degrees, torques in N·mm
+    k = rng.choice([1000.0, 1e-3])
+    cases.append(Case("nonsense", f"identify with torques ×{k:g}", ["identify", "bad.csv", "--robot", "robot.toml"],
+                      _csv_edit("excite.csv", "bad.csv", _scale_cols(["tau1", "tau2"], k)), "refuse"))
+    cases.append(Case("nonsense", "identify on 40 samples", ["identify", "short.csv", "--robot", "robot.toml"],
+                      _csv_edit("excite.csv", "short.csv", lambda d: d.iloc[:40]), "refuse"))
+    cases.append(Case("nonsense", "identify on a poke log", ["identify", "float.csv", "--robot", "robot.toml"],
+                      None, "refuse"))
+    cases.append(Case("nonsense", "identify angles in degrees", ["identify", "deg.csv", "--robot", "robot.toml"],
+                      _csv_edit("excite.csv", "deg.csv", _scale_cols(["q1", "q2", "dq1", "dq2"], 57.29578)),
+                      "refuse"))
+    cases.append(Case("nonsense", "estimate 3-D torques ×1000", ["estimate", "bad3.csv", "--robot", "quad.toml"],
+                      _csv_edit("leg3d.csv", "bad3.csv", lambda d: d.assign(**{c: d[c] * 1000 for c in d.columns
+                                                                              if c.startswith("tau")})),
+                      "refuse"))
+    cases.append(Case("nonsense", "estimate a planar log with a URDF robot", ["estimate", "fixed.csv", "--robot", "quad.toml"],
+                      None, "refuse"))
+    cases.append(Case("nonsense", "propagate 3-D wrong posture length",
+                      ["propagate", "--robot", "quad.toml", "--posture", "0.1,0.2", "--force", "5"], None, "refuse"))
+    bad_rate = rng.choice(["-1", "0", "nan", "1e300"])
+    cases.append(Case("nonsense", f"estimate --model-uncertainty {bad_rate}",
+                      ["estimate", "fixed.csv", "--model-uncertainty", bad_rate], None, "refuse"))
+    # controls
+    cases += [Case("valid", "identify the excitation log", ident + ["--out", "ident/robot_id.toml"], None, "ok"),
+              Case("valid", "estimate a 3-D log", ["estimate", "leg3d.csv", "--robot", "quad.toml"], None, "ok"),
+              Case("valid", "estimate with a declared model uncertainty",
+                   ["estimate", "fixed.csv", "--model-uncertainty", "0.05"], None, "ok")]
+    return cases
+
+
 def gen_valid(rng) -> list[Case]:
     c = [["estimate", "fixed.csv"], ["estimate", "float.csv", "--json"], ["estimate", "poke.csv"],
          ["estimate", "fixed.csv", "--out", "new/e.csv"], ["estimate", "poke.csv", "--method", "paper"],
@@ -895,6 +948,7 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--only", action="append", default=None)
     ap.add_argument("--limit", type=int, default=None, help="at most N cases per class")
+    ap.add_argument("--match", action="append", default=None, help="only cases whose name contains this text (repeatable: any)")
     ap.add_argument("--timeout", type=float, default=90.0)
     ap.add_argument("--max-rss-gb", type=float, default=4.0)
     ap.add_argument("--json", type=Path, default=None)
@@ -912,10 +966,12 @@ def main(argv=None) -> int:
     try:
         fixture = build_fixture(base)
         cases = (gen_paths(rng) + gen_nonsense(rng) + gen_oserror(rng, mounts) + gen_runaway(rng)
-                 + gen_interrupt(rng) + gen_valid(rng))
+                 + gen_interrupt(rng) + gen_valid(rng) + gen_identify_and_3d(rng))
         cases = [c for c in cases if not c.needs or c.needs in mounts]
         if args.only:
             cases = [c for c in cases if c.cls in args.only]
+        if args.match:
+            cases = [c for c in cases if any(m in c.name for m in args.match)]
         if args.limit:
             per = {}
             keep = []

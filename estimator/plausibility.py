@@ -171,8 +171,13 @@ def expected_forces(robot, t, q, dq, tau_meas, windows: int = HEAD_WINDOWS):
     (no velocity is differentiated; noise averages out over a window)."""
     from estimator.observer import momentum_terms
 
+    return _expected(lambda q_, v_, tau_: momentum_terms(robot, q_, v_, tau_), t, q, dq, tau_meas, windows)
+
+
+def _expected(momentum, t, q, dq, tau_meas, windows: int = HEAD_WINDOWS):
+    """``expected_forces`` with any model's ``momentum(q, v, τ_meas)`` → (P, u)."""
     t = np.asarray(t, float)
-    P, u = momentum_terms(robot, q, dq, tau_meas)           # u = τ_meas + Cᵀq̇ − G
+    P, u = momentum(q, dq, tau_meas)                        # u = τ_meas + Cᵀq̇ − G
     model = u - tau_meas                                    # Cᵀq̇ − G
     edges = np.linspace(0, len(t) - 1, windows + 1).round().astype(int)
     m, g = [], []
@@ -269,9 +274,62 @@ def _groups(n: int) -> list[tuple[str, list[int], dict]]:
              list(range(3, 3 + n)), torque)]
 
 
-def _scaled(m, g, tol, names, far) -> str | None:
+def check_head_model(model, log, noise=None, where: str | None = None) -> list[str]:
+    """``check_head`` for any RobotModel (a URDF robot's 3-D log, estimator.spatial.logs): the
+    mean generalized force the first samples measure (base rows from the FT sensor, sensed joint
+    torques) against what the model's masses and motion need without contact. A group of rows
+    off by 1000× or with its sign flipped, or an all-zero log, is refused naming it; a row far
+    outside the noise is a warning."""
+    src = where or getattr(log, "source", "log")
+    T = min(len(log.t), HEAD_SAMPLES)
+    if T < 16:
+        return []
+    head = f"{src}: the first {T} samples"
+    if not (np.any(log.wrench[:T]) or np.any(log.tau_Nm[:T])):
+        raise InputError(f"{head} measure exactly 0 on every force, moment and torque channel: an "
+                         "empty or all-zero export, or sensors not connected; the robot's weight alone "
+                         "loads them")
+    t, q, v = log.t[:T], log.q[:T], log.v[:T]
+    tau = log.tau_meas(model)[:T]
+    with np.errstate(all="ignore"):
+        m, g = _expected(model.momentum_terms, t, q, v, tau)
+    if not (np.all(np.isfinite(m)) and np.all(np.isfinite(g))):
+        return []
+    nb = model.n_base
+    rows = list(range(nb)) + [nb + j for j, s in enumerate(model.sensed_joints) if s]
+    m, g = m[:, rows], g[:, rows]
+    ft = np.full(6, np.nan) if noise is None else np.asarray(noise.ft_sigma, float)
+    tq = np.full(len(rows) - nb, 0.005) if noise is None else \
+        np.broadcast_to(np.asarray(noise.torque_sigma_Nm, float), (len(rows) - nb,))
+    ft = np.where(np.isfinite(ft), ft, [0.1, 0.1, 0.1, 0.01, 0.01, 0.01])
+    sigma = np.concatenate([ft[:nb], tq])
+    names = ["F_x", "F_y", "F_z", "M_x", "M_y", "M_z"][:nb] + \
+        [n for n, s in zip(model.joint_names, model.sensed_joints) if s]
+    tol = np.maximum(FAR_SIGMA * sigma, MODEL_SLACK * np.abs(g).max(0))
+    e = (m - g).mean(0)
+    far = np.abs(e) > tol
+    if not far.any():
+        return []
+    force = {1e3: "mN instead of N", 1e-3: "kN instead of N", -1.0: "the sign flipped (the wrench "
+             "is the one ON the robot, in the sensor frame: docs/conventions.md)"}
+    moment = {1e3: "N·mm instead of N·m", 1e-3: "kN·m instead of N·m", -1.0: "the sign flipped"}
+    groups = [("the FT sensor's forces", [0, 1, 2], force), ("the FT sensor's moments", [3, 4, 5], moment),
+              ("the joint torques", list(range(nb, len(rows))), dict(moment))]
+    diag = _scaled(m, g, tol, names, far, groups)
+    if diag:
+        raise InputError(f"{head}: {diag}")
+    j = int(np.argmax(np.abs(e) / tol))
+    return [f"{head}: the measured {names[j]} ({m[:, j].mean():.4g}) differs from what the robot's "
+            f"masses and motion need without contact ({g[:, j].mean():.4g}) by {abs(e[j]) / sigma[j]:.0f} σ: "
+            "the log starts in contact, or its units or channels or the robot file (--robot) do not "
+            "match the log"]
+
+
+def _scaled(m, g, tol, names, far, groups=None) -> str | None:
     """A group of channels measuring k·(what the model needs), k ≈ 1000, 1/1000 or −1."""
-    for label, idx, hints in _groups(len(names) - 3):
+    for label, idx, hints in (groups or _groups(len(names) - 3)):
+        if not idx:
+            continue
         if not far[idx].any():
             continue
         gg, mm = g[:, idx].ravel(), m[:, idx].ravel()

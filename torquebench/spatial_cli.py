@@ -59,6 +59,9 @@ def estimate(args) -> int:
         timing = [parse(args.timing, "--timing")] * model.n_v
     chunks = iter(reader)
     first = next(chunks)
+    from estimator.plausibility import check_head_model
+
+    found = check_head_model(model, first, noise, where=str(args.log))   # units, signs: refused
     stream = SpatialStream(model, reader.period_s, gain_per_s=args.gain, noise=noise, timing=timing,
                            false_alarm_rate=rate, threshold=args.threshold,
                            weighting=getattr(args, "weighting", "whitened"))
@@ -84,6 +87,14 @@ def estimate(args) -> int:
         summary["out"] = str(args.out)
     if getattr(args, "png", None) is not None:
         summary["png"] = pictures
+    if found:
+        import warnings
+
+        from estimator.plausibility import PlausibilityWarning
+
+        summary["warnings"] = found
+        for w in found:
+            warnings.warn(w, PlausibilityWarning, stacklevel=2)
     if args.json:
         print_json(summary)
         return 0
@@ -127,7 +138,11 @@ def _contact_pictures(model, args, est) -> list[str]:
         if truth is not None and str(truth.link.iloc[k] or "") != "":
             tp = truth[["px", "py", "pz"]].to_numpy()[k]
             tf = truth[["Fx", "Fy", "Fz"]].to_numpy()[k]
-        path = Path(args.png).with_name(f"{Path(args.png).stem}_{i}.png")
+        path = Path(args.png) if i == 1 else Path(args.png).with_name(f"{Path(args.png).stem}_{i}.png")
+        from userio.outputs import current
+
+        if i > 1 and current() is not None:
+            current().file("--png", path)            # checked against the inputs as it is written
         contact_picture(model, log.q[k], maps, row[["px", "py", "pz"]].to_numpy(float),
                         row[["Fx", "Fy", "Fz"]].to_numpy(float), tp, tf, path)
         out.append(str(path))

@@ -120,7 +120,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--png", type=Path, default=None, metavar="OUT.png",
                         help="URDF robots: the robot in 3-D at each contact interval's middle sample, the "
                              "estimated contact and force arrow beside the true one (LOG.truth.csv, if "
-                             "there); one picture per interval, OUT_1.png, OUT_2.png, ...")
+                             "there); one picture per interval: OUT.png, OUT_2.png, ...")
     parser.add_argument("--chunk-samples", type=_chunk, default=65536, metavar="N",
                         help="samples read, estimated and written per chunk: memory is bounded by "
                              "this, not by the log's length; results do not depend on it "
@@ -210,7 +210,14 @@ def run(args) -> int:
     plan = Outputs(force=args.force)
     plan.input("LOG.csv", args.log, log=True)           # the log and its side files
     plan.input("--robot", args.robot)
+    from estimator.spatial.robot import is_spatial_robot_file
+
+    if args.robot is not None and is_spatial_robot_file(args.robot):   # the URDF it names, too
+        from estimator.spatial.robot import load_spatial_robot
+
+        plan.input("--robot's URDF", load_spatial_robot(args.robot).urdf_path)
     plan.file("--out", args.out)
+    plan.file("--png", getattr(args, "png", None))       # the first contact's picture (3-D)
     with plan.active():                                 # checked now; every write obeys it
         return _run(args, start)
 
