@@ -64,7 +64,8 @@ def run(args) -> int:
     plan.file("--png", args.png)
     plan.check()                                             # before the points run
     rows = [row(r) for r in run_sweep(path, vary, None, args.executor,
-                                      str(args.cache_dir) if args.cache_dir else None)]
+                                      str(args.cache_dir) if args.cache_dir else None,
+                                      progress=not args.json)]
     with plan.active():
         return _report(args, path, rows)
 
