@@ -78,8 +78,22 @@ def run(args) -> int:
                          "with a log (the log is a CSV)")
     from estimator.spatial.scene import is_spatial_scene
     if is_spatial_scene(args.scene):                  # a URDF robot: the 3-D simulator
+        from estimator.spatial.scene import load_spatial_scene
         from torquebench.spatial_cli import simulate as simulate_3d
-        return simulate_3d(args)
+        from userio.outputs import Outputs
+
+        robot = load_spatial_scene(args.scene).robot
+        plan = Outputs(force=args.force)              # the same output rules as the planar path
+        plan.input("scene", args.scene)
+        decl = Path(robot.source) if str(robot.source).endswith(".toml") else None
+        for label, p in (("the scene's robot", decl), ("the scene's URDF", robot.urdf_path)):
+            plan.input(label, p)
+        for label, p in (("--out", out), ("truth (--out with .truth.csv)", tpath),
+                         ("timing (--out with .timing.toml)", timing_file),
+                         ("noise (--out with .noise.toml)", noise_file)):
+            plan.file(label, p)
+        with plan.check().active():
+            return simulate_3d(args)
     tol = getattr(args, "error_tolerance", None)
     if tol is not None:
         finite(tol, "--error-tolerance", positive=True)
