@@ -38,9 +38,10 @@ def tree(tmp_path_factory):
     NB = len(model.tree.body_names)               # triangle inequality: consistent ones here
     from scipy.spatial.transform import Rotation
 
+    R = Rotation.random(NB, random_state=rng).as_matrix()
+    d = rng.uniform(1e-4, 3e-3, (NB, 3))
     th = si.from_physical(rng.uniform(0.2, 2.0, NB), rng.normal(0, 0.05, (NB, 3)),
-                          rng.uniform(1e-4, 3e-3, (NB, 3)),
-                          Rotation.random(NB, random_state=rng).as_matrix())
+                          np.einsum("bik,bk,bjk->bij", R, d, R))
     return model.with_parameters(th)
 
 
@@ -135,16 +136,43 @@ def test_physical_round_trip_and_jacobian_by_finite_differences(which, leg, tree
     model = leg if which == "leg" else tree
     th = model.parameters()
     m, c, d, R = si.physical(th)
-    np.testing.assert_allclose(si.from_physical(m, c, d, R), th, atol=1e-14)
+    Sc = np.einsum("bik,bk,bjk->bij", R, d, R)
+    np.testing.assert_allclose(si.from_physical(m, c, Sc), th, atol=1e-14)
     J = si.jacobian(th)
-    p0 = np.column_stack([m, c, d])
-    for k in range(7):
-        e = np.zeros(7)
-        e[k] = 1e-6 * max(np.abs(p0[:, k]).max(), 1e-3)
-        plus = si.from_physical(*(lambda p: (p[:, 0], p[:, 1:4], p[:, 4:], R))(p0 + e))
-        minus = si.from_physical(*(lambda p: (p[:, 0], p[:, 1:4], p[:, 4:], R))(p0 - e))
-        fd = ((plus - minus) / (2 * e[k])).reshape(-1, 10)
+
+    def theta_of(p):                       # p = [m, c, ε] per body, ε = 0 at the file's values
+        return si.from_physical(p[:, 0], p[:, 1:4], si.strained(d, R, p[:, 4:]))
+
+    p0 = np.column_stack([m, c, np.zeros((len(m), 6))])
+    for k in range(10):
+        e = np.zeros(10)
+        e[k] = 1e-6 * max(np.abs(p0[:, k]).max(), 1e-2)
+        fd = ((theta_of(p0 + e) - theta_of(p0 - e)) / (2 * e[k])).reshape(-1, 10)
         np.testing.assert_allclose(J[:, :, k], fd, atol=1e-7 * np.abs(fd).max() + 1e-15)
+
+
+def test_strain_keeps_every_draw_physical_and_is_isotropic(leg):
+    """A large strain still gives Σ_c ⪰ 0; the strain's law does not depend on the principal
+    frame, so a rotated body gets the rotated covariance."""
+    th = leg.parameters()
+    big = si.draw(th, leg.body_sizes_m, ModelUncertainty.uniform(0.6), np.random.default_rng(3), 500)
+    g = np.array([leg.consistency_margins(x) for x in big]).reshape(len(big), -1, 6)
+    assert np.all(g[:, :, 1:] >= 0)                         # I_c ⪰ 0 and the triangle, always
+    unc = ModelUncertainty(mass_rel=0.05, inertia_rel=0.1, com_m=0.0)
+    m, h, Io = si.unpack(th)
+    from scipy.spatial.transform import Rotation
+
+    Q = Rotation.from_rotvec([0.4, 0.2, -0.9]).as_matrix()
+    rot = si.pack(m, h @ Q.T, Q @ Io @ Q.T)
+    S = si.parameter_covariance(th, leg.body_sizes_m, unc)
+    Sr = si.parameter_covariance(rot, leg.body_sizes_m, unc)
+    for b in range(4):                      # I_o entries: Cov(Q δI Qᵀ) from Cov(δI)
+        blk = slice(10 * b + 4, 10 * b + 10)
+        L = np.zeros((6, 6))
+        for k, (i, j) in enumerate(si._VECH):
+            for l, (u, v) in enumerate(si._VECH):
+                L[k, l] = Q[i, u] * Q[j, v] + (Q[i, v] * Q[j, u] if u != v else 0.0)
+        np.testing.assert_allclose(Sr[blk, blk], L @ S[blk, blk] @ L.T, atol=1e-9 * np.abs(S[blk, blk]).max())
 
 
 @pytest.mark.parametrize("which, unc", [
@@ -153,7 +181,7 @@ def test_physical_round_trip_and_jacobian_by_finite_differences(which, leg, tree
 ])
 def test_covariance_matches_a_monte_carlo_of_the_physical_draws(which, unc, leg, tree):
     """Σ_θ = J Σ_p Jᵀ (linearized) against the sample covariance of θ over draws of the physical
-    errors at a small σ; PSD with rank 7 per body (mass, 3 COM, 3 second moments). Entries are
+    errors at a small σ; PSD with full rank 10 per body (mass, 3 COM, 6 strains). Entries are
     compared within 5 % (sampling) + 0.5 % of the largest σ of their body's group (m | m c | I_o):
     a σ the linearization sets to 0 (I_xy of a body with c_x = c_y = 0) is m σ_c² at second order."""
     model = leg if which == "leg" else tree
@@ -163,7 +191,7 @@ def test_covariance_matches_a_monte_carlo_of_the_physical_draws(which, unc, leg,
     live = d > 0
     lam = np.linalg.eigvalsh(S[np.ix_(live, live)] / np.outer(d[live], d[live]))   # units differ
     assert lam.min() > -1e-12
-    assert np.sum(lam > 1e-9) == 7 * len(model.tree.body_names)
+    assert np.sum(lam > 1e-9) == 10 * len(model.tree.body_names)
     draws = si.draw(th, model.body_sizes_m, unc, np.random.default_rng(2), 8000)
     groups = np.tile(np.r_[0, 1, 1, 1, [2] * 6], len(d) // 10) + 3 * np.repeat(np.arange(len(d) // 10), 10)
     gmax = np.array([d[groups == g].max() for g in groups])

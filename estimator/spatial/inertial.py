@@ -22,16 +22,21 @@ group (λ_i = d_j + d_k) and kept so that each violated condition has its own na
 
 Declared uncertainty (``ModelUncertainty``), independent per body: the mass (relative), the centre
 of mass c (σ in metres on each body axis, or ``relative`` × the body's size ℓ, ``body_sizes``),
-and the principal second moments d_i of the mass about c (relative, about the fixed principal
-axes of I_c): d_i ≥ 0 is exactly consistency, so every draw is a physical body. (Independent
-relative errors on the principal moments λ_i themselves are not: on a slender body the triangle
-slack is small (the quadruped leg's shank: λ_y + λ_z − λ_x = 1.9 % of λ_x), and at 5 % such draws
-violate the triangle inequality 79 % of the time on that shank, 21 % on its thigh.) A relative error ε on d gives λ_i a relative σ of
-ε √(d_j² + d_k²)/(d_j + d_k) ∈ [ε/√2, ε]. Linearized: Σ_θ = J diag(σ_p²) Jᵀ with
+and the distribution of the mass about c, strained: x − c → (1 + ε)(x − c) with ε a random
+symmetric strain, isotropic (diagonal σ = ``inertia_rel``/2, off-diagonal σ = ``inertia_rel``/(2√2),
+so no frame is preferred), i.e. Σ_c → (1 + ε) Σ_c (1 + ε). Along the principal axes the second
+moments d_i (eigenvalues of Σ_c) change by the relative σ ``inertia_rel``; the shears tilt the
+principal axes (a rod's axis by an angle ~ ε). A congruence keeps Σ_c ⪰ 0: every draw is a
+physical body, and for Σ_c ≻ 0 the ten directions per body are all uncertain (a full-rank prior
+for the identification). (Independent relative errors on the principal moments λ_i themselves
+are not physical: on a slender body the triangle slack is small (the quadruped leg's shank:
+λ_y + λ_z − λ_x = 1.9 % of λ_x), and at 5 % such draws violate the triangle inequality 79 % of
+the time on that shank, 21 % on its thigh.) Each λ_i = d_j + d_k gets a relative σ between
+``inertia_rel``/√2 and ``inertia_rel``. Linearized: Σ_θ = J diag(σ_p²) Jᵀ, p = [m, c, ε_xx, ε_yy,
+ε_zz, ε_xy, ε_xz, ε_yz] (ε in the principal frame R of Σ_c = R diag(d) Rᵀ), with I_c = tr(Σ_c) 1 − Σ_c:
 
-    ∂θ/∂m = [1, c, S(c)],  ∂θ/∂c_a = [0, m e_a, m (2 c_a 1 − e_a cᵀ − c e_aᵀ)],  ∂θ/∂d_i = [0, 0, 1 − r_i r_iᵀ]
-
-(r_i the principal axis of d_i; I_c = Σ_i d_i (1 − r_i r_iᵀ)).
+    ∂θ/∂m = [1, c, S(c)],  ∂θ/∂c_a = [0, m e_a, m (2 c_a 1 − e_a cᵀ − c e_aᵀ)],
+    ∂I_o/∂ε_aa = 2 d_a (1 − r_a r_aᵀ),  ∂I_o/∂ε_ab = −(d_a + d_b)(r_a r_bᵀ + r_b r_aᵀ)
 """
 
 from __future__ import annotations
@@ -102,37 +107,45 @@ def physical(theta):
     return m, c, d, R
 
 
-def from_physical(m, c, d, R) -> np.ndarray:
-    """θ of bodies (m, c, d, R) (leading axes broadcast): I_c = Σ_i d_i (1 − r_i r_iᵀ)."""
-    m, c, d, R = (np.asarray(x, float) for x in (m, c, d, R))
-    Ic = d.sum(-1)[..., None, None] * np.eye(3) - np.einsum("...ik,...k,...jk->...ij", R, d, R)
+def from_physical(m, c, Sc) -> np.ndarray:
+    """θ of bodies (m, c, Σ_c) (leading axes broadcast): I_c = tr(Σ_c) 1 − Σ_c, I_o = I_c + m S(c)."""
+    m, c, Sc = (np.asarray(x, float) for x in (m, c, Sc))
+    Ic = np.trace(Sc, axis1=-2, axis2=-1)[..., None, None] * np.eye(3) - Sc
     return pack(m, m[..., None] * c, Ic + m[..., None, None] * _S(c))
 
 
+_SHEARS = ((0, 1), (0, 2), (1, 2))
+
+
 def sigmas(theta, sizes_m, unc) -> np.ndarray:
-    """1σ of the physical errors (NB, 7): [m, c_x, c_y, c_z, d_1, d_2, d_3]."""
-    m, _, d, _ = physical(theta)
+    """1σ of the physical errors (NB, 10): [m, c_x, c_y, c_z, ε_xx, ε_yy, ε_zz, ε_xy, ε_xz, ε_yz]."""
+    m = unpack(theta)[0]
     sc = np.full(len(m), unc.com_m) if unc.com_m is not None else \
         (unc.relative or 0.0) * np.asarray(sizes_m, float)
-    return np.column_stack([unc.mass_rel * m, sc, sc, sc, unc.inertia_rel * np.abs(d)])
+    e = 0.5 * unc.inertia_rel
+    return np.column_stack([unc.mass_rel * m, sc, sc, sc] + [np.full(len(m), e)] * 3
+                           + [np.full(len(m), e / np.sqrt(2.0))] * 3)
 
 
 def jacobian(theta) -> np.ndarray:
-    """∂θ_b/∂p_b (NB, 10, 7), p = [m, c, d] (module doc)."""
+    """∂θ_b/∂p_b (NB, 10, 10), p = [m, c, ε] (module doc)."""
     m, c, d, R = physical(theta)
     NB = len(m)
-    J = np.zeros((NB, 10, 7))
+    J = np.zeros((NB, 10, 10))
     eye = np.eye(3)
-    D = np.zeros((NB, 7, 3, 3))                 # ∂I_o/∂p
+    D = np.zeros((NB, 10, 3, 3))                # ∂I_o/∂p
     D[:, 0] = _S(c)
     for a in range(3):
         ea = eye[a]
         dS = 2 * c[:, a, None, None] * eye - ea[None, :, None] * c[:, None, :] - c[:, :, None] * ea[None, None, :]
         D[:, 1 + a] = m[:, None, None] * dS
         J[:, 1 + a, 1 + a] = m
-    for i in range(3):
-        r = R[:, :, i]
-        D[:, 4 + i] = eye - r[:, :, None] * r[:, None, :]
+        r = R[:, :, a]
+        D[:, 4 + a] = 2 * d[:, a, None, None] * (eye - r[:, :, None] * r[:, None, :])
+    for k, (a, b) in enumerate(_SHEARS):
+        ra, rb = R[:, :, a], R[:, :, b]
+        D[:, 7 + k] = -(d[:, a] + d[:, b])[:, None, None] * (ra[:, :, None] * rb[:, None, :]
+                                                             + rb[:, :, None] * ra[:, None, :])
     J[:, 0, 0] = 1.0
     J[:, 1:4, 0] = c
     for k, (i, j) in enumerate(_VECH):
@@ -151,18 +164,29 @@ def parameter_covariance(theta, sizes_m, unc) -> np.ndarray:
     return out
 
 
+def strained(d, R, eps) -> np.ndarray:
+    """Σ_c' = R (1 + ε) diag(d) (1 + ε) Rᵀ for strains ε (…, 6) = [xx, yy, zz, xy, xz, yz] in the
+    principal frame (always ⪰ 0)."""
+    E = np.zeros(eps.shape[:-1] + (3, 3))
+    for k in range(3):
+        E[..., k, k] = eps[..., k]
+    for k, (a, b) in enumerate(_SHEARS):
+        E[..., a, b] = E[..., b, a] = eps[..., 3 + k]
+    A = np.eye(3) + E
+    B = np.einsum("...ij,...jk->...ik", R, A) * np.sqrt(np.maximum(d, 0.0))[..., None, :]
+    return np.einsum("...ik,...jk->...ij", B, B)
+
+
 def draw(theta, sizes_m, unc, rng, n: int | None = None) -> np.ndarray:
-    """θ of robots drawn from the declared uncertainty ((n, k), or (k,) for n None): masses and
-    second moments × max(1 + σ_rel z, 0.2), centres of mass + σ z (every draw consistent)."""
+    """θ of robots drawn from the declared uncertainty ((n, k), or (k,) for n None): masses
+    × max(1 + σ_rel z, 0.2), centres of mass + σ z, the mass distribution strained (module doc;
+    every draw consistent)."""
     m, c, d, R = physical(theta)
     NB = len(m)
     shape = (1 if n is None else n, NB)
-    sig = sigmas(theta, sizes_m, unc)
-    z = rng.standard_normal(shape + (7,))
-    m2 = m * np.maximum(1 + unc.mass_rel * z[..., 0], 0.2)
-    c2 = c + sig[:, 1:4] * z[..., 1:4]
-    d2 = d * np.maximum(1 + unc.inertia_rel * z[..., 4:], 0.2)
-    out = from_physical(m2, c2, d2, np.broadcast_to(R, shape + (3, 3)))
+    z = rng.standard_normal(shape + (10,)) * sigmas(theta, sizes_m, unc)
+    m2 = m * np.maximum(1 + z[..., 0] / m, 0.2)
+    out = from_physical(m2, c + z[..., 1:4], strained(d, R, z[..., 4:]))
     return out[0] if n is None else out
 
 

@@ -94,6 +94,7 @@ class UrdfModel:
         self.joint_names = tuple(robot.joint_names)
         self.sensed_joints = tuple(robot.sensed)
         self.n_v = 6 + len(self.joint_names)
+        self.n_q = self.n_v + 1                 # q = [p, quaternion, joints]
         self.parameter_names = tuple(f"{b}.{p}" for b in self.tree.body_names for p in PARAMS)
         self._ft = robot.ft_placement()
         self._sizes = None
@@ -207,7 +208,7 @@ class UrdfModel:
 
     def parameter_covariance(self, uncertainty) -> np.ndarray:
         """Σ_θ = J diag(σ_p²) Jᵀ of independent per-body errors in the mass, the centre of mass and
-        the principal second moments about it (estimator.spatial.inertial)."""
+        a strain of the mass distribution about it (estimator.spatial.inertial)."""
         return spatial_inertial.parameter_covariance(self.parameters(), self.body_sizes_m, uncertainty)
 
     def model_covariance(self):
