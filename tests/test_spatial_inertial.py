@@ -277,3 +277,29 @@ def test_bad_tables_are_named(tmp_path, leg, table, message):
     with pytest.raises(InputError, match=re.escape(message)) as exc:
         load_spatial_robot(path)
     assert str(path) in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_written_robot_reads_back_with_its_identification(tmp_path, leg):
+    """A URDF robot with other inertial parameters written (URDF + declaration TOML with an
+    [identification] table) reads back with those parameters; the fixed foot merges as before."""
+    from estimator.spatial.write import declaration_toml, urdf_with_parameters
+    from userio.files import read_toml
+
+    other = leg.perturbed(ModelUncertainty.uniform(0.1), seed=4)
+    th = other.parameters()
+    (tmp_path / "leg_id.urdf").write_text(urdf_with_parameters(leg, th))
+    C = np.diag((0.01 * np.abs(th) + 1e-9) ** 2)
+    table = {"parameter_names": list(leg.parameter_names), "parameters": th, "covariance": C,
+             "logs": [{"path": "run.csv", "sha256": "00"}], "statistics": {"chi2_per_dof": 1.0}}
+    decl = read_toml(LEG)
+    decl["model_uncertainty"] = {"relative": 0.05}
+    (tmp_path / "leg_id.toml").write_text(declaration_toml(decl, "leg_id.urdf", "leg_id", tmp_path, table,
+                                                           "# identified"))
+    back = UrdfModel(load_spatial_robot(tmp_path / "leg_id.toml"))
+    np.testing.assert_allclose(back.parameters(), th, rtol=1e-10, atol=1e-14)
+    assert back.tree.body_names == leg.tree.body_names and back.joint_names == leg.joint_names
+    assert back.robot.ft_frame == "ft_sensor" and back.robot.model_uncertainty is None
+    np.testing.assert_allclose(back.robot.mount_stiffness, leg.robot.mount_stiffness)
+    cov, source = back.model_covariance()
+    np.testing.assert_allclose(cov, C)
+    assert source == "identification of leg_id from run.csv"
