@@ -114,3 +114,40 @@ def test_identified_model_recovers_the_robot_and_stops_the_flags(leg, true_robot
     identified = leg.with_parameters(res.theta)
     n_id, T = flags(identified, short_log, res.covariance)
     assert n_id <= 3 and flags(leg, short_log, None)[0] > 0.5 * T
+
+
+@pytest.mark.slow
+def test_identify_command_on_a_urdf_robot(leg, true_robot, short_log, tmp_path):
+    """``torquebench identify LOG --robot leg.toml`` on a 3-D log writes IDENTIFIED.urdf and
+    IDENTIFIED.toml; they read back with the fitted parameters and the posterior covariance,
+    which keeps the detector's rate on another log of the same robot."""
+    import json
+    import shutil
+
+    from estimator.spatial.logs import noise_text, write_spatial_log
+    from tests.test_identification import _tb
+
+    log = run_log(true_robot, 2.0, seed=1, amplitude=(0.4, 0.8, 0.8), freq=1.3)
+    path = tmp_path / "exc.csv"
+    write_spatial_log(log, leg.robot, path)
+    (tmp_path / "exc.noise.toml").write_text(noise_text(snoise.default_noise(leg)))
+    shutil.copy("robots/quadruped_leg.urdf", tmp_path / "quadruped_leg.urdf")
+    decl = tmp_path / "leg.toml"
+    decl.write_text(open("robots/quadruped_leg.toml").read() + "\n[model_uncertainty]\nmass_rel = "
+                    "0.05\ninertia_rel = 0.1\ncom_m = 0.003\n")
+    out = tmp_path / "out" / "leg_id.toml"
+    res = _tb("identify", path, "--robot", decl, "--out", out, "--window", "0.01", "--json")
+    assert res.returncode == 0, res.stderr
+    summary = json.loads(res.stdout)
+    assert 0.7 < summary["statistics"]["chi2_per_dof"] < 1.5
+    assert "log declaration" in summary["logs"][0]["noise"] or "exc.noise" in summary["logs"][0]["noise"]
+    back = UrdfModel(load_spatial_robot(out))
+    assert (tmp_path / "out" / "leg_id.urdf").is_file() and back.name == "quadruped_leg_identified"
+    theta = np.array([p["identified"] for p in summary["parameters"]])
+    np.testing.assert_allclose(back.parameters(), theta, rtol=1e-9, atol=1e-13)
+    cov, source = back.model_covariance()
+    assert source.startswith("identification of quadruped_leg_identified from")
+    n_id, T = flags(back, short_log, cov)
+    assert n_id <= 3
+    again = _tb("identify", path, "--robot", decl, "--out", out)
+    assert again.returncode == 2 and "exists" in again.stderr and again.stderr.count("\n") == 1
