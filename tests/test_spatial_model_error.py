@@ -151,3 +151,63 @@ def test_identify_command_on_a_urdf_robot(leg, true_robot, short_log, tmp_path):
     assert n_id <= 3
     again = _tb("identify", path, "--robot", decl, "--out", out)
     assert again.returncode == 2 and "exists" in again.stderr and again.stderr.count("\n") == 1
+
+
+def test_3d_estimate_carries_the_files_model_uncertainty(leg, short_log, tmp_path):
+    """``estimate`` on a 3-D contact-free log of a robot drawn from the declared uncertainty: the
+    nominal file (none declared) reports contact on most samples; the same URDF with a declared
+    [model_uncertainty] (R_k = R_noise + Φ_k Σ_θ Φ_kᵀ in the 3-D stream) on none; the option
+    ``--model-uncertainty none`` turns it off again."""
+    import json
+    import shutil
+
+    from estimator.spatial.logs import noise_text, write_spatial_log
+    from tests.test_identification import _tb
+
+    path = tmp_path / "run.csv"
+    write_spatial_log(short_log, leg.robot, path)
+    (tmp_path / "run.noise.toml").write_text(noise_text(snoise.default_noise(leg)))
+    shutil.copy("robots/quadruped_leg.urdf", tmp_path / "quadruped_leg.urdf")
+    decl = tmp_path / "leg.toml"
+    decl.write_text(open("robots/quadruped_leg.toml").read() + "\n[model_uncertainty]\nmass_rel = "
+                    "0.05\ninertia_rel = 0.1\ncom_m = 0.003\n")
+    runs = {}
+    for key, robot, extra in (("nominal", "robots/quadruped_leg.toml", ()), ("declared", decl, ()),
+                              ("off", decl, ("--model-uncertainty", "none"))):
+        res = _tb("estimate", path, "--robot", robot, "--json", *extra)
+        assert res.returncode == 0, res.stderr
+        runs[key] = json.loads(res.stdout)
+    T = runs["nominal"]["samples"]
+    assert runs["nominal"]["contact_samples"] > 0.5 * T
+    assert runs["declared"]["contact_samples"] == 0
+    assert runs["declared"]["model_uncertainty_source"].startswith("declared model uncertainty")
+    assert runs["off"]["contact_samples"] > 0.5 * T
+
+
+@pytest.mark.slow
+def test_model_term_keeps_the_poke_and_does_not_depend_on_chunks(leg, true_robot):
+    """With the declared uncertainty in R_k a 4 N poke on the shank of the perturbed robot is still
+    detected and located on the shank; fed in uneven chunks, the stream gives the same frame."""
+    from estimator.spatial.logs import SpatialLog
+    from estimator.spatial.pipeline import estimate_log
+    from estimator.spatial.sim import Poke
+
+    poke = Poke("shank", np.array([0.012, 0.0, -0.12]), np.array([-4.0, 1.0, 2.0]), 0.4, 0.6, 0.02)
+    spec = SimSpec(duration_s=0.8, sample_rate_Hz=500.0, substeps=4, q0_rad=np.array([0.2, 0.6, -1.2]),
+                   amplitude_rad=np.array([0.3, 0.5, 0.6]), frequency_Hz=1.5,
+                   noise=snoise.default_noise(leg), seed=5, pokes=[poke])
+    log, truth, _ = simulate(true_robot.robot, spec)
+    cov = leg.parameter_covariance(DECLARED)
+    dt = float(log.t[1] - log.t[0])
+    whole = estimate_log(leg, [log], dt, model_cov=cov, model_source="declared")
+    cuts = [0, 37, 150, 151, 260, len(log.t)]
+    parts = [SpatialLog(log.t[a:b], log.q[a:b], log.v[a:b], log.tau_Nm[a:b], log.wrench[a:b], log.floating)
+             for a, b in zip(cuts[:-1], cuts[1:])]
+    chunked = estimate_log(leg, parts, dt, model_cov=cov, model_source="declared")
+    f, g = whole.frame, chunked.frame
+    np.testing.assert_array_equal(f["contact"].to_numpy(), g["contact"].to_numpy())
+    np.testing.assert_allclose(f["rnorm"].to_numpy(), g["rnorm"].to_numpy(), rtol=1e-9)
+    on = (log.t >= 0.45) & (log.t < 0.6)
+    c = f["contact"].to_numpy().astype(bool)
+    assert c[on].mean() > 0.8 and c[log.t < 0.38].sum() == 0
+    assert [iv["link"] for iv in whole.intervals] == ["shank"]
