@@ -56,7 +56,7 @@ class Equations:
 
 def window_equations(model, t, q, v, tau_meas, noise, timing=None, window_s: float = 0.005,
                      source: str = "log", chunk: int = 8192) -> Equations:
-    """Equations of one contiguous log (t (T,), q, v (T, n_v), τ_meas (T, n_v)) in windows of
+    """Equations of one contiguous log (t (T,), q (T, n_q), v, τ_meas (T, n_v)) in windows of
     ``window_s`` (module doc). The log must be regularly sampled (no gaps)."""
     from estimator import timing as timing_mod
     from estimator.observer import regular_period
@@ -72,7 +72,7 @@ def window_equations(model, t, q, v, tau_meas, noise, timing=None, window_s: flo
                          f"parts before and after it as two logs")
     W = max(1, int(round(window_s / dt)))
     n_win = (T - 1) // W
-    n = q.shape[1]
+    n = np.shape(v)[1]                       # observer rows (a URDF robot's q has a quaternion)
     sig_tau = _force_sigma(noise, n)
     tauT = np.asarray(tau_meas, float).T
     taubar = 0.5 * (tauT[:, 1:] + tauT[:, :-1])

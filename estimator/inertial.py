@@ -239,26 +239,27 @@ def read_uncertainty(table, where: str):
                             com_m=get("com_m", None) if "com_m" in table else None, relative=rel)
 
 
-def read_identification(robot, table, where: str) -> dict:
-    """[identification]: its parameter names and values must be this robot's, its covariance a
+def read_identification(model, table, where: str) -> dict:
+    """[identification] of a RobotModel (the planar Robot, a URDF robot's UrdfModel): its parameter
+    names and values must be the model's (``parameter_names``, ``parameters()``), its covariance a
     finite symmetric positive semi-definite (n_θ × n_θ) matrix."""
     from userio.fields import Fields
 
     f = Fields(where)
     f.known(table, IDENTIFICATION_KEYS, "identification")
     names = table.get("parameter_names")
-    want = list(parameter_names(robot.n_links))
+    want = list(model.parameter_names)
     if names != want:
         raise f.err("identification.parameter_names", f"expected {want} (this robot's "
-                    f"{robot.n_links} links), got {names!r}")
+                    f"{len(want)} inertial parameters), got {names!r}")
     k = len(want)
     theta = f.vector(table, "parameters", "identification", length=k)
-    ref = parameters(robot)
+    ref = np.asarray(model.parameters(), float)
     scale = np.abs(ref) + 1e-12
     if np.any(np.abs(theta - ref) > 1e-6 * scale):
         j = int(np.argmax(np.abs(theta - ref) / scale))
         raise f.err("identification.parameters", f"{want[j]} = {theta[j]:.9g} differs from the "
-                    f"file's link tables ({ref[j]:.9g}): edited after identification? Identify again")
+                    f"file's inertial data ({ref[j]:.9g}): edited after identification? Identify again")
     cov = table.get("covariance")
     ok = isinstance(cov, list) and len(cov) == k and all(
         isinstance(r, list) and len(r) == k and all(isinstance(x, (int, float)) and
@@ -276,8 +277,9 @@ def read_identification(robot, table, where: str) -> dict:
     return out
 
 
-def read_tables(robot, data: dict, source: str):
-    """The robot with its [model_uncertainty] and [identification] tables read and validated."""
+def read_tables(robot, data: dict, source: str, model=None):
+    """The robot (a dataclass with ``model_uncertainty`` and ``identification`` fields) with those
+    tables read and validated; the identification against ``model`` (default: the robot itself)."""
     from dataclasses import replace
 
     unc = ident = None
@@ -290,7 +292,7 @@ def read_tables(robot, data: dict, source: str):
         t = data["identification"]
         if not isinstance(t, dict):
             raise InputError(f"{source}: identification: expected a table")
-        ident = read_identification(robot, t, source)
+        ident = read_identification(robot if model is None else model, t, source)
     return replace(robot, model_uncertainty=unc, identification=ident)
 
 

@@ -29,7 +29,8 @@ posterior of an identification (``torquebench identify``), or a declared physica
 ``consistency_margins`` (every entry ≥ 0 exactly when θ is consistent).
 
 Optional, used when a model has them: ``consistency_margin_names`` (what each margin bounds, for
-messages) and ``fused_model_chi2`` (the model-error statistic with the model's own compiled
+messages), ``n_q`` (columns of q when they are not ``n_v``: a URDF robot's quaternion) and
+``fused_model_chi2`` (the model-error statistic with the model's own compiled
 regressor inside the loop; estimator.model_error falls back to ``momentum_regressor``).
 """
 

@@ -89,7 +89,7 @@ class ModelTerm:
         nonzero at any of 16 random states (an entry not identically zero is almost surely
         nonzero there); Φ stays zero where Y is."""
         rng = np.random.default_rng(0)
-        qs = rng.uniform(-np.pi, np.pi, (16, self.n))
+        qs = rng.uniform(-np.pi, np.pi, (16, getattr(self.robot, "n_q", self.n)))   # URDF: + quaternion
         vs = rng.normal(0.0, 2.0, (16, self.n))
         YP, Yu = self.robot.momentum_regressor(qs, vs)
         live = np.any((YP != 0) | (Yu != 0), axis=0)                  # (n, k)

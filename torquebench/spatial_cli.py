@@ -51,6 +51,16 @@ def estimate(args) -> int:
     else:
         noise = read_noise(args.log, robot)
     rate = parse_rate(args.false_alarm_rate, "--false-alarm-rate")
+    from estimator.model_error import resolve
+    from torquebench.commands.estimate import model_uncertainty_option
+
+    given = model_uncertainty_option(getattr(args, "model_uncertainty", None))
+    if args.threshold is not None:
+        if given not in (None, False):
+            raise InputError("--model-uncertainty: enters the chi-square detector; not with --threshold")
+        model_cov, model_source = None, "none (--threshold)"
+    else:                      # the file's identification or [model_uncertainty], unless an option
+        model_cov, model_source = resolve(model, given)
     reader = SpatialLogReader(args.log, robot, model, chunk_samples=args.chunk_samples)
     timing = reader.timing
     if args.timing is not None:
@@ -64,7 +74,8 @@ def estimate(args) -> int:
     found = check_head_model(model, first, noise, where=str(args.log))   # units, signs: refused
     stream = SpatialStream(model, reader.period_s, gain_per_s=args.gain, noise=noise, timing=timing,
                            false_alarm_rate=rate, threshold=args.threshold,
-                           weighting=getattr(args, "weighting", "whitened"))
+                           weighting=getattr(args, "weighting", "whitened"),
+                           model_cov=model_cov, model_source=model_source)
     stream.feed(first)
     for c in chunks:
         stream.feed(c)

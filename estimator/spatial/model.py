@@ -19,10 +19,11 @@ from __future__ import annotations
 import numpy as np
 
 from estimator.errors import InputError
+from estimator.spatial import inertial as spatial_inertial
 from estimator.spatial import tree as tree_mod
 from estimator.spatial.robot import SpatialRobot
 
-PARAMS = ("m", "mc_x", "mc_y", "mc_z", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
+PARAMS = spatial_inertial.PARAMS
 
 
 def _skew(a: np.ndarray) -> np.ndarray:
@@ -93,8 +94,10 @@ class UrdfModel:
         self.joint_names = tuple(robot.joint_names)
         self.sensed_joints = tuple(robot.sensed)
         self.n_v = 6 + len(self.joint_names)
+        self.n_q = self.n_v + 1                 # q = [p, quaternion, joints]
         self.parameter_names = tuple(f"{b}.{p}" for b in self.tree.body_names for p in PARAMS)
         self._ft = robot.ft_placement()
+        self._sizes = None
 
     # ------------------------------------------------------------------ dynamics
     def momentum_terms(self, q, v, tau_meas):
@@ -186,6 +189,50 @@ class UrdfModel:
                 out.append(f"{name}: inertia violates the triangle inequality "
                            f"(eigenvalues {np.round(lam, 9).tolist()} kg·m²)")
         return out
+
+    def consistency_margins(self, theta) -> np.ndarray:
+        """Per body [m, e₁, e₂, e₃ of m I_c, e₂, e₃ of m Σ_c]: polynomials in θ, all ≥ 0 exactly
+        when the pseudo-inertia is positive semidefinite (estimator.spatial.inertial)."""
+        return spatial_inertial.consistency_margins(theta)
+
+    @property
+    def consistency_margin_names(self) -> list[str]:
+        return spatial_inertial.margin_names(self.tree.body_names)
+
+    @property
+    def body_sizes_m(self) -> np.ndarray:
+        """ℓ per body: what a ``relative`` centre-of-mass uncertainty is relative to."""
+        if self._sizes is None:
+            self._sizes = spatial_inertial.body_sizes(self.robot, self.tree)
+        return self._sizes
+
+    def parameter_covariance(self, uncertainty) -> np.ndarray:
+        """Σ_θ = J diag(σ_p²) Jᵀ of independent per-body errors in the mass, the centre of mass and
+        a strain of the mass distribution about it (estimator.spatial.inertial)."""
+        return spatial_inertial.parameter_covariance(self.parameters(), self.body_sizes_m, uncertainty)
+
+    def model_covariance(self):
+        """(Σ_θ, source) the robot file states: its [identification] covariance, else its declared
+        [model_uncertainty], else (None, why)."""
+        ident, unc = self.robot.identification, self.robot.model_uncertainty
+        if ident is not None:
+            logs = ", ".join(str(g.get("path", "?")) for g in ident.get("logs", [])) or "its logs"
+            return np.asarray(ident["covariance"], float), f"identification of {self.name} from {logs}"
+        if unc is not None:
+            return self.parameter_covariance(unc), f"declared model uncertainty: {unc.describe()}"
+        return None, "the robot file is not identified and declares no [model_uncertainty]"
+
+    def perturbed(self, uncertainty, seed: int) -> "UrdfModel":
+        """A robot whose inertial data differ from this one by one draw of the declared physical
+        uncertainty (``spatial_inertial.draw``: always consistent); geometry, joints and sensors
+        unchanged, no identification or declared uncertainty carried over."""
+        from dataclasses import replace
+
+        theta = spatial_inertial.draw(self.parameters(), self.body_sizes_m, uncertainty,
+                                      np.random.default_rng(seed))
+        robot = replace(self.robot, name=f"{self.name}_perturbed_{seed}", model_uncertainty=None,
+                        identification=None)
+        return UrdfModel(robot).with_parameters(theta)
 
     # ------------------------------------------------------------------ the FT sensor
     def base_rows_from_ft(self, q: np.ndarray, wrench_s: np.ndarray) -> np.ndarray:

@@ -50,10 +50,12 @@ class SpatialStream:
                  false_alarm_rate=(1.0, "h"), lag_compensation: bool = True,
                  cov_stride_s: float = 0.01, min_force_N: float = 0.05, max_condition: float = 20.0,
                  position_tol_m: float = 0.005, threshold: float | None = None,
-                 weighting: str = "whitened"):
+                 weighting: str = "whitened", model_cov=None, model_source: str = ""):
         """``weighting``: the localizer's least squares on the residual whitened by its
         no-contact covariance ("whitened", default), or unweighted ("identity": the planar
-        dynamic method's fit, with its ambiguity rule 2·√tr R on the residual norm)."""
+        dynamic method's fit, with its ambiguity rule 2·√tr R on the residual norm).
+        ``model_cov``: Σ_θ of the file's inertial parameters (``model.model_covariance``); the
+        no-contact covariance is then R_k = R_noise + Φ_k Σ_θ Φ_kᵀ (estimator.model_error)."""
         from estimator.errors import InputError
 
         if weighting not in ("whitened", "identity"):
@@ -90,8 +92,16 @@ class SpatialStream:
         self.info = {}
         K = self.K[:3]
         self._L0 = None
+        self.model_term = None
+        if model_cov is not None:
+            from estimator.model_error import ModelTerm
+
+            self.model_term = ModelTerm(model, model_cov, self.K, self.dt, "exact")
+            self.info["model_uncertainty_source"] = model_source
+        else:
+            self.info["model_uncertainty_source"] = model_source or "none"
         if (self.noise.velocity_sigma_rad_per_s == 0 and self.noise.encoder_counts == 0
-                and np.all(K == K[0])):
+                and np.all(K == K[0]) and self.model_term is None):
             q0 = model.robot.rest_q()
             q0[3:7] = [0.0, 0.0, 0.0, 1.0]
             R0 = snoise.residual_covariance(model, q0[None], np.zeros((1, model.n_v)), self.noise,
@@ -123,9 +133,11 @@ class SpatialStream:
         carried = self._cur is not None and self._cur[0] == blocks[0]
         new = first[1:] if carried else first
         Linv = np.empty((len(first), len(self.rows), len(self.rows)))
+        self._Rn = np.empty_like(Linv)                 # the noise covariances (model term: R_noise)
         if new.size:
             R = snoise.residual_covariance(self.model, q[new], v[new], self.noise, self.gain,
                                            self.dt, self.timing)
+            self._Rn[1 if carried else 0:] = R
             Linv[1 if carried else 0:] = np.linalg.inv(np.linalg.cholesky(R))
             if self._floor is None:
                 self._floor = max(self.min_force_N, 5.0 * float(np.sqrt(np.max(np.diagonal(R[0])[:3]))))
@@ -133,8 +145,8 @@ class SpatialStream:
                 self.info["residual_sigma"] = np.sqrt(np.diagonal(R[0])).tolist()
                 self._amb = 2.0 * float(np.sqrt(np.trace(R[0])))
         if carried:
-            Linv[0] = self._cur[1]
-        self._cur = (int(blocks[-1]), Linv[-1].copy())
+            Linv[0], self._Rn[0] = self._cur[1], self._cur[2]
+        self._cur = (int(blocks[-1]), Linv[-1].copy(), self._Rn[-1].copy())
         return Linv, np.searchsorted(first, np.arange(T), side="right") - 1
 
     def _process(self, rows):
@@ -150,7 +162,10 @@ class SpatialStream:
             stat = whitened_statistic(rb, self.rows, self._L0[None], np.zeros(T, np.int64))
         else:
             Lb, block = self._whiteners(q, v, self.g)
-            stat = whitened_statistic(r, self.rows, Lb, block)
+            if self.model_term is None:
+                stat = whitened_statistic(r, self.rows, Lb, block)
+            else:
+                stat, Gu = self._model_statistic(t, q, v, r, block)
         if self.threshold is None:
             contact, rnorm = stat > self.h, np.sqrt(stat)
         else:
@@ -180,6 +195,9 @@ class SpatialStream:
 
                 W = np.broadcast_to(self._L0, (sel.size,) + self._L0.shape).copy()
                 W[:, :, :3] = self._L0[:, :3] @ quat_matrix(q_loc[sel, 3:7]).transpose(0, 2, 1)
+            elif self.model_term is not None:           # R_k = R_noise + G_k G_kᵀ
+                Rk = self._Rn[block[sel]] + np.einsum("tic,tjc->tij", Gu[sel], Gu[sel])
+                W = np.linalg.inv(np.linalg.cholesky(Rk))
             else:
                 W = Lb[block[sel]]
             res = loc.localize(self.model, self.surfaces, q_loc[sel], r[sel], W,
@@ -205,6 +223,20 @@ class SpatialStream:
                                         "rnorm": rnorm,
                                         "reason": pd.Categorical(reason, categories=loc.REASONS)},
                                        columns=OUT_COLUMNS))
+
+    def _model_statistic(self, t, q, v, r, block):
+        """(s_k, G_k) with R_k = R_noise + G_k G_kᵀ on the used rows, G = Φ S from the model
+        term (estimator.model_error; its own statistic over all rows is not used: an unsensed
+        joint's row is no equation)."""
+        from estimator.model_error import statistic_numpy
+
+        n, rows = self.model.n_v, self.rows
+        Rfull = np.broadcast_to(np.eye(n), (len(self._Rn), n, n)).copy()
+        Rfull[np.ix_(np.arange(len(self._Rn)), rows, rows)] = self._Rn
+        _, G = self.model_term.statistic(t, q, v, np.ascontiguousarray(r.T), Rfull,
+                                         block.astype(np.int64))
+        Gu = G[:, rows]
+        return statistic_numpy(r[:, rows].T, Gu, self._Rn, block), Gu
 
     def feed(self, log):
         rows = self.obs.feed(log.t, log.q, log.v, log.tau_meas(self.model))

@@ -71,6 +71,8 @@ class SpatialRobot:
     shapes: dict = field(default_factory=dict)    # URDF link name → [Shape]
     source: str = ""
     _model: object = None
+    model_uncertainty: object | None = None   # declared ModelUncertainty (estimator.model)
+    identification: dict | None = None        # the [identification] table of an identified file
 
     # ------------------------------------------------------------------ pinocchio
     @property
@@ -247,7 +249,7 @@ def build_model(urdf_text: str, source: str, gravity: float = 9.81):
 
 
 TOP_KEYS = {"name", "urdf", "base", "torque_sensed", "ft_frame", "gravity_m_per_s2", "mount",
-            "collision"}
+            "collision", "model_uncertainty", "identification"}
 COLLISION_KEYS = {"link", "kind", "size", "xyz", "rpy", "mesh"}
 SIZES = {"box": 3, "cylinder": 2, "capsule": 2, "sphere": 1, "mesh": 3}
 
@@ -307,7 +309,7 @@ def load_spatial_robot(path) -> SpatialRobot:
     sensed = data.get("torque_sensed")
     if sensed is not None and (not isinstance(sensed, list) or not all(isinstance(s, str) for s in sensed)):
         raise InputError(f"{path}: torque_sensed: expected a list of joint names, got {sensed!r}")
-    return robot_from_urdf(
+    robot = robot_from_urdf(
         urdf, name=f.string(data, "name", "", path.stem), floating=base == "floating",
         sensed_names=sensed, ft_frame=data.get("ft_frame"),
         gravity=f.number(data, "gravity_m_per_s2", "", 9.81, lo=0.0, hi=100.0),
@@ -316,6 +318,19 @@ def load_spatial_robot(path) -> SpatialRobot:
         stiffness=f.vector(mount, "stiffness", "mount", 6, [2e4] * 3 + [800.0] * 3, nonneg=True),
         damping=f.vector(mount, "damping", "mount", 6, [150.0] * 3 + [4.0] * 3, nonneg=True),
         declaration=str(path), collision=_collision_overrides(f, data, path))
+    return read_tables(robot, data, str(path))
+
+
+def read_tables(robot: SpatialRobot, data: dict, source: str) -> SpatialRobot:
+    """The robot with its [model_uncertainty] and [identification] tables read through the planar
+    file's validators (estimator.inertial): the identification must name this URDF's parameters
+    (``UrdfModel.parameter_names``) with its inertial values."""
+    if "model_uncertainty" not in data and "identification" not in data:
+        return robot
+    from estimator import inertial
+    from estimator.spatial.model import UrdfModel
+
+    return inertial.read_tables(robot, data, source, model=UrdfModel(robot))
 
 
 def robot_from_urdf(urdf_path, *, name=None, floating=True, sensed_names=None, ft_frame=None,

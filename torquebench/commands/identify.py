@@ -36,7 +36,8 @@ def add_arguments(parser) -> None:
                              "run of scenes/identification_excitation.toml; each may carry "
                              "LOG.noise.toml and LOG.timing.toml beside it")
     parser.add_argument("--robot", type=Path, default=None,
-                        help="the nominal robot TOML (default: robots/paper_leg.toml)")
+                        help="the nominal robot TOML (default: robots/paper_leg.toml); a URDF "
+                             "robot (LEG.urdf or its declaration TOML) writes IDENTIFIED.urdf too")
     parser.add_argument("--out", type=Path, required=True, metavar="IDENTIFIED.toml",
                         help="identified robot TOML to write; directory created, an existing file "
                              "is kept unless --force")
@@ -122,6 +123,10 @@ def run(args) -> int:
     from torquebench.outputs import prepare_file
     from userio.files import write_text_atomic
 
+    from estimator.spatial.robot import is_spatial_robot_file
+    if args.robot is not None and is_spatial_robot_file(args.robot):   # a URDF robot: the 3-D path
+        from torquebench.spatial_identify import identify as identify_3d
+        return identify_3d(args)
     robot_path = args.robot or PAPER_LEG_TOML
     prepare_file(args.out, "--out", force=args.force, inputs=(*args.logs, robot_path))
     robot = load_robot(robot_path)
