@@ -146,7 +146,7 @@ def test_com_perp_in_the_robot_file(tmp_path):
 
 
 @pytest.mark.parametrize("table, message", [
-    ({"relative": 2.0}, "model_uncertainty.relative: must lie in [0.0, 1.0]"),
+    ({"relative": 2.0}, "model_uncertainty.relative: must lie in [0, 1]"),
     ({"mass_rel": 0.05}, "model_uncertainty.inertia_rel: missing field"),
     ({"realtive": 0.05}, "model_uncertainty.realtive: unknown field (did you mean 'relative'?)"),
     ({}, "model_uncertainty: empty table"),

@@ -254,7 +254,7 @@ def test_declared_uncertainty_and_identification_tables(tmp_path, leg):
 
 
 @pytest.mark.parametrize("table, message", [
-    ("[model_uncertainty]\nrelative = 2.0\n", "model_uncertainty.relative: must lie in [0.0, 1.0]"),
+    ("[model_uncertainty]\nrelative = 2.0\n", "model_uncertainty.relative: must lie in [0, 1]"),
     ("[model_uncertainty]\nmass_rel = 0.05\n", "model_uncertainty.inertia_rel: missing field"),
     ("[model_uncertainty]\nrealtive = 0.05\n", "model_uncertainty.realtive: unknown field (did you mean 'relative'?)"),
     ("[identification]\nparameter_names = [\"a\"]\n", "identification.parameter_names: expected ['base.m'"),
