@@ -38,3 +38,10 @@ def test_a_calibration_far_from_the_chain_is_warned_about():
     sigma, source, warnings = calibration_noise(cal, chain)
     assert abs(sigma - 1.21 / 0.0115 * 1e-3 * 9.80665 * 0.205) < 1e-12
     assert len(warnings) == 1 and "16× the sensor chain's" in warnings[0]
+
+
+def test_posture_is_refused_for_a_planar_robot(tmp_path):
+    """--posture is the URDF map's; a planar robot's map is a grid, so the option is refused, not ignored."""
+    proc = subprocess.run([sys.executable, "-m", "torquebench", "propagate", "--posture", "0.1,0.2"],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert proc.returncode == 2 and "--posture: for URDF robots" in proc.stderr

@@ -147,6 +147,9 @@ def run(args) -> int:
     from torquebench.cache import Cache
     from torquebench.io import print_json
 
+    if getattr(args, "posture", None) is not None:
+        raise InputError("--posture: for URDF robots (--robot LEG.toml naming a URDF); a planar robot's "
+                         "map covers a grid of postures over [0, π] per joint (--grid)")
     robot = load_robot(args.robot) if args.robot else paper_leg()
     parts = str(args.contact).split(",")
     try:
