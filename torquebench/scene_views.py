@@ -72,21 +72,22 @@ def statistic_label(est) -> tuple[str, float | None, str]:
     return "‖r‖, paper rule (N and N·m rows together)", info.get("threshold"), "ε"
 
 
-def residual_figure(est, robot, truth_on=None, title: str = "", methods: dict | None = None):
-    """The observer residual of ``est`` on three axes with one unit each: the detection statistic
-    (of every estimate in ``methods``, {name: ContactEstimate}, default {est.method: est}) with its
-    threshold; the force rows (N); the moment and torque rows (N·m). ``truth_on``: (T,) bool of the
-    true contact, shaded. Returns the matplotlib Figure (not saved)."""
-    plt = _pyplot()
-    methods = methods or {est.method: est}
-    stats = {}
+def statistic_groups(methods: dict) -> dict:
+    """{axis label: [(name, estimate)]}: estimates whose statistics share a unit share an axis."""
+    groups = {}
     for name, e in methods.items():
-        stats.setdefault(statistic_label(e)[0], []).append((name, e))
+        groups.setdefault(statistic_label(e)[0], []).append((name, e))
+    return groups
+
+
+def draw_residual(ax, est, robot, methods: dict | None = None) -> None:
+    """Draw the residual of ``est`` on the axes ``ax`` (len(statistic_groups(methods)) + 2 of
+    them): each detection statistic with its threshold (log scale when positive), then the force
+    rows (N), then the moment and torque rows (N·m)."""
+    methods = methods or {est.method: est}
     rows = residual_rows(robot)
     r = np.asarray(est.residual, float)
-    n_ax = len(stats) + 2
-    fig, ax = plt.subplots(n_ax, 1, figsize=(8, 2.2 * n_ax + 0.6), sharex=True)
-    for a, (label, group) in zip(ax, stats.items()):
+    for a, (label, group) in zip(ax, statistic_groups(methods).items()):
         for name, e in group:
             a.plot(e.t, e.rnorm, lw=0.9, label=f"{name}")
             _, thr, thr_label = statistic_label(e)
@@ -102,6 +103,18 @@ def residual_figure(est, robot, truth_on=None, title: str = "", methods: dict | 
                 a.plot(est.t, r[:, k], lw=0.9, label=f"r {name}")
         a.set_ylabel(f"residual, {what} ({unit})", fontsize=8)
         a.legend(fontsize=7, ncol=3)
+
+
+def residual_figure(est, robot, truth_on=None, title: str = "", methods: dict | None = None):
+    """The observer residual of ``est`` on axes with one unit each (draw_residual): the detection
+    statistic of every estimate in ``methods`` ({name: ContactEstimate}, default {est.method: est})
+    with its threshold; the force rows (N); the moment and torque rows (N·m). ``truth_on``: (T,)
+    bool of the true contact, shaded. Returns the matplotlib Figure (not saved)."""
+    plt = _pyplot()
+    methods = methods or {est.method: est}
+    n_ax = len(statistic_groups(methods)) + 2
+    fig, ax = plt.subplots(n_ax, 1, figsize=(8, 2.2 * n_ax + 0.6), sharex=True)
+    draw_residual(ax, est, robot, methods)
     if truth_on is not None:
         for a in ax:
             _shade(a, est.t, truth_on)
