@@ -192,3 +192,45 @@ def test_a_dynamic_scenes_report_holds_its_estimate_residual_and_scores_only(tmp
                                "estimator_vs_truth.png", "detection_residual.png"}
     summary = (out / "paper_floating_link2.md").read_text()
     assert "![residual](detection_residual.png)" in summary and "## Detection" in summary
+
+
+def test_views_draw_only_from_the_artifacts_they_are_given(tmp_path):
+    """The calibration view plots the scene's own session and fit (mass in g against the reading
+    in the calibration's unit); the estimator view plots the given estimates against the given
+    truth; both write only into the directory they are given."""
+    from types import SimpleNamespace
+
+    import matplotlib.pyplot as plt
+
+    from calibration.model import SensorModel
+    from calibration.session import Session
+    from torquebench import scene_views as V
+
+    mass = np.tile([0.0, 100.0, 500.0, 1000.0], 2)
+    reading = 40.0 * mass + 7.0 + np.random.default_rng(1).normal(0, 3.0, mass.size)
+    session = Session(mass_g=mass, reading=reading, direction=np.array(["load"] * mass.size),
+                      repeat=np.repeat([0, 1], 4), timestamp_s=np.full(mass.size, np.nan),
+                      lever_arm_m=0.2, reading_unit="counts")
+    cal = SensorModel(model="linear", coef_names=("slope", "offset"), coef_mean=np.array([40.0, 7.0]),
+                      coef_cov=np.diag([1e-4, 1.0]), sigma=3.0, samples=np.zeros((4, 2)),
+                      sigma_samples=np.ones(4), lever_arm_m=0.2, reading_unit="counts")
+    fig = V.calibration_figure(session, cal)
+    assert [a.get_ylabel() for a in fig.axes] == ["mass (g)", "mass − fit (g)"]
+    assert fig.axes[1].get_xlabel() == "reading (counts)"
+    np.testing.assert_allclose(fig.axes[0].get_lines()[0].get_xdata(), reading)
+    plt.close(fig)
+    scene = SimpleNamespace(name="s", chain=SimpleNamespace(calibration_file=None))
+    lines, paths = V.VIEWS["calibration"].draw(scene, {"calibration": cal, "session": session}, tmp_path)
+    assert [p.name for p in paths] == ["calibration_fit.png"] and "![calibration fit](calibration_fit.png)" in lines
+    assert "slope 40 ± 0.01 counts/g" in "\n".join(lines)
+
+    robot, ests, on = _leg_estimates()
+    truth = {"link": np.where(on, 2, 0), "alpha": np.full(on.size, 0.5), "Fx": np.where(on, 2.5, 0.0),
+             "Fz": np.where(on, -4.3, 0.0)}
+    fig = V.estimate_figure(ests, truth)
+    assert [a.get_ylabel() for a in fig.axes] == ["contact (0/1)", "link", "α (along the link, 0–1)",
+                                                  "F on the robot (N)"]
+    labels = {ln.get_label() for ln in fig.axes[3].get_lines()}
+    assert {"Fx dynamic", "Fz paper", "truth Fx", "truth Fz"} <= labels
+    plt.close(fig)
+    assert {p.name for p in tmp_path.iterdir() if not p.name.startswith(".")} == {"calibration_fit.png"}
