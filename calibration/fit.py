@@ -171,7 +171,7 @@ def check_readings(y: np.ndarray, source, adc_bits: int | None = None) -> None:
     rail = (y <= lo) | (y >= hi)
     if np.count_nonzero(rail) * 2 > y.size:
         raise InputError(f"{source}: column 'reading': {np.count_nonzero(rail)} of {y.size} readings "
-                         f"are at the ADC full scale ({lo}, {hi} counts: saturated); reduce the gain "
+                         f"are at the ADC full scale (saturated), {lo} or {hi} counts; reduce the gain "
                          "or the load")
 
 
