@@ -156,24 +156,29 @@ def make_log_prob(X: np.ndarray, y: np.ndarray, model: str, mass_std_g: float = 
     return log_prob
 
 
-def check_readings(y: np.ndarray, source) -> None:
+def check_readings(y: np.ndarray, source, adc_bits: int | None = None) -> None:
     """Refuse constant readings (no response to load: saturated, disconnected or stuck; the
-    posterior is degenerate) and readings at a 24-bit ADC rail (±2^23 counts, clipped)."""
+    posterior is degenerate) and readings at an ADC rail (−2^(N−1) or 2^(N−1) − 1 counts, clipped;
+    N = ``adc_bits``, else the default sensor's width, calibration.model.adc_rails)."""
+    from calibration.model import adc_rails
+
     y = np.asarray(y, float)
     if y.size and np.ptp(y) <= 1e-12 * max(np.abs(y).max(), 1e-300):
         raise InputError(f"{source}: column 'reading': all {y.size} readings are {y[0]:g}; a sensor "
                          "that does not respond to load (saturated, stuck or disconnected) cannot "
                          "be calibrated")
-    rail = (y <= -(2 ** 23)) | (y >= 2 ** 23 - 1)
+    lo, hi = adc_rails(adc_bits)
+    rail = (y <= lo) | (y >= hi)
     if np.count_nonzero(rail) * 2 > y.size:
         raise InputError(f"{source}: column 'reading': {np.count_nonzero(rail)} of {y.size} readings "
-                         "are at the 24-bit ADC full scale (saturated); reduce the gain or the load")
+                         f"are at the ADC full scale (saturated), {lo} or {hi} counts; reduce the gain "
+                         "or the load")
 
 
 def fit_session(session: Session, model: str = "linear", *, mass_std_g: float = 0.0,
                 n_walkers: int = 256, seed: int | None = 0, tau_multiple: float = 50.0,
                 max_steps: int = 50_000, min_steps: int = 300, moves: str = "de",
-                progress: bool = False) -> FitResult:
+                progress: bool = False, adc_bits: int | None = None) -> FitResult:
     """Fit ``session`` with emcee until converged (≥ ``tau_multiple`` τ) or ``max_steps``."""
     import time
 
@@ -186,7 +191,7 @@ def fit_session(session: Session, model: str = "linear", *, mass_std_g: float = 
         design_matrix(session.mass_g, model)  # raises the InputError naming the models
     X = design_matrix(session.mass_g, model, session.unload)
     y = session.reading
-    check_readings(y, session.source)
+    check_readings(y, session.source, adc_bits)
     check_identifiable(X, model, session.source)
     exact = exact_posterior(X, y, names)
     p = X.shape[1]

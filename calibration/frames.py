@@ -24,6 +24,10 @@ import numpy as np
 
 SYNC = b"\xa5\x5a"
 MAX_CHANNELS = 8
+SAMPLE_BYTES = 3                        # one sample word on the wire (tb_frame.h: TB_FRAME_LEN)
+SAMPLE_BITS = 8 * SAMPLE_BYTES          # the word holds the ADC's code (the default sensor's width,
+                                        # bridge.config.SensorConfig.bits; a test holds them equal)
+SAMPLE_MIN, SAMPLE_MAX = -(1 << (SAMPLE_BITS - 1)), (1 << (SAMPLE_BITS - 1)) - 1
 
 
 def _crc_table() -> np.ndarray:
@@ -54,18 +58,19 @@ def crc16_rows(block: np.ndarray) -> np.ndarray:
 
 
 def frame_length(n_channels: int) -> int:
-    """Bytes per frame: 2 sync + 2 seq + 1 n_ch + 3 n + 2 CRC."""
-    return 7 + 3 * n_channels
+    """Bytes per frame: 2 sync + 2 seq + 1 n_ch + SAMPLE_BYTES·n + 2 CRC."""
+    return 7 + SAMPLE_BYTES * n_channels
 
 
 def encode_frames(seq, samples) -> bytes:
-    """Frames for ``seq`` (k,) and ``samples`` (k, n_ch) int (clipped to 24-bit), concatenated."""
+    """Frames for ``seq`` (k,) and ``samples`` (k, n_ch) int (clipped to the SAMPLE_BITS word),
+    concatenated."""
     samples = np.atleast_2d(np.asarray(samples, dtype=np.int64))
     k, n = samples.shape
     if not 1 <= n <= MAX_CHANNELS:
         raise ValueError(f"n_ch must be 1..{MAX_CHANNELS}, got {n}")
     seq = np.asarray(seq, dtype=np.int64).reshape(k) & 0xFFFF
-    v = np.clip(samples, -(2**23), 2**23 - 1) & 0xFFFFFF
+    v = np.clip(samples, SAMPLE_MIN, SAMPLE_MAX) & ((1 << SAMPLE_BITS) - 1)
     out = np.empty((k, frame_length(n)), dtype=np.uint8)
     out[:, 0], out[:, 1] = 0xA5, 0x5A
     out[:, 2], out[:, 3] = seq >> 8, seq & 0xFF
@@ -152,7 +157,7 @@ class FrameParser:
         seq = (good[:, 2].astype(np.int64) << 8) | good[:, 3]
         raw = ((good[:, 5::3][:, :n].astype(np.int64) << 16) | (good[:, 6::3][:, :n].astype(np.int64) << 8)
                | good[:, 7::3][:, :n])
-        samples = np.where(raw >= 2**23, raw - 2**24, raw)
+        samples = np.where(raw > SAMPLE_MAX, raw - (1 << SAMPLE_BITS), raw)
         prev = np.concatenate([[self._last_seq], seq[:-1]]) if self._last_seq is not None else seq[:-1]
         cur = seq if self._last_seq is not None else seq[1:]
         gaps = (cur - prev - 1) % 65536

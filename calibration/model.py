@@ -19,7 +19,15 @@ from calibration.session import G_STANDARD_M_PER_S2
 
 
 RANGE_MARGIN = 0.10                   # readings up to 10 % of the calibrated span outside it are used
-ADC_MIN, ADC_MAX = -(2 ** 23), 2 ** 23 - 1   # signed 24-bit full scale (calibration.frames)
+
+
+def adc_rails(bits: int | None = None) -> tuple[int, int]:
+    """(min, max) count of the converter: ``bits`` (the sensor's [adc] bits), else the width of the
+    default sensor (bridge.config.SensorConfig, the one place it is written)."""
+    from bridge.adc import code_limits
+    from bridge.config import SensorConfig
+
+    return code_limits(SensorConfig.bits if bits is None else bits)
 
 
 @dataclass
@@ -39,9 +47,10 @@ class SensorModel:
     source: str = "<memory>"
     info: dict = field(default_factory=dict)
     mass_range_g: tuple | None = None     # (min, max) applied mass of the calibration session
+    adc_bits: int | None = None           # the converter's width (None: the default sensor's)
 
     def flags(self, reading, direction=None) -> np.ndarray:
-        """Per reading: "" (usable), "saturated_adc" (24-bit count at or past full scale,
+        """Per reading: "" (usable), "saturated_adc" (a count at or past the ADC's full scale,
         reading_unit "counts"), "outside_calibrated_range" (mass more than RANGE_MARGIN of the
         calibrated span outside it: extrapolation), or "no_solution" (model has no root)."""
         r = np.asarray(reading, float)
@@ -54,7 +63,8 @@ class SensorModel:
             with np.errstate(invalid="ignore"):
                 out[(m < lo - pad) | (m > hi + pad)] = "outside_calibrated_range"
         if self.reading_unit == "counts":
-            out[(r <= ADC_MIN) | (r >= ADC_MAX)] = "saturated_adc"
+            lo, hi = adc_rails(self.adc_bits)
+            out[(r <= lo) | (r >= hi)] = "saturated_adc"
         return out.astype(str)
 
     # -- coefficient bookkeeping -------------------------------------------------------------

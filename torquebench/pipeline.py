@@ -15,8 +15,9 @@
     paper_scores       log (dynamic scenes)        → paper_scores (the reproduction's scores: `reproduce`)
     error_map          chain, calibration          → error_map (MC + first order over a posture grid:
                                                      `propagate`)
-    report             what the scene computes     → report (the report builders whose inputs the
-                                                     scene has, + a summary, into [outputs].dir)
+    report             what the scene computes     → report (views of the scene's own results,
+                                                     torquebench.scene_views, + a summary, into
+                                                     [outputs].dir)
 
 The graph is built backwards from the requested outputs; a stage whose result the scene gives
 (a ``strain_per_Nm``, a calibration file, a recorded log) is not run. Stage results are cached
@@ -37,6 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
+from torquebench import formatting as fmt
+from torquebench.scene_views import VIEWS
 from userio.errors import InputError
 
 # the code version in every cache key: this file's content (any edit to a stage invalidates) and
@@ -111,16 +114,14 @@ STAGES = (
     Stage("paper_scores", ("log?", "chain?"), "paper_scores", "the paper reproduction's scores of the scene"),
     Stage("error_map", ("chain?", "calibration?"), "error_map",
           "Monte Carlo + first-order localization error over a posture grid"),
-    Stage("report", ("chain?", "flexure?", "calibration?", "estimates?", "localization_error?",
-                     "predicted_error?", "paper_scores?"), "report",
-          "the report builders whose inputs the scene has, into the scene's output directory"),
+    Stage("report", ("chain?", "flexure?", "session?", "calibration?", "truth?", "estimates?",
+                     "localization_error?", "predicted_error?", "paper_scores?"), "report",
+          "views of the scene's own results (torquebench.scene_views) + its summary, into the "
+          "scene's output directory"),
 )
-# what each report builder (torquebench/reports/<area>.py) is about: the area runs as part of a
-# scene's report only when the scene computes that artifact; None: not about one scene
-REPORT_INPUTS = {"bridge": "chain", "flexure": "flexure", "fem": "flexure",
-                 "calibration": "calibration", "estimator": "estimates", "detection": "estimates",
-                 "reproduction": "paper_scores", "stability": None, "error_vs_runtime": None,
-                 "model_error": None}
+# what each report view (torquebench.scene_views.VIEWS) shows: a view is drawn only when the scene
+# computes that artifact; an area of torquebench/reports with no view is not about one scene (None)
+REPORT_INPUTS = {v.name: v.needs for v in VIEWS.values()}
 BY_GIVES = {s.gives: s for s in STAGES}
 ALIASES = {"sensitivity": "chain", "noise_budget": "chain"}
 DEFAULT_OUTPUTS = ("localization_error", "predicted_error")
@@ -309,7 +310,9 @@ def run_calibration_fit(scene, inp):
     from calibration.fit import fit_session
     from calibration.model import SensorModel
 
-    fit = fit_session(inp["session"], "linear", seed=scene.chain.session["seed"], n_walkers=64)
+    bits = adc_bits(scene)
+    fit = fit_session(inp["session"], "linear", seed=scene.chain.session["seed"], n_walkers=64,
+                      adc_bits=bits)
     if not fit.converged:
         raise InputError(f"{scene.path}: calibration: emcee did not converge ({fit.reason})")
     k = len(fit.coef_names)
@@ -317,8 +320,17 @@ def run_calibration_fit(scene, inp):
     return SensorModel(model="linear", coef_names=fit.coef_names, coef_mean=fit.mean[:k],
                        coef_cov=fit.cov[:k, :k], sigma=fit.sigma, samples=s[:, :k],
                        sigma_samples=np.exp(s[:, -1]), lever_arm_m=inp["session"].lever_arm_m,
-                       reading_unit="counts", sensor_id="simulated",
+                       reading_unit="counts", sensor_id="simulated", adc_bits=bits,
                        info={"n_samples": int(fit.samples.shape[0]), "tau_max": fit.tau_max})
+
+
+def adc_bits(scene) -> int:
+    """The converter's width: the scene's [sensor] file's [adc] bits, else the default sensor's
+    (bridge.config.SensorConfig: the one place the width is written)."""
+    from bridge.config import SensorConfig, load_sensor_config
+
+    c = scene.chain
+    return (load_sensor_config(c.sensor_file)[0] if c.sensor_file else SensorConfig()).bits
 
 
 def load_calibration(scene):
@@ -396,7 +408,7 @@ def _read_counts_log(scene):
         out["counts"] = codes
         if c.reading_unit == "counts":                    # ADC codes: the rails are flagged
             from bridge.adc import code_limits
-            out["rails"] = code_limits(24)
+            out["rails"] = code_limits(adc_bits(scene))
         else:                                             # mV readings: only non-finite ones
             out["rails"] = (-math.inf, math.inf)
     return out
@@ -744,26 +756,28 @@ def bound_maps(robot, postures, pr, sigma_tau) -> dict:
 
 
 def run_report(scene, inp):
-    """The chosen report builders' ``build(out_dir)`` into the scene's output directory, and
-    ``<scene>.md``: what this scene computed (sensor, calibration, measured vs predicted error)."""
-    import importlib
-
+    """The chosen views of the scene's own results (torquebench.scene_views: markdown + pictures
+    drawn from ``inp`` only) into the scene's output directory, and ``<scene>.md``: the summary of
+    what this scene computed followed by the views' sections."""
     from userio.files import write_text_atomic
 
     out_dir = report_dir(scene)
     out_dir.mkdir(parents=True, exist_ok=True)
     have = {k for k, v in inp.items() if v is not None}
     areas, _ = report_areas(scene, have)
-    written = {}
+    written, sections = {}, []
     for area in areas:
-        written[area] = [str(p) for p in importlib.import_module(f"torquebench.reports.{area}").build(out_dir)]
+        lines, paths = VIEWS[area].draw(scene, inp, out_dir)
+        sections += lines
+        written[area] = [str(p) for p in paths]
     summary = out_dir / summary_name(scene)
-    write_text_atomic(summary, scene_summary(scene, inp))
+    write_text_atomic(summary, scene_summary(scene, inp, sections))
     return {"dir": str(out_dir), "areas": areas, "written": written, "summary": str(summary)}
 
 
-def scene_summary(scene, arts) -> str:
-    """Markdown: the figures this scene computed."""
+def scene_summary(scene, arts, sections=()) -> str:
+    """Markdown: the figures this scene computed (the formatters `run` prints with,
+    torquebench.formatting), then ``sections`` (the report views drawn)."""
     L = [f"# Scene {scene.name}", "", scene.description or "", "",
          f"Generated by `torquebench run {scene.path}`.", ""]
     ch = arts.get("chain")
@@ -772,24 +786,16 @@ def scene_summary(scene, arts) -> str:
               f"- torque noise σ_τ: {ch.noise_std_Nm:.4g} N·m per sample", ""]
     fx = arts.get("flexure")
     if fx:
-        L += ["## Flexure (FEM)", ""] + [f"- {k}: {v}" for k, v in fx.items()
-                                          if not k.endswith("_error_method")] + [""]
+        L += ["## Flexure (FEM)", "", f"- {fmt.flexure_text(fx)}", ""]
     cal = arts.get("calibration")
     if cal is not None:
-        L += ["## Calibration", "", f"- slope: {cal.coef_mean[0]:.6g} ± {cal.coef_cov[0, 0] ** 0.5:.2g} "
-              f"{cal.reading_unit}/g (posterior 1σ)", f"- offset: {cal.coef_mean[1]:.6g} {cal.reading_unit}", ""]
+        L += ["## Calibration", "", f"- {fmt.calibration_text(cal)}", ""]
     me, pr = arts.get("localization_error"), arts.get("predicted_error")
     if me or pr:
         L += ["## Localization error (collision phase)", "",
-              "| method | measured RMS | predicted RMS (MC, 1σ) | predicted p95 |", "|---|---|---|---|"]
-        mm = lambda v: f"{v * 1e3:.2f} mm" if v is not None else "—"   # noqa: E731
-        for m in METHODS:
-            a, b = (me or {}).get(m, {}), (pr or {}).get(m, {})
-            e = b.get("position_rms_m_error_estimate")
-            L.append(f"| {m} | {mm(a.get('position_error_rms_m'))} | {mm(b.get('position_rms_m'))}"
-                     + (f" ± {e * 1e3:.2f} mm" if e is not None else "") + f" | {mm(b.get('position_p95_m'))} |")
-        L.append("")
-    return "\n".join(L)
+              *fmt.markdown_table(["method", "measured RMS", "predicted RMS (MC, 1σ)", "predicted p95"],
+                                  [[m, *fmt.error_cells(me, pr, m)] for m in METHODS]), ""]
+    return "\n".join(L + list(sections))
 
 
 RUNNERS = {"flexure_fem": run_flexure_fem, "sensor_chain": run_sensor_chain,
@@ -858,14 +864,15 @@ def summary_name(scene) -> str:
 
 
 def report_areas(scene, have: set) -> tuple[list[str], list[tuple[str, str]]]:
-    """(areas to build, [(area, why not)]): an area runs when the scene computes what it is
-    about (``have``: the artifacts the other outputs need); an area listed in [outputs].reports
-    whose input the scene cannot produce is an error."""
+    """(views to draw, [(area, why not)]): a view is drawn when the scene computes what it shows
+    (``have``: the artifacts the other outputs need); a view listed in [outputs].reports whose
+    input the scene cannot produce is an error, and so is an area that is not about one scene (a
+    shipped report of torquebench/reports with no view here)."""
     from torquebench.scenes import report_areas_available
 
     chosen = scene.chain.report_areas
     run, skipped = [], []
-    for area in report_areas_available():
+    for area in sorted(set(report_areas_available()) | set(VIEWS)):
         art = REPORT_INPUTS.get(area)
         if chosen is not None and area not in chosen:
             skipped.append((area, "not in outputs.reports"))
@@ -968,9 +975,9 @@ def plan(scene, outputs=None, cache=None, seed=None, force=False) -> list[Step]:
         if st.name == "report":          # writes files: always runs, never cached
             areas, skipped = report_areas(scene, set(needed) - {"report"})
             why = "; ".join(f"{a} ({r})" for a, r in skipped)
-            steps.append(Step(st, "run", f"{needed[st.gives]}; builders: {', '.join(areas) or 'none'}"
+            steps.append(Step(st, "run", f"{needed[st.gives]}; views: {', '.join(areas) or 'none'}"
                               f" + the scene summary, into {report_dir(scene)}"
-                              + (f"; not run: {why}" if why else "")))
+                              + (f"; not drawn: {why}" if why else "")))
             continue
         up = [keys.get(n.rstrip("?"), "") if _uses(scene, st.name, n.rstrip("?")) else ""
               for n in st.needs]

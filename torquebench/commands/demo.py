@@ -68,7 +68,7 @@ def _demo(args, scene, out_dir) -> int:
     from estimator.sim.output import truth_csv
     from torquebench import pipeline as P
     from torquebench.cache import Cache
-    from torquebench.commands.flexure import _pm
+    from torquebench import formatting as fmt
     from torquebench.io import print_json, write_text_atomic
 
     say = (lambda *a: print(*a, file=sys.stderr)) if args.json else print
@@ -79,11 +79,10 @@ def _demo(args, scene, out_dir) -> int:
     if "flexure" in arts:
         fx = arts["flexure"]
         results["flexure"] = {"design_file": str(args.flexure), **fx}
-        say(f"0. flexure: {args.flexure}: {fx['gauge_strain_per_Nm']:.4g}{_pm(fx, 'gauge_strain_per_Nm')} "
+        say(f"0. flexure: {args.flexure}: {fx['gauge_strain_per_Nm']:.4g}{fmt.pm(fx, 'gauge_strain_per_Nm')} "
             f"strain/N·m at the gauges (P2 FEM, 3 mesh levels, {fx['dofs']} DOFs at the answer), "
             f"safety factor {fx['safety_factor']:.2f}")
-    say(f"1. sensor: bridge/ADC chain, {chain.strain_per_Nm:.3g} strain/N·m → σ_τ = "
-        f"{chain.noise_std_Nm:.4f} N·m per sample (the same model in the simulation)")
+    say(f"1. sensor: bridge/ADC chain, {fmt.sensor_text(chain)} (the same model in the simulation)")
     e = scene.estimator
     rate = f"{e.false_alarm_rate[0]:g}/{e.false_alarm_rate[1]}"
     results["detection"] = {
@@ -113,9 +112,8 @@ def _demo(args, scene, out_dir) -> int:
     say("3–4. estimate vs truth over the collision phase, and the Monte Carlo prediction:")
     say(f"   {'method':8s} {'mean |p| err':>13s} {'RMS |p| err':>12s} {'predicted RMS':>14s} {'mean |F| err':>13s}")
     for method, m in results["methods"].items():
-        mm = lambda v: f"{v * 1e3:.2f} mm" if v is not None else "—"   # noqa: E731
-        say(f"   {method:8s} {mm(m['position_error_mean_m']):>13s} {mm(m['position_error_rms_m']):>12s} "
-            f"{mm(m['predicted_position_rms_m']):>14s} {m['force_error_mean_N'] or float('nan'):>11.3f} N")
+        say(f"   {method:8s} {fmt.mm(m['position_error_mean_m']):>13s} {fmt.mm(m['position_error_rms_m']):>12s} "
+            f"{fmt.mm(m['predicted_position_rms_m']):>14s} {m['force_error_mean_N'] or float('nan'):>11.3f} N")
     say("   paper's Table III test 2: mean |p| error 2 mm, |F| 0.121 N.")
     say("   contact-free samples flagged as contact (before the poke, and from 10/K after release): "
         + ", ".join(f"{k} {100 * m['contact_free_flagged_fraction']:.2f} %"

@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from torquebench.errors import InputError
+from torquebench.formatting import pm as _pm
 
 HELP = "flexure FEM: sensitivity (mV/V per N·m), stiffness, stress, cross-talk, min torque; sweeps"
 EXAMPLES = """\
@@ -79,14 +80,6 @@ def _check_outputs(args, design_path: Path, design=None):
     plan.file("--vtu", args.vtu)
     plan.file("--png", args.png)
     return plan.check()
-
-
-def _pm(res: dict, key: str) -> str:
-    """' ± x %' from ``key``'s error estimate ('' when there is none)."""
-    e, v = res.get(f"{key}_error_estimate"), res.get(key)
-    if e is None or v in (None, 0) or e != e:
-        return ""
-    return f" ± {100 * e / abs(v):.2g} %"
 
 
 def _print_design(res: dict) -> None:

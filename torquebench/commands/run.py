@@ -66,6 +66,7 @@ def summarize(arts: dict) -> dict:
 
 
 def run(args) -> int:
+    from torquebench import formatting as fmt
     from torquebench import pipeline as P
     from torquebench.cache import Cache
     from torquebench.io import print_json
@@ -99,34 +100,23 @@ def run(args) -> int:
     for n, a, t in timing:
         print(f"  {n:20s} {a:7s} {t:7.2f} s", file=sys.stderr)
     if "flexure" in out:
-        from torquebench.commands.flexure import _pm
-
-        fx = out["flexure"]
-        print(f"flexure: {fx['gauge_strain_per_Nm']:.4g}{_pm(fx, 'gauge_strain_per_Nm')} strain/N·m, "
-              f"{fx['torsional_stiffness_Nm_per_rad']:.4g}{_pm(fx, 'torsional_stiffness_Nm_per_rad')} N·m/rad "
-              f"({fx['dofs']} dofs; ± discretisation error bound, 3 mesh levels)")
-        for w in fx.get("warnings", []):
+        print(f"flexure: {fmt.flexure_text(out['flexure'])}")
+        for w in out["flexure"].get("warnings", []):
             print(f"WARNING: flexure: {w}")
-    if "sensor" in out:
-        s = out["sensor"]
-        print(f"sensor: {s['strain_per_Nm']:.3g} strain/N·m, σ_τ = {s['torque_noise_std_Nm']:.4g} N·m per sample")
-    if "calibration" in out:
-        c = out["calibration"]
-        print(f"calibration: slope {c['slope_counts_per_g']:.5g} ± {c['slope_counts_per_g_error_estimate']:.2g} counts/g")
+    if "chain" in arts:
+        print(f"sensor: {fmt.sensor_text(arts['chain'])}")
+    if "calibration" in arts:
+        print(f"calibration: {fmt.calibration_text(arts['calibration'])}")
     if out.get("residual_noise_source"):
         print(f"detector noise: {out['residual_noise_source']}")
     if "measured" in out or "predicted" in out:
         print(f"{'method':8s} {'measured RMS |p| err':>21s} {'predicted RMS':>22s} {'predicted p95':>14s}")
         for m in P.METHODS:
-            me = out.get("measured", {}).get(m, {}).get("position_error_rms_m")
-            pr = out.get("predicted", {}).get(m, {})
-            f = (lambda v: f"{v * 1e3:.2f} mm" if v is not None else "—")   # noqa: E731
-            pe = pr.get("position_rms_m_error_estimate")
-            pred = f"{f(pr.get('position_rms_m'))} ± {pe * 1e3:.2f} mm" if pe is not None else "—"
-            print(f"{m:8s} {f(me):>21s} {pred:>22s} {f(pr.get('position_p95_m')):>14s}")
+            me, pred, p95 = fmt.error_cells(out.get("measured"), out.get("predicted"), m)
+            print(f"{m:8s} {me:>21s} {pred:>22s} {p95:>14s}")
     if "report" in out:
         r = out["report"]
-        print(f"report: {r['summary']}" + (f" + {', '.join(r['areas'])} in {r['dir']}" if r["areas"] else ""))
+        print(f"report: {r['summary']}" + (f" + views {', '.join(r['areas'])} in {r['dir']}" if r["areas"] else ""))
     if "flagged_samples" in out:
         print(f"saturated/out-of-range samples kept out of detection: {out['flagged_samples']}")
     return 0

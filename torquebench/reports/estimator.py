@@ -1,6 +1,7 @@
 """reports/estimator.md: the estimator on the independent leg_poke log and on a moving leg.
 
-Figures: the observer residual of leg_poke.csv with the detection threshold and the estimated
+Figures: the observer residual of leg_poke.csv (the detection statistic with its threshold, the
+force rows in N and the moment rows in N·m on separate axes) and the estimated
 α/F against the truth; the position error of `paper` vs `dynamic` on a leg swinging under a
 constant poke (built by inverse dynamics). Numbers are measured when the report is built.
 """
@@ -62,16 +63,13 @@ def _leg_poke(out_dir: Path, lines: list[str]) -> list[Path]:
               "| method | detected interval (s) | link | max abs α error | max F error (N) | max point error (mm) | run time (ms) |",
               "|---|---|---|---|---|---|---|", *rows, "",
               "![leg_poke residual](estimator_leg_poke.png)"]
+    from torquebench.scene_views import draw_residual
+
     est = ests["dynamic"]
-    fig, ax = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
-    names = ["x", "z", "θ", "q1", "q2"]
-    for k in range(est.residual.shape[1]):
-        ax[0].plot(est.t, est.residual[:, k], label=f"r_{names[k]}")
-    ax[0].plot(est.t, est.rnorm, "k--", lw=1, label="‖r‖")
-    ax[0].axhline(0.06, color="r", lw=0.8, label="ε_res = 0.06")
-    ax[0].set_ylabel("residual (N, N·m)")
-    ax[0].legend(ncol=4, fontsize=8)
+    fig, ax = plt.subplots(5, 1, figsize=(8, 12), sharex=True)
+    draw_residual(ax[:3], est, robot)          # ‖r‖, the force rows (N), the moment rows (N·m)
     ax[0].set_title("leg_poke.csv: momentum-observer residual (K = 100 s⁻¹)")
+    ax = ax[2:]                                # α and F below
     for method, style in (("dynamic", "-"), ("paper", ":")):
         e = ests[method]
         ax[1].plot(e.t, e.alpha, style, label=f"α {method}")
