@@ -166,7 +166,7 @@ SMOOTHED_COARSE = {"sweep": True, "tetgen": False, "gmsh": True}
 
 
 def _solve_cases(design: Design, mesh, K, load_nodes, fixed_nodes, ref: np.ndarray, wrench: np.ndarray,
-                 x0: np.ndarray | None = None, solver=None):
+                 x0: np.ndarray | None = None, solver=None, rtol: float | None = None):
     """Displacements U (n, 3, cases) and hub rotations Θ (3, cases) for unit wrenches (cases, 6)
     at ``ref``, with one factorization (direct, below solve.DIRECT_MAX_DOFS) or one AMG hierarchy
     (P2: the p-multigrid) for all cases; ``x0`` (n_q, cases): the iterative solver's initial guess;
@@ -186,9 +186,10 @@ def _solve_cases(design: Design, mesh, K, load_nodes, fixed_nodes, ref: np.ndarr
         B = np.repeat(system.b[:, None], len(wrench), axis=1)
         B[system.ref_slices[0], :] = wrench.T
         if solver is not None:
-            q, info = solver(B, x0, RTOL)
+            q, info = solver(B, x0, rtol or RTOL)
         else:
-            q, info = fsolve.solve_reduced(system, B, rtol=RTOL, smoothed_coarse=SMOOTHED_COARSE[design.mesher], x0=x0)
+            q, info = fsolve.solve_reduced(system, B, rtol=rtol or RTOL, smoothed_coarse=SMOOTHED_COARSE[design.mesher],
+                                           x0=x0)
         U = np.stack([problem.expand(system, q[:, j]) for j in range(len(wrench))], axis=-1)
         return U, q[system.ref_slices[0]][3:, :], info
     is_load = np.zeros(mesh.n_nodes, bool)
@@ -200,9 +201,10 @@ def _solve_cases(design: Design, mesh, K, load_nodes, fixed_nodes, ref: np.ndarr
     B = np.column_stack([wrench_traction(mesh, faces, ref, w[:3], w[3:]).ravel() for w in wrench])
     B[system.fixed_q] = 0.0                       # fixed dofs hold zero displacement
     if solver is not None:
-        q, info = solver(B, x0, RTOL)
+        q, info = solver(B, x0, rtol or RTOL)
     else:
-        q, info = fsolve.solve_reduced(system, B, rtol=RTOL, smoothed_coarse=SMOOTHED_COARSE[design.mesher], x0=x0)
+        q, info = fsolve.solve_reduced(system, B, rtol=rtol or RTOL, smoothed_coarse=SMOOTHED_COARSE[design.mesher],
+                                       x0=x0)
     U = q.reshape(mesh.n_nodes, 3, len(wrench))
     return U, np.column_stack([mean_rotation(mesh, faces, U[..., j]) for j in range(len(wrench))]), info
 
@@ -232,11 +234,11 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
 
 
 def analyze_mesh(design: Design, mres, mesh_s: float = 0.0, progress: bool = False, x0=None, K=None,
-                 solver=None):
+                 solver=None, rtol: float | None = None):
     """``analyze`` on a given mesh (``mres``: meshing.MeshResult; ``mesh_s`` its meshing time):
     the six load cases (``x0``: an initial guess of the solver, (n_q, 6); ``K`` the stiffness matrix
-    and ``solver`` a prepared solver of the system, if already made), the gauges, the figures
-    → (results dict, Fields)."""
+    and ``solver`` a prepared solver of the system, if already made; ``rtol`` the CG tolerance,
+    default RTOL), the gauges, the figures → (results dict, Fields)."""
     from bridge.budget import min_detectable_strain
     from bridge.wheatstone import output_ratio
     from flexure import solve as fsolve
@@ -258,7 +260,7 @@ def analyze_mesh(design: Design, mres, mesh_s: float = 0.0, progress: bool = Fal
     for i, c in enumerate(CASES):
         wrench[i, {"Fx": 0, "Fy": 1, "Fz": 2, "Mx": 3, "My": 4, "Mz": 5}[c]] = 1.0
     t0 = time.perf_counter()
-    U, theta, info = _solve_cases(design, mesh, K, load_nodes, fixed_nodes, ref, wrench, x0, solver)
+    U, theta, info = _solve_cases(design, mesh, K, load_nodes, fixed_nodes, ref, wrench, x0, solver, rtol)
     solve_s = time.perf_counter() - t0
     say(f"solved {len(CASES)} load cases ({info['solver']}, {solve_s:.1f} s, residual {info['residual_norm']:.1e})")
     warnings, metrics = fsolve.conditioning_warnings(mesh, design.material)

@@ -287,7 +287,12 @@ def bisect(tm: TaggedMesh, elements, fields=(), rounds: int = 1, projector=None,
     return out, fields, info
 
 
-def project_nodes(mesh: Mesh, nodes, dims, tags, projector, min_scaled_jacobian: float = 0.05,
+#: a projected node may not leave an element with det J below this fraction of its straight det at a
+#: quadrature point or node (gmsh_mesh.MIN_SCALED_JACOBIAN: below it the nodal stresses are spurious)
+MIN_SCALED_JACOBIAN = 0.25
+
+
+def project_nodes(mesh: Mesh, nodes, dims, tags, projector, min_scaled_jacobian: float = MIN_SCALED_JACOBIAN,
                   tries: int = 6) -> dict:
     """Move ``nodes`` of ``mesh`` (in place) onto their curve (dim 1) or surface (dim 2) ``tags``.
     Where an element would fold (det J at a quadrature point or node below ``min_scaled_jacobian``
