@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # One entry point that sets up a fresh machine and runs the project.
 #   bash run.sh demo   # the main job: a hardware-free demo scene, end to end
-#   bash run.sh test   # the test suite
+#   bash run.sh test   # the test suite without the slow tests (a few minutes on 2 cores)
+#   bash run.sh test --all   # every test, the slow convergence and end-to-end ones too (as CI)
 #   bash run.sh ...    # anything else is passed to the `torquebench` CLI
 # Set-up is idempotent: Debian libraries for off-screen rendering (only if one is really missing),
 # a venv in .venv, and `pip install -e .[test]` whenever pyproject.toml changed (about a minute the
@@ -78,7 +79,9 @@ fi
 
 export MPLBACKEND=Agg PYVISTA_OFF_SCREEN=true
 case "${1:-}" in
-    test) shift; exec "$VENV/bin/python" -m pytest -n 2 -q "$@" ;;
+    # 2 workers fed one test at a time (slow tests are ordered first by tests/conftest.py), so
+    # neither is left alone with a long test at the end; --all is tests/conftest.py's option
+    test) shift; exec "$VENV/bin/python" -m pytest -n 2 --maxschedchunk 1 -q "$@" ;;
     demo) shift; exec "$VENV/bin/torquebench" demo "$@" ;;
     *)    exec "$VENV/bin/torquebench" "$@" ;;
 esac

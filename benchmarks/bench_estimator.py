@@ -70,6 +70,13 @@ def bench_offline(n_samples: int, repeat: int = 3) -> dict:
         result["est"] = estimate(robot, log, method="dynamic")
 
     stages["estimate_dynamic_s"] = _best(full, repeat, key="estimate")
+    from estimator.model import ModelUncertainty
+
+    declared = ModelUncertainty(0.05, 0.10, 0.003)
+    estimate(robot, log, model_uncertainty=declared)              # warm-up of the model term
+    stages["estimate_model_s"] = _best(lambda: estimate(robot, log, model_uncertainty=declared),
+                                       repeat, key="estimate_model")
+    stages["estimate_dynamic_again_s"] = _best(full, repeat, key="estimate_again")
     from estimator import kernels
 
     kernels.ENABLED = False                 # before: the numpy forms (same run, same log)
@@ -98,6 +105,12 @@ def bench_offline(n_samples: int, repeat: int = 3) -> dict:
             "numpy_forms_samples_per_s": n_samples / stages["estimate_numpy_forms_s"],
             "numpy_forms_samples_per_cpu_s": n_samples / CPU["estimate_numpy"],
             "ratio_numpy_forms_over_compiled": stages["estimate_numpy_forms_s"] / stages["estimate_dynamic_s"],
+            "model_term_us_per_sample": 1e6 * (stages["estimate_model_s"] - min(
+                stages["estimate_dynamic_s"], stages["estimate_dynamic_again_s"])) / n_samples,
+            "model_term_cpu_us_per_sample": 1e6 * (CPU["estimate_model"] - min(
+                CPU["estimate"], CPU["estimate_again"])) / n_samples,
+            "ratio_model_over_plain": stages["estimate_model_s"] / min(
+                stages["estimate_dynamic_s"], stages["estimate_dynamic_again_s"]),
             "compiled_kernels": kernels.available(),
             "detector_samples_per_s": n_samples / stages["detector_s"],
             "observer_plus_localize_samples_per_s":
@@ -292,9 +305,12 @@ def bench_end_to_end(n_samples: int = 2_000_000, ten_million: bool = False) -> d
             _write_log_csv(small, _log_blocks(5000))
             cli(["estimate", str(small), "--out", str(tmp / "warm.csv"), "--force", "--json"])
             cli(["estimate", str(small), "--out", str(tmp / "warm.parquet"), "--force", "--json"])
-        for name, src, dst in (("csv", csv, tmp / "est.csv"), ("parquet", parquet, tmp / "est.parquet"),
-                               ("csv_to_parquet", csv, tmp / "est2.parquet"), ("csv_no_out", csv, None)):
-            argv = ["estimate", str(src), "--json"] + ([] if dst is None else ["--out", str(dst), "--force"])
+        for name, src, dst, extra in (
+                ("csv", csv, tmp / "est.csv", []), ("parquet", parquet, tmp / "est.parquet", []),
+                ("csv_to_parquet", csv, tmp / "est2.parquet", []), ("csv_no_out", csv, None, []),
+                ("csv_model", csv, tmp / "est4.csv", ["--model-uncertainty", "0.05"])):
+            argv = ["estimate", str(src), "--json", *extra] + \
+                ([] if dst is None else ["--out", str(dst), "--force"])
             buf = io.StringIO()
             t0, c0 = time.perf_counter(), time.process_time()
             with contextlib.redirect_stdout(buf):
@@ -305,6 +321,7 @@ def bench_end_to_end(n_samples: int = 2_000_000, ten_million: bool = False) -> d
             out[f"{name}_s"], out[f"{name}_cpu_s"] = wall, cpu
             out[f"{name}_samples_per_s"] = n_samples / wall
             out[f"{name}_samples_per_cpu_s"] = n_samples / cpu
+        out["ratio_csv_model_to_csv"] = out["csv_model_s"] / out["csv_s"]
         out["ratio_csv_to_pandas_anchor"] = out["csv_s"] / out["anchor_pandas_read_csv_s"]
         out["ratio_csv_to_pyarrow_anchor"] = out["csv_s"] / out["anchor_pyarrow_read_csv_s"]
         for name, src, dst in (("csv", csv, tmp / "est3.csv"), ("parquet", parquet, tmp / "est3.parquet")):
@@ -340,9 +357,12 @@ def main(argv=None) -> dict:
         print(f"torquebench estimate LOG --out OUT, {n:,} samples ({e['csv_MB']:.0f} MB CSV, "
               f"9 significant digits), in process (target >= 500,000 samples/s):")
         for key, label in (("csv", "CSV -> CSV"), ("parquet", "Parquet -> Parquet"),
-                           ("csv_to_parquet", "CSV -> Parquet"), ("csv_no_out", "CSV, no --out")):
+                           ("csv_to_parquet", "CSV -> Parquet"), ("csv_no_out", "CSV, no --out"),
+                           ("csv_model", "CSV -> CSV, model term")):
             print(f"  {label:20s} {e[key + '_s']:6.2f} s = {e[key + '_samples_per_s']:>10,.0f} samples/s wall; "
                   f"CPU {e[key + '_cpu_s']:.2f} s = {e[key + '_samples_per_cpu_s']:,.0f} samples per CPU-second")
+        print(f"  the model-error term (--model-uncertainty 0.05: R_k = R_noise + Φ_k Σ_θ Φ_kᵀ per "
+              f"sample) costs {e['ratio_csv_model_to_csv']:.2f}x the plain CSV -> CSV run")
         print(f"  anchors, the same CSV read alone: pandas.read_csv {e['anchor_pandas_read_csv_s']:.2f} s "
               f"(CPU {e['anchor_pandas_read_csv_cpu_s']:.2f} s), pyarrow.csv.read_csv "
               f"{e['anchor_pyarrow_read_csv_s']:.2f} s (CPU {e['anchor_pyarrow_read_csv_cpu_s']:.2f} s); "
@@ -366,6 +386,10 @@ def main(argv=None) -> dict:
     print(f"  before (numpy forms, kernels off): {off['numpy_forms_samples_per_s']:,.0f} samples/s wall, "
           f"{off['numpy_forms_samples_per_cpu_s']:,.0f} per CPU-second -> compiled/numpy speed-up "
           f"{off['ratio_numpy_forms_over_compiled']:.2f}x (compiled kernels: {off['compiled_kernels']})")
+    print(f"  with the model-error term (declared uncertainty, R_k per sample): "
+          f"{off['ratio_model_over_plain']:.2f}x the plain estimate() in the same run, "
+          f"+{off['model_term_us_per_sample']:.2f} us per sample wall, "
+          f"+{off['model_term_cpu_us_per_sample']:.2f} us CPU")
     print(f"  detector alone (whitening + chi-square test) {off['detector_s']:.3f} s -> "
           f"{off['detector_samples_per_s']:,.0f} samples/s")
     print(f"  anchor: lfilter over 5 channels {off['anchor_lfilter_5ch_s']:.3f} s; estimate/anchor = "

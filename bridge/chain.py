@@ -35,7 +35,7 @@ from bridge.wheatstone import effective_gauge_factor, strain_from_ratio
 
 PAPER_SLOPE_mV_PER_g = 0.0115        # eq. 12
 PAPER_LEVER_ARM_m = 0.205            # assumed: masses at the end of link 1 (l_1, Table I)
-GRAVITY_m_per_s2 = 9.81              # DESIGN.md's gravity
+GRAVITY_m_per_s2 = 9.81              # the workbench's gravity (docs/conventions.md)
 PAPER_SENSITIVITY_V_PER_NM = (PAPER_SLOPE_mV_PER_g * 1e-3
                               / (1e-3 * GRAVITY_m_per_s2 * PAPER_LEVER_ARM_m))
 PAPER_STRAIN_PER_NM = PAPER_SENSITIVITY_V_PER_NM / (2.0 * 5.0 * 1.0)   # GF V_ex s (full bending)

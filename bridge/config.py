@@ -131,8 +131,28 @@ def _num(cfg, name, *, positive=False, nonneg=False, finite=True):
     return v
 
 
+def _ranges():
+    """Physical range of each field, with its unit (userio.fields.Range)."""
+    from userio.fields import Range
+
+    return {
+        "gauge_factor": Range(0.1, 1000.0, ""), "gauge_resistance_ohm": Range(1.0, 1e7, "Ω", high="mΩ typed as Ω?"),
+        "lead_resistance_ohm": Range(0.0, 1e4, "Ω"),
+        "excitation_V": Range(1e-3, 100.0, "V", high="mV typed as V?"),
+        "gain": Range(1e-3, 1e6, "V/V", low="an amplifier attenuating more than 1000×",
+                      high="dB typed as V/V?"),
+        "noise_V_per_rtHz": Range(0.0, 1e-3, "V/√Hz", high="nV/√Hz typed as V/√Hz?"),
+        "corner_Hz": Range(0.0, 1e7, "Hz"), "offset_V": Range(-10.0, 10.0, "V", high="mV typed as V?",
+                                                             low="mV typed as V?"),
+        "flicker_low_Hz": Range(1e-9, 1e6, "Hz"), "v_ref_V": Range(0.01, 100.0, "V"),
+        "data_rate_Hz": Range(0.01, 1e9, "S/s"), "noise_bandwidth_factor": Range(1e-3, 10.0, ""),
+        "temperature_K": Range(1.0, 2000.0, "K", high="°C typed as K? (300 K is room temperature)"),
+    }
+
+
 def validate(cfg: SensorConfig) -> None:
-    """Raise InputError naming the field for a physically impossible or inconsistent config."""
+    """Raise InputError naming the field for a physically impossible or inconsistent config
+    (every number also inside its physical range, ``_ranges``)."""
     if cfg.arrangement not in ARRANGEMENTS:
         raise InputError(f"bridge.arrangement: unknown {cfg.arrangement!r}; expected one of "
                          f"{', '.join(ARRANGEMENTS)}")
@@ -144,6 +164,10 @@ def validate(cfg: SensorConfig) -> None:
         _num(cfg, name, nonneg=True)
     _num(cfg, "offset_V")
     _num(cfg, "rated_strain", nonneg=True)
+    for name, rng in _ranges().items():
+        why = rng.problem(float(getattr(cfg, name)))
+        if why:
+            raise InputError(f"{_field(name)}: {why}")
     nu = _num(cfg, "poisson_ratio")
     if not -1.0 < nu < 0.5:
         raise InputError(f"bridge.poisson_ratio: must lie in (−1, 0.5), got {nu}")

@@ -35,16 +35,40 @@ def open_port(port: str, baud: int = 2_000_000, timeout_s: float = 0.05):
 
 
 class RawCapture:
-    """Append-only raw byte log ``path.part`` → renamed to ``path`` on :meth:`close`."""
+    """Append-only raw byte log ``path.part`` → moved to ``path`` on :meth:`close`.
+
+    An existing ``.part`` (kept by an interrupted run) is appended to, never truncated, and the
+    resumed byte count is ``resumed``; a ``.part`` that is a symlink (or not a regular file) is
+    refused rather than followed onto another file."""
+
+    @staticmethod
+    def part_path(path) -> Path:
+        path = Path(path)
+        return path.with_name(path.name + ".part")
 
     def __init__(self, path, *, force: bool = False):
         self.path = Path(path)
-        if self.path.exists() and not force:
+        self.force = force
+        if os.path.lexists(self.path) and not force:
             raise InputError(f"--out: {self.path} exists; refusing to overwrite it (use --force)")
         if not self.path.parent.is_dir():
             raise InputError(f"--out: directory {self.path.parent} does not exist")
-        self.part = self.path.with_name(self.path.name + ".part")
-        self.fh = open(self.part, "wb")
+        self.part = self.part_path(self.path)
+        if os.path.islink(self.part):
+            raise InputError(f"--out: {self.part} (the capture file) is a symlink; refusing to follow "
+                             "it onto another file: remove it or choose another --out")
+        flags = os.O_WRONLY | os.O_CREAT | os.O_APPEND | getattr(os, "O_NOFOLLOW", 0)
+        try:
+            fd = os.open(self.part, flags, 0o644)
+        except OSError as exc:
+            raise InputError(f"--out: cannot open the capture file {self.part}: {exc.strerror}") from None
+        st = os.fstat(fd)
+        import stat as _stat
+        if not _stat.S_ISREG(st.st_mode):
+            os.close(fd)
+            raise InputError(f"--out: {self.part} (the capture file) is not a regular file")
+        self.resumed = int(st.st_size)
+        self.fh = os.fdopen(fd, "ab")
         self.n_bytes = 0
 
     def write(self, data: bytes) -> None:
@@ -53,10 +77,15 @@ class RawCapture:
         self.n_bytes += len(data)
 
     def close(self) -> Path:
+        from userio import outputs
+
         self.fh.flush()
         os.fsync(self.fh.fileno())
         self.fh.close()
-        os.replace(self.part, self.path)
+        plan = outputs.current()
+        mode = plan.admit(self.path, final=True) if plan is not None else (
+            "replace" if self.force else "new")
+        outputs.place(self.part, self.path, mode)
         return self.path
 
     def abort(self) -> None:

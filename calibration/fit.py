@@ -1,6 +1,6 @@
 """Bayesian calibration fit with emcee.
 
-reading = slope·m + offset [+ quad·m²] [+ hysteresis·1{unloading}] + ε, m in g,
+``reading = slope·m + offset [+ quad·m²] [+ hysteresis·1{unloading}] + ε``, m in g,
 ε ~ N(0, σ² + (∂reading/∂m)² σ_m²) (σ_m: optional standard uncertainty of the applied masses,
 "errors in the load", marginalized analytically to first order).
 Priors: flat on slope, offset, quad, hysteresis; p(σ) ∝ 1/σ, i.e. flat on log σ in [−30, 30].
@@ -26,6 +26,28 @@ from calibration.posterior import (PARAM_NAMES, ExactPosterior, check_identifiab
 from calibration.session import Session
 
 LOG_SIGMA_BOUNDS = (-30.0, 30.0)
+MAX_RESIDUALS_PER_STEP = 2e7          # walkers × readings evaluated per step (a (W, n) float64 array: 160 MB)
+MAX_CHAIN_BYTES = 4 * 2**30           # the chain emcee keeps: walkers × steps × (p + 2) float64
+
+
+def check_cost(n_readings: int, n_walkers: int, max_steps: int, ndim: int, source="session") -> None:
+    """Refuse, before any allocation, a fit whose per-step work or stored chain is out of reach:
+    walkers × readings residuals per step (memory and time of one step), and walkers × max_steps ×
+    (parameters + log-probability) doubles kept by emcee. The message names the knob to turn."""
+    per_step = float(n_walkers) * n_readings
+    if per_step > MAX_RESIDUALS_PER_STEP:
+        ok_walkers = int(MAX_RESIDUALS_PER_STEP // max(n_readings, 1))
+        raise InputError(
+            f"{source}: {n_readings} readings × {n_walkers} walkers = {per_step:.3g} residuals per step "
+            f"({per_step * 8 / 2**20:.0f} MiB, and ≥ 300 steps), above {MAX_RESIDUALS_PER_STEP:.0e}; "
+            + (f"use --walkers ≤ {ok_walkers} (at least 8)" if ok_walkers >= 8 else
+               "average the readings of each load step first (the reading noise is fitted as sigma)"))
+    chain = float(n_walkers) * max_steps * (ndim + 1) * 8
+    if chain > MAX_CHAIN_BYTES:
+        raise InputError(
+            f"--walkers/--max-steps: {n_walkers} walkers × {max_steps} steps keep a chain of "
+            f"{chain / 2**30:.3g} GiB, above {MAX_CHAIN_BYTES / 2**30:.0f} GiB; lower --walkers or "
+            f"--max-steps (the default 256 × 50000 keeps {256 * 50000 * (ndim + 1) * 8 / 2**30:.2g} GiB)")
 
 
 @dataclass
@@ -169,10 +191,20 @@ def fit_session(session: Session, model: str = "linear", *, mass_std_g: float = 
     exact = exact_posterior(X, y, names)
     p = X.shape[1]
     ndim = p + 1
+    check_cost(len(y), int(n_walkers), int(max_steps), ndim, session.source)
     n_walkers = max(int(n_walkers), 2 * ndim + 2)
     n_walkers += n_walkers % 2
     rng = np.random.default_rng(seed)
-    ls_mean, ls_std = exact.log_sigma_moments()
+    with np.errstate(all="ignore"):
+        ls_mean, ls_std = exact.log_sigma_moments()
+    lo, hi = LOG_SIGMA_BOUNDS
+    if not (np.isfinite(ls_mean) and lo + 2 < ls_mean < hi - 2 and np.all(np.isfinite(exact.std))
+            and np.all(exact.std > 0)):
+        s_hat = float(np.exp(ls_mean)) if np.isfinite(ls_mean) else float("nan")
+        raise InputError(f"{session.source}: column 'reading': the readings scatter about the "
+                         f"{model} fit by σ ≈ {s_hat:.3g} {session.reading_unit}, outside what a fit "
+                         f"can represent (e^{lo + 2:g}–e^{hi - 2:g}): noise-free (simulated without "
+                         "noise?) or wildly scaled readings; a real sensor's readings carry noise")
     center = np.concatenate([exact.beta, [ls_mean]])
     width = np.concatenate([exact.std, [ls_std]])
     p0 = center + 0.1 * width * rng.standard_normal((n_walkers, ndim))

@@ -5,7 +5,7 @@ CSV: optional leading ``# key=value; key=value`` metadata lines (``reading_unit=
 ``direction`` (``load``/``unload``), ``repeat``, ``lever_arm_m``, ``timestamp`` (s),
 ``sensor_id``. Units are in the column names (g, m, s); the reading's unit is the
 ``reading_unit`` metadata (mV for the paper's eqs. 12–13, or ``counts``).
-Torque of a dead weight on a horizontal lever: τ = m g L (m in kg, g = 9.81 m/s², DESIGN.md's
+Torque of a dead weight on a horizontal lever: τ = m g L (m in kg, g = 9.81 m/s², the workbench's
 gravity, as ``bridge.chain`` uses).
 """
 
@@ -19,8 +19,15 @@ from pathlib import Path
 import numpy as np
 
 from calibration.errors import InputError
+from userio.fields import Range
 
 G_STANDARD_M_PER_S2 = 9.81
+# physical ranges of a static-loading session (userio.fields.Range: checked where read)
+LEVER_ARM_RANGE_M = Range(0.0, 10.0, "m", lo_open=True,
+                          high="a calibration lever is at most a few metres: mm typed as m?")
+MASS_RANGE_G = Range(0.0, 1e7, "g", high="ten tonnes on a calibration lever: kg typed as g, or mg?")
+READING_LIMIT = 1e12                 # |reading| above this is no ADC code or voltage (counts ≤ 2³², mV ≤ 1e5)
+MAX_SESSION_BYTES = 64 << 20
 REQUIRED = ("mass_g", "reading")
 OPTIONAL = ("direction", "repeat", "lever_arm_m", "timestamp", "sensor_id")
 
@@ -96,11 +103,10 @@ def read_session(path, *, reading_unit: str | None = None) -> Session:
     """Read and validate a session CSV; errors name the file, line and column."""
     import pandas as pd
 
-    path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except IsADirectoryError:
-        raise InputError(f"{path}: is a directory, not a CSV file") from None
+    from userio.files import check_input
+
+    path = check_input(path, max_bytes=MAX_SESSION_BYTES, what="session CSV")
+    raw = path.read_bytes()
     text = raw.decode("utf-8", errors="replace").lstrip("\ufeff")
     lines = text.splitlines()
     n_meta = 0
@@ -148,7 +154,14 @@ def read_session(path, *, reading_unit: str | None = None) -> Session:
     if np.any(mass_g < 0):
         i = int(np.argmax(mass_g < 0))
         raise InputError(f"{path}: line {lineno[i]}: column 'mass_g': negative mass {mass_g[i]:g}")
+    for i in np.flatnonzero(mass_g > MASS_RANGE_G.hi)[:1]:
+        MASS_RANGE_G.check(mass_g[i], f"{path}: line {lineno[i]}: column 'mass_g'")
     reading = numeric("reading")
+    big = np.flatnonzero(np.abs(reading) > READING_LIMIT)
+    if big.size:
+        i = int(big[0])
+        raise InputError(f"{path}: line {lineno[i]}: column 'reading': {reading[i]:g} is larger than "
+                         f"any ADC code or voltage (|reading| ≤ {READING_LIMIT:g}); check the export")
     n = mass_g.size
     if "direction" in df.columns:
         direction = df["direction"].str.strip().str.lower().to_numpy(dtype=object)
@@ -172,6 +185,8 @@ def read_session(path, *, reading_unit: str | None = None) -> Session:
             i = int(np.argmax(arm <= 0))
             raise InputError(f"{path}: line {lineno[i]}: column 'lever_arm_m': "
                              f"must be > 0, got {arm[i]:g}")
+        for i in np.flatnonzero(arm > LEVER_ARM_RANGE_M.hi)[:1]:
+            LEVER_ARM_RANGE_M.check(arm[i], f"{path}: line {lineno[i]}: column 'lever_arm_m'")
         if np.ptp(arm) > 1e-9 * arm.max():
             i = int(np.argmax(np.abs(arm - arm[0]) > 1e-9 * arm.max()))
             raise InputError(f"{path}: line {lineno[i]}: column 'lever_arm_m': differs from "

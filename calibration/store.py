@@ -135,11 +135,11 @@ def save(payload: dict, path, *, force: bool = False) -> Path:
 
 def read_document(path, *, data_path=None) -> dict:
     """Parse and verify a calibration file (schema, version, content hash, optional data hash)."""
-    path = Path(path)
+    from userio.files import check_input
+
+    path = check_input(path, what="calibration JSON file")
     try:
         text = path.read_text(encoding="utf-8")
-    except IsADirectoryError:
-        raise InputError(f"{path}: is a directory, not a calibration file") from None
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a UTF-8 JSON calibration file") from None
     try:
@@ -156,8 +156,9 @@ def read_document(path, *, data_path=None) -> dict:
         raise InputError(f"{path}: field 'content_sha256': content hash mismatch "
                          "(file corrupted or edited by hand)")
     if data_path is not None:
-        digest = hashlib.sha256(Path(data_path).read_bytes()).hexdigest()
-        if digest != doc["data"]["sha256"]:
+        digest = hashlib.sha256(check_input(data_path, "--data", max_bytes=None).read_bytes()).hexdigest()
+        stored_data = doc.get("data")
+        if not isinstance(stored_data, dict) or digest != stored_data.get("sha256"):
             raise InputError(f"{path}: field 'data.sha256': {data_path} is not the data this "
                              "calibration was fitted to (hash mismatch)")
     doc["content_sha256"] = stored
@@ -172,8 +173,29 @@ MODEL_COEFS = {"linear": ("slope", "offset"), "quadratic": ("slope", "offset", "
 def check_meaning(doc: dict, path="<calibration>") -> None:
     """Refuse a hash-valid document that does not make sense: unknown model, coefficients
     missing or not finite, slope 0, lever arm not finite > 0, covariance missing, not square,
-    not symmetric or not positive semi-definite (eigenvalues ≥ −1e-9·max|λ|), bad samples."""
+    not symmetric or not positive semi-definite (eigenvalues ≥ −1e-9·max|λ|), bad samples; and
+    any field of the wrong type (a string where a number belongs, a number where a table does)."""
+    try:
+        _check_meaning(doc, path)
+    except (TypeError, ValueError, KeyError, AttributeError, IndexError) as exc:
+        if isinstance(exc, InputError):
+            raise
+        raise InputError(f"{path}: a field has the wrong type or shape ({type(exc).__name__}: "
+                         f"{str(exc).splitlines()[0] if str(exc) else ''}); not a calibration this "
+                         "version wrote") from None
+
+
+def _number(doc_value, name: str, **kw) -> float:
+    """A JSON number (not a string, not a boolean), finite (userio.errors.finite rules)."""
     from userio.errors import finite
+
+    if isinstance(doc_value, bool) or not isinstance(doc_value, (int, float)):
+        raise InputError(f"{name}: expected a number, got {doc_value!r}")
+    return finite(doc_value, name, **kw)
+
+
+def _check_meaning(doc: dict, path) -> None:
+    finite = _number
 
     def field(name):
         return f"{path}: field {name!r}"
@@ -191,12 +213,18 @@ def check_meaning(doc: dict, path="<calibration>") -> None:
     if coefs["slope"] == 0:
         raise InputError(f"{field('coefficients.slope')}: slope is 0; readings carry no load information")
     if doc.get("lever_arm_m") is not None:
+        from calibration.session import LEVER_ARM_RANGE_M
+
         finite(doc["lever_arm_m"], f"{path}: field 'lever_arm_m'", positive=True)
+        LEVER_ARM_RANGE_M.check(doc["lever_arm_m"], f"{path}: field 'lever_arm_m'")
+    for key in ("reading_unit", "sensor_id"):
+        if key in doc and not isinstance(doc[key], str):
+            raise InputError(f"{field(key)}: expected a string, got {doc[key]!r}")
     cov = doc.get("covariance")
     if not isinstance(cov, dict) or "matrix" not in cov or "names" not in cov:
         raise InputError(f"{field('covariance')}: missing (need names and matrix); "
                          "the torque uncertainty cannot be computed without it")
-    if list(cov["names"]) != list(names):
+    if not isinstance(cov["names"], list) or list(cov["names"]) != list(names):
         raise InputError(f"{field('covariance.names')}: expected {list(names)}, got {cov['names']!r}")
     try:
         mat = np.asarray(cov["matrix"], float)
@@ -214,7 +242,7 @@ def check_meaning(doc: dict, path="<calibration>") -> None:
     try:
         finite(doc["posterior"]["sigma"]["mean"], f"{path}: field 'posterior.sigma.mean'", nonneg=True)
         vals = np.asarray(doc["samples"]["values"], float)
-    except (KeyError, TypeError, ValueError):
+    except (KeyError, TypeError, ValueError, InputError):
         raise InputError(f"{field('samples')}: posterior samples or sigma missing or not numeric") from None
     if vals.ndim != 2 or vals.shape[0] < 1 or vals.shape[1] != p + 1 or not np.all(np.isfinite(vals)):
         raise InputError(f"{field('samples.values')}: expected finite draws of shape (S, {p + 1})")

@@ -10,7 +10,7 @@ Every function is vectorized over leading axes: ``q`` has shape (..., n).
 
 With φ_i = θ + Σ_{j≤i} q_j, e_i = (sin φ_i, −cos φ_i) and ⊥(a) = (−a_z, a_x) (a rotated +90°):
 
-    p_{i+1} = p_i + l_i e_i,    c_i = p_i + r_i e_i,
+    p_{i+1} = p_i + l_i e_i,    c_i = p_i + r_i e_i + s_i n_i,   n_i = ⊥e_i = (cos φ_i, sin φ_i),
     ∂P/∂x = (1, 0), ∂P/∂z = (0, 1), ∂P/∂(θ or q_k) = ⊥(P − o_k) for every angle upstream of P,
 
 where o_θ = o_{q_1} = p_1 and o_{q_k} = p_k. Then
@@ -63,7 +63,8 @@ def forward_kinematics(robot: Robot, q: np.ndarray):
     e = np.stack([np.sin(phi), -np.cos(phi)], axis=-1)
     base = qf[..., None, 0:2]
     joints = np.concatenate([base, base + np.cumsum(robot.lengths_m[:, None] * e, axis=-2)], axis=-2)
-    coms = joints[..., :-1, :] + robot.com_m[:, None] * e
+    n = np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+    coms = joints[..., :-1, :] + robot.com_m[:, None] * e + robot.com_perp_m[:, None] * n
     return joints, coms
 
 

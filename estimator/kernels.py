@@ -25,15 +25,18 @@ def warm() -> bool:
     this file, so the first estimate does not pay the compile); False without numba."""
     if not available():
         return False
-    from estimator.localization import _weights
+    from estimator.localization import weight_blocks
     from estimator.observer import full_robot
     from estimator.robot import paper_leg
 
     robot = full_robot(paper_leg())
     q = np.zeros((2, 5))
     PT, uT = momentum_terms_T(robot, q, q, q)
+    from estimator import model_kernels
+
+    model_kernels.warm(robot)
     for q_now in (q, None):         # the estimator passes the current posture; localize alone not
-        localize_dynamic(robot, q, uT.T + 1.0, _weights(5, None), q_now, min_force_N=0.05,
+        localize_dynamic(robot, q, uT.T + 1.0, weight_blocks(5, 2), q_now, min_force_N=0.05,
                          max_condition=20.0, ambiguity_tol=1e-3, position_tol_m=0.005,
                          bound_tol=0.05)
     for base in (3, 0):             # the log reader's loops: floating and fixed base
@@ -61,7 +64,7 @@ def _load():
     return _KERNELS or None
 
 
-def _terms_py(q, dq, tau, m, l, rc, Irot, g, Gz, msuf, PT, uT):
+def _terms_py(q, dq, tau, m, l, rc, rp, Irot, g, Gz, msuf, PT, uT):
     """P = M q̇ and u = τ + Cᵀq̇ − G (observer._FastTerms) for every sample, link-major."""
     T, n = q.shape
     N = n - 3
@@ -89,10 +92,10 @@ def _terms_py(q, dq, tau, m, l, rc, Irot, g, Gz, msuf, PT, uT):
             oz[i] = jz
             vox[i] = vjx
             voz[i] = vjz
-            cx[i] = jx + rc[i] * s
-            cz[i] = jz - rc[i] * c
-            vx[i] = vjx + rc[i] * dphi * c
-            vz[i] = vjz + rc[i] * dphi * s
+            cx[i] = jx + rc[i] * s + rp[i] * c
+            cz[i] = jz - rc[i] * c + rp[i] * s
+            vx[i] = vjx + dphi * (rc[i] * c - rp[i] * s)
+            vz[i] = vjz + dphi * (rc[i] * s + rp[i] * c)
             jx = jx + l[i] * s
             jz = jz - l[i] * c
             vjx = vjx + l[i] * dphi * c
@@ -124,35 +127,47 @@ def _terms_py(q, dq, tau, m, l, rc, Irot, g, Gz, msuf, PT, uT):
         PT[0, k] += Bx
         PT[1, k] += Bz
 
-def _fit_py(rd, wr, kappa, jx, jz, c, N, out):
-    """Link c (1-based): weighted LS of (F, μ), α clipped to [0, 1] and F re-fitted there
-    (localization._fit_link). rd, wr: merged rows [x, z, hip, q_2…q_N]; out ← α_free, α,
-    Fx, Fz, cost."""
-    wx = wr[0]
-    wz = wr[1]
-    A11 = wx
+def _fit_py(r, W, jx, jz, c, N, H, WH, out):
+    """Link c (1-based): weighted LS of (F, μ), min (r − H x)ᵀ W (r − H x) (W the inverse residual
+    covariance), α clipped to [0, 1] and F re-fitted there (localization._fit_link). H, WH: (n, 3)
+    scratch; out ← α_free, α, Fx, Fz, cost."""
+    n = N + 3
+    for i in range(n):
+        H[i, 0] = 0.0
+        H[i, 1] = 0.0
+        H[i, 2] = 0.0
+    H[0, 0] = 1.0
+    H[1, 1] = 1.0
+    for m in range(2, 3 + c):
+        o = m - 3 if m > 3 else 0
+        H[m, 0] = -(jz[c - 1] - jz[o])
+        H[m, 1] = jx[c - 1] - jx[o]
+        H[m, 2] = 1.0
+    for i in range(n):
+        for k in range(3):
+            acc = 0.0
+            for j in range(n):
+                acc += W[i, j] * H[j, k]
+            WH[i, k] = acc
+    A11 = 0.0
     A12 = 0.0
     A13 = 0.0
-    A22 = wz
+    A22 = 0.0
     A23 = 0.0
     A33 = 0.0
-    b1 = wx * rd[0]
-    b2 = wz * rd[1]
+    b1 = 0.0
+    b2 = 0.0
     b3 = 0.0
-    for k in range(c):
-        ax = jx[c - 1] - jx[k]
-        az = jz[c - 1] - jz[k]
-        wk = wr[2 + k]
-        rk = rd[2 + k]
-        A11 += wk * az * az
-        A12 -= wk * az * ax
-        A13 -= wk * az
-        A22 += wk * ax * ax
-        A23 += wk * ax
-        A33 += wk
-        b1 -= wk * az * rk
-        b2 += wk * ax * rk
-        b3 += wk * rk
+    for i in range(n):
+        A11 += H[i, 0] * WH[i, 0]
+        A12 += H[i, 0] * WH[i, 1]
+        A13 += H[i, 0] * WH[i, 2]
+        A22 += H[i, 1] * WH[i, 1]
+        A23 += H[i, 1] * WH[i, 2]
+        A33 += H[i, 2] * WH[i, 2]
+        b1 += WH[i, 0] * r[i]
+        b2 += WH[i, 1] * r[i]
+        b3 += WH[i, 2] * r[i]
     c11 = A22 * A33 - A23 * A23
     c12 = A13 * A23 - A12 * A33
     c13 = A12 * A23 - A13 * A22
@@ -169,57 +184,56 @@ def _fit_py(rd, wr, kappa, jx, jz, c, N, out):
     alpha_free = mu / den                          # error_model="numpy": ±inf or nan
     alpha = 0.5 if math.isnan(alpha_free) else min(max(alpha_free, 0.0), 1.0)
     if alpha != alpha_free:
-        B11 = wx
+        for m in range(2, 3 + c):                  # moment rows: (a_m + α Δ) × F
+            H[m, 0] -= alpha * dz
+            H[m, 1] += alpha * dx
+        for i in range(n):
+            for k in range(2):
+                acc = 0.0
+                for j in range(n):
+                    acc += W[i, j] * H[j, k]
+                WH[i, k] = acc
+        B11 = 0.0
         B12 = 0.0
-        B22 = wz
-        d1 = wx * rd[0]
-        d2 = wz * rd[1]
-        for k in range(c):
-            bx = (jx[c - 1] - jx[k]) + alpha * dx
-            bz = (jz[c - 1] - jz[k]) + alpha * dz
-            wk = wr[2 + k]
-            rk = rd[2 + k]
-            B11 += wk * bz * bz
-            B12 -= wk * bz * bx
-            B22 += wk * bx * bx
-            d1 -= wk * rk * bz
-            d2 += wk * rk * bx
+        B22 = 0.0
+        d1 = 0.0
+        d2 = 0.0
+        for i in range(n):
+            B11 += H[i, 0] * WH[i, 0]
+            B12 += H[i, 0] * WH[i, 1]
+            B22 += H[i, 1] * WH[i, 1]
+            d1 += WH[i, 0] * r[i]
+            d2 += WH[i, 1] * r[i]
         detB = B11 * B22 - B12 * B12
         Fx = (B22 * d1 - B12 * d2) / detB
         Fz = (B11 * d2 - B12 * d1) / detB
         mu = alpha * (dx * Fz - dz * Fx)
-    ex = rd[0] - Fx
-    ez = rd[1] - Fz
-    cost2 = wx * ex * ex + wz * ez * ez + kappa
-    for k in range(c):
-        ax = jx[c - 1] - jx[k]
-        az = jz[c - 1] - jz[k]
-        e = rd[2 + k] - (ax * Fz - az * Fx + mu)
-        cost2 += wr[2 + k] * e * e
-    for k in range(2 + c, N + 2):
-        cost2 += wr[k] * rd[k] * rd[k]
+        for m in range(2, 3 + c):                  # back to the (F, μ) columns for the cost
+            H[m, 0] += alpha * dz
+            H[m, 1] -= alpha * dx
+    cost2 = 0.0
+    for i in range(n):
+        ei = r[i] - (H[i, 0] * Fx + H[i, 1] * Fz + H[i, 2] * mu)
+        for j in range(n):
+            ej = r[j] - (H[j, 0] * Fx + H[j, 1] * Fz + H[j, 2] * mu)
+            cost2 += ei * W[i, j] * ej
     out[0] = alpha_free
     out[1] = alpha
     out[2] = Fx
     out[3] = Fz
     out[4] = math.sqrt(max(cost2, 0.0))
 
-def _localize_py(q, r, q_now, lengths, w, min_force, max_condition, ambiguity_tol, position_tol,
-             bound_tol, link, alpha_o, force_o, point_o, cond_o, reason_o, cost_o):
-    """localization.localize_dynamic without expected contacts, per sample; the point is
-    reported at ``q_now`` (the current posture) from the body coordinate α."""
+def _localize_py(q, r, q_now, lengths, Wb, widx, min_force, max_condition, ambiguity_tol,
+                 position_tol, bound_tol, link, alpha_o, force_o, point_o, cond_o, reason_o, cost_o):
+    """localization.localize_dynamic without expected contacts, per sample (sample t weighted by
+    Wb[widx[t]]); the point is reported at ``q_now`` (the current posture) from the body
+    coordinate α."""
     T, n = q.shape
     N = n - 3
     jx = np.empty(N + 1)
     jz = np.empty(N + 1)
-    rd = np.empty(N + 2)
-    wr = np.empty(N + 2)
-    W0 = w[2] + w[3]
-    wr[0] = w[0]
-    wr[1] = w[1]
-    wr[2] = W0
-    for k in range(4, n):
-        wr[k - 1] = w[k]
+    H = np.empty((n, 3))
+    WH = np.empty((n, 3))
     res = np.empty((N, 5))
     for t in range(T):
         phi = q[t, 2]
@@ -229,16 +243,10 @@ def _localize_py(q, r, q_now, lengths, w, min_force, max_condition, ambiguity_to
             phi += q[t, 3 + i]
             jx[i + 1] = jx[i] + lengths[i] * math.sin(phi)
             jz[i + 1] = jz[i] - lengths[i] * math.cos(phi)
-        rd[0] = r[t, 0]
-        rd[1] = r[t, 1]
-        rd[2] = (w[2] * r[t, 2] + w[3] * r[t, 3]) / W0
-        for k in range(4, n):
-            rd[k - 1] = r[t, k]
-        dd = r[t, 2] - r[t, 3]
-        kappa = (w[2] * w[3] / W0) * dd * dd
+        W = Wb[widx[t]]
         best = 0
         for c in range(1, N + 1):
-            _fit(rd, wr, kappa, jx, jz, c, N, res[c - 1])
+            _fit(r[t], W, jx, jz, c, N, H, WH, res[c - 1])
             if res[c - 1, 4] < res[best, 4]:
                 best = c - 1
         second = -1
@@ -614,14 +622,16 @@ def momentum_terms_T(robot, q, dq, tau):
     uT = np.empty((n, T))
     msuf = np.cumsum(m[::-1])[::-1].copy()
     k["terms"](q, dq, tau, m, np.asarray(robot.lengths_m, float), np.asarray(robot.com_m, float),
-               _irot(robot), g, g * (float(robot.base_mass_kg) + float(m.sum())), msuf, PT, uT)
+               np.asarray(robot.com_perp_m, float), _irot(robot), g,
+               g * (float(robot.base_mass_kg) + float(m.sum())), msuf, PT, uT)
     return PT, uT
 
 
-def localize_dynamic(robot, q, r, w, q_now=None, *, min_force_N, max_condition, ambiguity_tol,
+def localize_dynamic(robot, q, r, weight, q_now=None, *, min_force_N, max_condition, ambiguity_tol,
                      position_tol_m, bound_tol):
     """Arrays (link, α, F, p, condition, reason, cost) of localization.localize_dynamic (no
-    expected contacts) with the compiled loop; p at ``q_now`` if given."""
+    expected contacts) with the compiled loop; p at ``q_now`` if given. ``weight``: (W (B, n, n),
+    index (T,)), sample t weighted by W[index[t]] (localization.weight_blocks)."""
     k = _load()
     q = np.ascontiguousarray(q, float)
     r = np.ascontiguousarray(r, float)
@@ -634,7 +644,8 @@ def localize_dynamic(robot, q, r, w, q_now=None, *, min_force_N, max_condition, 
     reason = np.empty(T, np.int8)
     cost = np.empty(T)
     k["localize"](q, r, None if q_now is None else np.ascontiguousarray(q_now, float),
-                  np.asarray(robot.lengths_m, float), np.asarray(w, float), float(min_force_N),
+                  np.asarray(robot.lengths_m, float), np.ascontiguousarray(weight[0], float),
+                  np.ascontiguousarray(weight[1], np.int64), float(min_force_N),
                   float(max_condition), float(ambiguity_tol), float(position_tol_m), float(bound_tol),
                   link, alpha, force, point, cond, reason, cost)
     return link, alpha, force, point, cond, reason, cost

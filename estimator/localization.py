@@ -9,8 +9,8 @@ p = p_c + α Δ_c, Δ_c = p_{c+1} − p_c, and generalized force τ_ext = J(α)�
     rows q_k, k > c:     0                                        (o_θ = o_{q_1} = p_1, o_{q_k} = p_k)
 
 ``dynamic``: the observer residual r ≈ τ_ext on every row. For each link, (F_x, F_z, μ) is a
-weighted LINEAR least-squares problem (3 unknowns, closed-form 3×3 solve per sample; the
-identical θ and q_1 rows are merged exactly first); α =
+weighted LINEAR least-squares problem (3 unknowns, closed-form 3×3 solve per sample), weighted
+by the inverse of the residual's noise covariance R when given (the maximum-likelihood fit); α =
 μ/(Δ_c × F); if α ∉ [0, 1] it is clipped and F re-fitted. The link with the smallest residual wins.
 With expected contacts (a stance foot) their forces join the unknowns (batched SVD solve).
 
@@ -90,44 +90,54 @@ def _moment_arms(joints: np.ndarray, c: int) -> np.ndarray:
     return joints[:, c - 1:c] - origins
 
 
-def _merge_hip_rows(rT, w):
-    """Rows θ and q_1 share the origin p_1 (identical columns): merge them into one row with
-    weight w_θ + w_q1 and the weighted-mean target; the dropped part of the cost is the constant
-    κ = w_θ w_q1 / (w_θ + w_q1) (r_θ − r_q1)². Returns rows [x, z, hip, q_2…q_N], weights, κ."""
-    W0 = w[2] + w[3]
-    red = np.empty((rT.shape[0] - 1, rT.shape[1]))
-    red[:2] = rT[:2]
-    red[2] = (w[2] * rT[2] + w[3] * rT[3]) / W0
-    red[3:] = rT[4:]
-    kappa = (w[2] * w[3] / W0) * (rT[2] - rT[3]) ** 2
-    return red, np.r_[w[:2], W0, w[4:]], kappa
+def weight_blocks(n: int, T: int, row_weights=None, weight=None):
+    """(W (B, n, n), index (T,)) of the fit's weight matrices: sample t uses W[index[t]].
+
+    ``weight``: the inverse residual covariance R⁻¹ — one (n, n) matrix, one per sample (T, n, n),
+    or already (W, index); else the diagonal of ``row_weights`` (default ones)."""
+    if weight is None:
+        return np.diag(_weights(n, row_weights))[None], np.zeros(T, np.int64)
+    if isinstance(weight, tuple):
+        W, idx = weight
+        return np.asarray(W, float), np.asarray(idx, np.int64)
+    W = np.asarray(weight, float)
+    if W.shape == (n, n):
+        return W[None], np.zeros(T, np.int64)
+    if W.shape != (T, n, n):
+        raise InputError(f"weight: expected ({n}, {n}) or ({T}, {n}, {n}), got {W.shape}")
+    return W, np.arange(T, dtype=np.int64)
 
 
-def _fit_link(rT, w, jx, jz, c, N, kappa):
-    """Weighted LS of (F, μ) on link c (1-based), then α clipped to [0, 1] and F re-fitted there.
+def _link_design(jx, jz, c, n):
+    """Columns (Fx, Fz, μ) of link c (1-based) on the rows [x, z, θ, q_1…q_N], (T, n, 3):
 
-    Link-major layout: rT (N+2, T) = rows [x, z, hip (θ and q_1 merged), q_2…q_N] with weights w
-    and merge constant κ (``_merge_hip_rows``); joints jx, jz (N+1, T) relative to the base origin.
-    Returns alpha_free, alpha, Fx, Fz, cost (each (T,)), cost = sqrt(Σ w e²) over all rows.
+    rows x, z: (1, 0, 0), (0, 1, 0); moment row m ∈ {θ, q_1…q_c} with origin o_m:
+    (−a_z, a_x, 1), a = p_c − o_m (o_θ = o_{q_1} = p_1, o_{q_k} = p_k); rows beyond q_c: 0."""
+    T = jx.shape[1]
+    H = np.zeros((T, n, 3))
+    H[:, 0, 0] = 1.0
+    H[:, 1, 1] = 1.0
+    org = np.r_[0, 0:c]                                   # origins of rows 2 … 2 + c
+    H[:, 2:3 + c, 0] = -(jz[c - 1] - jz[org]).T
+    H[:, 2:3 + c, 1] = (jx[c - 1] - jx[org]).T
+    H[:, 2:3 + c, 2] = 1.0
+    return H
+
+
+def _fit_link(r, W, jx, jz, c, N):
+    """Weighted LS of (F, μ) on link c (1-based), min (r − H x)ᵀ W (r − H x), then α clipped to
+    [0, 1] and F re-fitted there. r (T, n); W (T, n, n), the inverse residual covariance (or any
+    positive definite weight); joints jx, jz (N+1, T) relative to the base origin.
+    Returns alpha_free, alpha, Fx, Fz, cost (each (T,)), cost = √(eᵀ W e).
     """
-    sel = np.r_[0:c]                                     # origins p_1 (hip), p_2 … p_c
-    ax = jx[c - 1] - jx[sel]                             # a_k = p_c − o_k, (c, T)
-    az = jz[c - 1] - jz[sel]
-    rows = np.r_[2:2 + c]
-    wk = w[rows][:, None]
-    rk = rT[rows]
-    wx, wz = w[0], w[1]
-    wax, waz = wk * ax, wk * az
-    # normal equations of rows x: (1,0,0), z: (0,1,0), k: (−a_z, a_x, 1)
-    A11 = wx + (waz * az).sum(0)
-    A12 = -(waz * ax).sum(0)
-    A13 = -waz.sum(0)
-    A22 = wz + (wax * ax).sum(0)
-    A23 = wax.sum(0)
-    A33 = float(wk.sum())
-    b1 = wx * rT[0] - (waz * rk).sum(0)
-    b2 = wz * rT[1] + (wax * rk).sum(0)
-    b3 = (wk * rk).sum(0)
+    n = N + 3
+    H = _link_design(jx, jz, c, n)
+    WH = np.einsum("tij,tjk->tik", W, H)
+    A = np.einsum("tik,til->tkl", H, WH)
+    b = np.einsum("tik,ti->tk", WH, r)
+    A11, A12, A13 = A[:, 0, 0], A[:, 0, 1], A[:, 0, 2]
+    A22, A23, A33 = A[:, 1, 1], A[:, 1, 2], A[:, 2, 2]
+    b1, b2, b3 = b[:, 0], b[:, 1], b[:, 2]
     # symmetric 3×3 inverse by cofactors
     c11 = A22 * A33 - A23 * A23
     c12 = A13 * A23 - A12 * A33
@@ -145,26 +155,21 @@ def _fit_link(rT, w, jx, jz, c, N, kappa):
     alpha = np.clip(np.nan_to_num(alpha_free, nan=0.5), 0.0, 1.0)
     clipped = np.flatnonzero(alpha != alpha_free)
     if clipped.size:
-        # F with α fixed: rows k are (a_k + α Δ) × F → 2×2 normal equations, on those samples only
+        # F with α fixed: moment rows are (a_m + α Δ) × F → 2×2 normal equations, those samples only
         al = alpha[clipped]
-        bx = ax[:, clipped] + al * dx[clipped]
-        bz = az[:, clipped] + al * dz[clipped]
-        rc_ = rk[:, clipped]
-        B11 = wx + (wk * bz * bz).sum(0)
-        B12 = -(wk * bz * bx).sum(0)
-        B22 = wz + (wk * bx * bx).sum(0)
-        d1 = wx * rT[0, clipped] - (wk * rc_ * bz).sum(0)
-        d2 = wz * rT[1, clipped] + (wk * rc_ * bx).sum(0)
+        H2 = H[clipped, :, :2].copy()
+        H2[:, 2:3 + c, 0] -= (al * dz[clipped])[:, None]
+        H2[:, 2:3 + c, 1] += (al * dx[clipped])[:, None]
+        WH2 = np.einsum("tij,tjk->tik", W[clipped], H2)
+        B = np.einsum("tik,til->tkl", H2, WH2)
+        d = np.einsum("tik,ti->tk", WH2, r[clipped])
+        B11, B12, B22 = B[:, 0, 0], B[:, 0, 1], B[:, 1, 1]
         detB = B11 * B22 - B12 * B12
-        Fx[clipped] = (B22 * d1 - B12 * d2) / detB
-        Fz[clipped] = (B11 * d2 - B12 * d1) / detB
+        Fx[clipped] = (B22 * d[:, 0] - B12 * d[:, 1]) / detB
+        Fz[clipped] = (B11 * d[:, 1] - B12 * d[:, 0]) / detB
         mu[clipped] = al * (dx[clipped] * Fz[clipped] - dz[clipped] * Fx[clipped])
-    ex = rT[0] - Fx
-    ez = rT[1] - Fz
-    ek = rk - (ax * Fz - az * Fx + mu)
-    cost2 = wx * ex * ex + wz * ez * ez + (wk * ek * ek).sum(0) + kappa
-    if c < N:
-        cost2 += (w[2 + c:, None] * rT[2 + c:] ** 2).sum(0)
+    e = r - np.einsum("tik,tk->ti", H, np.stack([Fx, Fz, mu], axis=-1))
+    cost2 = np.einsum("ti,tij,tj->t", e, W, e)
     return alpha_free, alpha, Fx, Fz, np.sqrt(np.maximum(cost2, 0.0))
 
 
@@ -196,10 +201,15 @@ def _flag(force, delta, reason, min_force_N, max_condition):
 
 
 def localize_dynamic(robot: Robot, q: np.ndarray, residual: np.ndarray, *, expected=(),
-                     row_weights=None, min_force_N: float = 0.05, max_condition: float = 20.0,
-                     ambiguity_tol: float = 1e-3, position_tol_m: float = 0.005,
-                     bound_tol: float = 0.05) -> Localization:
+                     row_weights=None, weight=None, min_force_N: float = 0.05,
+                     max_condition: float = 20.0, ambiguity_tol: float = 1e-3,
+                     position_tol_m: float = 0.005, bound_tol: float = 0.05) -> Localization:
     """Least-squares (F, α) on every link from the residual on all rows; smallest residual wins.
+
+    ``weight``: the fit's weight matrix W, the inverse of the residual's noise covariance R
+    (``weight_blocks``): then the fit is the maximum-likelihood (generalized least squares) one of
+    r = J(α)ᵀF + n, n ~ N(0, R), and the cost is in noise standard deviations. Without it the
+    diagonal ``row_weights`` (default ones: the unweighted fit).
 
     q, residual: (T, n) floating coordinates. ``expected``: sequence of (link, α) contacts whose
     forces are estimated jointly (e.g. ``[(N, 1.0)]`` for a stance foot). Flags: |F| < min_force_N
@@ -218,13 +228,13 @@ def localize_dynamic(robot: Robot, q: np.ndarray, residual: np.ndarray, *, expec
     n = N + 3
     if q.shape[-1] != n or r.shape != q.shape:
         raise InputError(f"localize: q and residual must both be (T, {n}), got {q.shape}, {r.shape}")
-    w = _weights(n, row_weights)
+    Wb, widx = weight_blocks(n, len(q), row_weights, weight)
     args = (min_force_N, max_condition, ambiguity_tol, position_tol_m, bound_tol)
     from estimator import kernels
 
     if not expected and kernels.available():        # the same per-sample solve, compiled
         link, alpha, force, point, condition, reason, cost = kernels.localize_dynamic(
-            rob, q, r, w, min_force_N=min_force_N, max_condition=max_condition,
+            rob, q, r, (Wb, widx), min_force_N=min_force_N, max_condition=max_condition,
             ambiguity_tol=ambiguity_tol, position_tol_m=position_tol_m, bound_tol=bound_tol)
         return Localization(link=link, alpha=alpha, force_N=force, point_m=point,
                             condition=condition, reason=reason, cost=cost)
@@ -233,7 +243,7 @@ def localize_dynamic(robot: Robot, q: np.ndarray, residual: np.ndarray, *, expec
         out = None
         for s in range(0, len(q), chunk):
             part = localize_dynamic(rob, q[s:s + chunk], r[s:s + chunk], expected=expected,
-                                    row_weights=w, min_force_N=min_force_N,
+                                    weight=(Wb, widx[s:s + chunk]), min_force_N=min_force_N,
                                     max_condition=max_condition, ambiguity_tol=ambiguity_tol,
                                     position_tol_m=position_tol_m, bound_tol=bound_tol)
             if out is None:                    # preallocate every field for the whole batch
@@ -244,12 +254,12 @@ def localize_dynamic(robot: Robot, q: np.ndarray, residual: np.ndarray, *, expec
                 if arr is not None:
                     arr[s:s + chunk] = getattr(part, f)
         return Localization(**out)
+    W = Wb[widx]                                    # (T, n, n)
     if expected:
-        return _localize_with_expected(rob, q, r, w, list(expected), *args)
+        return _localize_with_expected(rob, q, r, W, list(expected), *args)
     T = len(q)
     jx, jz = _joints_link_major(rob, q)
-    rT, wr, kappa = _merge_hip_rows(np.ascontiguousarray(r.T), w)
-    fits = [_fit_link(rT, wr, jx, jz, c, N, kappa) for c in range(1, N + 1)]
+    fits = [_fit_link(r, W, jx, jz, c, N) for c in range(1, N + 1)]
     costs = np.stack([f[4] for f in fits])                            # (N, T)
     if N > 1:
         order = np.argsort(costs, axis=0, kind="stable")
@@ -342,18 +352,19 @@ def _link_columns(joints, c, N, alpha=None):
     return cols
 
 
-def _localize_with_expected(rob, q, r, w, expected, min_force_N, max_condition, ambiguity_tol,
+def _localize_with_expected(rob, q, r, W, expected, min_force_N, max_condition, ambiguity_tol,
                             position_tol_m, bound_tol):
     N = rob.n_links
     T = len(q)
-    sw = np.sqrt(w)
+    S = np.swapaxes(np.linalg.cholesky(W), -1, -2)     # Sᵀ S = W: ‖S e‖² = eᵀ W e
+    Sr = np.einsum("tij,tj->ti", S, r)
     joints, _ = dyn.forward_kinematics(rob, q)
     Je = expected_jacobians(rob, q, expected)                   # (T, n, 2m)
     me = Je.shape[-1]
     results = []
     for c in range(1, N + 1):
         A = np.concatenate([Je, _link_columns(joints, c, N)], axis=-1)
-        x, deficient = _lstsq_batched(sw[:, None] * A, sw * r)
+        x, deficient = _lstsq_batched(S @ A, Sr)
         F = x[:, me:me + 2]
         mu = x[:, me + 2]
         delta = joints[:, c] - joints[:, c - 1]
@@ -363,13 +374,13 @@ def _localize_with_expected(rob, q, r, w, expected, min_force_N, max_condition, 
         clipped = (alpha != alpha_free) & ~deficient
         if np.any(clipped):
             A2 = np.concatenate([Je, _link_columns(joints, c, N, alpha)], axis=-1)
-            x2, def2 = _lstsq_batched(sw[:, None] * A2, sw * r)
+            x2, def2 = _lstsq_batched(S @ A2, Sr)
             x = np.where(clipped[:, None], np.concatenate([x2, (alpha * _cross(delta, x2[:, me:]))[:, None]],
                                                           axis=-1), x)
             deficient = deficient | (clipped & def2)
             A = np.where(clipped[:, None, None],
                          np.concatenate([A2, np.zeros((T, N + 3, 1))], axis=-1), A)
-        e = sw * (r - np.einsum("tnk,tk->tn", A, x))
+        e = np.einsum("tij,tj->ti", S, r - np.einsum("tnk,tk->tn", A, x))
         results.append((alpha_free, alpha, x, np.sqrt((e * e).sum(-1)), deficient))
     costs = np.stack([res[3] for res in results], axis=-1)
     order = np.argsort(costs, axis=-1, kind="stable")

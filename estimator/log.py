@@ -1,9 +1,9 @@
-"""Sensor logs: the estimator's input (DESIGN.md, "Sensor log").
+"""Sensor logs: the estimator's input (docs/conventions.md, "Sensor log CSV").
 
 CSV header ``t,x,z,theta,q1,q2,dx,dz,dtheta,dq1,dq2,tau1,tau2,Fx,Fz,My`` (q3…, dq3…, tau3… for
 longer chains; a fixed-base log omits x, z, theta and their rates). SI units throughout.
 In memory, coordinates are always the floating ones [x, z, θ, q_1…q_N]: a fixed-base log is
-padded with a zero base, and the base wrench enters on the base rows (DESIGN.md).
+padded with a zero base, and the base wrench enters on the base rows (docs/conventions.md).
 """
 
 from __future__ import annotations
@@ -151,6 +151,28 @@ def _reblock(blocks, size: int | None):
         yield np.concatenate(held) if len(held) > 1 else held[0]
 
 
+MAX_HEADER_BYTES = 1 << 16          # a log header: ≤ 64 KiB (a 100-joint robot's needs ~3 KiB)
+MAX_LOG_COLUMNS = 1024               # ≤ 1 + 2·(N+3) + N + 3 columns for N ≤ ~250 joints
+
+
+def check_header(path, source: str) -> None:
+    """Size the header before any parser sees it: the first line must end within
+    MAX_HEADER_BYTES and hold at most MAX_LOG_COLUMNS fields (a 120k-column or binary file is
+    refused in one line instead of being parsed)."""
+    with open(path, "rb") as f:
+        line = f.readline(MAX_HEADER_BYTES + 1)
+    if not line:
+        return
+    n = line.count(b",") + 1
+    more = "more than " if len(line) > MAX_HEADER_BYTES else ""
+    if n > MAX_LOG_COLUMNS:
+        raise InputError(f"{source}: line 1 has {more}{n} columns, above the {MAX_LOG_COLUMNS} of any "
+                         "robot's log (t, base, joints, rates, torques, wrench); is it the right file?")
+    if more:
+        raise InputError(f"{source}: line 1 is longer than {MAX_HEADER_BYTES // 1024} KiB: not a log "
+                         "header (a binary file, or every sample on one line?)")
+
+
 def _simple_header(path):
     """(first line, names) if the file's first line is plain comma-separated names (letters,
     digits, _; spaces around commas; distinct), which pandas reads as the same names; else None."""
@@ -247,7 +269,7 @@ def _fill(dst: np.ndarray, column, null_mask: bool = False) -> None:
 
 
 def read_log(path, robot=None, *, max_jitter: float = 0.01) -> SensorLog:
-    """Read and validate a sensor log (DESIGN.md format): CSV, or Parquet for ``.parquet``.
+    """Read and validate a sensor log (docs/conventions.md format): CSV, or Parquet for ``.parquet``.
 
     Rows with a NaN/inf (or empty) field are skipped and counted (``skipped_lines``, ``valid_mask``);
     a non-numeric field, a non-increasing time or a step that is not a whole number of sample
@@ -283,12 +305,13 @@ class LogReader:
         from estimator.plausibility import Checker
         from estimator.timing import read_declaration
 
+        from userio.files import check_input
+
         path = Path(path)
         self.path, self.source = path, str(path)
+        check_input(path, max_bytes=None, what="log (CSV or Parquet)")   # a regular file: no device
         if not path.exists():
             raise InputError(f"{self.source}: no such file")
-        if path.is_dir():
-            raise InputError(f"{self.source}: is a directory, expected a CSV log")
         if chunk_samples is not None and (int(chunk_samples) != chunk_samples or chunk_samples < 1):
             raise InputError(f"chunk size: must be a whole number of samples ≥ 1, got {chunk_samples}")
         self.chunk_samples = chunk_samples
@@ -309,6 +332,7 @@ class LogReader:
 
     # ------------------------------------------------------------------ header
     def _csv_names(self):
+        check_header(self.path, self.source)
         self._simple_header = _simple_header(self.path)
         if self._simple_header is not None:       # plain names: no need to import pandas
             return self._simple_header[1]
@@ -557,11 +581,31 @@ class LogReader:
         log.row0 = int(row0)
         log.period_s = dt
         self.checker.rows(t, q, dq)
+        self._track_constant(wrench, tau)
         self.n_samples += T
         return log
 
+    def _track_constant(self, wrench, tau):
+        """Running min/max of every force channel [Fx, Fz, My, τ…] (a dead channel is constant)."""
+        block = np.concatenate([wrench, tau], axis=1)
+        lo, hi = block.min(0), block.max(0)
+        if getattr(self, "_lo", None) is None:
+            self._lo, self._hi = lo, hi
+        else:
+            self._lo, self._hi = np.minimum(self._lo, lo), np.maximum(self._hi, hi)
+
+    def constant_channels(self) -> list[str]:
+        """Warnings for force channels that are exactly constant over the whole log."""
+        if getattr(self, "_lo", None) is None or self.n_samples < 16:
+            return []
+        names = ["Fx", "Fz", "My", *[f"tau{i}" for i in range(1, self.n_links + 1)]]
+        return [f"{self.source}: column '{names[j]}' is exactly {self._lo[j]:g} in all {self.n_samples} "
+                "samples: a dead or unplugged channel? (a sensor's reading carries noise)"
+                for j in np.flatnonzero(self._hi == self._lo)]
+
     def finish(self) -> list[str]:
-        """The whole-log plausibility checks (velocity scale); warnings issued and returned."""
+        """The whole-log plausibility checks (velocity scale); warnings issued and returned.
+        ``constant_channels()`` lists the force channels constant over the whole log."""
         self.plausibility_warnings = self.checker.finish()
         return self.plausibility_warnings
 
@@ -590,7 +634,7 @@ def rows_to_lines(rows: np.ndarray) -> np.ndarray:
 
 
 def log_to_frame(log: SensorLog):
-    """A pandas DataFrame with DESIGN.md's columns in order (a fixed base omits the base columns)."""
+    """A pandas DataFrame with the columns of docs/conventions.md in order (a fixed base omits the base columns)."""
     import pandas as pd
 
     n = log.n_links

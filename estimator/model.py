@@ -21,13 +21,47 @@ model-uncertainty terms use:
 
 so the residual's drive under no contact, d = ΔP/Δt − ū, is linear in θ as well, and a parameter
 error δθ shows up in the residual as the filtered regressor times δθ.
+
+How far the real robot may be from its file is a covariance Σ_θ of θ (``model_covariance``): the
+posterior of an identification (``torquebench identify``), or a declared physical uncertainty
+(``ModelUncertainty``: relative masses and inertias, centres of mass in metres) mapped to θ by
+``parameter_covariance``. Identification keeps θ physically consistent through
+``consistency_margins`` (every entry ≥ 0 exactly when θ is consistent).
+
+Optional, used when a model has them: ``consistency_margin_names`` (what each margin bounds, for
+messages) and ``fused_model_chi2`` (the model-error statistic with the model's own compiled
+regressor inside the loop; estimator.model_error falls back to ``momentum_regressor``).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
+
+
+@dataclass(frozen=True)
+class ModelUncertainty:
+    """1σ of a robot file's inertial data, independent per body: masses and rotational inertias
+    (about the centre of mass) relative, centres of mass in metres along every axis. ``com_m``
+    None: ``relative`` × the body's length (a link's ``length_m``)."""
+
+    mass_rel: float
+    inertia_rel: float
+    com_m: float | None = None
+    relative: float | None = None          # what a single number declared (for messages)
+
+    @classmethod
+    def uniform(cls, relative: float) -> "ModelUncertainty":
+        """One relative figure for everything: masses, inertias, and COM as a fraction of length."""
+        return cls(mass_rel=relative, inertia_rel=relative, com_m=None, relative=relative)
+
+    def describe(self) -> str:
+        com = f"{self.com_m * 1e3:g} mm" if self.com_m is not None else \
+            f"{self.relative or 0:g} × link length"
+        return (f"masses ±{self.mass_rel * 100:g} %, inertias ±{self.inertia_rel * 100:g} %, "
+                f"centres of mass ±{com} (1σ)")
 
 
 @runtime_checkable
@@ -62,3 +96,14 @@ class RobotModel(Protocol):
     def consistency_problems(self, theta: np.ndarray) -> list[str]:
         """Physical consistency of θ (positive masses, centre of mass on the body, positive
         definite inertia satisfying the triangle inequalities); [] when consistent."""
+
+    def consistency_margins(self, theta: np.ndarray) -> np.ndarray:
+        """Smooth constraint values of θ, every one ≥ 0 exactly when θ is consistent (what a
+        constrained fit keeps ≥ 0)."""
+
+    def parameter_covariance(self, uncertainty: ModelUncertainty) -> np.ndarray:
+        """Σ_θ (n_θ, n_θ) of a declared physical uncertainty, linearized at this model's θ."""
+
+    def model_covariance(self) -> tuple[np.ndarray | None, str]:
+        """(Σ_θ, source) the robot file states: an identification's posterior covariance, else its
+        declared model uncertainty; (None, why) when it states neither."""

@@ -22,15 +22,27 @@ number of alarm onsets per second is at most α/Δt.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from pathlib import Path
 
 import numpy as np
 
 from estimator.errors import InputError
+from userio.fields import Range, check_ranges
+
+# physical ranges of the sensor noise (1σ per sample), declared once (userio.fields.Range)
+TORQUE_SIGMA_RANGE = Range(1e-9, 1e4, "N·m", low="below any real sensor's noise: the residual "
+                           "covariance would be singular", high="N·mm typed as N·m?")
+FT_SIGMA_RANGE = Range(1e-9, 1e5, "N or N·m", low="below any real FT sensor's noise: the residual "
+                       "covariance would be singular", high="mN typed as N?")
+VELOCITY_SIGMA_RANGE = Range(0.0, 1e3, "rad/s", high="deg/s typed as rad/s?")
+ENCODER_COUNTS_RANGE = Range(4, 2.0 ** 40, "counts/rev", zero_ok=True,
+                             low="an encoder has at least 4 counts per revolution (0: no quantization)")
 
 DEFAULT_FALSE_ALARMS_PER_S = 1.0 / 3600.0
+QUIET_SEGMENTS = 8          # a quiet window's eighths must agree with each other (6 standard errors)
+QUIET_MAX_OFFSET = 4.0      # and its residual's median sit within this many σ of zero
 
 
 @dataclass(frozen=True)
@@ -38,10 +50,10 @@ class NoiseModel:
     """White sensor noise per sample (1σ): joint torques (N,), FT wrench [Fx N, Fz N, My N·m],
     joint-rate noise and encoder resolution (0 = none)."""
 
-    torque_sigma_Nm: np.ndarray
-    ft_sigma: np.ndarray
-    velocity_sigma_rad_per_s: float = 0.0
-    encoder_counts: int = 0
+    torque_sigma_Nm: np.ndarray = field(metadata={"range": TORQUE_SIGMA_RANGE})
+    ft_sigma: np.ndarray = field(metadata={"range": FT_SIGMA_RANGE})
+    velocity_sigma_rad_per_s: float = field(default=0.0, metadata={"range": VELOCITY_SIGMA_RANGE})
+    encoder_counts: int = field(default=0, metadata={"range": ENCODER_COUNTS_RANGE})
     source: str = "option"
 
     def __post_init__(self):
@@ -54,8 +66,12 @@ class NoiseModel:
             raise InputError(f"{self.source}: FT sigma: needs 3 values [Fx, Fz, My], got {self.ft_sigma.size}")
         if not (np.isfinite(self.velocity_sigma_rad_per_s) and self.velocity_sigma_rad_per_s >= 0):
             raise InputError(f"{self.source}: velocity sigma must be finite and ≥ 0")
-        if int(self.encoder_counts) != self.encoder_counts or self.encoder_counts < 0:
+        if not np.isfinite(self.encoder_counts) or int(self.encoder_counts) != self.encoder_counts \
+                or self.encoder_counts < 0:
             raise InputError(f"{self.source}: encoder counts must be a whole number ≥ 0")
+        check_ranges(self, keys={k: f"{self.source}: {v}" for k, v in (
+            ("torque_sigma_Nm", "torque sigma"), ("ft_sigma", "FT sigma"),
+            ("velocity_sigma_rad_per_s", "velocity sigma"), ("encoder_counts", "encoder counts"))})
 
     def describe(self) -> str:
         return (f"{self.source}: τ σ {np.round(self.torque_sigma_Nm, 6).tolist()} N·m, FT σ "
@@ -122,6 +138,11 @@ def per_sample_rate(value: float, unit: str, dt_s: float, where: str = "--false-
     if not (np.isfinite(alpha) and 0 < alpha < 1):
         raise InputError(f"{where}: the false-alarm rate must be in (0, 1) per sample, got "
                          f"{alpha:g} per sample ({value:g}/{unit} at Δt = {dt_s:g} s)")
+    from estimator.limits import FALSE_ALARM_PER_SAMPLE_RANGE
+
+    why = FALSE_ALARM_PER_SAMPLE_RANGE.problem(alpha)
+    if why:
+        raise InputError(f"{where}: {value:g}/{unit} at Δt = {dt_s:g} s gives {why}")
     return alpha
 
 
@@ -201,22 +222,35 @@ def residual_covariance(robot, q, dq, noise: NoiseModel, gain_per_s, dt_s: float
 
 
 def quiet_covariance(r: np.ndarray, t: np.ndarray, t0: float, t1: float, gain_per_s,
-                     dt_s: float, where: str = "--quiet-window") -> np.ndarray:
-    """Robust covariance of r over t0 ≤ t ≤ t1 (MAD scale, correlation of winsorized values at
-    ±4σ), (n, n). Refuses a stretch whose first and last quarters differ by more than 6 standard
-    errors (a contact, or a drift) on any row."""
+                     dt_s: float, where: str = "--quiet-window", method: str = "exact") -> np.ndarray:
+    """The residual's stationary sensor-noise covariance from the stretch t0 ≤ t ≤ t1, (n, n).
+
+    Not the spread of r itself: over a stretch r also carries the model error Φ_k δθ (a bias on a
+    held leg, a posture- and velocity-dependent signal on a moving one; estimator.model_error),
+    which is not stationary noise. The sensor noise is read from the observer's innovations
+    d_k = (r_{k+1} − a r_k)/b (the drive, an MA(1) process d_k = B0 e_{k+1} + B1 e_k) differenced
+    once, which removes a slowly varying model error: with C0 = Cov(Δd_k), C1 = Cov(Δd_k, Δd_{k−1})
+    (robust: MAD scales, winsorized products about zero),
+
+        S0 = C0 + (C1 + C1ᵀ)/2,   S1 = (C1 + S0)/2,   R_ij = b_i b_j (S0 + a_j S1 + a_i S1ᵀ)_ij/(1 − a_i a_j)
+
+    (the module doc's stationary covariance). Refuses a stretch shorter than 20 observer time
+    constants or whose first and last quarters differ by more than 6 standard errors (a contact,
+    or a drift) on any row."""
+    from estimator import observer
     from estimator.detection import robust_sigma
 
     if not (np.isfinite(t0) and np.isfinite(t1) and t1 > t0):
         raise InputError(f"{where}: expected T0:T1 with T0 < T1 (seconds), got {t0:g}:{t1:g}")
     sel = (t >= t0) & (t <= t1)
-    x = r[sel]
-    a = float(np.exp(-np.min(np.atleast_1d(gain_per_s)) * dt_s))
-    tau_c = (1 + a) / (1 - a)                       # samples per independent value of r
+    x, tx = r[sel], t[sel]
+    n = r.shape[1]
+    K = np.broadcast_to(np.asarray(gain_per_s, float), (n,))
+    a_min = float(np.exp(-np.min(K) * dt_s))
+    tau_c = (1 + a_min) / (1 - a_min)               # samples per independent value of r
     if len(x) < 20 * tau_c:
         raise InputError(f"{where}: {len(x)} samples in {t0:g}–{t1:g} s; need at least "
                          f"{int(np.ceil(20 * tau_c))} (20 observer time constants)")
-    med = np.median(x, axis=0)
     sig = robust_sigma(x, axis=0)
     if np.any(sig <= 0):
         raise InputError(f"{where}: the residual is constant on some row in {t0:g}–{t1:g} s "
@@ -228,9 +262,53 @@ def quiet_covariance(r: np.ndarray, t: np.ndarray, t0: float, t1: float, gain_pe
         raise InputError(f"{where}: the residual changes within {t0:g}–{t1:g} s ({z.max():.0f} "
                          f"standard errors between its first and last quarter): it contains a "
                          f"contact or a drift; mark a stretch without contact")
-    w = np.clip((x - med) / sig, -4, 4)
-    C = np.corrcoef(w, rowvar=False)
-    return C * np.outer(sig, sig)
+    # a contact inside the stretch (not at its ends): any eighth away from the stretch's median
+    k = len(x) // QUIET_SEGMENTS
+    if k >= 4 * tau_c:
+        seg = np.median(x[:k * QUIET_SEGMENTS].reshape(QUIET_SEGMENTS, k, -1), axis=1)
+        zs = np.abs(seg - np.median(x, axis=0)) / (sig * np.sqrt(1.57 * tau_c / k))
+        if np.any(zs > 6):
+            i = int(np.argmax(zs.max(axis=1)))
+            raise InputError(f"{where}: the residual changes within {t0:g}–{t1:g} s (around "
+                             f"{t0 + (i + 0.5) * (t1 - t0) / QUIET_SEGMENTS:.3g} s it sits {zs.max():.0f} "
+                             f"standard errors from the rest): it contains a contact; mark a stretch "
+                             f"without contact")
+    a, b = observer.coefficients(K, dt_s, method)
+    regular = np.abs(np.diff(tx) - dt_s) <= 0.01 * dt_s
+    d = (x[1:] - a * x[:-1]) / b                     # innovations (the drive), (T−1, n)
+    ok = regular[1:] & regular[:-1]                  # Δd over two regular steps
+    dd = (d[1:] - d[:-1])[ok]
+    if len(dd) < 20:
+        raise InputError(f"{where}: too few regular steps in {t0:g}–{t1:g} s to read the noise")
+    both = ok[1:] & ok[:-1]
+    s = robust_sigma(dd, axis=0)
+    if np.any(s <= 0):
+        raise InputError(f"{where}: the residual's innovations are constant on some row in "
+                         f"{t0:g}–{t1:g} s (a noise-free log?); give a noise model instead")
+    w = np.clip(dd / s, -4, 4) * s                   # winsorized at ±4 robust σ, about zero
+    C0 = w.T @ w / len(w) * _winsor_gain()
+    dd_all = np.clip((d[1:] - d[:-1]) / s, -4, 4) * s
+    pairs = np.flatnonzero(np.r_[False, both])       # Δd_k and Δd_{k−1} both regular
+    C1 = dd_all[pairs].T @ dd_all[pairs - 1] / max(len(pairs), 1) * _winsor_gain()
+    S0 = C0 + 0.5 * (C1 + C1.T)
+    S1 = 0.5 * (C1 + S0)
+    num = S0 + S1 * a[None, :] + S1.T * a[:, None]
+    R = np.outer(b, b) * num / (1.0 - np.outer(a, a))
+    R = 0.5 * (R + R.T)
+    if np.linalg.eigvalsh(R).min() <= 0:
+        raise InputError(f"{where}: the noise read from {t0:g}–{t1:g} s is not a covariance "
+                         f"(the stretch is too short or not noise); give a noise model instead")
+    return R
+
+
+def _winsor_gain() -> float:
+    """1 / E[clip(z, −4, 4)²] for a standard normal z: undoes the winsorizing's shrinkage."""
+    from scipy.special import erf
+
+    c = 4.0
+    p_in = erf(c / np.sqrt(2))
+    inner = p_in - 2 * c * np.exp(-c * c / 2) / np.sqrt(2 * np.pi)
+    return float(1.0 / (inner + c * c * (1 - p_in)))
 
 
 def chi2_threshold(alpha: float, n: int) -> float:

@@ -128,7 +128,7 @@ def chain_terms(robot: Robot, q: np.ndarray, dq: np.ndarray, want=("P", "CTdq", 
     dqT = np.ascontiguousarray(np.reshape(dq, (-1, shape[-1])).T)
     T = qT.shape[1]
     m = rob.masses_kg[:, None]
-    l, rc = rob.lengths_m[:, None], rob.com_m[:, None]
+    l, rc, rp = rob.lengths_m[:, None], rob.com_m[:, None], rob.com_perp_m[:, None]
     phi = qT[2] + cumrows(qT[3:])
     dphi = dqT[2] + cumrows(dqT[3:])
     sn, cs = np.sin(phi), np.cos(phi)
@@ -144,8 +144,9 @@ def chain_terms(robot: Robot, q: np.ndarray, dq: np.ndarray, want=("P", "CTdq", 
 
     jx, jz = prefix(l * ex), prefix(l * ez)   # joints relative to p_1 (index 0 … N)
     vjx, vjz = dqT[0] + prefix(l * dex), dqT[1] + prefix(l * dez)
-    cx, cz = jx[:-1] + rc * ex, jz[:-1] + rc * ez
-    vx, vz = vjx[:-1] + rc * dex, vjz[:-1] + rc * dez
+    # c_i = p_i + r_i e_i + s_i n_i, n_i = (cos φ, sin φ); ċ_i = ṗ_i + φ̇_i (r_i n_i − s_i e_i)
+    cx, cz = jx[:-1] + rc * ex + rp * cs, jz[:-1] + rc * ez + rp * sn
+    vx, vz = vjx[:-1] + rc * dex - rp * dphi * ex, vjz[:-1] + rc * dez - rp * dphi * ez
     # angle columns θ, q_1 … q_N: origins p_1, p_1, p_2 … p_N; link set S_k starts at max(k−1, 0)
     sel = np.r_[0, 0:N]
     ox, oz = jx[sel], jz[sel]
@@ -163,10 +164,10 @@ def chain_terms(robot: Robot, q: np.ndarray, dq: np.ndarray, want=("P", "CTdq", 
         CT[2:] = -(vjx[sel] * Bz - vjz[sel] * Bx)
         out["CTdq"] = CT
     if "Cdq" in want:
-        # a_i = J̇_i q̇ = −Σ_{j<i} φ̇_j² l_j e_j − φ̇_i² r_i e_i  (the base's translation adds nothing)
+        # a_i = J̇_i q̇ = −Σ_{j<i} φ̇_j² l_j e_j − φ̇_i² (r_i e_i + s_i n_i)  (base translation: 0)
         w2 = dphi * dphi
-        ax = -prefix(w2 * l * ex)[:-1] - w2 * rc * ex
-        az = -prefix(w2 * l * ez)[:-1] - w2 * rc * ez
+        ax = -prefix(w2 * l * ex)[:-1] - w2 * (rc * ex + rp * cs)
+        az = -prefix(w2 * l * ez)[:-1] - w2 * (rc * ez + rp * sn)
         Ax, Az = suffix(m * ax)[sel], suffix(m * az)[sel]
         Ac = suffix(m * (cx * az - cz * ax))[sel]
         Cq = np.empty((N + 3, T))
@@ -367,6 +368,7 @@ class _FastTerms:
         self.m = [float(v) for v in robot.masses_kg]
         self.l = [float(v) for v in robot.lengths_m]
         self.rc = [float(v) for v in robot.com_m]
+        self.rp = [float(v) for v in robot.com_perp_m]
         self.Irot = _irot(robot)
         self.g = float(robot.gravity_m_per_s2)
         self.Gz = self.g * (float(robot.base_mass_kg) + sum(self.m))
@@ -375,7 +377,7 @@ class _FastTerms:
     def __call__(self, q, dq, tau):
         import math
 
-        N, m, l, rc = self.N, self.m, self.l, self.rc
+        N, m, l, rc, rp = self.N, self.m, self.l, self.rc, self.rp
         ql, dql = q.tolist(), dq.tolist()
         phi, dphi = ql[2], dql[2]
         jx = jz = 0.0
@@ -386,8 +388,9 @@ class _FastTerms:
             dphi += dql[3 + i]
             s, c = math.sin(phi), math.cos(phi)
             ox[i], oz[i], vox[i], voz[i] = jx, jz, vjx, vjz
-            cx[i], cz[i] = jx + rc[i] * s, jz - rc[i] * c
-            vx[i], vz[i] = vjx + rc[i] * dphi * c, vjz + rc[i] * dphi * s
+            cx[i], cz[i] = jx + rc[i] * s + rp[i] * c, jz - rc[i] * c + rp[i] * s
+            vx[i] = vjx + dphi * (rc[i] * c - rp[i] * s)
+            vz[i] = vjz + dphi * (rc[i] * s + rp[i] * c)
             jx, jz = jx + l[i] * s, jz - l[i] * c
             vjx, vjz = vjx + l[i] * dphi * c, vjz + l[i] * dphi * s
         P = (self.Irot @ dq)

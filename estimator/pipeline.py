@@ -14,6 +14,11 @@ sizes give the same per-sample numbers, bit for bit) and carries everything that
 boundary in its state: the observer (last row's r, P, u, τ), the rows a group delay reads ahead,
 the past postures for the lag compensation, the detector's state (``DetectorState``: debounce run),
 the open contact episode's running sums. ``estimate()`` is the one-chunk case.
+
+Hooks of the localization limit: the chi-square detector's contacts end at their release
+(estimator.release); the fit reads the observer restarted at each onset (estimator.onset),
+weighted by R⁻¹; each interval's point, ± and Cramér–Rao bounds come from its episode
+(estimator.intervals: the episode estimate, slides split an episode).
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ import numpy as np
 
 from estimator import detection, kernels, localization as loc_mod, observer
 from estimator import noise as noise_mod
+from estimator import intervals, onset, release
 from estimator import sequential
 from estimator import timing as timing_mod
 from estimator.errors import InputError
@@ -150,24 +156,41 @@ def _whitened(rT: np.ndarray, Linv: np.ndarray) -> np.ndarray:
     return out
 
 
+def _fit_weights(rec, sel, T: int, n: int, row_weights):
+    """The localization's weights for the selected samples: W = L⁻ᵀL⁻¹ = R⁻¹ from the detector's
+    whitening blocks (the maximum-likelihood fit; the noise covariance R is the detector's, per
+    posture block), else the diagonal ``row_weights`` (the paper rule: no noise model)."""
+    if rec.get("Linv") is None:
+        return loc_mod.weight_blocks(n, T, row_weights)[0], \
+            np.zeros(T, np.int64)[sel]
+    Linv, idx = rec["Linv"]
+    return np.einsum("bki,bkj->bij", Linv, Linv), idx[sel]
+
+
 ERROR_METHOD = ("first-order propagation of the residual's no-contact covariance through the "
                 "least-squares localization at one sample of the episode (the kept sample 2^j − 1 "
                 "samples after its start nearest below its middle), 1σ per sample")
 
 
-def _episode_errors(robot, q_rows, r_rows, R, loc_kwargs, h=1e-4):
+def _episode_errors(robot, q_rows, r_rows, R, loc_kwargs, h=1e-4, R_propagated=None):
     """Per episode: 1σ of α, Fx, Fz, px, pz, J R Jᵀ with J = ∂(α, F, p)/∂r by central differences
-    of localize_dynamic at the episode's representative sample (q_loc, r rows given, (E, n))."""
+    of localize_dynamic at the episode's representative sample (q_loc, r rows given, (E, n));
+    R (n, n) for every episode or (E, n, n) (noise + the model-error term at that sample) weights
+    the fit; ``R_propagated`` (default R) is the covariance propagated (e.g. the model term alone)."""
     E, n = r_rows.shape
     eye = np.eye(n) * h
     rp = np.concatenate([r_rows[:, None] + eye, r_rows[:, None] - eye], axis=1).reshape(-1, n)
     qp = np.repeat(q_rows, 2 * n, axis=0)
-    res = loc_mod.localize_dynamic(robot, qp, rp, **loc_kwargs)
+    W = np.linalg.inv(R)
+    if W.ndim == 3:                                              # one R per episode
+        W = np.repeat(W, 2 * n, axis=0)
+    res = loc_mod.localize_dynamic(robot, qp, rp, weight=W, **loc_kwargs)
     y = np.concatenate([res.alpha[:, None], res.force_N, res.point_m], axis=1).reshape(E, 2 * n, 5)
     J = (y[:, :n] - y[:, n:]) / (2 * h)                           # (E, n, 5)
     out = []
     for e in range(E):
-        cov = J[e].T @ R @ J[e]
+        Rp = R if R_propagated is None else R_propagated
+        cov = J[e].T @ (Rp if np.ndim(Rp) == 2 else Rp[e]) @ J[e]
         sd = np.sqrt(np.clip(np.diagonal(cov), 0, None))
         row = {}
         for j, key in enumerate(["alpha", "Fx_N", "Fz_N", "px_m", "pz_m"]):
@@ -177,6 +200,22 @@ def _episode_errors(robot, q_rows, r_rows, R, loc_kwargs, h=1e-4):
                 "not available: the localization refused a perturbed answer (ill-conditioned)"
         out.append(row)
     return out
+
+
+def _add_model_error(row: dict, model: dict):
+    """The episode's 1σ with the model-uncertainty term added in quadrature (σ² = σ_noise² +
+    σ_model²; the position's from its components)."""
+    for key in ("alpha", "px_m", "pz_m"):
+        e, m = row.get(f"{key}_error_estimate"), model.get(f"{key}_error_estimate")
+        if e is None or m is None:
+            continue
+        row[f"{key}_error_estimate"] = float(np.hypot(e, m))
+        row[f"{key}_error_method"] = row.get(f"{key}_error_method", "") + \
+            " + the model uncertainty's term at the representative sample (systematic, not averaged)"
+    if row.get("position_m_error_estimate") is not None and row.get("px_m_error_estimate") is not None:
+        row["position_m_error_estimate"] = float(np.hypot(row["px_m_error_estimate"], row["pz_m_error_estimate"]))
+        if row.get("position_bound_m"):
+            row["error_over_bound"] = row["position_m_error_estimate"] / row["position_bound_m"]
 
 
 class _ObserverRun:
@@ -242,14 +281,24 @@ class _EpisodeAccumulator:
                 "good": np.zeros(self.nb), "same": np.zeros(self.nb),
                 "sums": {k: np.zeros(self.nb) for k in self.KEYS}, "kept": []}
 
-    def feed(self, g0, t, contact, link, alpha, Fx, Fz, px, pz, q_loc, rT):
+    def feed(self, g0, t, contact, link, alpha, Fx, Fz, px, pz, q_loc, rT, G=None, breaks=None):
+        """``G`` (T, n, c): the model term's factor per sample (None without one); ``breaks`` (T,)
+        bool: a new interval starts at this contact sample (a slide)."""
         c = contact.astype(np.int8)
+        if breaks is not None and len(c) and breaks[0] and self.open is not None:
+            self.closed.append(self.open)
+            self.open = None
         prev = 1 if self.open is not None else 0
         edges = np.diff(np.concatenate([[prev], c, [0]]))
         starts = np.flatnonzero(edges == 1)
         stops = np.flatnonzero(edges == -1)
         if prev:
             starts = np.r_[0, starts]
+        if breaks is not None:
+            cut = np.flatnonzero(np.asarray(breaks, bool) & contact.astype(bool))
+            cut = cut[cut > 0]
+            starts = np.sort(np.r_[starts, cut])
+            stops = np.sort(np.r_[stops, cut])
         if not starts.size:
             return
         # segment id per sample (valid where contact): index of the start at or before it
@@ -278,7 +327,8 @@ class _EpisodeAccumulator:
             while j - 1 < off0 + (b - a):        # keep samples at offsets 2^j − 1
                 if j - 1 >= off0:
                     k = a + (j - 1 - off0)
-                    ep["kept"].append((j - 1, q_loc[k].copy(), rT[:, k].copy()))
+                    ep["kept"].append((j - 1, q_loc[k].copy(), rT[:, k].copy(),
+                                       None if G is None else G[k].copy()))
                 j *= 2
             ep["n"] += b - a
             if b > a:                            # b == a: it ended at the chunk boundary
@@ -314,10 +364,11 @@ class _EpisodeAccumulator:
 
     @staticmethod
     def representative(ep):
-        """(q_loc, r) at the kept offset 2^j − 1 nearest below the middle (L − 1) // 2."""
+        """(q_loc, r, G) at the kept offset 2^j − 1 nearest below the middle (L − 1) // 2 (G: the
+        model-error term's Φ S there, or None)."""
         mid = (ep["n"] - 1) // 2
         best = max((k for k in ep["kept"] if k[0] <= mid), key=lambda k: k[0])
-        return best[1], best[2]
+        return best[1], best[2], best[3]
 
 
 class EstimatorStream:
@@ -335,8 +386,9 @@ class EstimatorStream:
       contact-free samples (covariance blocks) among the first ``stats_samples`` samples of the
       log (65 536 by default; the whole log when it is shorter). Localization waits until those
       samples are in (they are held, observer and detection done);
-    * an episode's error estimate: at the sample 2^j − 1 samples after its start nearest below
-      its middle (``_EpisodeAccumulator``), not its exact middle (which needs the episode's end).
+    * an episode's per-sample error estimate of F: at the sample 2^j − 1 samples after its start
+      nearest below its middle (``_EpisodeAccumulator``), not its exact middle (which needs the
+      episode's end); its point and ± (estimator.intervals) are sums over all its samples.
     """
 
     def __init__(self, robot: Robot, method: str = "dynamic", gain_per_s=100.0,
@@ -347,7 +399,9 @@ class EstimatorStream:
                  timing_source: str = "option", noise=None, residual_cov=None,
                  residual_cov_source: str = "", false_alarm_rate=DEFAULT_FALSE_ALARM_RATE,
                  cov_stride_s: float = 0.01, stats_samples: int = STATS_SAMPLES,
-                 detector: str = "chi2", cusum_calibration=None, isolation_quiet: bool = False):
+                 detector: str = "chi2", cusum_calibration=None, isolation_quiet: bool = False,
+                 model_cov=None, model_cov_source: str = "",
+                 residual_drive=None, release_test: bool = True):
         if method not in METHODS:
             raise InputError(f"method: unknown {method!r}; use one of {', '.join(METHODS)}")
         if detector not in sequential.DETECTORS:
@@ -374,6 +428,7 @@ class EstimatorStream:
         self.state = DetectorState()
         self.info = {"timing": timing_mod.describe(timing), "timing_source": timing_source}
         self.R = self.Linv = None
+        self._post = None                # posture(s) of the covariance block(s): (q, q̇)
         self.stride = None
         self._R_head = []                # posture-dependent covariances of the head's blocks
         self.detector, self.cusum_cal = detector, cusum_calibration
@@ -403,6 +458,24 @@ class EstimatorStream:
                               "false_alarm_probability_per_sample": alpha,
                               "false_alarm_rate_per_s": alpha / self.dt, "chi2_threshold": self.h,
                               "chi2_dof": self.n, "residual_noise_source": source})
+            self.model_term = None
+            if model_cov is not None:        # R_k = R_noise + Φ_k Σ_θ Φ_kᵀ (estimator.model_error)
+                if detector != "chi2":
+                    raise InputError(f"detector {detector}: calibrated for white sensor noise; the "
+                                     f"robot's model uncertainty ({model_cov_source}) makes the "
+                                     f"residual's error slowly varying: use the chi2 detector, or "
+                                     f"--model-uncertainty none")
+                from estimator.model_error import ModelTerm
+
+                self.model_term = ModelTerm(self.full, model_cov, gain_per_s, self.dt, discretization)
+                self._G_head = []
+                self.info["model_uncertainty_source"] = model_cov_source
+                self.info["residual_noise_source"] = f"{source}; + model uncertainty ({model_cov_source})"
+        if not self.chi2:
+            self.model_term = None
+        # the localization reads the observer restarted at each contact's onset (estimator.onset)
+        self.restart = onset.RestartState() if method == "dynamic" and discretization == "exact" \
+            else None
         self.lag = None
         if method == "dynamic" and lag_compensation:
             self.lag = float(np.mean(observer.lag_s(self.K, self.dt, discretization)))
@@ -413,6 +486,21 @@ class EstimatorStream:
         self.queue = []                      # detected chunks waiting for the noise floors
         self.stats = None
         self.episodes = _EpisodeAccumulator(robot.n_links)
+        self.episode_stage = None            # the episode estimate: dynamic, chi-square, no stance
+        self.release = None                  # the release test: with the chi-square detector
+        if method == "dynamic" and self.chi2 and not self.expected and discretization == "exact":
+            self.episode_stage = intervals.EpisodeStage(
+                robot, self.K, self.dt, self.noise, gain_per_s, timing, residual_drive)
+            if detector == "chi2" and self.debounce == 0 and release_test and self.model_term is not None:
+                # the release test whitens the drive by the sensor noise alone; with the model
+                # term in R_k a contact ends when the statistic falls under the threshold
+                self.info["release_test"] = "off: the model-uncertainty term is in the statistic"
+            elif detector == "chi2" and self.debounce == 0 and release_test:
+                self.release = release.ReleaseState()
+                self.h_release = float(np.log(1.0 / self.alpha))
+                self.info.update(release_test="CUSUM of the released/held log-likelihood ratio "
+                                              "on the observer's drive (estimator.release)",
+                                 release_threshold=self.h_release)
         self.intervals = []
         self.reason_counts = np.zeros(len(loc_mod.REASONS), dtype=np.int64)
         self.samples = self.contact_samples = 0
@@ -423,35 +511,58 @@ class EstimatorStream:
         self.Linv = np.linalg.inv(np.linalg.cholesky(R))
 
     # ------------------------------------------------------------------ stage 1
-    def _statistic(self, g0, q, dq, unexpT):
-        """The detector's statistic: ‖r‖ (paper rule) or rᵀR⁻¹r (chi-square) per sample."""
+    def _statistic(self, g0, t, q, dq, unexpT):
+        """The detector's statistic: ‖r‖ (paper rule) or rᵀR⁻¹r (chi-square) per sample, and the
+        model-error term's G = Φ S per sample (None without one)."""
         if not self.chi2:
-            return np.sqrt(_sumsq_rows(unexpT))
+            return np.sqrt(_sumsq_rows(unexpT)), None
         T = unexpT.shape[1]
         if self.R is None and self.stride is None:          # posture-independent: first sample
             R = noise_mod.residual_covariance(self.robot, q[:1], dq[:1], self.noise, self.gain_per_s,
                                               self.dt, self.timing)[0]
             self._set_R(R)
         if self.stride is None:
-            return _whitened(unexpT, self.Linv)
+            if self._post is None:
+                self._post = (q[:1].copy(), dq[:1].copy())
+            self._weights = (self.Linv[None], np.zeros(T, np.int64))
+            if self.model_term is None:
+                return _whitened(unexpT, self.Linv), None
+            stat, G = self.model_term.statistic(t, q, dq, unexpT, self.R[None], np.zeros(T, np.int64))
+            self._keep_head_G(g0, G)
+            return stat, G
         st = self.stride
         blocks = np.arange(g0 // st, (g0 + T - 1) // st + 1)
         new = blocks[blocks * st >= g0]
-        Ls = {}
+        Ls, Rs, Ps = {}, {}, {}
         if self._cur_block is not None:
-            Ls[self._cur_block[0]] = self._cur_block[1]
+            b0 = self._cur_block[0]
+            Ls[b0], Rs[b0], Ps[b0] = self._cur_block[1], self._cur_block[2], self._cur_block[3]
         if new.size:
             Rb = noise_mod.residual_covariance(self.robot, q[new * st - g0], dq[new * st - g0],
                                                self.noise, self.gain_per_s, self.dt, self.timing)
             Lb = np.linalg.inv(np.linalg.cholesky(Rb))
             for b, R, L in zip(new, Rb, Lb):
-                Ls[int(b)] = L
+                Ls[int(b)], Rs[int(b)] = L, R
+                Ps[int(b)] = (q[b * st - g0].copy(), dq[b * st - g0].copy())
                 if b * st < self.stats_samples:
                     self._R_head.append(R)
+        bl = int(blocks[-1])
+        self._cur_block = (bl, Ls[bl], Rs[bl], Ps[bl])
+        idx = (g0 + np.arange(T)) // st - blocks[0]
         L_all = np.stack([Ls[int(b)] for b in blocks])
-        self._cur_block = (int(blocks[-1]), L_all[-1])
-        per = L_all[(g0 + np.arange(T)) // st - blocks[0]]
-        return _whitened(unexpT, per)
+        self._weights = (L_all, idx)
+        self._post = (np.stack([Ps[int(b)][0] for b in blocks]), np.stack([Ps[int(b)][1] for b in blocks]))
+        if self.model_term is not None:
+            R_all = np.stack([Rs[int(b)] for b in blocks])
+            stat, G = self.model_term.statistic(t, q, dq, unexpT, R_all, idx)
+            self._keep_head_G(g0, G)
+            return stat, G
+        return _whitened(unexpT, L_all[idx]), None
+
+    def _keep_head_G(self, g0, G):
+        """Every 10th sample's G among the first ``stats_samples`` (the median model term)."""
+        if g0 < self.stats_samples:
+            self._G_head.append(G[:max(0, self.stats_samples - g0):10])
 
     def _detect(self, stat, q0, dq0):
         """(contact, rnorm) from the statistic; the detector's state carries across chunks.
@@ -483,8 +594,17 @@ class EstimatorStream:
             unexpT = np.ascontiguousarray(unexp.T)
         else:
             unexpT = rT
-        stat = self._statistic(self.g, q, dq, unexpT)
-        contact, rnorm = self._detect(stat, q[0], dq[0])
+        self._weights = None
+        stat, G = self._statistic(self.g, t, q, dq, unexpT)
+        rec = {"Linv": self._weights, "post": self._post}
+        if self.release is not None:             # chi-square with the release test (estimator.release)
+            W = np.linalg.inv(self.episode_stage.terms(rec).Omega)
+            contact, stat, rec["released"] = release.detect(
+                t, r, self.K, self._weights[0], W, self._weights[1], self.h, self.h_release,
+                self.release)
+            rnorm = np.sqrt(stat)
+        else:
+            contact, rnorm = self._detect(stat, q[0], dq[0])
         if self.method == "paper" and not self.isolation_quiet and self._R_iso is None:
             self._R_iso = noise_mod.residual_covariance(self.robot, q[:1], dq[:1], self.noise,
                                                         self.gain_per_s, self.dt, self.timing)[0]
@@ -496,8 +616,8 @@ class EstimatorStream:
             for k in range(q.shape[1]):
                 q_loc[:, k] = np.interp(x, pt, pq[:, k])
             self._past = (pt[-self._past_rows:], pq[-self._past_rows:])
-        rec = {"g0": self.g, "t": t, "q": q, "dq": dq, "tau": tau, "rT": rT, "r": r,
-               "contact": contact, "rnorm": rnorm, "q_loc": q_loc, "ef": ef}
+        rec.update({"g0": self.g, "t": t, "q": q, "dq": dq, "tau": tau, "rT": rT, "r": r,
+                    "contact": contact, "rnorm": rnorm, "q_loc": q_loc, "ef": ef, "G": G})
         self.g += T
         return rec
 
@@ -513,10 +633,16 @@ class EstimatorStream:
         if self.stride is not None and self._R_head:
             Rm = np.median(np.stack(self._R_head), axis=0)
         info = {}
+        self.Rm_noise, Rf = Rm, Rm
+        if getattr(self, "model_term", None) is not None and Rm is not None and self._G_head:
+            G = np.concatenate(self._G_head)
+            Rmodel = np.median(np.einsum("tic,tjc->tij", G, G), axis=0)
+            info["residual_model_sigma"] = np.sqrt(np.diag(Rmodel)).tolist()
+            Rf = Rm + Rmodel             # the force floor sees the model error (a bias of F)
         force_floor = float(detection.noise_thresholds(quiet_r[:, :2], None, floor=self.min_force_N).max())
         if Rm is not None:
-            ambiguity_tol = 2.0 * float(np.sqrt(np.trace(Rm)))
-            force_floor = max(self.min_force_N, 5.0 * float(np.sqrt(max(Rm[0, 0], Rm[1, 1]))))
+            ambiguity_tol = 2.0 * float(np.sqrt(self.n))   # 2 noise norms: the fit is whitened
+            force_floor = max(self.min_force_N, 5.0 * float(np.sqrt(max(Rf[0, 0], Rf[1, 1]))))
             info["residual_sigma"] = np.sqrt(np.diag(Rm)).tolist()
         else:
             ambiguity_tol = max(1e-3, 2.0 * float(np.median(quiet_rnorm))) if len(quiet_rnorm) >= 10 else 1e-3
@@ -546,6 +672,9 @@ class EstimatorStream:
     def _stage2(self, rec) -> ContactEstimate:
         t, q, r, contact = rec["t"], rec["q"], rec["r"], rec["contact"]
         T, N = len(t), self.robot.n_links
+        r_obs = r
+        if self.restart is not None:         # localize on the observer restarted at the onset
+            r, rec["since_s"] = onset.restart(t, r, contact, self.K, self.restart)
         sel = np.flatnonzero(contact)
         if sel.size == T:
             sel = slice(None)                          # every sample: views, no copies
@@ -559,17 +688,17 @@ class EstimatorStream:
         expected_force = None
         fused = False
         if self.method == "dynamic":
+            weight = _fit_weights(rec, sel, T, self.n, self.row_weights)
+            kw = {k: v for k, v in self.loc_kwargs.items() if k != "row_weights"}
             if n_sel and not self.expected and kernels.available():
                 # one compiled pass: the fit at q(t − lag), the point at the current posture
-                w = loc_mod._weights(self.n, self.row_weights)
-                kw = {k: v for k, v in self.loc_kwargs.items() if k != "row_weights"}
-                out = kernels.localize_dynamic(self.full, rec["q_loc"][sel], r[sel], w, q[sel],
+                out = kernels.localize_dynamic(self.full, rec["q_loc"][sel], r[sel], weight, q[sel],
                                                position_tol_m=0.005, bound_tol=0.05, **kw)
                 res = loc_mod.Localization(*out[:6], cost=out[6])
                 fused = True
             elif n_sel:
                 res = loc_mod.localize_dynamic(self.robot, rec["q_loc"][sel], r[sel],
-                                               expected=self.expected, **self.loc_kwargs)
+                                               expected=self.expected, weight=weight, **kw)
             if self.expected:
                 expected_force = np.full((T, len(self.expected), 2), np.nan)
                 quiet = np.flatnonzero(~contact)
@@ -599,12 +728,16 @@ class EstimatorStream:
         self.samples += T
         self.contact_samples += int(contact.sum())
         self.reason_counts += np.bincount(reason[contact], minlength=len(loc_mod.REASONS))
+        breaks = None
+        if self.episode_stage is not None:       # episode estimates and bounds (estimator.intervals)
+            breaks = self.episode_stage.feed(rec, t, q, r_obs, contact, link, alpha, force,
+                                             rec["q_loc"], rec["since_s"])
         self.episodes.feed(rec["g0"], t, contact, link, alpha, force[:, 0], force[:, 1],
-                           point[:, 0], point[:, 1], rec["q_loc"], rec["rT"])
+                           point[:, 0], point[:, 1], rec["q_loc"], r.T, rec["G"], breaks)
         self._close_episodes()
         return ContactEstimate(t=t, contact=contact, link=link, alpha=alpha, Fx=force[:, 0],
                                Fz=force[:, 1], px=point[:, 0], pz=point[:, 1], rnorm=rec["rnorm"],
-                               condition=condition, reason=reason, residual=r, method=self.method,
+                               condition=condition, reason=reason, residual=r_obs, method=self.method,
                                expected_force_N=expected_force)
 
     def _close_episodes(self):
@@ -615,10 +748,27 @@ class EstimatorStream:
         rows = [_EpisodeAccumulator.summary(ep) for ep in eps]
         if self.method == "dynamic" and self.Rm is not None and not self.expected:
             reps = [_EpisodeAccumulator.representative(ep) for ep in eps]
-            errs = _episode_errors(self.robot, np.stack([a for a, _ in reps]),
-                                   np.stack([b for _, b in reps]), self.Rm, self.loc_kwargs)
+            R = self.Rm
+            if getattr(self, "model_term", None) is not None:    # noise + model term there
+                R = np.stack([self.Rm_noise + g @ g.T for _, _, g in reps])
+            errs = _episode_errors(self.robot, np.stack([a for a, _, _ in reps]),
+                                   np.stack([b for _, b, _ in reps]), R, self.loc_kwargs)
             for row, err in zip(rows, errs):
                 row.update(err)
+        model_sd = None
+        if self.method == "dynamic" and self.Rm is not None and not self.expected \
+                and getattr(self, "model_term", None) is not None and self.episode_stage is not None:
+            # the model error is systematic: it does not average down over an episode, so its
+            # per-sample part J G Gᵀ Jᵀ (at the representative sample) adds to the episode's 1σ
+            model_sd = _episode_errors(self.robot, np.stack([a for a, _, _ in reps]),
+                                       np.stack([b for _, b, _ in reps]),
+                                       R, self.loc_kwargs,
+                                       R_propagated=np.stack([g @ g.T for _, _, g in reps]))
+        if self.episode_stage is not None:
+            for i, row in enumerate(rows):
+                row.update(self.episode_stage.fields(row["link"], row["well_conditioned_fraction"] > 0))
+                if model_sd is not None:
+                    _add_model_error(row, model_sd[i])
         self.intervals.extend(rows)
 
     # ------------------------------------------------------------------ driving
@@ -653,6 +803,8 @@ class EstimatorStream:
             self.queue.append(self._stage1(rows))
         out = self._drain(True)
         self.episodes.close_all()
+        if self.episode_stage is not None:
+            self.episode_stage.finish()
         self._close_episodes()
         return out
 
@@ -676,15 +828,30 @@ def _resolve_timing(robot, log, timing):
 
 
 def quiet_window_covariance(robot, chunks, window, gain_per_s, period_s, discretization="exact",
-                            timing=None, where: str = "--quiet-window") -> np.ndarray:
-    """(R, r) : the robust covariance of the residual over the contact-free window (t0, t1)
-    (noise.quiet_covariance) and the window's residual rows, from an observer-only pass over the
-    log's chunks (stops after t1): the first of two passes. ``where`` names the window in errors."""
+                            timing=None, where: str = "--quiet-window", model_cov=None,
+                            model_source: str = "", alpha: float | None = None):
+    """(R, r): the residual's sensor-noise covariance read from the contact-free window (t0, t1)
+    (noise.quiet_covariance: the innovations, not the spread of r, which also holds the model
+    error) and the window's residual rows, from an observer-only pass over the log's chunks
+    (stops after t1): the first of two passes. ``where`` names the window in errors.
+
+    The window must then be explained by that noise and the model term (``model_cov``, Σ_θ): the
+    median of s_k = r_kᵀ (R + Φ_k Σ_θ Φ_kᵀ)⁻¹ r_k over it must be that of χ²_n within its sampling
+    error; otherwise its residual is model error that the stated uncertainty does not cover (on a
+    moving leg it is not stationary, so no covariance of the stretch could stand for it), and
+    the window is refused naming what to do."""
     t0, t1 = window
     K = observer.gains(robot, gain_per_s)
+    n = K.size
     run = _ObserverRun(robot, K, float(period_s), discretization, timing)
-    ts, rs = [], []
-    empty = np.zeros((0, K.size))
+    term = None
+    if model_cov is not None:                     # Φ from the log's start, kept on the window
+        from estimator.model_error import ModelTerm
+
+        term = ModelTerm(observer.full_robot(robot), model_cov, gain_per_s, float(period_s),
+                         discretization)
+    ts, rs, Gs = [], [], []
+    empty = np.zeros((0, n))
     for chunk in itertools.chain(chunks, [None]):        # lazily: stop after t1
         final = chunk is None
         rows = run.feed(np.zeros(0), empty, empty, empty, final=True) if final else \
@@ -693,11 +860,35 @@ def quiet_window_covariance(robot, chunks, window, gain_per_s, period_s, discret
             keep = (rows["t"] >= t0) & (rows["t"] <= t1)
             ts.append(rows["t"][keep])
             rs.append(rows["rT"].T[keep])
+            if term is not None:
+                m = len(rows["t"])
+                _, G = term.statistic(rows["t"], rows["q"], rows["dq"], rows["rT"],
+                                      np.eye(n)[None], np.zeros(m, np.int64))
+                Gs.append(G[keep])
             if rows["t"][-1] > t1:
                 break
     t = np.concatenate(ts) if ts else np.zeros(0)
-    r = np.concatenate(rs) if rs else np.zeros((0, K.size))
-    return noise_mod.quiet_covariance(r, t, t0, t1, gain_per_s, float(period_s), where), r
+    r = np.concatenate(rs) if rs else empty
+    R = noise_mod.quiet_covariance(r, t, t0, t1, gain_per_s, float(period_s), where, discretization)
+    if term is not None:
+        from estimator.model_error import statistic_numpy
+
+        stat = statistic_numpy(r.T, np.concatenate(Gs), R[None], np.zeros(len(t), np.int64))
+    else:
+        stat = _whitened(np.ascontiguousarray(r.T), np.linalg.inv(np.linalg.cholesky(R)))
+    a = float(np.exp(-np.min(K) * float(period_s)))
+    n_eff = max(1.0, len(t) * (1 - a) / (1 + a))
+    ratio = float(np.median(stat)) / _chi2_isf(0.5, n)
+    tol = max(0.5, 6.0 * np.sqrt(2.0 / (n * n_eff)))
+    if ratio > 1.0 + tol:
+        cover = (f"the model uncertainty ({model_source}) does not cover it" if model_cov is not None
+                 else "the robot file states no model uncertainty")
+        raise InputError(f"{where}: the residual over {t0:g}–{t1:g} s is {np.sqrt(ratio):.2g}× what "
+                         f"its sensor noise explains: a contact held through the stretch, or model "
+                         f"error and {cover}; mark a stretch without contact, or identify the robot "
+                         f"(torquebench identify) or declare its model uncertainty "
+                         f"(--model-uncertainty, a [model_uncertainty] table)")
+    return R, r
 
 
 def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=100.0,
@@ -707,7 +898,8 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
              lag_compensation: bool = True, timing=None, noise=None, quiet_window=None,
              false_alarm_rate=DEFAULT_FALSE_ALARM_RATE, cov_stride_s: float = 0.01,
              stats_samples: int = STATS_SAMPLES, chunk_samples: int | None = None,
-             detector: str = "chi2", quiet_where: str = "--quiet-window") -> ContactEstimate:
+             detector: str = "chi2", quiet_where: str = "--quiet-window",
+             model_uncertainty=None, release_test: bool = True) -> ContactEstimate:
     """Run observer, detection and localization on a whole log (offline, vectorized).
 
     ``EstimatorStream`` on the log in one chunk (or in chunks of ``chunk_samples``: the same
@@ -717,10 +909,16 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     [(link, α), …]: contacts the robot expects; their forces are estimated jointly and never
     reported as a collision. ``False`` or ``()`` forces none.
 
+    Localization (``dynamic``): the fit is weighted by R⁻¹, the detector's noise covariance (the
+    maximum-likelihood fit; the paper rule's ``threshold`` has no R: unweighted), on the
+    observer restarted at each contact's onset (estimator.onset). Each interval's point and ±
+    come from its episode estimate, with the Cramér–Rao bounds beside them (estimator.intervals).
+
     Flags (estimator.localization): |F| below max(min_force_N, 5 σ of the force rows without
-    contact) → small_force; two links fitting within max(1e-3, 2 · median ‖r‖ without contact)
-    at points > 5 mm apart → ambiguous_link; 1/|sin∠(F, link)| > max_condition → parallel_to_link.
-    (σ and the median: over the contact-free samples among the first ``stats_samples``.)
+    contact) → small_force; two links fitting within 2√n noise norms (R known; else max(1e-3,
+    2 · median ‖r‖ without contact)) at points > 5 mm apart → ambiguous_link; 1/|sin∠(F, link)| >
+    max_condition → parallel_to_link. (σ and the median: over the contact-free samples among the
+    first ``stats_samples``.)
 
     lag_compensation (``dynamic`` only): r lags τ_ext by ≈ 1/K (``observer.lag_s``), so r_k is
     paired with the posture q(t_k − lag) (linear interpolation in time, held at q(t_0) before
@@ -735,9 +933,16 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     no-contact covariance (estimator.noise) from ``noise`` (a NoiseModel; default the paper leg's
     sensors) or from the ``quiet_window`` (t0, t1) of the log, at ``false_alarm_rate`` = (value,
     unit) with unit 'sample', 's' or 'h' (default one per hour); ``rnorm`` is then √(rᵀR⁻¹r).
-    ``detector="cusum"``: a CUSUM on the same statistic (estimator.sequential) instead. ``paper``
+    ``detector="cusum"``: a CUSUM on the same statistic (estimator.sequential) instead. With the
+    chi-square test (and no debounce) a contact ends at its release (estimator.release;
+    ``release_test=False``: when ‖r‖ has decayed under the threshold, as before). ``paper``
     isolates on rows whitened by the noise model (detection.whitened_thresholds) at the per-row
     probability of ``false_alarm_rate``; with a ``quiet_window``, on the robust σ of the stretch.
+
+    Model uncertainty (``dynamic`` chi-square only; estimator.model_error): the residual's
+    covariance gains R_model,k = Φ_k Σ_θ Φ_kᵀ per sample. ``model_uncertainty``: None → what the
+    robot file states (its identification's covariance, else its [model_uncertainty]); a
+    ``ModelUncertainty`` or a Σ_θ array → that; False → none.
     """
     if log.n_links != robot.n_links:
         raise InputError(f"{getattr(log, 'source', 'log')}: {log.n_links} joints in the log but the "
@@ -749,7 +954,8 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
                          timing=timing, noise=noise, quiet_window=quiet_window,
                          quiet_chunks=lambda: [log], quiet_where=quiet_where,
                          false_alarm_rate=false_alarm_rate,
-                         cov_stride_s=cov_stride_s, stats_samples=stats_samples, detector=detector)
+                         cov_stride_s=cov_stride_s, stats_samples=stats_samples, detector=detector,
+                         model_uncertainty=model_uncertainty, release_test=release_test)
     T = len(log.t)
     step = T if not chunk_samples else int(chunk_samples)
     parts = []
@@ -766,7 +972,8 @@ def _slice_log(log: SensorLog, sl) -> SensorLog:
 
 def open_stream(robot, log, method="dynamic", gain_per_s=100.0, threshold=None, debounce=0,
                 expected_contacts=None, *, timing=None, quiet_window=None, quiet_chunks=None,
-                quiet_where: str = "--quiet-window", period_s=None, **kw) -> EstimatorStream:
+                quiet_where: str = "--quiet-window", period_s=None, model_uncertainty=None,
+                **kw) -> EstimatorStream:
     """An EstimatorStream set up for ``log`` (its first chunk, or a LogReader: the expected
     contacts, timing declaration and period come from it). ``quiet_chunks()``: a fresh iterable
     of the log's chunks for the quiet-window pass."""
@@ -778,13 +985,24 @@ def open_stream(robot, log, method="dynamic", gain_per_s=100.0, threshold=None, 
     timing, timing_source = _resolve_timing(robot, log, timing)
     if period_s is None:
         period_s = getattr(log, "period_s", None) or observer.regular_period(log.t)
-    cov, cov_source, cal = None, "", None
+    cov, cov_source, cal, drive = None, "", None, None
+    model_cov, model_source = None, ""
+    if method == "dynamic" and threshold is None:
+        from estimator.model_error import resolve
+
+        model_cov, model_source = resolve(robot, model_uncertainty)
+    elif model_uncertainty not in (None, False):
+        raise InputError("model uncertainty: enters the chi-square detector of the dynamic method; "
+                         "not with --method paper or --threshold")
     if quiet_window is not None and method == "dynamic" and threshold is None:
         cov, r_quiet = quiet_window_covariance(robot, quiet_chunks(), quiet_window, gain_per_s,
                                                period_s, kw.get("discretization", "exact"), timing,
-                                               quiet_where)
+                                               quiet_where, model_cov, model_source)
+        from estimator.bounds import sample_terms      # the drive's noise for the episode estimate
+
+        drive = sample_terms(r_quiet, cov, np.exp(-observer.gains(robot, gain_per_s) * period_s))
         cov_source = (f"robust estimate over the quiet window {quiet_window[0]:g}–"
-                      f"{quiet_window[1]:g} s")
+                      f"{quiet_window[1]:g} s (sensor noise from the observer's innovations)")
         if kw.get("detector") == "cusum":         # CUSUM calibrated on the stretch's correlation
             z = np.linalg.solve(np.linalg.cholesky(cov), r_quiet.T).T
             a = float(np.exp(-np.min(observer.gains(robot, gain_per_s)) * period_s))
@@ -792,7 +1010,9 @@ def open_stream(robot, log, method="dynamic", gain_per_s=100.0, threshold=None, 
     return EstimatorStream(robot, method, gain_per_s, threshold, debounce, expected,
                            period_s=period_s, timing=timing, timing_source=timing_source,
                            residual_cov=cov, residual_cov_source=cov_source, cusum_calibration=cal,
-                           isolation_quiet=quiet_window is not None and method == "paper", **kw)
+                           residual_drive=drive,
+                           isolation_quiet=quiet_window is not None and method == "paper",
+                           model_cov=model_cov, model_cov_source=model_source, **kw)
 
 
 def join_parts(parts: list, stream: EstimatorStream, n_skipped: int = 0) -> ContactEstimate:

@@ -151,3 +151,246 @@ def check_log(log) -> list[str]:
         warnings.warn(msg, PlausibilityWarning, stacklevel=2)
     log.plausibility_warnings = found
     return found
+
+
+# --------------------------------------------------------------------------- the log vs its robot
+HEAD_SAMPLES = 256          # samples of the log's head checked against the robot's dynamics
+HEAD_WINDOWS = 8            # sub-windows of the head (a scale is fitted across them)
+FAR_SIGMA = 8.0             # a residual beyond this many per-sample noise σ is "far outside"
+MODEL_SLACK = 0.05          # and beyond this fraction of what the model expects (model error)
+
+
+def _channels(n_links: int) -> list[str]:
+    return ["Fx", "Fz", "My", *[f"tau{i}" for i in range(1, n_links + 1)]]
+
+
+def expected_forces(robot, t, q, dq, tau_meas, windows: int = HEAD_WINDOWS):
+    """(m, g) per sub-window, shapes (W, n): the mean measured generalized force m (the log's
+    [Fx, Fz, My, τ…]) and the one the robot's dynamics needs without contact, from momentum:
+    g = (P(t_b) − P(t_a))/(t_b − t_a) − mean(Cᵀq̇ − G), since Ṗ = τ_meas + Cᵀq̇ − G + τ_ext
+    (no velocity is differentiated; noise averages out over a window)."""
+    from estimator.observer import momentum_terms
+
+    return _expected(lambda q_, v_, tau_: momentum_terms(robot, q_, v_, tau_), t, q, dq, tau_meas, windows)
+
+
+def _expected(momentum, t, q, dq, tau_meas, windows: int = HEAD_WINDOWS):
+    """``expected_forces`` with any model's ``momentum(q, v, τ_meas)`` → (P, u)."""
+    t = np.asarray(t, float)
+    P, u = momentum(q, dq, tau_meas)                        # u = τ_meas + Cᵀq̇ − G
+    model = u - tau_meas                                    # Cᵀq̇ − G
+    edges = np.linspace(0, len(t) - 1, windows + 1).round().astype(int)
+    m, g = [], []
+    for a, b in zip(edges[:-1], edges[1:]):
+        if b <= a:
+            continue
+        dt = t[b] - t[a]
+        # trapezoid means over [t_a, t_b]
+        w = np.diff(t[a:b + 1])
+        mean = lambda x: (0.5 * (x[a:b] + x[a + 1:b + 1]) * w[:, None]).sum(0) / dt   # noqa: E731
+        m.append(mean(tau_meas))
+        g.append((P[b] - P[a]) / dt - mean(model))
+    return np.array(m), np.array(g)
+
+
+def check_head(robot, log, noise=None, *, expected_contact: bool = False, where: str | None = None) -> list[str]:
+    """The first samples of ``log`` (a SensorLog chunk) against ``robot``'s dynamics.
+
+    The mean generalized force the log measures over its first ``HEAD_SAMPLES`` samples is
+    compared with what the robot's masses and motion need without contact (``expected_forces``).
+    A confident diagnosis of nonsense raises InputError naming it: an all-zero log, a group of
+    channels off by 1000× (N·mm, kN, mN), Fx/Fz or two joint torques swapped, a sign flipped,
+    angles in degrees. A residual merely far outside the noise (``FAR_SIGMA`` σ and
+    ``MODEL_SLACK`` of the expected force) is returned as a warning that names the channel and the
+    likely causes (the log starts in contact; units, channels or the robot file do not match),
+    as is a channel that is exactly constant (dead) while the model expects it to carry load.
+    ``expected_contact`` (a stance foot): refusals become warnings (the ground carries load)."""
+    src = where or getattr(log, "source", "log")
+    T = min(len(log.t), HEAD_SAMPLES)
+    if T < 16:
+        return []
+    t, q, dq = log.t[:T], log.q[:T], log.dq[:T]
+    tau = np.concatenate([log.wrench[:T], log.tau_Nm[:T]], axis=1)
+    names = _channels(log.n_links)
+    head = f"{src}: the first {T} samples"
+    if not np.any(tau):
+        raise InputError(f"{head} measure exactly 0 on every force and torque channel (Fx, Fz, My, "
+                         "tau…): an empty or all-zero export, or sensors not connected; the robot's "
+                         "weight alone loads them")
+    with np.errstate(all="ignore"):
+        m, g = expected_forces(robot, t, q, dq, tau)
+    if not (np.all(np.isfinite(m)) and np.all(np.isfinite(g))):
+        return []
+    sigma = _sigma(noise, log.n_links)
+    scale = np.abs(g).max(0)
+    tol = np.maximum(FAR_SIGMA * sigma, MODEL_SLACK * scale)
+    e = (m - g).mean(0)
+    far = np.abs(e) > tol
+    if not far.any():
+        return []
+    found = []
+    refuse = []
+    # a unit or channel mix-up explains the residual: refuse (unless a contact is expected)
+    for diag in (_swapped(m, g, tol, names), _scaled(m, g, tol, names, far),
+                 _degrees(robot, t, q, dq, tau, g, tol, far)):
+        if diag:
+            refuse.append(diag)
+    if refuse:
+        msg = f"{head}: {refuse[0]}"
+        if not expected_contact:
+            raise InputError(msg)
+        found.append(msg)
+    dead = [j for j in np.flatnonzero(far) if np.ptp(tau[:, j]) == 0]
+    for j in dead:
+        found.append(f"{head}: channel {names[j]} is constant ({tau[0, j]:g}) while the robot's "
+                     f"dynamics need {g[:, j].mean():.4g} there: a dead or unplugged channel?")
+    if not dead and not expected_contact:       # a stance foot carries load from the start
+        j = int(np.argmax(np.abs(e) / tol))
+        found.append(f"{head}: the measured {names[j]} ({m[:, j].mean():.4g}) differs from what the "
+                     f"robot's masses and motion need without contact ({g[:, j].mean():.4g}) by "
+                     f"{abs(e[j]) / sigma[j]:.0f} σ: the log starts in contact, or its units or channels "
+                     "or the robot file (--robot) do not match the log")
+    return found
+
+
+def _sigma(noise, n_links: int) -> np.ndarray:
+    """Per-channel noise σ [Fx, Fz, My, τ…] (the paper leg's sensors when none is given)."""
+    if noise is None:
+        ft, tq = np.array([0.1, 0.1, 0.01]), np.full(n_links, 0.005)
+    else:
+        ft = np.asarray(noise.ft_sigma, float)
+        tq = np.broadcast_to(np.asarray(noise.torque_sigma_Nm, float), (n_links,))
+    return np.concatenate([ft, tq])
+
+
+def _groups(n: int) -> list[tuple[str, list[int], dict]]:
+    force = {1e3: "mN instead of N", 1e-3: "kN instead of N", -1.0: "the sign flipped (the wrench "
+             "is the mount's ON the base, docs/conventions.md)"}
+    moment = {1e3: "N·mm instead of N·m", 1e-3: "kN·m instead of N·m", -1.0: "the sign flipped"}
+    torque = {1e3: "N·mm instead of N·m", 1e-3: "kN·m instead of N·m", -1.0: "the sign flipped "
+              "(joint torques act ON the link, docs/conventions.md)"}
+    return [("the base forces Fx, Fz", [0, 1], force), ("the base moment My", [2], moment),
+            ("the joint torques " + ", ".join(f"tau{i}" for i in range(1, n + 1)),
+             list(range(3, 3 + n)), torque)]
+
+
+def check_head_model(model, log, noise=None, where: str | None = None) -> list[str]:
+    """``check_head`` for any RobotModel (a URDF robot's 3-D log, estimator.spatial.logs): the
+    mean generalized force the first samples measure (base rows from the FT sensor, sensed joint
+    torques) against what the model's masses and motion need without contact. A group of rows
+    off by 1000× or with its sign flipped, or an all-zero log, is refused naming it; a row far
+    outside the noise is a warning."""
+    src = where or getattr(log, "source", "log")
+    T = min(len(log.t), HEAD_SAMPLES)
+    if T < 16:
+        return []
+    head = f"{src}: the first {T} samples"
+    if not (np.any(log.wrench[:T]) or np.any(log.tau_Nm[:T])):
+        raise InputError(f"{head} measure exactly 0 on every force, moment and torque channel: an "
+                         "empty or all-zero export, or sensors not connected; the robot's weight alone "
+                         "loads them")
+    t, q, v = log.t[:T], log.q[:T], log.v[:T]
+    tau = log.tau_meas(model)[:T]
+    with np.errstate(all="ignore"):
+        m, g = _expected(model.momentum_terms, t, q, v, tau)
+    if not (np.all(np.isfinite(m)) and np.all(np.isfinite(g))):
+        return []
+    nb = model.n_base
+    rows = list(range(nb)) + [nb + j for j, s in enumerate(model.sensed_joints) if s]
+    m, g = m[:, rows], g[:, rows]
+    ft = np.full(6, np.nan) if noise is None else np.asarray(noise.ft_sigma, float)
+    tq = np.full(len(rows) - nb, 0.005) if noise is None else \
+        np.broadcast_to(np.asarray(noise.torque_sigma_Nm, float), (len(rows) - nb,))
+    ft = np.where(np.isfinite(ft), ft, [0.1, 0.1, 0.1, 0.01, 0.01, 0.01])
+    sigma = np.concatenate([ft[:nb], tq])
+    names = ["F_x", "F_y", "F_z", "M_x", "M_y", "M_z"][:nb] + \
+        [n for n, s in zip(model.joint_names, model.sensed_joints) if s]
+    tol = np.maximum(FAR_SIGMA * sigma, MODEL_SLACK * np.abs(g).max(0))
+    e = (m - g).mean(0)
+    far = np.abs(e) > tol
+    if not far.any():
+        return []
+    force = {1e3: "mN instead of N", 1e-3: "kN instead of N", -1.0: "the sign flipped (the wrench "
+             "is the one ON the robot, in the sensor frame: docs/conventions.md)"}
+    moment = {1e3: "N·mm instead of N·m", 1e-3: "kN·m instead of N·m", -1.0: "the sign flipped"}
+    groups = [("the FT sensor's forces", [0, 1, 2], force), ("the FT sensor's moments", [3, 4, 5], moment),
+              ("the joint torques", list(range(nb, len(rows))), dict(moment))]
+    diag = _scaled(m, g, tol, names, far, groups)
+    if diag:
+        raise InputError(f"{head}: {diag}")
+    j = int(np.argmax(np.abs(e) / tol))
+    return [f"{head}: the measured {names[j]} ({m[:, j].mean():.4g}) differs from what the robot's "
+            f"masses and motion need without contact ({g[:, j].mean():.4g}) by {abs(e[j]) / sigma[j]:.0f} σ: "
+            "the log starts in contact, or its units or channels or the robot file (--robot) do not "
+            "match the log"]
+
+
+def _scaled(m, g, tol, names, far, groups=None) -> str | None:
+    """A group of channels measuring k·(what the model needs), k ≈ 1000, 1/1000 or −1."""
+    for label, idx, hints in (groups or _groups(len(names) - 3)):
+        if not idx:
+            continue
+        if not far[idx].any():
+            continue
+        gg, mm = g[:, idx].ravel(), m[:, idx].ravel()
+        den = float(gg @ gg)
+        if den <= (tol[idx] ** 2).sum() * len(g):          # the model expects ~nothing here
+            continue
+        k = float(mm @ gg) / den
+        fit = np.abs(m[:, idx] - k * g[:, idx]).mean(0)
+        for ref, hint in hints.items():
+            if k != 0 and abs(np.log(abs(k) / abs(ref))) < np.log(2) and np.sign(k) == np.sign(ref) \
+                    and np.all(fit <= np.maximum(np.abs(k) * tol[idx], 0.2 * np.abs(m[:, idx]).mean(0))):
+                return (f"{label} are {k:.3g} × what the robot's masses and motion need: {hint}? "
+                        "The log must be in SI units (N, N·m)")
+    return None
+
+
+def _swapped(m, g, tol, names) -> str | None:
+    """Two channels exchanged: swapping them back explains the residual."""
+    n = len(names)
+    pairs = [(0, 1)] + [(a, b) for a in range(3, n) for b in range(a + 1, n)][:15]
+    base = np.abs(m - g).mean(0)
+    for a, b in pairs:
+        mm = m.copy()
+        mm[:, [a, b]] = mm[:, [b, a]]
+        fixed = np.abs(mm - g).mean(0)
+        if max(base[a], base[b]) > 4 * max(tol[a], tol[b]) and fixed[a] <= tol[a] and fixed[b] <= tol[b]:
+            return (f"{names[a]} and {names[b]} look swapped (exchanged, both match what the robot "
+                    "needs); check the log's column order")
+    return None
+
+
+def _degrees(robot, t, q, dq, tau, g, tol, far) -> str | None:
+    """Angles in degrees: the robot's needs at q·π/180 explain the log far better."""
+    if not np.any(np.abs(q[:, 3:]) > 0.5):
+        return None
+    k = np.pi / 180
+    qq, dd = q.copy(), dq.copy()
+    qq[:, 2:] *= k
+    dd[:, 2:] *= k
+    with np.errstate(all="ignore"):
+        m2, g2 = expected_forces(robot, t, qq, dd, tau)
+    if not np.all(np.isfinite(g2)):
+        return None
+    before = np.abs(m2 - g).mean(0)
+    after = np.abs(m2 - g2).mean(0)
+    if np.all(after <= tol) and np.any(before[far] > 4 * tol[far]):
+        return ("the joint angles look like degrees (read as degrees, the robot's gravity torques "
+                "match the log); the log must be in rad and rad/s")
+    return None
+
+
+WHOLE_LOG_FRACTION = 0.9
+
+
+def whole_log_contact(summary: dict, head_warnings=()) -> str | None:
+    """A warning when contact is reported over ≥ 90 % of the samples from the first one: a real
+    contact rarely spans a whole log; a unit, channel or robot-file mix-up always does."""
+    n, k = summary.get("samples") or 0, summary.get("contact_samples") or 0
+    ivs = summary.get("intervals") or []
+    if n < 16 or k < WHOLE_LOG_FRACTION * n or not ivs:
+        return None
+    return (f"{summary.get('log', 'log')}: contact over {100 * k / n:.0f} % of the samples, from the "
+            "first one: check the log's units and channel order and the robot file (--robot)"
+            + ("" if head_warnings else "; a contact held over the whole log is rare"))

@@ -34,8 +34,11 @@ from pathlib import Path
 import numpy as np
 
 from estimator.errors import InputError
+from userio.fields import Range
 
 KINDS = ("instant", "mean", "delay")
+DELAY_RANGE = Range(0.0, 1.0, "s", high="a sensor filter's group delay is micro- to milliseconds: "
+                    "ms or samples typed as seconds?")
 
 
 def parse(text, where: str) -> tuple[str, float]:
@@ -53,6 +56,9 @@ def parse(text, where: str) -> tuple[str, float]:
         if not (np.isfinite(d) and d >= 0):
             raise InputError(f"{where}: group delay must be a finite number of seconds ≥ 0, "
                              f"got {text!r}")
+        why = DELAY_RANGE.problem(d)
+        if why:
+            raise InputError(f"{where}: group delay {why}")
         return "delay", d
     hint = difflib.get_close_matches(s.split(":")[0], ["instant", "mean", "delay"], n=1)
     did = f" (did you mean '{hint[0]}'?)" if hint else ""

@@ -1,4 +1,4 @@
-"""Sensor uncertainty → contact-localization error, before the robot exists (DESIGN.md, job 3).
+"""Sensor uncertainty → contact-localization error, before the robot exists (the workbench's third job).
 
 A static contact (link c, α, F) on a leg held at posture q loads the sensors with
 
@@ -14,6 +14,10 @@ sensor reads τ_meas,k = (1 + g_k) τ_true,k + n_k:
   The ``paper`` method uses the raw readings: no filtering (factor 1).
 - g_k: a calibration gain error (relative slope uncertainty, systematic): it scales the whole
   reading, gravity load included, and is not filtered.
+- δθ: the robot file's inertial-parameter error (systematic, ``parameter_cov`` Σ_θ: an
+  identification's posterior or a declared uncertainty; estimator.model): the estimator computes
+  G from the file, so the settled residual gains G(θ_file) − G(θ) = −Y_u(q, 0) δθ
+  (estimator.model: Cᵀv − G = Y_u θ), δθ ~ N(0, Σ_θ), drawn once per robot (per draw).
 
 Two independent propagations of (g, n) into (α, F) and the contact point p = p_c + α Δ_c:
 
@@ -128,14 +132,36 @@ def _check(robot: Robot, q_joint, link, alpha, force_N):
     return q_joint, link, alpha, force
 
 
-def _localize(robot, method, q, r, link, ambiguity_tol=1e-3):
+def _fit_weights(noise: SensorNoise, n_links: int, method: str):
+    """The estimator's fit weights: the inverse of the residual's white-noise variance per row
+    (estimator.pipeline whitens by its noise covariance R; white sensor noise makes R diagonal,
+    (f σ)²), or None (unweighted) where a σ is zero or for the paper method."""
+    sig_n, _ = noise.per_row(n_links)
+    if method != "dynamic" or not np.all(sig_n > 0):
+        return None
+    return 1.0 / (noise.filter_factor(method) * sig_n) ** 2
+
+
+def _localize(robot, method, q, r, link, ambiguity_tol=1e-3, weights=None):
     """(α, F) from residual-form readings r = G − τ_meas (rows [x, z, θ, q…])."""
     if method == "dynamic":
-        out = loc.localize_dynamic(robot, q, r, ambiguity_tol=ambiguity_tol)
+        out = loc.localize_dynamic(robot, q, r, ambiguity_tol=ambiguity_tol, row_weights=weights)
     else:
         G = dyn.gravity_vector(robot.with_base(True), q)
         out = loc.localize_paper(robot, q, np.zeros_like(q), G - r, link, bias=G)
     return out.alpha, out.force_N
+
+
+def _model_rows(robot, q, parameter_cov):
+    """(B, n, r): −Y_u(q, 0) S with S Sᵀ = Σ_θ, the settled residual's sensitivity to δθ in S's
+    columns (None without a covariance)."""
+    if parameter_cov is None:
+        return None
+    from estimator.model_error import covariance_sqrt
+
+    S, _ = covariance_sqrt(parameter_cov)
+    _, Yu = robot.with_base(True).momentum_regressor(q, np.zeros_like(q))
+    return -Yu @ S
 
 
 def _truth(robot, q_joint, link, alpha, force):
@@ -153,8 +179,9 @@ def _link_length(robot, q, link):
 
 
 def first_order(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise,
-                method: str = "dynamic", step: float = 1e-6) -> Propagation:
-    """Linearized error: Σ_(α,F) = J Σ_r Jᵀ, Σ_r = diag(f² σ_n² + g² τ_true²) (f: filter factor)."""
+                method: str = "dynamic", step: float = 1e-6, parameter_cov=None) -> Propagation:
+    """Linearized error: Σ_(α,F) = J Σ_r Jᵀ, Σ_r = diag(f² σ_n² + g² τ_true²) + Y Σ_θ Yᵀ
+    (f: filter factor; Y = −Y_u(q, 0) with ``parameter_cov`` Σ_θ, module doc)."""
     if method not in METHODS:
         raise InputError(f"method: unknown {method!r}; use one of {', '.join(METHODS)}")
     q_joint, link, alpha, force = _check(robot, q_joint, link, alpha, force_N)
@@ -162,13 +189,17 @@ def first_order(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise,
     B, n = r_true.shape
     sig_n, sig_g = noise.per_row(robot.n_links)
     var_r = (noise.filter_factor(method) * sig_n) ** 2 + (sig_g * readings) ** 2     # (B, n)
+    cov_r = var_r[:, :, None] * np.eye(n)
+    Ym = _model_rows(robot, q, parameter_cov)
+    if Ym is not None:
+        cov_r = cov_r + Ym @ np.swapaxes(Ym, 1, 2)
     eye = np.eye(n) * step
     r_pert = np.concatenate([r_true[:, None, :] + eye, r_true[:, None, :] - eye], axis=1)   # (B, 2n, n)
     a_out, f_out = _localize(robot, method, np.repeat(q, 2 * n, axis=0), r_pert.reshape(-1, n),
-                             np.repeat(link, 2 * n))
+                             np.repeat(link, 2 * n), weights=_fit_weights(noise, robot.n_links, method))
     y = np.concatenate([a_out[:, None], f_out], axis=1).reshape(B, 2 * n, 3)
     jac = (y[:, :n] - y[:, n:]) / (2 * step)                        # (B, n, 3): ∂(α, Fx, Fz)/∂r_k
-    cov = np.einsum("bki,bk,bkj->bij", jac, var_r, jac)
+    cov = np.einsum("bki,bkl,blj->bij", jac, cov_r, jac)
     alpha_std = np.sqrt(cov[:, 0, 0])
     return Propagation(alpha_std=alpha_std,
                        position_rms_m=alpha_std * _link_length(robot, q, link),
@@ -178,8 +209,9 @@ def first_order(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise,
 
 def monte_carlo(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise,
                 draws: int = 1000, rng: np.random.Generator | int = 0,
-                method: str = "dynamic") -> Propagation:
-    """Sampled error over ``draws`` realizations of (g, n) per posture; flagged draws counted."""
+                method: str = "dynamic", parameter_cov=None) -> Propagation:
+    """Sampled error over ``draws`` realizations of (g, n, δθ) per posture (δθ: with
+    ``parameter_cov``); flagged draws counted."""
     if method not in METHODS:
         raise InputError(f"method: unknown {method!r}; use one of {', '.join(METHODS)}")
     if draws < 2:
@@ -192,9 +224,15 @@ def monte_carlo(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise,
     f = noise.filter_factor(method)
     e = (f * sig_n * rng.standard_normal((B, draws, n))
          + sig_g * readings[:, None, :] * rng.standard_normal((B, draws, n)))
+    Ym = _model_rows(robot, q, parameter_cov)
+    if Ym is not None:                            # r = Jᵀ F + Y δθ − e, δθ = S z per draw
+        e = e - np.einsum("bnr,bdr->bdn", Ym, rng.standard_normal((B, draws, Ym.shape[2])))
     r = (r_true[:, None, :] - e).reshape(-1, n)
+    weights = _fit_weights(noise, robot.n_links, method)
+    tol = noise.ambiguity_tol(robot.n_links, method) if weights is None else \
+        AMBIGUITY_N_SIGMA * np.sqrt(robot.n_links + 3)          # whitened cost: noise norm √n
     a_out, f_out = _localize(robot, method, np.repeat(q, draws, axis=0), r, np.repeat(link, draws),
-                             noise.ambiguity_tol(robot.n_links, method))
+                             tol, weights)
     a_err = a_out.reshape(B, draws) - alpha[:, None]
     f_err = np.hypot(*(f_out.reshape(B, draws, 2) - force[:, None, :]).transpose(2, 0, 1))
     length = _link_length(robot, q, link)
@@ -212,3 +250,40 @@ def monte_carlo(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise,
                        force_rms_N=np.sqrt(np.mean(f_err ** 2, axis=1)),
                        flagged_fraction=flagged.mean(axis=1), position_p95_m=p95,
                        position_rms_se_m=rms_se, position_p95_se_m=percentile_standard_error(pos, 95.0))
+
+
+def interval_rms(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise, parameter_cov,
+                 draws: int = 2000, rng: np.random.Generator | int = 0,
+                 method: str = "dynamic", samples: int | None = None) -> np.ndarray:
+    """The RMS position error over a held contact's samples, one value per robot draw, (B, draws).
+
+    A robot differs from its file by δθ ~ N(0, Σ_θ) (and a gain error g), fixed for the robot; the
+    settled residual Jᵀ F + Y δθ (module doc) is localized without noise: the bias b(δθ, g); the
+    per-sample noise adds σ_p (first order, noise only) around it. Over ``samples`` samples of
+    the observer's residual (n_eff = samples (1 − a)/(1 + a) independent values, a = e^{−KΔt})
+    the RMS is √((b + n̄)² + σ_p² χ²_{n_eff}/n_eff), n̄ ~ N(0, σ_p²/n_eff) (without ``samples``:
+    √(b² + σ_p²)): the distribution a set of robots' measured interval errors should follow."""
+    rng = np.random.default_rng(rng)
+    q_joint, link, alpha, force = _check(robot, q_joint, link, alpha, force_N)
+    q, readings, r_true = _truth(robot, q_joint, link, alpha, force)
+    B, n = r_true.shape
+    _, sig_g = noise.per_row(robot.n_links)
+    e = sig_g * readings[:, None, :] * rng.standard_normal((B, draws, n))
+    Ym = _model_rows(robot, q, parameter_cov)
+    if Ym is not None:
+        e = e - np.einsum("bnr,bdr->bdn", Ym, rng.standard_normal((B, draws, Ym.shape[2])))
+    r = (r_true[:, None, :] - e).reshape(-1, n)
+    a_out, _ = _localize(robot, method, np.repeat(q, draws, axis=0), r, np.repeat(link, draws),
+                         noise.ambiguity_tol(robot.n_links, method))
+    bias = np.abs(a_out.reshape(B, draws) - alpha[:, None]) * _link_length(robot, q, link)[:, None]
+    quiet = SensorNoise(torque_std_Nm=noise.torque_std_Nm, wrench_std=noise.wrench_std,
+                        torque_gain_rel_std=np.zeros(1), sample_rate_Hz=noise.sample_rate_Hz,
+                        gain_per_s=noise.gain_per_s)
+    sig = first_order(robot, q_joint, link, alpha, force, quiet, method=method).position_rms_m[:, None]
+    if samples is None:
+        return np.sqrt(bias ** 2 + sig ** 2)
+    a = np.exp(-noise.gain_per_s / noise.sample_rate_Hz)
+    n_eff = max(1.0, samples * (1 - a) / (1 + a))
+    mean = sig / np.sqrt(n_eff) * rng.standard_normal(bias.shape)
+    spread = sig ** 2 * rng.chisquare(n_eff, bias.shape) / n_eff
+    return np.sqrt((bias + mean) ** 2 + spread)

@@ -12,8 +12,13 @@ from pathlib import Path
 
 import numpy as np
 
+from userio.errors import CallbackInterrupt
+
+
 from flexure.errors import InputError
 from flexure.geometry import Surface, check_watertight
+
+_INTERRUPT = CallbackInterrupt()     # Ctrl-C inside gmsh's size callback → KeyboardInterrupt after it
 
 
 @contextmanager
@@ -74,13 +79,17 @@ def load_step(path: str | Path, size_for=None, where: str = "geometry.file") -> 
             scale_m = float((box[3:] - box[:3]).min()) * unit_m
             if size_for is not None:
                 field = size_for(scale_m)
-                gmsh.model.mesh.setSizeCallback(
-                    lambda dim, tag, x, y, z, lc: min(lc, float(field(np.array([[x, y, z]]) * unit_m)[0]) / unit_m))
+                gmsh.model.mesh.setSizeCallback(_INTERRUPT.wrap(   # Ctrl-C: size 0 stops gmsh
+                    lambda dim, tag, x, y, z, lc: min(lc, float(field(np.array([[x, y, z]]) * unit_m)[0]) / unit_m),
+                    0.0))
                 gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
                 gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
                 gmsh.option.setNumber("Mesh.LcIntegrationPrecision", LC_INTEGRATION_PRECISION)
             gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 16)     # elements per 2π of a hole
-            gmsh.model.mesh.generate(2)
+            try:
+                gmsh.model.mesh.generate(2)
+            finally:
+                _INTERRUPT.check()
         tags, coords, _ = gmsh.model.mesh.getNodes()
         index = np.zeros(int(tags.max()) + 1, dtype=np.int64)
         index[tags.astype(np.int64)] = np.arange(len(tags))

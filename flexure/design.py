@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from flexure.errors import InputError
+from userio.fields import Range
 from userio.files import read_toml
 from flexure.gauges import Gauge
 from flexure.geometry import SpokeDisc
@@ -37,6 +38,33 @@ MATERIAL_PRESETS = {"6061-T6": dict(E_Pa=68.9e9, nu=0.33, yield_Pa=276e6, name="
                     "17-4PH-H900": dict(E_Pa=196e9, nu=0.272, yield_Pa=1170e6, name="steel 17-4PH H900")}
 SIZES = ("coarse", "medium", "fine")
 TABLES = {"name", "description", "geometry", "material", "gauges", "loads", "bridge", "mesh"}
+
+# physical ranges of a design's fields, in the file's units (userio.fields.Range)
+LENGTH_MM = Range(0.01, 5000.0, "mm", low="below 10 µm: m or µm typed as mm?",
+                  high="a flexure over 5 m: µm typed as mm?")
+FIELD_RANGES = {
+    "geometry.spokes": Range(2, 360, "spokes"), "geometry.hub_bolts": Range(0, 360, "holes"),
+    "geometry.rim_bolts": Range(0, 360, "holes"), "geometry.phase_deg": Range(-360.0, 360.0, "deg"),
+    "material.E_GPa": Range(0.01, 1500.0, "GPa", low="MPa or kPa? (E is in GPa: aluminium 68.9, "
+                            "steel 200)", high="E given in Pa or MPa? the key is E_GPa (aluminium "
+                            "68.9, steel 200)"),
+    "material.yield_MPa": Range(1.0, 1e5, "MPa", high="yield given in Pa? the key is yield_MPa"),
+    "material.nu": Range(-0.99, 0.49999, "", high="ν ≥ 0.5 is not an elastic solid"),
+    "gauges.gauge_factor": Range(0.1, 1000.0, ""), "gauges.resistance_ohm": Range(1.0, 1e7, "Ω"),
+    "loads.rated_torque_Nm": Range(1e-6, 1e6, "N·m", lo_open=True, high="N·mm typed as N·m?"),
+}
+MAX_CAD_BYTES = 512 << 20            # an STL/STEP flexure part (a fine STL of one part is ~10–50 MB)
+NEAR_INCOMPRESSIBLE_NU = 0.49         # from here linear tetrahedra lock and CG slows down
+MIN_ELEMENTS_ACROSS = 2               # elements across the thinnest wall of a mesh
+
+
+def _field_range(key: str, value, where: str):
+    rng = FIELD_RANGES.get(key) or (LENGTH_MM if key.endswith("_mm") else None)
+    if rng is not None:
+        why = rng.problem(float(value))
+        if why:
+            raise InputError(f"{where}: {key}: {why}")
+    return value
 
 
 @dataclass
@@ -104,9 +132,9 @@ def _unknown(table: dict, allowed, where: str):
 
 def load_design(path: str | Path, overrides: dict | None = None) -> Design:
     """Read a design TOML; ``overrides`` {"spoke_width_mm": 5.0, "mesh.size": "fine", ...} apply on top."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: design file not found")
+    from userio.files import check_input
+
+    path = check_input(path, what="design file")    # not found, a directory or a device: say which
     return design_from_dict(read_toml(path), path, overrides)
 
 
@@ -146,9 +174,14 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
         for key, (fld, scale) in DISC_KEYS.items():
             if key in geo:
                 if scale is None and fld in ("spokes", "hub_bolts", "rim_bolts"):
-                    kw[fld] = _get(geo, key, w, int)
+                    kw[fld] = _field_range(f"geometry.{key}", _get(geo, key, w, int), f)
                 else:
-                    kw[fld] = _get(geo, key, w) * (scale or 1.0)
+                    value = _get(geo, key, w)
+                    if key.endswith("_mm") and value != 0:       # 0: an optional feature left out
+                        _field_range(f"geometry.{key}", value, f)
+                    elif key in FIELD_RANGES or f"geometry.{key}" in FIELD_RANGES:
+                        _field_range(f"geometry.{key}", value, f)
+                    kw[fld] = value * (scale or 1.0)
         disc = SpokeDisc(**kw)
         try:
             disc.check(where=w)
@@ -160,6 +193,8 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
     elif kind in ("stl", "step"):
         _unknown(geo, {"kind", "file", "unit_mm"}, w)
         file_path = (path.parent / _get(geo, "file", w, str, required=True))
+        from userio.files import check_input
+        check_input(file_path, f"{w}.file", max_bytes=MAX_CAD_BYTES, what=f"{kind.upper()} file")
         if kind == "step" and "unit_mm" in geo:
             raise InputError(f"{w}.unit_mm: a STEP file declares its own length unit (OpenCASCADE reads it "
                              "and converts to mm); unit_mm is for STL files, which have none")
@@ -179,11 +214,13 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
     from flexure.material import Material
     base = dict(MATERIAL_PRESETS[preset])
     if "E_GPa" in mat:
-        base["E_Pa"] = _get(mat, "E_GPa", w) * 1e9
+        base["E_Pa"] = _field_range("material.E_GPa", _get(mat, "E_GPa", w), f) * 1e9
     if "nu" in mat:
         base["nu"] = _get(mat, "nu", w)
+        if -1 < base["nu"] < 0.5:
+            _field_range("material.nu", base["nu"], f)
     if "yield_MPa" in mat:
-        base["yield_Pa"] = _get(mat, "yield_MPa", w) * 1e6
+        base["yield_Pa"] = _field_range("material.yield_MPa", _get(mat, "yield_MPa", w), f) * 1e6
     if "name" in mat:
         base["name"] = _get(mat, "name", w, str)
     if not base["E_Pa"] > 0:
@@ -208,9 +245,13 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
     gf = _get(gt, "gauge_factor", w, float, 2.0)
     if gf <= 0:
         raise InputError(f"{w}.gauge_factor: must be > 0")
+    _field_range("gauges.gauge_factor", gf, f)
     r_ohm = _get(gt, "resistance_ohm", w, float, 1000.0)
     if r_ohm <= 0:
         raise InputError(f"{w}.resistance_ohm: must be > 0")
+    _field_range("gauges.resistance_ohm", r_ohm, f)
+    for key, v in (("grid_length_mm", L * 1e3), ("grid_width_mm", Wd * 1e3)):
+        _field_range(f"gauges.{key}", v, f)
     layout = _get(gt, "layout", w, str, "shear_45" if kind == "spoke_disc" else "explicit")
     if layout == "shear_45":
         if disc is None:
@@ -252,6 +293,7 @@ def design_from_dict(raw: dict, path: Path, overrides: dict | None = None) -> De
     rated = _get(ld, "rated_torque_Nm", w, float, 2.0)
     if rated <= 0:
         raise InputError(f"{w}.rated_torque_Nm: must be > 0")
+    _field_range("loads.rated_torque_Nm", rated, f)
     fixed = _get(ld, "fixed", w, str, ("rim_bolts" if disc is not None and disc.rim_bolts else
                                         "rim_outer" if disc is not None else "radius"))
     if fixed not in ("rim_bolts", "rim_outer", "radius"):
@@ -336,3 +378,83 @@ def shear_45_layout(disc: SpokeDisc, length_m: float, width_m: float, position: 
         gauges.append(Gauge(tuple(r * r_hat + np.array([0, 0, disc.thickness])), tuple(axis), (0.0, 0.0, 1.0),
                             length_m, width_m, arm, f"g{arm}"))
     return gauges
+
+
+def thinnest_wall(design: Design) -> tuple[float, str] | None:
+    """(thickness in m, what it is) of the thinnest wall of a parametric disc: the disc itself,
+    a spoke, the hub and rim rings, the ligaments beside and between bolt holes (None for an
+    STL/STEP part, whose walls are not declared)."""
+    d = design.disc
+    if d is None:
+        return None
+    walls = [(d.thickness, "geometry.thickness_mm"), (d.spoke_width, "geometry.spoke_width_mm"),
+             (d.hub_radius - d.bore_radius, "the hub ring (hub_radius_mm − bore_radius_mm)"),
+             (d.outer_radius - d.rim_inner_radius, "the rim ring (outer_radius_mm − rim_inner_radius_mm)")]
+    for prefix, rin, rout in (("hub", d.bore_radius, d.hub_radius), ("rim", d.rim_inner_radius, d.outer_radius)):
+        n = getattr(d, f"{prefix}_bolts")
+        if n:
+            rc, dia = getattr(d, f"{prefix}_bolt_circle_radius"), getattr(d, f"{prefix}_bolt_diameter")
+            walls += [(rc - dia / 2 - rin, f"the {prefix} bolt holes' inner ligament"),
+                      (rout - rc - dia / 2, f"the {prefix} bolt holes' outer ligament"),
+                      (2 * math.pi * rc / n - dia, f"the ligament between {prefix} bolt holes")]
+    return min(walls)
+
+
+def preflight(design: Design, size: str | None = None, order: int | None = None,
+              max_elements: float | None = None, levels: int = 3) -> dict:
+    """Cost and soundness before any meshing, for ``levels`` mesh levels (1: the answer's; 2: a
+    sweep row's h and h·√2; 3: the error estimate's h·√2, h, h/√2):
+
+    - tetrahedra per level from the mesh size field, whose element size is bounded by the part's
+      own thickness (flexure.meshing.estimate_elements); a level above ``max_elements`` is refused
+      now, naming the thinnest wall that sets the size and the knob to turn — not after the
+      coarser levels ran;
+    - near-incompressible material: P1 from ν ≥ 0.49 locks (its numbers would be withheld) and P2
+      from ν ≥ 0.49999 is beyond its measured accuracy: refused; P2 from 0.49 warned (the solver
+      needs more iterations).
+    Returns {"elements_estimate" (at the answer's level), "levels", "warnings"}."""
+    from flexure.meshing import MAX_ELEMENTS, SIZES, estimate_elements, size_field
+    from flexure.solve import NU_LOCKING
+
+    size = size or design.size
+    order = order or design.order
+    cap = max_elements or MAX_ELEMENTS
+    warnings: list[str] = []
+    nu = design.material.nu
+    where = f"{design.path}: material.nu"
+    if nu >= NU_LOCKING[order]:
+        raise InputError(f"{where}: ν = {nu:g} is near-incompressible for P{order} tetrahedra (from "
+                         f"{NU_LOCKING[order]:g} they lock or leave their measured accuracy: the numbers "
+                         "would be withheld after a long solve)" + ("; use order 2 (P2)" if order == 1 else ""))
+    if nu >= NEAR_INCOMPRESSIBLE_NU:
+        warnings.append(f"material.nu = {nu:g} is near-incompressible: the solve needs more iterations "
+                        "and its result carries a condition warning if it is ill-posed")
+    out = {"elements_estimate": None, "levels": [], "warnings": warnings}
+    if design.disc is None or size not in SIZES:
+        return out
+    from flexure.geometry import profile
+
+    d = design.disc
+    poly = profile(d, 3)
+    V = poly.area * d.thickness
+    A = 2 * poly.area + (poly.exterior.length + sum(r.length for r in poly.interiors)) * d.thickness
+    centres = np.array([g.centre_m for g in design.gauges])
+    extent = 0.5 * max(g.length_m + g.width_m for g in design.gauges) / math.sqrt(2) * 1.3
+    gw = min(min(g.width_m, g.length_m) for g in design.gauges)
+    factors = {1: (1.0,), 2: (2 ** 0.5, 1.0), 3: (2 ** 0.5, 1.0, 2 ** -0.5)}.get(levels, (1.0,))
+    for f in factors:
+        field = size_field(size, d.thickness, centres, extent, gw, f)
+        n = estimate_elements(field, V, 2 * V / A)
+        out["levels"].append({"h_factor": f, "elements_estimate": n})
+        if f == 1.0:
+            out["elements_estimate"] = n
+        if not np.isfinite(n) or n > cap:
+            wall, what = thinnest_wall(design)
+            lvl = "" if f == 1.0 else f" level h × {f:.3g}{' (the finest)' if f < 1 else ''}"
+            raise InputError(
+                f"{design.path}: the mesh{lvl} would have ~{n:.3g} tetrahedra, above --max-elements "
+                f"{cap:.3g}: the thinnest wall, {what} = {wall * 1e3:.3g} mm, bounds the element size "
+                f"(h ≤ {min(field.h_far, 2 * V / A) * 1e3:.3g} mm over {V * 1e9:.4g} mm³); refused before "
+                "meshing. Thicken the wall, use --single-level"
+                + (" or --size coarse" if size != "coarse" else "") + ", or raise --max-elements")
+    return out

@@ -32,6 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from userio.errors import CallbackInterrupt
+
 from flexure.errors import InputError
 from flexure.meshing import edge_size
 
@@ -59,6 +61,7 @@ VOLUME_OPTIONS = {"Mesh.Algorithm3D": 1, "Mesh.Optimize": 1, "Mesh.OptimizeNetge
 #: h × 1 (11.5 s), 691k on a 47k-triangle STL (39 s of 39 s). At 1e-4: 18k calls and 4.6 s, 58k calls
 #: and 15 s; node placement along a curve changes by < 1e-4 of an element.
 LC_INTEGRATION_PRECISION = 1e-4
+_INTERRUPT = CallbackInterrupt()     # Ctrl-C inside gmsh's size callback → KeyboardInterrupt after it
 
 
 def _size_field(gmsh, field, spots=None) -> None:
@@ -90,7 +93,7 @@ def _size_field(gmsh, field, spots=None) -> None:
             h = min(h, float((spots[:, 3] + g * d).min()))
         return h
 
-    gmsh.model.mesh.setSizeCallback(size)
+    gmsh.model.mesh.setSizeCallback(_INTERRUPT.wrap(size, 0.0))   # Ctrl-C: size 0 stops gmsh
     gmsh.option.setNumber("Mesh.LcIntegrationPrecision", LC_INTEGRATION_PRECISION)
     gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
     gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
@@ -107,7 +110,9 @@ def _volume_tets(gmsh, where: str):
         gmsh.model.mesh.generate(3)
         gmsh.model.mesh.optimize("", False, 1)       # after Netgen: lifts the worst tetrahedra
     except Exception as exc:
+        _INTERRUPT.check()                           # Ctrl-C in the size callback stopped gmsh
         raise InputError(f"{where}: gmsh could not mesh the volume ({str(exc).splitlines()[0]})") from None
+    _INTERRUPT.check()
     tags, coords, _ = gmsh.model.mesh.getNodes()
     _, enodes = gmsh.model.mesh.getElementsByType(4)
     if len(enodes) == 0:

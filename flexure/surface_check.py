@@ -3,7 +3,7 @@
 - ``self_intersections``: non-adjacent triangles that cross. Broad phase: bounding boxes that
   overlap (sweep and prune along the longest axis); narrow phase: each edge p0 + s(p1 − p0),
   s ∈ (0, 1), of one triangle against the other (Möller–Trumbore: s, u, v from
-  [−d, e1, e2][s, u, v]ᵀ = p0 − v0, crossing iff 0 < s < 1, u, v ≥ 0, u + v ≤ 1).
+  ``[−d, e1, e2] [s, u, v]ᵀ = p0 − v0``, crossing iff 0 < s < 1, u, v ≥ 0, u + v ≤ 1).
 - ``thin_walls``: pairs of opposed, parallel triangles (n_a · n_b < −0.95) whose planes are closer
   than t_min and whose projections overlap: a wall (or slit) of (near) zero thickness.
 - ``check_gauges``: every gauge grid lies on the surface: its centre within ``tol`` of the surface,

@@ -91,8 +91,9 @@ def test_error_estimates_per_interval_are_streamed():
     assert len(ivs) >= 4
     for a, b in zip(ivs, got.intervals()):
         assert a["alpha_error_estimate"] is not None and 0 < a["alpha_error_estimate"] < 0.05
-        assert a["alpha_error_estimate"] == b["alpha_error_estimate"]
-        assert a["px_m_error_estimate"] == b["px_m_error_estimate"]
+        # the episode's figures are sums over its samples: chunks change only the rounding
+        assert a["alpha_error_estimate"] == pytest.approx(b["alpha_error_estimate"], rel=1e-12)
+        assert a["px_m_error_estimate"] == pytest.approx(b["px_m_error_estimate"], rel=1e-12)
 
 
 def test_gaps_from_skipped_rows_across_chunks():

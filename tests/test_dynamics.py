@@ -15,8 +15,17 @@ def three_link(floating=True):
                  base_mass_kg=2.0, base_inertia_kgm2=0.03, floating=floating)
 
 
-ROBOTS = [paper_leg(True), paper_leg(False), three_link(True), three_link(False)]
-IDS = ["leg-floating", "leg-fixed", "3link-floating", "3link-fixed"]
+def offset_link(floating=True):
+    """Centres of mass off the link axis (com_perp_m), both signs: a real robot's CAD."""
+    return Robot(lengths_m=np.array([0.3, 0.25, 0.2]), com_m=np.array([0.12, 0.1, 0.15]),
+                 com_perp_m=np.array([0.025, -0.04, 0.012]),
+                 masses_kg=np.array([1.2, 0.7, 0.4]), inertias_kgm2=np.array([0.01, 0.005, 0.002]),
+                 base_mass_kg=2.0, base_inertia_kgm2=0.03, floating=floating)
+
+
+ROBOTS = [paper_leg(True), paper_leg(False), three_link(True), three_link(False), offset_link(True),
+          offset_link(False)]
+IDS = ["leg-floating", "leg-fixed", "3link-floating", "3link-fixed", "offset-floating", "offset-fixed"]
 
 
 def _states(robot, n=20, seed=0):
@@ -76,7 +85,9 @@ def test_point_jacobian_finite_differences(robot):
 def pinocchio_model(robot):
     """The planar chain in pinocchio. Our counterclockwise angle (x right, z up) is a rotation
     about −y (a rotation about +y maps z → x), so revolute joints use the axis (0, −1, 0); the
-    links hang along −z at zero angle. Floating base: prismatic x, prismatic z, revolute −y."""
+    links hang along −z at zero angle (a body's +x then maps to n = (cos φ, sin φ), so the centre
+    of mass sits at (com_perp_m, 0, −com_m) in the joint frame). Floating base: prismatic x,
+    prismatic z, revolute −y."""
     pin = pytest.importorskip("pinocchio")
     model = pin.Model()
     axis = np.array([0.0, -1.0, 0.0])
@@ -95,7 +106,7 @@ def pinocchio_model(robot):
         parent = model.addJoint(parent, pin.JointModelRevoluteUnaligned(axis), placement, f"q{i + 1}")
         I = robot.inertias_kgm2[i]
         model.appendBodyToJoint(parent, pin.Inertia(robot.masses_kg[i],
-                                                    np.array([0.0, 0.0, -robot.com_m[i]]),
+                                                    np.array([robot.com_perp_m[i], 0.0, -robot.com_m[i]]),
                                                     np.diag([I, I, I])), pin.SE3.Identity())
         offset = robot.lengths_m[i]
     model.gravity.linear = np.array([0.0, 0.0, -robot.gravity_m_per_s2])

@@ -202,8 +202,9 @@ def test_pipeline_stance_foot_is_not_a_collision(capsys, tmp_path):
 
 
 def test_fast_least_squares_matches_generic_lstsq():
-    """The closed-form per-link fit (θ/q1 rows merged, cofactor solve) equals numpy lstsq of the
-    full weighted problem on noisy residuals, where α needs no clipping; costs agree too."""
+    """The closed-form per-link fit (cofactor solve, any positive definite weight W, e.g. the
+    inverse residual covariance) equals numpy lstsq of the whitened problem on noisy residuals,
+    where α needs no clipping; costs agree too."""
     robot = Robot(lengths_m=np.array([0.3, 0.25, 0.2]), com_m=np.array([0.12, 0.1, 0.15]),
                   masses_kg=np.array([1.2, 0.7, 0.4]), inertias_kgm2=np.array([0.01, 0.005, 0.002]),
                   base_mass_kg=2.0, base_inertia_kgm2=0.03)
@@ -213,23 +214,36 @@ def test_fast_least_squares_matches_generic_lstsq():
     q[:, :3] = rng.normal(0, 0.05, (T, 3))
     q[:, 3:] = rng.uniform(-2, 2, (T, 3))
     r = rng.normal(0, 1, (T, 6))
-    w = rng.uniform(0.5, 3.0, 6)
+    M = rng.normal(size=(6, 6))
+    W = M @ M.T + 0.5 * np.eye(6)
+    S = np.linalg.cholesky(W).T                   # Sᵀ S = W
     jx, jz = L._joints_link_major(robot, q)
-    red, wr, kappa = L._merge_hip_rows(np.ascontiguousarray(r.T), w)
     joints, _ = D.forward_kinematics(robot, q)
     for c in range(1, N + 1):
-        alpha_free, alpha, Fx, Fz, cost = L._fit_link(red, wr, jx, jz, c, N, kappa)
+        alpha_free, alpha, Fx, Fz, cost = L._fit_link(r, np.broadcast_to(W, (T, 6, 6)), jx, jz, c, N)
         A = L._link_columns(joints, c, N)
-        sw = np.sqrt(w)
         for t in range(T):
-            x, *_ = np.linalg.lstsq(sw[:, None] * A[t], sw * r[t], rcond=None)
+            x, *_ = np.linalg.lstsq(S @ A[t], S @ r[t], rcond=None)
+            e = S @ (r[t] - A[t] @ x)
             if 0 <= alpha_free[t] <= 1:
                 np.testing.assert_allclose([Fx[t], Fz[t]], x[:2], atol=1e-10)
-                e = sw * (r[t] - A[t] @ x)
                 np.testing.assert_allclose(cost[t], np.linalg.norm(e), atol=1e-10)
             else:                              # clipped: cost can only be higher than the free one
-                e = sw * (r[t] - A[t] @ x)
                 assert cost[t] >= np.linalg.norm(e) - 1e-12
+    # the compiled loop is the same solve
+    from estimator import kernels
+
+    if kernels.available():
+        ref = L.localize_dynamic(robot, q, r, weight=W)
+        kernels.ENABLED = False
+        try:
+            plain = L.localize_dynamic(robot, q, r, weight=W)
+        finally:
+            kernels.ENABLED = True
+        np.testing.assert_allclose(ref.cost, plain.cost, rtol=1e-9)
+        same = ref.link == plain.link              # else a tie: α = 1 on a link and 0 on the next
+        assert same.mean() > 0.9
+        np.testing.assert_allclose(ref.force_N[same], plain.force_N[same], rtol=1e-9, atol=1e-12)
 
 
 def test_chunked_batches_equal_single_batches():

@@ -1,4 +1,5 @@
-"""The README's examples run as written: every `$ torquebench ...` line in a ```console block.
+"""The README's examples run as written: every `$ torquebench ...` line in a ```console block of the
+README and of the documentation pages beside it (docs/*.md; the tutorials have their own test).
 
 Commands run in a scratch directory that links the shipped inputs (robots/, scenes/, examples/, ...)
 and nothing outside the repository, with a fresh `out/` for what they write; they exit 0,
@@ -19,10 +20,12 @@ SHIPPED = ("robots", "scenes", "calibration", "flexure", "bridge", "estimator", 
 
 
 def readme_commands() -> list[str]:
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
     commands = []
-    for block in re.findall(r"```console\n(.*?)```", text, flags=re.S):
-        commands += [line[2:].strip() for line in block.splitlines() if line.startswith("$ torquebench")]
+    for page in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+        text = page.read_text(encoding="utf-8")
+        for block in re.findall(r"```console\n(.*?)```", text, flags=re.S):
+            commands += [line[2:].strip() for line in block.splitlines()
+                         if line.startswith("$ torquebench") and line[2:].strip() not in commands]
     return commands
 
 

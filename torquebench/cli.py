@@ -89,6 +89,43 @@ def _quiet_broken_pipe() -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; Ctrl-C anywhere (parsing, imports, the work, the cleanup) is exit 130.
+
+    Called as the program (``argv`` None), Ctrl-C is ignored once the command has returned: the
+    interpreter's shutdown (joining worker threads, atexit handlers) runs with the default SIGINT
+    action, which would end the process by the signal with no message."""
+    try:
+        code = _main(argv)
+    except KeyboardInterrupt:
+        code = _interrupted("torquebench")
+    if argv is None:
+        _ignore_sigint()
+    return code
+
+
+def _ignore_sigint() -> None:
+    import signal
+
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except (ValueError, OSError):          # not the main thread
+        pass
+
+
+def _interrupted(where: str, note: str = "") -> int:
+    """One line, exit 130; a second Ctrl-C during the shutdown is ignored (no traceback)."""
+    import signal
+
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except (ValueError, OSError):          # not the main thread
+        pass
+    print(f"{where}: interrupted; " + (f"{note}; " if note else "")
+          + "files already written are complete, nothing was half-written", file=sys.stderr)
+    return 130
+
+
+def _main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     argv = sys.argv[1:] if argv is None else list(argv)
     if not argv:  # a bare call: show what there is to run
@@ -100,24 +137,78 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("a command is required (see torquebench --help)")
     where = f"torquebench {args.command}"
     try:
-        return int(args._run(args) or 0)
-    except KeyboardInterrupt:
-        print(f"{where}: interrupted; files already written are complete, nothing was half-written",
-              file=sys.stderr)
-        return 130
+        with _warnings_as_lines():
+            return int(args._run(args) or 0)
+    except KeyboardInterrupt as exc:
+        return _interrupted(where, str(exc))
     except BrokenPipeError:
         return _quiet_broken_pipe()
     except USER_ERRORS as exc:
-        msg = _one_line(exc)
-        if isinstance(exc, OSError) and exc.filename and str(exc.filename) not in msg:
-            msg = f"{exc.filename}: {exc.strerror}"
-        print(f"{where}: error: {msg}", file=sys.stderr)
+        print(f"{where}: error: {_user_message(exc)}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # the environment: read-only or full file system, a device, a network
+        print(f"{where}: error: {_os_message(exc)}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print(f"{where}: error: out of memory: the input or an option is too large for this machine "
+              "(see the command's --help for the options that size the work)", file=sys.stderr)
         return 2
     except UnicodeError as exc:  # UnicodeDecodeError: a binary or non-UTF-8 file given as text
         print(f"{where}: error: an input file is not UTF-8 text ({_one_line(exc)})", file=sys.stderr)
         return 2
+    except RecursionError as exc:
+        return _bug(where, exc, args.debug)
     except Exception as exc:  # noqa: BLE001 - the last line of defence
         return _bug(where, exc, args.debug)
+
+
+def _user_message(exc: BaseException) -> str:
+    msg = _one_line(exc)
+    if isinstance(exc, OSError) and exc.filename and str(exc.filename) not in msg:
+        msg = f"{exc.filename}: {exc.strerror}"
+    return msg
+
+
+def _os_message(exc: OSError) -> str:
+    """'PATH: cannot …: cause' for an OSError (the path when it has one)."""
+    import errno
+
+    cause = exc.strerror or _one_line(exc)
+    if exc.errno == errno.ENOSPC:
+        cause += " (the file system is full)"
+    elif exc.errno == errno.EROFS:
+        cause += " (mounted read-only)"
+    if exc.filename:
+        return f"{exc.filename}: {cause}"
+    return cause
+
+
+class _warnings_as_lines:
+    """Python warnings (PlausibilityWarning, …) as ``warning: MESSAGE`` lines on stderr, one line
+    each, without the source line Python adds. They are held until the command ends: printed when
+    it succeeds, dropped when it fails (an error is ONE line, not the warnings that led to it)."""
+
+    def __enter__(self):
+        import warnings
+
+        self._cm = warnings.catch_warnings()
+        self._cm.__enter__()
+        self.held: list[str] = []
+
+        def show(message, category, filename, lineno, file=None, line=None):
+            text = " ".join(str(message).split())
+            if text not in self.held:
+                self.held.append(text)
+
+        warnings.showwarning = show
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        self._cm.__exit__(exc_type, exc, tb)
+        if exc_type is None:
+            for text in self.held:
+                print(f"warning: {text}", file=sys.stderr)
+        return False
 
 
 def _bug(where: str, exc: BaseException, debug: bool) -> int:

@@ -1,6 +1,6 @@
 """Output shared by the commands: shipped files and JSON (atomic files are ``userio.files``).
 
-Contracts (DESIGN.md): files the tool writes appear whole or not at all (temp file + rename);
+Contracts (CONTRIBUTING.md, "Errors and files"): files the tool writes appear whole or not at all (temp file + rename);
 ``--json`` prints exactly one JSON object on stdout, numbers in SI units, NaN as null.
 """
 

@@ -119,7 +119,8 @@ STAGES = (
 # scene's report only when the scene computes that artifact; None: not about one scene
 REPORT_INPUTS = {"bridge": "chain", "flexure": "flexure", "fem": "flexure",
                  "calibration": "calibration", "estimator": "estimates", "detection": "estimates",
-                 "reproduction": "paper_scores", "stability": None, "error_vs_runtime": None}
+                 "reproduction": "paper_scores", "stability": None, "error_vs_runtime": None,
+                 "model_error": None}
 BY_GIVES = {s.gives: s for s in STAGES}
 ALIASES = {"sensitivity": "chain", "noise_budget": "chain"}
 DEFAULT_OUTPUTS = ("localization_error", "predicted_error")
@@ -201,7 +202,8 @@ def _params(scene, stage: str, seed) -> dict:
     if stage == "calibrated_torques":
         return {"cal": _file_hash(c.calibration_file)}
     if stage in ("estimates", "localization_error", "predicted_error"):
-        return {"est": _canon(scene.estimator), "poke": _canon(scene.sim.pokes if scene.sim else None)}
+        return {"est": _canon(scene.estimator), "poke": _canon(scene.sim.pokes if scene.sim else None),
+                "robot": _canon(scene.robot)}        # the file the estimator reads
     return {}
 
 
@@ -500,7 +502,7 @@ def run_estimates(scene, inp):
     from estimator.pipeline import estimate
 
     rd, tq = inp["readings"], inp["torques"]
-    robot = scene.robot if scene.sim is None else scene.sim.robot
+    robot = scene.robot                 # the file the estimator reads (the simulation: sim.robot)
     tau = tq["tau_Nm"]
     keep = np.all(np.isfinite(tau), axis=1)             # flagged samples stay out of detection
     log = SensorLog(t=rd["t"][keep], q=rd["q"][keep], dq=rd["dq"][keep], tau_Nm=tau[keep],
@@ -542,8 +544,11 @@ def run_localization_error(scene, inp):
 
 def run_predicted_error(scene, inp, draws=2000):
     """Monte Carlo (estimator.uncertainty) at the mean posture of the collision phase, with the
-    chain's σ_τ and the calibration's relative slope uncertainty; MC standard error of the RMS
-    from the draws (σ_RMS ≈ RMS·√(kurtosis-1)/(2√n) estimated by the delta method)."""
+    chain's σ_τ, the calibration's relative slope uncertainty and the robot file's parameter
+    uncertainty (its identification or declared [model_uncertainty]: estimator.model_error);
+    MC standard error of the RMS from the draws (σ_RMS ≈ RMS·√(kurtosis-1)/(2√n) estimated by
+    the delta method)."""
+    from estimator.model_error import resolve
     from estimator.uncertainty import SensorNoise, monte_carlo
 
     chain, cal = inp["chain"], inp.get("calibration")
@@ -561,10 +566,12 @@ def run_predicted_error(scene, inp, draws=2000):
     noise = SensorNoise(torque_std_Nm=chain.noise_std_Nm, wrench_std=cfg.sensors.ft_noise,
                         torque_gain_rel_std=gain_rel, sample_rate_Hz=cfg.sensors.sample_rate_Hz,
                         gain_per_s=scene.estimator.gain_per_s)
+    cov, cov_source = resolve(scene.robot)
     out = {"torque_noise_std_Nm": chain.noise_std_Nm, "gain_error_rel_std": gain_rel,
-           "posture_rad": q.tolist()}
+           "posture_rad": q.tolist(), "model_uncertainty_source": cov_source}
     for m in METHODS:
-        mc = monte_carlo(cfg.robot, q, poke.link, poke.alpha, force, noise, draws=draws, rng=0, method=m)
+        mc = monte_carlo(scene.robot, q, poke.link, poke.alpha, force, noise, draws=draws, rng=0,
+                         method=m, parameter_cov=cov)
         rms = float(mc.position_rms_m[0])
         out[m] = {"position_rms_m": rms, "position_p95_m": float(mc.position_p95_m[0]),
                   "position_rms_m_error_estimate": rms / math.sqrt(2 * draws),
@@ -627,30 +634,70 @@ def run_paper_scores(scene, inp):
     return rr.evaluate_dynamic(scene, res, chain=inp.get("chain"))
 
 
+def calibration_noise(cal, chain=None) -> tuple[float, str, list]:
+    """σ_τ of one torque reading from a calibration: its reading noise through its slope,
+    σ_τ = σ_reading / |slope| · 10⁻³ g L (N·m), and how it compares with the sensor chain's noise
+    budget and sensitivity (a warning when they differ by more than 2×: another sensor, another
+    unit, or readings averaged over several ADC samples)."""
+    i = list(cal.coef_names).index("slope")
+    slope = abs(float(cal.coef_mean[i]))
+    per_Nm = slope / cal._torque_per_g()                 # reading units per N·m
+    sigma = float(cal.sigma) / per_Nm
+    source = (f"the calibration's reading noise ({cal.sigma:.3g} {cal.reading_unit or 'reading units'} "
+              f"through its slope, {cal.source})")
+    warnings = []
+    if chain is not None:
+        ratio = sigma / chain.noise_std_Nm
+        if not 0.5 <= ratio <= 2.0:
+            warnings.append(f"the calibration's σ_τ {sigma:.3g} N·m is {ratio:.2g}× the sensor chain's "
+                            f"{chain.noise_std_Nm:.3g} N·m: is the chain (sensor file, strain per N·m) "
+                            f"this sensor's, or were its readings averages of several samples?")
+        if cal.reading_unit == "counts":
+            s_ratio = per_Nm / abs(chain.counts_per_Nm)
+            if not 0.5 <= s_ratio <= 2.0:
+                warnings.append(f"the calibration's sensitivity {per_Nm:.4g} counts/N·m is {s_ratio:.2g}× "
+                                f"the sensor chain's {abs(chain.counts_per_Nm):.4g}")
+    return sigma, source, warnings
+
+
 def run_error_map(scene, inp):
     """Localization error over the posture grid q ∈ [0, π]^n (estimator.uncertainty): Monte Carlo
     and first order, per method, with σ_τ from the sensor chain (or given), the calibration's
-    relative slope std as a gain error (or given) and the FT noise."""
+    relative slope std as a gain error (or given), the FT noise and the robot's parameter
+    uncertainty (given, else the robot file's identification or declared uncertainty)."""
     from estimator.uncertainty import SensorNoise, first_order, monte_carlo
 
     pr, robot = scene.prediction, scene.robot
-    sigma_tau = pr.torque_noise_Nm if pr.torque_noise_Nm is not None else inp["chain"].noise_std_Nm
+    cal, chain = inp.get("calibration"), inp.get("chain")
+    sigma_tau, tau_source, warnings = pr.torque_noise_Nm, "given", []
+    if sigma_tau is None and cal is not None and cal.lever_arm_m is not None:
+        sigma_tau, tau_source, warnings = calibration_noise(cal, chain)
+    elif sigma_tau is None:
+        sigma_tau, tau_source = chain.noise_std_Nm, "the sensor chain's noise budget"
     gain_error = pr.gain_error
-    if gain_error is None and inp.get("calibration") is not None:
-        cal = inp["calibration"]
+    if gain_error is None and cal is not None:
         i = list(cal.coef_names).index("slope")
         gain_error = math.sqrt(cal.coef_cov[i, i]) / abs(cal.coef_mean[i])
     noise = SensorNoise(torque_std_Nm=sigma_tau, wrench_std=list(pr.ft_noise),
                         torque_gain_rel_std=gain_error or 0.0, sample_rate_Hz=pr.sample_rate_Hz,
                         gain_per_s=pr.gain_per_s)
     force = pr.magnitude_N * np.array([math.cos(pr.direction_rad), math.sin(pr.direction_rad)])
+    from estimator.model import ModelUncertainty
+    from estimator.model_error import resolve
+
+    mu = pr.model_uncertainty
+    cov, cov_source = resolve(robot, None if mu is None else
+                              (ModelUncertainty.uniform(mu) if mu > 0 else False))
     axes = [np.linspace(0.0, math.pi, pr.grid)] * robot.n_links
     postures = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, robot.n_links)
-    out = {"noise": noise, "axes": axes, "postures": len(postures), "methods": {}, "maps": {}}
+    out = {"noise": noise, "axes": axes, "postures": len(postures), "methods": {}, "maps": {},
+           "model_uncertainty_source": cov_source, "torque_noise_source": tau_source,
+           "warnings": warnings}
     for method in METHODS:
         mc = monte_carlo(robot, postures, pr.link, pr.alpha, force, noise, draws=pr.draws,
-                         rng=pr.seed, method=method)
-        fo = first_order(robot, postures, pr.link, pr.alpha, force, noise, method=method)
+                         rng=pr.seed, method=method, parameter_cov=cov)
+        fo = first_order(robot, postures, pr.link, pr.alpha, force, noise, method=method,
+                         parameter_cov=cov)
         usable = mc.flagged_fraction < 0.05
         pos = mc.position_rms_m[usable]
         ratio = mc.position_rms_m[usable] / fo.position_rms_m[usable]
@@ -673,7 +720,27 @@ def run_error_map(scene, inp):
             "monte_carlo_over_first_order_median": float(np.median(ratio)) if pos.size else None,
         }
         out["maps"][method] = np.where(usable, mc.position_rms_m, np.nan)
+    out["bounds"] = bound_maps(robot, postures, pr, sigma_tau)
     return out
+
+
+def bound_maps(robot, postures, pr, sigma_tau) -> dict:
+    """The Cramér–Rao bound and our estimator's predicted error over the postures × force
+    directions (estimator.bound_maps), the scene's direction first; {} with a reason when a zero
+    σ leaves nothing to whiten."""
+    from estimator.bound_maps import localization_maps
+    from estimator.noise import NoiseModel
+
+    if not (sigma_tau > 0 and all(v > 0 for v in pr.ft_noise)):
+        return {"reason": "a zero sensor σ: the residual cannot be whitened, no bound"}
+    dirs = pr.direction_rad + 2 * math.pi * np.arange(pr.directions) / pr.directions
+    dirs = (dirs + math.pi) % (2 * math.pi) - math.pi
+    noise = NoiseModel(torque_sigma_Nm=[sigma_tau], ft_sigma=list(pr.ft_noise))
+    m = localization_maps(robot, postures, pr.link, pr.alpha, pr.magnitude_N, dirs, noise,
+                          pr.gain_per_s, 1.0 / pr.sample_rate_Hz, pr.hold_s,
+                          draws=min(pr.draws, 200), seed=pr.seed)
+    m["directions_rad"] = dirs
+    return m
 
 
 def run_report(scene, inp):
@@ -690,7 +757,7 @@ def run_report(scene, inp):
     written = {}
     for area in areas:
         written[area] = [str(p) for p in importlib.import_module(f"torquebench.reports.{area}").build(out_dir)]
-    summary = out_dir / f"{scene.name}.md"
+    summary = out_dir / summary_name(scene)
     write_text_atomic(summary, scene_summary(scene, inp))
     return {"dir": str(out_dir), "areas": areas, "written": written, "summary": str(summary)}
 
@@ -774,10 +841,20 @@ def _feasible(scene, art: str) -> str | None:
 
 
 def report_dir(scene) -> Path:
-    """Where the scene's reports go: [outputs].dir, else ./out/<scene name> (never the shipped
-    reports/ unless [outputs].regenerate_shipped)."""
+    """Where the scene's reports go: [outputs].dir, else ./out/<scene name as a safe file stem>
+    (never the shipped reports/ unless [outputs].regenerate_shipped)."""
+    from userio.outputs import safe_stem
+
     d = scene.chain.report_dir
-    return Path(d) if d is not None else Path("out") / scene.name
+    return Path(d) if d is not None else Path("out") / safe_stem(scene.name, "scene")
+
+
+def summary_name(scene) -> str:
+    """The scene summary's file name: ``<scene name as a safe file stem>.md`` (a name like
+    "../x" or "notes" never leaves the report directory nor takes another file's name there)."""
+    from userio.outputs import safe_stem
+
+    return f"{safe_stem(scene.name, 'scene')}.md"
 
 
 def report_areas(scene, have: set) -> tuple[list[str], list[tuple[str, str]]]:

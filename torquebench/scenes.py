@@ -14,6 +14,7 @@ Every error is a torquebench.errors.InputError naming the file and the field.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -21,9 +22,12 @@ import numpy as np
 
 from estimator.robot import Robot, load_robot
 from estimator.sim.config import (INTEGRATORS, Controller, Ground, Poke, Sensors, SimConfig)
+from estimator.limits import ALPHA_RANGE, FORCE_RANGE, GAIN_RANGE, SAMPLE_RATE_RANGE, THRESHOLD_RANGE
+from estimator.noise import FT_SIGMA_RANGE, TORQUE_SIGMA_RANGE
 from torquebench.errors import InputError
 from torquebench.io import REPO_ROOT
 from userio.fields import Fields as _Fields
+from userio.fields import Range, ranged
 from userio.files import read_toml
 
 G_M_PER_S2 = 9.81
@@ -40,8 +44,8 @@ class EstimatorSettings:
     state the noise of a recorded log, whose sensors the scene does not describe)."""
 
     method: str = "dynamic"
-    gain_per_s: float = 100.0
-    threshold: float | None = None
+    gain_per_s: float = ranged(100.0, GAIN_RANGE)
+    threshold: float | None = ranged(None, THRESHOLD_RANGE)
     false_alarm_rate: tuple = (1.0, "h")
     quiet_window_s: tuple | None = None
 
@@ -104,20 +108,25 @@ class PredictionSpec:
     """A posture-grid localization-error prediction (what `propagate` asks): contact (link, α),
     force (magnitude, direction from +x), ``grid`` postures per joint over [0, π], Monte Carlo
     ``draws`` and ``seed``, sample rate, observer gain, FT noise σ (Fx, Fz, My); an optional
-    given joint-torque σ (else the sensor chain's) and gain error (else the calibration's)."""
+    given joint-torque σ (else the sensor chain's) and gain error (else the calibration's), the
+    robot's model uncertainty; the bound maps' hold time and number of force directions."""
 
     link: int
-    alpha: float
-    magnitude_N: float
-    direction_rad: float
-    grid: int = 10
-    draws: int = 500
+    alpha: float = ranged(0.8, ALPHA_RANGE)
+    magnitude_N: float = ranged(7.0, FORCE_RANGE)
+    direction_rad: float = 0.0
+    grid: int = ranged(10, Range(1, 1000, "postures per joint"))
+    draws: int = ranged(500, Range(2, 1e7, "draws per posture"))
     seed: int = 0
-    sample_rate_Hz: float = 1000.0
-    gain_per_s: float = 100.0
-    ft_noise: tuple = (0.1, 0.1, 0.01)
-    torque_noise_Nm: float | None = None
-    gain_error: float | None = None
+    sample_rate_Hz: float = ranged(1000.0, SAMPLE_RATE_RANGE)
+    gain_per_s: float = ranged(100.0, GAIN_RANGE)
+    ft_noise: tuple = ranged((0.1, 0.1, 0.01), FT_SIGMA_RANGE)
+    torque_noise_Nm: float | None = ranged(None, TORQUE_SIGMA_RANGE)
+    gain_error: float | None = ranged(None, Range(0.0, 1.0, "(relative)"))
+    model_uncertainty: float | None = ranged(None, Range(0.0, 1.0, "(relative)"))   # 1σ of the
+    # inertial data (0: none; None: the robot file's identification or [model_uncertainty])
+    hold_s: float = 0.5                  # the episode bound's hold time (estimator.bound_maps)
+    directions: int = 24                 # force directions of the bound maps
 
 
 @dataclass(frozen=True)
@@ -133,22 +142,91 @@ class Scene:
     robot: Robot | None = None
     prediction: PredictionSpec | None = None
     max_run_time_s: float = 600.0          # a run limit, not an input: not part of any cache key
+    robot_file: Path | None = None         # the robot TOML the scene named (an input of the run)
 
 
-def _resolve_robot(f: _Fields, data: dict) -> Robot:
+def scene_inputs(scene: Scene) -> list[tuple[str, Path]]:
+    """Every file a run of ``scene`` reads, labelled by its field (for the output policy,
+    userio.outputs: none of them may be written): the scene, its robot, flexure design, sensor and
+    calibration files, and a recorded log with its side files (LOG.timing.toml, LOG.noise.toml)."""
+    from userio.outputs import log_side_files
+
+    ch = scene.chain
+    items = [("scene", scene.path), ("robot", scene.robot_file), ("flexure.design", ch.flexure_design),
+             ("sensor.file", ch.sensor_file), ("calibration.file", ch.calibration_file),
+             ("source.log", ch.log_file)]
+    if ch.log_file is not None:
+        items += [("source.log's side file", p) for p in log_side_files(ch.log_file)]
+    return [(label, Path(p)) for label, p in items if p is not None and not str(p).startswith("<")]
+
+
+def _robot_path(f: _Fields, data: dict) -> Path | None:
+    """The robot file a scene names, resolved as ``_resolve_robot`` resolves it (None: not found)."""
     name = data.get("robot", "paper_leg.toml")
-    if isinstance(name, dict):                       # [robot] file = "..."
-        f.known(name, {"file"}, "robot")
-        name = f.string(name, "file", "robot", "paper_leg.toml")
+    if isinstance(name, dict):
+        name = name.get("file", "paper_leg.toml")
     if not isinstance(name, str):
-        raise f.err("robot", f"expected a file name, got {name!r}")
+        return None
+    for cand in (f.path.parent / name, REPO_ROOT / "robots" / name, Path(name)):
+        if cand.is_file():
+            return cand
+    return None
+
+
+ROBOT_KEYS = {"file", "true_parameters", "perturbation", "perturbation_seed"}
+
+
+def _robot_file(f: _Fields, name, where: str) -> Robot:
+    if not isinstance(name, str):
+        raise f.err(where, f"expected a file name, got {name!r}")
     for cand in (f.path.parent / name, REPO_ROOT / "robots" / name, Path(name)):
         if cand.is_file():
             try:
                 return load_robot(cand)
             except InputError as exc:
-                raise InputError(f"{f.path}: robot: {exc}") from None
-    raise f.err("robot", f"file {name!r} not found beside the scene or in robots/")
+                raise InputError(f"{f.path}: {where}: {exc}") from None
+    raise f.err(where, f"file {name!r} not found beside the scene or in robots/")
+
+
+def _resolve_robot(f: _Fields, data: dict) -> Robot:
+    """The robot file the estimator reads: ``robot = "x.toml"`` or ``[robot] file = "x.toml"``."""
+    name = data.get("robot", "paper_leg.toml")
+    if isinstance(name, dict):                       # [robot] file = "..."
+        f.known(name, ROBOT_KEYS, "robot")
+        name = f.string(name, "file", "robot", "paper_leg.toml")
+    return _robot_file(f, name, "robot")
+
+
+def _true_robot(f: _Fields, data: dict, robot: Robot, kind: str) -> Robot:
+    """The robot the simulator simulates: the file's, or (a dynamic scene's [robot] table)
+    ``true_parameters = "other.toml"`` (same links, other inertial data) or a ``perturbation``
+    (relative 1σ of masses, inertias and, × link length, centres of mass; drawn with
+    ``perturbation_seed``, estimator.inertial.perturbed)."""
+    from estimator.inertial import perturbed
+    from estimator.model import ModelUncertainty
+
+    t = data.get("robot")
+    if not isinstance(t, dict) or not (set(t) & {"true_parameters", "perturbation"}):
+        if isinstance(t, dict) and "perturbation_seed" in t:
+            raise f.err("robot.perturbation_seed", "is the seed of a perturbation; set robot.perturbation")
+        return robot
+    if kind != "dynamic":
+        raise f.err("robot", "true_parameters / perturbation: only a dynamic scene simulates a "
+                    "robot other than its file")
+    if "true_parameters" in t and "perturbation" in t:
+        raise f.err("robot.perturbation", "give either true_parameters or a perturbation, not both")
+    if "true_parameters" in t:
+        true = _robot_file(f, t["true_parameters"], "robot.true_parameters")
+        if true.n_links != robot.n_links or not np.allclose(true.lengths_m, robot.lengths_m):
+            raise f.err("robot.true_parameters", f"{true.name} has links {true.lengths_m.tolist()} m, "
+                        f"the file {robot.name} {robot.lengths_m.tolist()} m: only inertial data "
+                        "may differ")
+        from dataclasses import replace
+
+        return replace(true, floating=robot.floating)
+    rel = f.number(t, "perturbation", "robot", lo=0.0, hi=0.5)
+    seed = f.integer(t, "perturbation_seed", "robot", 0, lo=0)
+    return perturbed(robot, ModelUncertainty.uniform(rel), seed) if rel > 0 else robot
 
 
 def _sensors(f: _Fields, data: dict) -> Sensors:
@@ -164,14 +242,14 @@ def _sensors(f: _Fields, data: dict) -> Sensors:
     seed = t.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise f.err("sensors.seed", f"expected an integer ≥ 0, got {seed!r}")
-    return Sensors(
+    return f.ranges(Sensors(
         sample_rate_Hz=f.number(t, "sample_rate_Hz", "sensors", 1000.0, positive=True),
         torque_model=f.choice(t, "torque_model", "sensors", ("gaussian", "bridge"), "gaussian"),
         torque_noise_Nm=f.number(t, "torque_noise_Nm", "sensors", 0.01, nonneg=True),
         ft_noise=f.vector(t, "ft_noise", "sensors", 3, [0.1, 0.1, 0.01], nonneg=True),
         encoder_counts=counts,
         velocity_noise_rad_per_s=f.number(t, "velocity_noise_rad_per_s", "sensors", 0.0, nonneg=True),
-        seed=seed)
+        seed=seed), "sensors")
 
 
 def _estimator(f: _Fields, data: dict) -> EstimatorSettings:
@@ -188,12 +266,12 @@ def _estimator(f: _Fields, data: dict) -> EstimatorSettings:
     rate_Hz = f.number(data.get("sensors", {}) if isinstance(data.get("sensors"), dict) else {},
                        "sample_rate_Hz", "sensors", 1000.0, positive=True)
     per_sample_rate(*rate, 1.0 / rate_Hz, where)           # (0, 1) per sample, or one line
-    return EstimatorSettings(
+    return f.ranges(EstimatorSettings(
         method=f.choice(t, "method", "estimator", ("dynamic", "paper"), "dynamic"),
         gain_per_s=f.number(t, "gain_per_s", "estimator", 100.0, positive=True),
         threshold=f.number(t, "threshold", "estimator", None, positive=True) if "threshold" in t
         else None,
-        false_alarm_rate=rate, quiet_window_s=_quiet_window(f, t))
+        false_alarm_rate=rate, quiet_window_s=_quiet_window(f, t)), "estimator")
 
 
 def _quiet_window(f: _Fields, t: dict) -> tuple | None:
@@ -226,9 +304,30 @@ def _poke(f: _Fields, p: dict, where: str, n_links: int, duration: float) -> Pok
     t_off = f.number(p, "t_off_s", where, duration, nonneg=True)
     if t_off < t_on:
         raise f.err(f"{where}.t_off_s", f"must be ≥ t_on_s = {t_on}, got {t_off}")
-    return Poke(link=link, alpha=f.number(p, "alpha", where, lo=0.0, hi=1.0), magnitude_N=mag,
-                direction_rad=direction, t_on_s=t_on, t_off_s=t_off,
-                ramp_s=f.number(p, "ramp_s", where, 0.0, nonneg=True))
+    if t_on >= duration:
+        raise f.err(f"{where}.t_on_s", f"{t_on:g} s starts at or after the end of the simulation "
+                    f"(duration_s = {duration:g} s): the poke would never act; start it earlier or "
+                    "lengthen duration_s")
+    return f.ranges(Poke(link=link, alpha=f.number(p, "alpha", where, lo=0.0, hi=1.0), magnitude_N=mag,
+                         direction_rad=direction, t_on_s=t_on, t_off_s=t_off,
+                         ramp_s=f.number(p, "ramp_s", where, 0.0, nonneg=True)), where,
+                    {"magnitude_N": "mass_kg × g" if "mass_kg" in p else "magnitude_N"})
+
+
+def _harmonics(f: _Fields, c: dict, key: str, n: int, H=None, default=None, nonneg=False):
+    """[controller] amplitude_rad / frequency_Hz / phase_rad: one number per joint, or per joint a
+    list of H harmonics (a Fourier excitation); a list of lists must match the amplitudes' shape."""
+    v = c.get(key)
+    if v is None and default is not None:
+        return np.asarray(default, float)
+    if isinstance(v, list) and v and all(isinstance(row, list) for row in v):
+        if len(v) != n:
+            raise f.err(f"controller.{key}", f"expected {n} rows (one per joint), got {len(v)}")
+        width = H if H else len(v[0])                 # every joint: the same harmonics
+        return np.stack([f.vector({key: row}, key, "controller", width, nonneg=nonneg) for row in v])
+    if H is not None:
+        raise f.err(f"controller.{key}", f"expected {n} lists of {H} harmonics (as amplitude_rad)")
+    return f.vector(c, key, "controller", n, default, nonneg=nonneg)
 
 
 def _dynamic(f: _Fields, data: dict, robot: Robot, name: str) -> SimConfig:
@@ -240,19 +339,21 @@ def _dynamic(f: _Fields, data: dict, robot: Robot, name: str) -> SimConfig:
                 "phase_rad", "gravity_compensation"}, "controller")
     traj = {}
     if any(k in c for k in ("amplitude_rad", "frequency_Hz", "phase_rad")):
-        traj = dict(amplitude_rad=f.vector(c, "amplitude_rad", "controller", n),
-                    frequency_Hz=f.vector(c, "frequency_Hz", "controller", n, nonneg=True),
-                    phase_rad=f.vector(c, "phase_rad", "controller", n, np.zeros(n)))
+        amp = _harmonics(f, c, "amplitude_rad", n)
+        H = amp.shape[1] if amp.ndim == 2 else None
+        traj = dict(amplitude_rad=amp,
+                    frequency_Hz=_harmonics(f, c, "frequency_Hz", n, H, nonneg=True),
+                    phase_rad=_harmonics(f, c, "phase_rad", n, H, np.zeros(amp.shape)))
     gc = c.get("gravity_compensation", False)
     if not isinstance(gc, bool):
         raise f.err("controller.gravity_compensation", f"expected true or false, got {gc!r}")
-    controller = Controller(
+    controller = f.ranges(Controller(
         q0_rad=f.vector(c, "q0_rad", "controller", n),
         kp=f.number(c, "kp", "controller", 500.0, nonneg=True),
         kd=f.number(c, "kd", "controller", 10.0, nonneg=True),
         mode=f.choice(c, "mode", "controller", ("continuous", "zoh"), "continuous"),
         rate_Hz=f.number(c, "rate_Hz", "controller", 1000.0, positive=True),
-        gravity_compensation=gc, **traj)
+        gravity_compensation=gc, **traj), "controller")
     pokes_raw = data.get("poke", [])
     if not isinstance(pokes_raw, list):
         raise f.err("poke", "expected [[poke]] tables")
@@ -270,14 +371,14 @@ def _dynamic(f: _Fields, data: dict, robot: Robot, name: str) -> SimConfig:
             raise f.err("ground", "expected a table")
         f.known(g, {"height_m", "stiffness_N_per_m", "damping_Ns_per_m",
                     "tangential_stiffness_N_per_m", "friction_coefficient"}, "ground")
-        ground = Ground(
+        ground = f.ranges(Ground(
             height_m=f.number(g, "height_m", "ground", 0.0),
             stiffness_N_per_m=f.number(g, "stiffness_N_per_m", "ground", 2e4, positive=True),
             damping_Ns_per_m=f.number(g, "damping_Ns_per_m", "ground", 200.0, nonneg=True),
             tangential_stiffness_N_per_m=f.number(g, "tangential_stiffness_N_per_m", "ground",
                                                   2e4, positive=True),
             friction_coefficient=f.number(g, "friction_coefficient", "ground",
-                                          robot.friction_coefficient, nonneg=True))
+                                          robot.friction_coefficient, nonneg=True)), "ground")
         if base == "rigid":
             raise f.err("ground", "a ground contact needs base = \"floating\" or \"fixed\"")
     it = f.table(data, "integrator")
@@ -286,16 +387,25 @@ def _dynamic(f: _Fields, data: dict, robot: Robot, name: str) -> SimConfig:
     f.known(m, {"stiffness", "damping"}, "mount")
     if m and base == "rigid":
         raise f.err("mount", "a rigid base has no mount springs")
-    return SimConfig(
+    sensors = _sensors(f, data)
+    if controller.frequency_Hz is not None:
+        nyq = 0.5 * sensors.sample_rate_Hz
+        f_max = float(np.max(controller.frequency_Hz))       # every joint's every harmonic
+        if f_max >= nyq:
+            raise f.err("controller.frequency_Hz", f"{f_max:g} Hz is at or above the "
+                        f"log's Nyquist frequency {nyq:g} Hz (sensors.sample_rate_Hz = "
+                        f"{sensors.sample_rate_Hz:g}): the motion could not be sampled")
+    return f.ranges(SimConfig(
         robot=robot, controller=controller, base=base, duration_s=duration, pokes=pokes,
-        ground=ground, sensors=_sensors(f, data),
+        ground=ground, sensors=sensors,
         integrator=f.choice(it, "method", "integrator", INTEGRATORS, "BDF"),
         rtol=f.number(it, "rtol", "integrator", 1e-6, lo=1e-13, hi=1e-2),   # a 1 %
         atol=f.number(it, "atol", "integrator", 1e-8, positive=True, hi=1e-2),  # cap, ≥ 100 eps
         fixed_step_s=f.number(it, "fixed_step_s", "integrator", 5e-5, positive=True),
         mount_stiffness=f.vector(m, "stiffness", "mount", 3, nonneg=True) if m else None,
         mount_damping=f.vector(m, "damping", "mount", 3, nonneg=True) if m else None,
-        name=name)
+        name=name), "", {"mount_stiffness": "mount.stiffness", "mount_damping": "mount.damping",
+                         "fixed_step_s": "integrator.fixed_step_s"})
 
 
 def _static(f: _Fields, data: dict, robot: Robot, name: str, kind: str) -> StaticScene:
@@ -365,6 +475,7 @@ def _static(f: _Fields, data: dict, robot: Robot, name: str, kind: str) -> Stati
 OUTPUTS = ("sensitivity", "noise_budget", "flexure", "calibration", "estimates",
            "localization_error", "predicted_error", "report")
 SESSION_KEYS = {"masses_g", "lever_arm_m", "repeats", "n_avg", "seed"}
+MAX_SESSION_SAMPLES = 2e7            # ADC codes a simulated calibration session draws (160 MB)
 
 
 def _file(f: _Fields, table: dict, key: str, where: str, shipped: str) -> Path:
@@ -401,11 +512,23 @@ def _chain_spec(f: _Fields, data: dict, kind: str) -> ChainSpec:
                           default=[10, 20, 50, 100, 200, 300, 500, 700, 850, 1000])
         if masses.size < 3:
             raise f.err("calibration.masses_g", f"need at least 3 load levels, got {masses.size}")
+        from calibration.session import LEVER_ARM_RANGE_M, MASS_RANGE_G
+
+        for m_g in masses:
+            if MASS_RANGE_G.problem(float(m_g)):
+                raise f.err("calibration.masses_g", MASS_RANGE_G.problem(float(m_g)))
         session = {"masses_g": masses.tolist(),
                    "lever_arm_m": f.number(ca, "lever_arm_m", "calibration", 0.205, positive=True),
-                   "repeats": f.integer(ca, "repeats", "calibration", 3, lo=1),
-                   "n_avg": f.integer(ca, "n_avg", "calibration", 256, lo=1),
+                   "repeats": f.integer(ca, "repeats", "calibration", 3, lo=1, hi=10_000),
+                   "n_avg": f.integer(ca, "n_avg", "calibration", 256, lo=1, hi=10_000_000),
                    "seed": f.integer(ca, "seed", "calibration", 0, lo=0)}
+        if LEVER_ARM_RANGE_M.problem(session["lever_arm_m"]):
+            raise f.err("calibration.lever_arm_m", LEVER_ARM_RANGE_M.problem(session["lever_arm_m"]))
+        n = len(masses) * session["repeats"] * session["n_avg"]
+        if n > MAX_SESSION_SAMPLES:          # the simulated session holds every ADC code at once
+            raise f.err("calibration.n_avg", f"{len(masses)} masses × {session['repeats']} repeats × "
+                        f"n_avg {session['n_avg']} = {n:.3g} ADC samples ({8 * n / 2**30:.3g} GiB) to "
+                        f"simulate, above {MAX_SESSION_SAMPLES:.0e}; lower n_avg or repeats")
     so = f.table(data, "source")
     f.known(so, {"log", "counts_columns", "reading_unit"}, "source")
     log_file = _file(f, so, "log", "source", "samples") if "log" in so else None
@@ -520,9 +643,7 @@ def set_key(data: dict, key: str, value, path) -> None:
 def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
     """Read and validate a scene file (``overrides``: dotted keys set before validation)."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: scene file not found")
-    data = read_toml(path)
+    data = read_toml(path)                         # a regular file: not found, a directory or a device say so
     for key, value in (overrides or {}).items():
         set_key(data, key, value, path)
     f = _Fields(path)
@@ -535,23 +656,31 @@ def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
         raise f.err("name", f"expected a string, got {name!r}")
     kind = f.choice(data, "kind", "", KINDS, "dynamic")
     robot = _resolve_robot(f, data)
+    true_robot = _true_robot(f, data, robot, kind)
     desc = str(data.get("description", ""))
     est = _estimator(f, data)
     chain = _chain_spec(f, data, kind)
+    rfile = _robot_path(f, data)
     if kind == "dynamic" and chain.log_file is not None:
         sim_keys = sorted(set(data) & {"controller", "poke", "ground", "integrator", "mount"})
         if sim_keys:
             raise f.err(sim_keys[0], "a scene with a recorded log (source.log) has no simulation keys")
-        return Scene(name, kind, path, desc, None, None, est, chain, robot)
+        return Scene(name, kind, path, desc, None, None, est, chain, robot, robot_file=rfile)
     if kind == "dynamic":
-        return Scene(name, kind, path, desc, _dynamic(f, data, robot, name), None, est, chain, robot)
-    return Scene(name, kind, path, desc, None, _static(f, data, robot, name, kind), est, chain, robot)
+        return Scene(name, kind, path, desc, _dynamic(f, data, true_robot, name), None, est, chain,
+                     robot, robot_file=rfile)
+    return Scene(name, kind, path, desc, None, _static(f, data, robot, name, kind), est, chain, robot,
+                 robot_file=rfile)
 
 
 def scene_path(name: str) -> Path:
     """A shipped scene by name (``paper_floating_link1``) or a path."""
+    from userio.files import check_input
+
     p = Path(name)
-    if p.suffix == ".toml" and p.is_file():
+    if os.path.lexists(p) and (p.suffix == ".toml" or os.sep in str(name) or not p.is_file()):
+        return check_input(p, what="scene TOML")            # a path the user named: what it is
+    if p.is_file():
         return p
     cand = REPO_ROOT / "scenes" / (name if name.endswith(".toml") else f"{name}.toml")
     if not cand.is_file():
@@ -562,7 +691,13 @@ def scene_path(name: str) -> Path:
 def prediction_scene(robot: Robot, chain: ChainSpec, prediction: PredictionSpec,
                      name: str = "propagate") -> Scene:
     """A scene with no simulation that asks for a posture-grid prediction (built by `propagate`
-    from its options)."""
+    from its options; every setting inside its physical range, named by its option)."""
+    from userio.fields import check_ranges
+
+    check_ranges(prediction, keys={"alpha": "--contact (α)", "magnitude_N": "--force (magnitude)",
+                                   "grid": "--grid", "draws": "--draws", "sample_rate_Hz": "--rate",
+                                   "gain_per_s": "--gain", "ft_noise": "--ft-noise",
+                                   "torque_noise_Nm": "--torque-noise-Nm", "gain_error": "--gain-error"})
     return Scene(name, "prediction", Path(f"<{name} options>"), "", None, None,
                  chain=chain, robot=robot, prediction=prediction)
 

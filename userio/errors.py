@@ -45,3 +45,30 @@ def seed(value, name: str = "--seed"):
     if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2 ** 63:
         raise InputError(f"{name}: must be an integer in [0, 2^63), got {value!r}")
     return value
+
+
+class CallbackInterrupt:
+    """Ctrl-C inside a Python callback that C code calls (gmsh's mesh-size callback): ctypes would
+    print the KeyboardInterrupt with a traceback and swallow it, and the C code would carry on or
+    fail with an unrelated error. ``wrap(fn, abort_value)`` records the interrupt and returns
+    ``abort_value`` (which makes the C code stop) from then on; ``check()``, called once the C call
+    has returned or failed, re-raises it as a plain KeyboardInterrupt."""
+
+    def __init__(self):
+        self.hit = False
+
+    def wrap(self, fn, abort_value):
+        def guarded(*args):
+            if self.hit:
+                return abort_value
+            try:
+                return fn(*args)
+            except KeyboardInterrupt:
+                self.hit = True
+                return abort_value
+        return guarded
+
+    def check(self) -> None:
+        if self.hit:
+            self.hit = False
+            raise KeyboardInterrupt

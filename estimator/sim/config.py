@@ -1,6 +1,6 @@
 """Simulation configuration: what a scene file describes once validated.
 
-Units are SI; angles follow DESIGN.md (from the downward vertical, counterclockwise-positive).
+Units are SI; angles follow docs/conventions.md (from the downward vertical, counterclockwise-positive).
 """
 
 from __future__ import annotations
@@ -10,7 +10,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from estimator.limits import ALPHA_RANGE, FORCE_RANGE, SAMPLE_RATE_RANGE
 from estimator.robot import Robot
+from userio.fields import Range, ranged
+
+TWO_PI = 2 * math.pi
+ANGLE_RANGE = Range(-TWO_PI, TWO_PI, "rad", low="degrees typed as rad?", high="degrees typed as rad?")
+TIME_RANGE = Range(0.0, 1e6, "s", high="a simulated run of more than 11 days")
 
 INTEGRATORS = ("RK45", "DOP853", "Radau", "BDF", "LSODA", "RK4")
 ADAPTIVE = ("RK45", "DOP853", "Radau", "BDF", "LSODA")
@@ -27,12 +33,12 @@ class Poke:
     """
 
     link: int
-    alpha: float
-    magnitude_N: float
-    direction_rad: float
-    t_on_s: float
-    t_off_s: float
-    ramp_s: float = 0.0
+    alpha: float = ranged(0.5, ALPHA_RANGE)
+    magnitude_N: float = ranged(0.0, FORCE_RANGE)
+    direction_rad: float = 0.0
+    t_on_s: float = ranged(0.0, TIME_RANGE)
+    t_off_s: float = ranged(0.0, TIME_RANGE)
+    ramp_s: float = ranged(0.0, Range(0.0, 100.0, "s"))
 
     @property
     def force_N(self) -> np.ndarray:
@@ -57,17 +63,23 @@ class Poke:
 class Controller:
     """Joint PD: τ = K_P (q_d(t) − q) + K_D (q̇_d(t) − q̇) [+ G_joint(q)].
 
-    q_d(t) = q0 + A sin(2π f t + φ) per joint (A = 0: hold q0). ``mode`` "continuous" evaluates
-    τ at every integrator stage; "zoh" holds it over 1/rate_Hz.
+    q_d(t) = q0 + Σ_h A_h sin(2π f_h t + φ_h) per joint (A = 0: hold q0): one sine per joint
+    (amplitude, frequency, phase of shape (N,)) or several harmonics (shape (N, H): a Fourier
+    excitation trajectory). ``mode`` "continuous" evaluates τ at every integrator stage; "zoh"
+    holds it over 1/rate_Hz.
     """
 
-    q0_rad: np.ndarray
-    kp: float = 500.0
-    kd: float = 10.0
+    q0_rad: np.ndarray = field(metadata={"range": ANGLE_RANGE})
+    kp: float = ranged(500.0, Range(0.0, 1e7, "N·m/rad", high="no joint servo is this stiff"))
+    kd: float = ranged(10.0, Range(0.0, 1e5, "N·m·s/rad", high="no joint servo damps this hard"))
     mode: str = "continuous"
-    rate_Hz: float = 1000.0
-    amplitude_rad: np.ndarray | None = None
-    frequency_Hz: np.ndarray | None = None
+    rate_Hz: float = ranged(1000.0, Range(1.0, 1e6, "Hz"))
+    amplitude_rad: np.ndarray | None = ranged(None, Range(-math.pi, math.pi, "rad",
+                                                          low="degrees typed as rad?",
+                                                          high="degrees typed as rad?"))
+    frequency_Hz: np.ndarray | None = ranged(None, Range(0.0, 100.0, "Hz", high="a leg's reference "
+                                                         "trajectory swings at a few Hz; rad/s "
+                                                         "typed as Hz?"))
     phase_rad: np.ndarray | None = None
     gravity_compensation: bool = False
 
@@ -77,10 +89,18 @@ class Controller:
         q0 = np.asarray(self.q0_rad, float)
         if self.amplitude_rad is None:
             return np.broadcast_to(q0, t.shape[:-1] + q0.shape), np.zeros(t.shape[:-1] + q0.shape)
-        w = 2 * np.pi * np.asarray(self.frequency_Hz, float)
-        arg = w * t + np.asarray(self.phase_rad, float)
-        a = np.asarray(self.amplitude_rad, float)
-        return q0 + a * np.sin(arg), a * w * np.cos(arg)
+        a, f, ph = self.harmonics()
+        w = 2 * np.pi * f
+        arg = w * t[..., None] + ph                                   # (..., N, H)
+        return q0 + np.sum(a * np.sin(arg), axis=-1), np.sum(a * w * np.cos(arg), axis=-1)
+
+    def harmonics(self):
+        """(A, f, φ) as (N, H) arrays (one column for a single sine per joint)."""
+        a, f, ph = (np.asarray(x, float) for x in (self.amplitude_rad, self.frequency_Hz,
+                                                    self.phase_rad))
+        if a.ndim == 1:
+            a, f, ph = a[:, None], f[:, None], ph[:, None]
+        return a, f, ph
 
 
 @dataclass(frozen=True)
@@ -92,11 +112,11 @@ class Ground:
     |F_t| ≤ μ F_n: the foot sticks (F_t elastic) until the bristle saturates, then slips at μ F_n.
     """
 
-    height_m: float = 0.0
-    stiffness_N_per_m: float = 2e4
-    damping_Ns_per_m: float = 200.0
-    tangential_stiffness_N_per_m: float = 2e4
-    friction_coefficient: float = 0.3
+    height_m: float = ranged(0.0, Range(-10.0, 10.0, "m", high="mm typed as m?", low="mm typed as m?"))
+    stiffness_N_per_m: float = ranged(2e4, Range(1.0, 1e9, "N/m"))
+    damping_Ns_per_m: float = ranged(200.0, Range(0.0, 1e7, "N·s/m"))
+    tangential_stiffness_N_per_m: float = ranged(2e4, Range(1.0, 1e9, "N/m"))
+    friction_coefficient: float = ranged(0.3, Range(0.0, 10.0, ""))
 
 
 @dataclass(frozen=True)
@@ -108,12 +128,12 @@ class Sensors:
     2π/encoder_counts (0 = off); sample_rate_Hz of the log.
     """
 
-    sample_rate_Hz: float = 1000.0
+    sample_rate_Hz: float = ranged(1000.0, SAMPLE_RATE_RANGE)
     torque_model: str = "gaussian"
-    torque_noise_Nm: float = 0.01
-    ft_noise: np.ndarray = field(default_factory=lambda: np.array([0.1, 0.1, 0.01]))
-    encoder_counts: int = 0
-    velocity_noise_rad_per_s: float = 0.0
+    torque_noise_Nm: float = ranged(0.01, Range(0.0, 1e4, "N·m", high="N·mm typed as N·m?"))
+    ft_noise: np.ndarray = ranged([0.1, 0.1, 0.01], Range(0.0, 1e5, "N or N·m", high="mN typed as N?"))
+    encoder_counts: int = ranged(0, Range(4, 2.0 ** 40, "counts/rev", zero_ok=True))
+    velocity_noise_rad_per_s: float = ranged(0.0, Range(0.0, 1e3, "rad/s", high="deg/s typed as rad/s?"))
     seed: int = 0
 
 
@@ -129,16 +149,16 @@ class SimConfig:
     robot: Robot
     controller: Controller
     base: str = "floating"
-    duration_s: float = 1.5
+    duration_s: float = ranged(1.5, Range(0.0, 1e6, "s", lo_open=True, high="more than 11 days"))
     pokes: tuple[Poke, ...] = ()
     ground: Ground | None = None
     sensors: Sensors = field(default_factory=Sensors)
     integrator: str = "BDF"       # stiff-capable, fastest here (see reports/paper_reproduction.md)
     rtol: float = 1e-6
     atol: float = 1e-8
-    fixed_step_s: float = 5e-5
-    mount_stiffness: np.ndarray | None = None
-    mount_damping: np.ndarray | None = None
+    fixed_step_s: float = ranged(5e-5, Range(1e-9, 1.0, "s", lo_open=True))
+    mount_stiffness: np.ndarray | None = ranged(None, Range(0.0, 1e12, "N/m or N·m/rad"))
+    mount_damping: np.ndarray | None = ranged(None, Range(0.0, 1e9, "N·s/m or N·m·s/rad"))
     name: str = "scene"
 
     def mount(self) -> tuple[np.ndarray, np.ndarray]:

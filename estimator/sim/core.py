@@ -215,7 +215,7 @@ def simulate(config: SimConfig, *, check: bool = True, max_run_time_s: float = 6
     truth = truth_table(config, ts, q)
     n_base_log = 3 if config.base == "floating" else 0
     qm, dqm, taum, Wm = measure(config.sensors, q, dq, tau, wrench, 3)
-    if n_base_log == 0:   # fixed / rigid: the log has no base columns (zero base, DESIGN.md)
+    if n_base_log == 0:   # fixed / rigid: the log has no base columns (zero base, docs/conventions.md)
         qm[:, :3] = 0.0
         dqm[:, :3] = 0.0
     log = SensorLog(t=ts, q=qm, dq=dqm, tau_Nm=taum, wrench=Wm, floating=config.base == "floating")

@@ -23,6 +23,7 @@ from estimator.errors import InputError
 from estimator.sim.config import ADAPTIVE, SimConfig
 
 PROBE_RHS_CAP = 200_000          # rhs evaluations allowed in one probe
+PROBE_WALL_CAP_S = 30.0          # and wall time (s): max(1 s, the limit's share w/T of it), at most this
 MAX_LOG_SAMPLES = 20_000_000     # (T·fs) rows held in memory by simulate()
 EXPLICIT_STABILITY_EXTENT = {"RK45": 3.3, "DOP853": 6.0, "RK4": 2.78}
 RHS_PER_STEP = {"RK45": 6, "DOP853": 12, "RK4": 4}
@@ -51,17 +52,22 @@ def _probe_config(config: SimConfig) -> SimConfig:
     return replace(config, duration_s=float(min(w, config.duration_s)), pokes=pokes)
 
 
-def _run(config: SimConfig, cap: int):
+def _run(config: SimConfig, cap: int, wall_cap_s: float = float("inf")):
+    """Integrate the probe; _Budget when it needs more than ``cap`` rhs evaluations or more than
+    ``wall_cap_s`` of wall time (an implicit method's Newton and LU work between evaluations is
+    not counted in the evaluations: the clock bounds it too)."""
     from estimator.sim.core import _adaptive, _rk4, sample_times
     from estimator.sim.model import Plant
 
     plant = Plant(config)
     inner = plant.rhs1
+    t_start = time.perf_counter()
 
     def capped(*a):
-        if plant.nfev + getattr(capped, "n", 0) > cap:
+        n = getattr(capped, "n", 0)
+        if plant.nfev + n > cap or (n % 64 == 0 and time.perf_counter() - t_start > wall_cap_s):
             raise _Budget
-        capped.n = getattr(capped, "n", 0) + 1
+        capped.n = n + 1
         return inner(*a)
 
     plant.rhs1 = capped
@@ -99,14 +105,18 @@ def estimate_cost(config: SimConfig, fastest_pole_per_s: float, stiffness_ratio:
             f"(implicit) or raise the limit (--max-run-time)")
     probe = _probe_config(config)
     w = probe.duration_s
+    # the probe may spend at most its share of the limit: beyond it the extrapolation is over anyway
+    wall_cap = min(PROBE_WALL_CAP_S, max(1.0, max_run_time_s * w / T))
     try:
-        q_a, wall, nfev = _run(probe, PROBE_RHS_CAP)
+        q_a, wall, nfev = _run(probe, PROBE_RHS_CAP, wall_cap)
     except _Budget:
         raise InputError(
-            f"scene '{config.name}': integrator {m} needed more than {PROBE_RHS_CAP} right-hand-side "
-            f"evaluations for the first {w:g} s of {T:g} s (fastest pole {fastest_pole_per_s:.3g} 1/s, "
-            f"stiffness ratio {stiffness_ratio:.3g}): the run cannot finish; lower the gains/stiffness, "
-            f"or use Radau/BDF for a stiff scene") from None
+            f"scene '{config.name}': integrator {m} used up its probe budget ({PROBE_RHS_CAP} "
+            f"right-hand-side evaluations or {wall_cap:.3g} s, its share of the limit "
+            f"{max_run_time_s:g} s) on the first {w:g} s of {T:g} s (fastest pole "
+            f"{fastest_pole_per_s:.3g} 1/s, stiffness ratio {stiffness_ratio:.3g}): the run cannot "
+            f"finish; lower the gains/stiffness (controller.kp = {config.controller.kp:g} N·m/rad), "
+            f"use Radau/BDF for a stiff scene, or raise --max-run-time") from None
     per_rhs = wall / max(nfev, 1)
     pred_rhs = max(nfev * T / w, floor_rhs)
     pred_s = pred_rhs * per_rhs

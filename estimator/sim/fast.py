@@ -3,9 +3,9 @@
 Same equations as estimator.dynamics (tests compare them to 1e-12) written for one state:
 with φ_i = θ + Σ_{j≤i} q_j, e_i = (sin φ_i, −cos φ_i), ⊥e_i = (cos φ_i, sin φ_i),
 
-    c_i = p_i + r_i e_i,  J_i[:, x] = (1, 0), J_i[:, z] = (0, 1), J_i[:, θ or q_k] = ⊥(c_i − o_k),
+    c_i = p_i + r_i e_i + s_i ⊥e_i,  J_i[:, x] = (1, 0), J_i[:, z] = (0, 1), J_i[:, θ or q_k] = ⊥(c_i − o_k),
     M = diag(m_b, m_b, I_b) + Σ_i m_i J_iᵀ J_i + I_i a_i a_iᵀ,
-    C q̇ = Σ_i m_i J_iᵀ b_i,   b_i = −Σ_{j<i} l_j φ̇_j² e_j − r_i φ̇_i² e_i   (c̈_i = J_i q̈ + b_i),
+    C q̇ = Σ_i m_i J_iᵀ b_i,   b_i = −Σ_{j<i} l_j φ̇_j² e_j − φ̇_i² (r_i e_i + s_i ⊥e_i)   (c̈_i = J_i q̈ + b_i),
     G_k = g (m_b δ_{kz} + Σ_i m_i J_i[z, k]).
 """
 
@@ -25,6 +25,7 @@ class FastRHS:
         self.N = plant.n_links
         self.l = [float(v) for v in r.lengths_m]
         self.r = [float(v) for v in r.com_m]
+        self.rp = [float(v) for v in r.com_perp_m]
         self.m = [float(v) for v in r.masses_kg]
         self.I = [float(v) for v in r.inertias_kgm2]
         self.mb, self.Ib = float(r.base_mass_kg), float(r.base_inertia_kgm2)
@@ -38,9 +39,10 @@ class FastRHS:
         self.q0 = [float(v) for v in c.q0_rad]
         self.traj = c.amplitude_rad is not None
         if self.traj:
-            self.A = [float(v) for v in c.amplitude_rad]
-            self.w = [2 * math.pi * float(v) for v in c.frequency_Hz]
-            self.ph = [float(v) for v in c.phase_rad]
+            a, f, ph = c.harmonics()
+            self.A = a.tolist()
+            self.w = (2 * math.pi * f).tolist()
+            self.ph = ph.tolist()
         self.gc = c.gravity_compensation
 
     def kinematics(self, q):
@@ -87,8 +89,10 @@ class FastRHS:
         for i in range(N):
             ex, ez = e[i]
             w2 = dphi[i] * dphi[i]
-            ci = (p[i][0] + self.r[i] * ex, p[i][1] + self.r[i] * ez)
-            bix, biz = bx - self.r[i] * w2 * ex, bz - self.r[i] * w2 * ez
+            dx = self.r[i] * ex - self.rp[i] * ez       # r e + s ⊥e, ⊥e = (−e_z, e_x)
+            dz = self.r[i] * ez + self.rp[i] * ex
+            ci = (p[i][0] + dx, p[i][1] + dz)
+            bix, biz = bx - w2 * dx, bz - w2 * dz
             bx -= self.l[i] * w2 * ex
             bz -= self.l[i] * w2 * ez
             cols = self.point_jac(p, ci, i + 1)
@@ -116,9 +120,10 @@ class FastRHS:
         for j in range(self.N):
             qd, dqd = self.q0[j], 0.0
             if self.traj:
-                arg = self.w[j] * t + self.ph[j]
-                qd += self.A[j] * math.sin(arg)
-                dqd = self.A[j] * self.w[j] * math.cos(arg)
+                for a, w, ph in zip(self.A[j], self.w[j], self.ph[j]):
+                    arg = w * t + ph
+                    qd += a * math.sin(arg)
+                    dqd += a * w * math.cos(arg)
             tau = self.plant.kp * (qd - q[nb + j]) + self.plant.kd * (dqd - dq[nb + j])
             if self.gc and G is not None:
                 tau += G[nb + j]

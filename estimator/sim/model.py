@@ -137,12 +137,32 @@ class Plant:
         return np.concatenate(parts, axis=-1)
 
     def initial_state(self, batch: int = 1) -> np.ndarray:
-        """At rest at the reference posture q_d(0), base at the mount's rest position."""
+        """At rest at the reference posture q_d(0), base at the mount's rest position; a fixed base
+        (a stiff mount the log does not record) starting still starts at its static equilibrium."""
         qd, dqd = self.config.controller.reference(0.0)
         y = np.zeros((batch, self.n_state))
         y[:, self.n_base:self.n] = qd
         y[:, self.n + self.n_base:2 * self.n] = dqd
+        if self.config.base == "fixed" and not self.has_ground and not np.any(dqd):
+            y[:, :self.n] = self.static_equilibrium(y[0, :self.n])
         return y
+
+    def static_equilibrium(self, q0: np.ndarray) -> np.ndarray:
+        """q with q̈ = 0 at q̇ = 0 and t = 0: W_mount(q) + τ_PD(q) + τ_ext − G(q) = 0 (Newton from
+        q0). Started from the undeflected mount instead, the base rings at the mount's frequency
+        (≈ 900 rad/s) for a few ms — motion a fixed-base log does not record, so the estimator
+        would read it as a contact."""
+        from scipy.optimize import root
+
+        def accel(q):
+            y = np.zeros((1, self.n_state))
+            y[0, :self.n] = q
+            return self.rhs(0.0, y)[0, self.n:2 * self.n]
+
+        sol = root(accel, q0, method="hybr", options={"xtol": 1e-13})
+        if not sol.success or not np.all(np.isfinite(sol.x)) or np.max(np.abs(accel(sol.x))) > 1e-6:
+            return q0                                   # no equilibrium found: start as before
+        return sol.x
 
     # ---------------------------------------------------------------- sampled outputs
     def constraint_wrench(self, t, q, dq, tau_j):

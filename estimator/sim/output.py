@@ -1,4 +1,4 @@
-"""Files of a simulated log: the sensor log CSV (DESIGN.md format), its truth
+"""Files of a simulated log: the sensor log CSV (docs/conventions.md format), its truth
 (t,link,alpha,Fx,Fz,px,pz) and its sensor-timing declaration ``LOG.timing.toml`` (estimator.timing).
 
 How our simulator samples its force channels (estimator.sim.core, estimator.sim.sensors): the

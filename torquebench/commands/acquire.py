@@ -48,24 +48,21 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
-    import numpy as np
-
-    from calibration.acquire import (RawCapture, Reader, capture, guided_session, open_port,
-                                     session_csv)
+    from calibration.acquire import RawCapture
     from calibration.errors import InputError
-    from calibration.frames import MAX_CHANNELS, FrameParser
-    from torquebench.io import print_json
-    from userio.files import write_files_atomic
+    from calibration.frames import MAX_CHANNELS
 
     from userio.errors import finite
-    from userio.files import plan_outputs
 
     for name, v, hi in (("--duration-s", args.duration_s, 1e7), ("--idle-timeout-s", args.idle_timeout_s,
                         3600.0), ("--rate-hz", args.rate_hz, 1e7), ("--settle-s", args.settle_s, 3600.0),
-                        ("--window-s", args.window_s, 3600.0), ("--lever-arm-m", args.lever_arm_m, 100.0),
+                        ("--window-s", args.window_s, 3600.0),
                         ("--tolerance-counts", args.tolerance_counts, 1e12)):
         if v is not None:
             finite(v, name, positive=name != "--settle-s", nonneg=True, hi=hi)
+    if args.lever_arm_m is not None:
+        from calibration.session import LEVER_ARM_RANGE_M
+        LEVER_ARM_RANGE_M.check(args.lever_arm_m, "--lever-arm-m")
     for name, v in (("--baud", args.baud), ("--repeats", args.repeats), ("--frames", args.frames)):
         if v is not None and v < 1:
             raise InputError(f"{name}: must be ≥ 1, got {v}")
@@ -83,15 +80,35 @@ def run(args) -> int:
             finite(m, "--guided", nonneg=True)
         if len(set(masses)) < 2 or min(masses) < 0:
             raise InputError("--guided: need at least two distinct non-negative masses (g)")
-    plan_outputs({"--port": args.port} if not str(args.port).count("://") else {},
-                 {"--out": args.out, "--csv": args.csv,
-                  "--session": (args.session or args.out.with_suffix(".csv")) if masses else None})
+        from calibration.session import MASS_RANGE_G
+        for m in masses:
+            MASS_RANGE_G.check(m, "--guided")
+    from torquebench.outputs import Outputs
+
+    plan = Outputs(force=args.force)
+    if "://" not in str(args.port):
+        plan.input("--port", args.port)
+    plan.file("--out", args.out)
+    plan.file("--csv", args.csv)
+    plan.file("--session", (args.session or args.out.with_suffix(".csv")) if masses else None)
+    plan.input("--out's kept capture (.part)", RawCapture.part_path(args.out))   # appended, never written over
+    with plan.active():                     # checked now; every write obeys it
+        return _acquire(args, masses)
+
+
+def _acquire(args, masses) -> int:
+    import numpy as np
+
+    from calibration.errors import InputError
+    from calibration.acquire import RawCapture, Reader, capture, guided_session, open_port, session_csv
+    from calibration.frames import FrameParser
+    from torquebench.io import print_json
+    from userio.files import write_files_atomic
+
     port = open_port(args.port, args.baud)
-    from torquebench.outputs import prepare_dir
-    for flag, path in (("--out", args.out), ("--csv", args.csv), ("--session", args.session)):
-        if path is not None:
-            prepare_dir(path.parent, flag)
     raw = RawCapture(args.out, force=args.force)
+    if raw.resumed:
+        print(f"acquire: appending to the capture kept in {raw.part} ({raw.resumed} bytes)", file=sys.stderr)
     reader = Reader(port, raw, FrameParser(args.channels), keep=args.csv is not None)
     rows = None
     try:
@@ -106,6 +123,12 @@ def run(args) -> int:
                                   idle_timeout_s=args.idle_timeout_s,
                                   prompt=lambda msg: (print(msg, end="", file=out, flush=True),
                                                       sys.stdin.readline())[1], out=out)
+    except KeyboardInterrupt:
+        raw.abort()
+        raise KeyboardInterrupt(f"raw bytes so far kept in {raw.part}") from None
+    except InputError as exc:
+        raw.abort()
+        raise InputError(f"{exc}; raw bytes so far kept in {raw.part}") from None
     except BaseException:
         raw.abort()
         print(f"acquire: raw bytes so far kept in {raw.part}", file=sys.stderr)

@@ -25,6 +25,18 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
+    from torquebench.outputs import Outputs
+
+    plan = Outputs(force=args.force)
+    plan.input("calibration", args.calibration)
+    plan.input("readings", args.readings)
+    plan.input("--data", args.data)
+    plan.file("--out", args.out)
+    with plan.active():                         # checked now; the write obeys it
+        return _apply(args, plan)
+
+
+def _apply(args, plan) -> int:
     import io
 
     import numpy as np
@@ -33,23 +45,26 @@ def run(args) -> int:
     import calibration
     from calibration.errors import InputError
     from torquebench.io import print_json, write_text_atomic
-    from torquebench.outputs import prepare_file
 
-    from userio.files import plan_outputs
+    from calibration.session import MAX_SESSION_BYTES, _parse_meta
+    from userio.files import check_input
 
-    if args.out is not None:
-        prepare_file(args.out, "--out", force=args.force,
-                     inputs=(args.calibration, args.readings, args.data))   # mkdir, --force
-        plan_outputs({"calibration": args.calibration, "readings": args.readings, "--data": args.data},
-                     {"--out": args.out})
     model = calibration.load(args.calibration, data_path=args.data)
+    check_input(args.readings, max_bytes=16 * MAX_SESSION_BYTES, what="readings CSV")
     try:
         with open(args.readings, encoding="utf-8", errors="replace") as fh:
-            n_comment = 0
+            n_comment, comments = 0, []
             for line in fh:
                 if not line.startswith("#"):
                     break
                 n_comment += 1
+                comments.append(line)
+        unit = _parse_meta(comments).get("reading_unit")
+        if unit is not None and model.reading_unit and unit != model.reading_unit:
+            raise InputError(f"{args.readings}: reading_unit={unit} but {args.calibration} converts "
+                             f"readings in {model.reading_unit!r}: a unit mismatch (readings in "
+                             f"{unit} through a {model.reading_unit} calibration); use a calibration "
+                             f"fitted to {unit} readings")
         df = pd.read_csv(args.readings, dtype=str, keep_default_na=False, skiprows=n_comment)
     except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         raise InputError(f"{args.readings}: not a valid CSV: {str(exc).splitlines()[0]}") from None
@@ -62,6 +77,7 @@ def run(args) -> int:
         i = int(np.argmax(bad))
         raise InputError(f"{args.readings}: line {i + n_comment + 2}: column {args.column!r}: "
                          f"{df[args.column].iloc[i]!r} is not a finite number")
+    _check_magnitude(vals, model, args)
     direction = None
     if "direction" in df.columns and model.model == "hysteresis":
         direction = df["direction"].str.strip().str.lower().to_numpy()
@@ -86,7 +102,7 @@ def run(args) -> int:
     buf = io.StringIO()
     out.to_csv(buf, index=False, float_format="%.9g")
     if args.out is not None:
-        write_text_atomic(args.out, buf.getvalue(), overwrite=True)
+        write_text_atomic(args.out, buf.getvalue(), overwrite=args.force)
     if args.json:
         res = {"n": int(vals.size), "sensor_id": model.sensor_id, "model": model.model,
                "out_of_range": n_nan, "saturated_adc": n_sat, "outside_calibrated_range": n_range,
@@ -111,3 +127,26 @@ def run(args) -> int:
               (f", {n_nan} flagged and left NaN: {n_sat} saturated ADC, {n_range} outside the "
                "calibrated range" if n_nan else "") + ")")
     return 0
+
+
+def _check_magnitude(vals, model, args) -> None:
+    """Readings that are, nearly all of them, orders of magnitude off the calibrated reading span (counts
+    read through an mV calibration, V through mV, ...) are a unit mismatch, refused naming it
+    rather than answered with NaN (outside the calibrated range) for every reading."""
+    import numpy as np
+
+    from calibration.errors import InputError
+
+    if model.mass_range_g is None or vals.size == 0:
+        return
+    lo, hi = model.mass_range_g
+    r = model.coef_mean[0] * np.array([lo, hi]) + model.coef_mean[1]
+    span = max(float(np.ptp(r)), float(np.abs(r).max()), 1e-300)
+    typical = float(np.median(np.abs(vals)))
+    ratio = typical / span
+    off = (np.abs(vals) > 100 * span) | (np.abs(vals) < 1e-4 * span)
+    if np.mean(off) >= 0.9:                  # (nearly) every reading: one reading off is flagged
+        raise InputError(f"{args.readings}: column {args.column!r}: the readings (median |reading| "
+                         f"{typical:.4g}) are {ratio:.3g} × the calibrated span of {args.calibration} "
+                         f"({r.min():.4g}–{r.max():.4g} {model.reading_unit}): a unit mismatch (e.g. ADC "
+                         f"counts read through an {model.reading_unit} calibration)?")

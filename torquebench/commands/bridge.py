@@ -20,6 +20,16 @@ def add_arguments(parser) -> None:
                         help="average this many ADC samples: noise bandwidth / N (default: %(default)s)")
 
 
+MAX_AVERAGING_S = 3600.0     # a reading averaged over more than an hour is a drift measurement
+
+
+def _strain_range():
+    from userio.fields import Range
+
+    return Range(1e-9, 1e-1, "1/(N·m)", low="a sensor this stiff reads nothing: µε typed as ε?",
+                 high="beyond any gauge's strain range at 1 N·m")
+
+
 def _fmt(v) -> str:
     return f"{v:.4g}" if isinstance(v, float) else str(v)
 
@@ -32,14 +42,24 @@ def run(args) -> int:
 
     from userio.errors import finite
 
+    from userio.fields import Range
+
+    STRAIN_PER_NM = _strain_range()
     if args.strain_per_Nm is not None:
         finite(args.strain_per_Nm, "--strain-per-Nm", positive=True)
+        STRAIN_PER_NM.check(args.strain_per_Nm, "--strain-per-Nm")
     if args.bandwidth_Hz is not None:
         finite(args.bandwidth_Hz, "--bandwidth-Hz", positive=True)
+        Range(1e-6, 1e9, "Hz").check(args.bandwidth_Hz, "--bandwidth-Hz")
     if args.averaging < 1:
         raise InputError(f"--averaging: must be ≥ 1, got {args.averaging}")
     path = args.config or shipped("scenes", "paper_sensor.toml")
     cfg, spn = load_sensor_config(path)
+    span_s = args.averaging / cfg.data_rate_Hz
+    if span_s > MAX_AVERAGING_S:
+        raise InputError(f"--averaging: {args.averaging} samples at {cfg.data_rate_Hz:g} S/s span "
+                         f"{span_s:.3g} s, above an hour: no sensor holds still (drift, 1/f noise) "
+                         "that long; average fewer samples")
     if args.strain_per_Nm is not None:
         spn = args.strain_per_Nm
     out = sensor_summary(cfg, spn, args.bandwidth_Hz, args.averaging)

@@ -13,7 +13,8 @@ torquebench cache clear
 
 def add_arguments(parser) -> None:
     parser.add_argument("action", choices=("info", "clear"),
-                        help="info: where the cache is and how big; clear: delete the cached stage results")
+                        help="info: where the cache is and how big; clear: delete the cached stage results "
+                             "(only the entries the cache wrote: other files in the directory stay)")
     parser.add_argument("--cache-dir", type=Path, default=None,
                         help="cache directory (default $TORQUEBENCH_CACHE or .torquebench-cache)")
 
@@ -24,10 +25,13 @@ def run(args) -> int:
 
     cache = Cache(args.cache_dir)
     out = cache.info() if args.action == "info" else {"directory": str(cache.dir), "removed": cache.clear()}
+    others = cache.info()["other_files"] if args.action == "clear" else out["other_files"]
     if args.json:
-        print_json(out)
+        print_json({**out, "other_files_kept": others})
     elif args.action == "info":
-        print(f"{out['directory']}: {out['entries']} entries, {out['size_bytes'] / 1e6:.1f} MB")
+        print(f"{out['directory']}: {out['entries']} entries, {out['size_bytes'] / 1e6:.1f} MB"
+              + (f" ({others} other .pkl files, not the cache's)" if others else ""))
     else:
-        print(f"{out['directory']}: removed {out['removed']} entries")
+        print(f"{out['directory']}: removed {out['removed']} entries"
+              + (f"; kept {others} .pkl files the cache did not write" if others else ""))
     return 0

@@ -101,40 +101,54 @@ def _target(out: Path, force: bool, no_report: bool) -> Path:
     return cand
 
 
-def _plan(args, out: Path) -> None:
-    """Refuse before fitting: an output equal to the input, or outputs colliding."""
-    from userio.files import plan_outputs
+def _plan(args, out: Path, replace: bool = False):
+    """The output plan (userio.outputs): the calibration and its report files, never the data
+    (``replace``: existing files are not the question, only the other rules)."""
+    from torquebench.outputs import Outputs
 
-    outputs = {"--out": out}
+    plan = Outputs(force=args.force or replace)
+    plan.input("data", args.data)
+    plan.file("--out", out)
     if not args.no_report:
         md, corner, resid = report_paths(out)
-        outputs.update({"report (--out with .md)": md, "corner plot": corner, "residual plot": resid})
-    plan_outputs({"data": args.data}, outputs)
+        plan.file("report (--out with .md)", md)
+        plan.file("corner plot", corner)
+        plan.file("residual plot", resid)
+    return plan
 
 
 def run(args) -> int:
     from calibration.errors import InputError
-    from calibration.fit import fit_session
-    from calibration.session import read_session
-    from calibration.store import calibration_payload, encode
-    from torquebench.io import print_json
-    from torquebench.outputs import prepare_dir
+    from calibration.session import LEVER_ARM_RANGE_M, MASS_RANGE_G
 
-    from userio.errors import finite
-    from userio.files import write_files_atomic
+    from userio.errors import finite, seed
 
     if args.lever_arm_m is not None:
-        args.lever_arm_m = finite(args.lever_arm_m, "--lever-arm-m", positive=True)
+        args.lever_arm_m = LEVER_ARM_RANGE_M.check(args.lever_arm_m, "--lever-arm-m")
     args.mass_std_g = finite(args.mass_std_g, "--mass-std-g", nonneg=True)
-    from userio.errors import seed
-
+    MASS_RANGE_G.check(args.mass_std_g, "--mass-std-g")
     seed(args.seed)
     if args.walkers < 8:
         raise InputError(f"--walkers: need at least 8, got {args.walkers}")
     if args.max_steps < 1:
         raise InputError(f"--max-steps: must be ≥ 1, got {args.max_steps}")
-    prepare_dir(args.out.parent, "--out")                          # created if missing
-    _plan(args, args.out)
+    _plan(args, args.out, replace=True).check()      # the names given: never the data, dirs made
+    # the name written: --out, or its first free NAME.vK.json without --force (kept, never replaced)
+    written = _target(args.out, args.force, args.no_report)
+    plan = _plan(args, written)
+    plan.check()            # before the fit: outputs vs input, directories made, room to write
+    with plan.active():
+        return _calibrate(args, written)
+
+
+def _calibrate(args, written: Path) -> int:
+    from calibration.errors import InputError
+    from calibration.fit import fit_session
+    from calibration.session import read_session
+    from calibration.store import calibration_payload, encode
+    from torquebench.io import print_json
+    from userio.files import write_files_atomic
+
     session = read_session(args.data)
     if args.lever_arm_m is not None:
         session.lever_arm_m = args.lever_arm_m
@@ -150,8 +164,6 @@ def run(args) -> int:
         "args": {"data": str(args.data), "model": args.model, "mass_std_g": args.mass_std_g,
                  "seed": args.seed, "walkers": args.walkers, "max_steps": args.max_steps,
                  "lever_arm_m": args.lever_arm_m}})
-    written = _target(args.out, args.force, args.no_report)
-    _plan(args, written)
     files = [(written, encode(payload))]
     if not args.no_report:
         files += _report(payload, fit, session, written)

@@ -1,4 +1,4 @@
-"""`torquebench compare SCENE.toml --vary flexure.design=a.toml,b.toml`: designs end to end.
+"""`torquebench compare SCENE.toml --vary flexure=a.toml,b.toml`: designs end to end.
 
 Each value of the varied key (any dotted scene key) runs the scene's stage graph (torquebench.sweep);
 per variant: sensitivity, torsional stiffness and safety factor (when the scene has a flexure
@@ -19,9 +19,13 @@ torquebench compare scenes/end_to_end.toml --vary flexure=5e-5,5e-4 --png out/co
 def add_arguments(parser) -> None:
     parser.add_argument("scene", type=Path, help="scene TOML (e.g. scenes/end_to_end.toml)")
     parser.add_argument("--vary", action="append", required=True, metavar="KEY=V1,V2",
-                        help="dotted scene key and its values, e.g. flexure.design=a.toml,b.toml")
+                        help="dotted scene key and its values; for designs flexure=a.toml,b.toml (each value a design file "
+                             "or a strain per N·m, e.g. flexure=5e-5,5e-4)")
     parser.add_argument("--executor", default="local", help="local (default), processes:N, dask://HOST:PORT")
-    parser.add_argument("--png", type=Path, default=None, help="write a bar chart of the comparison")
+    parser.add_argument("--png", type=Path, default=None,
+                        help="write a bar chart of the comparison (directory created; an existing "
+                             "file is kept unless --force)")
+    parser.add_argument("--force", action="store_true", help="replace an existing --png file")
     parser.add_argument("--cache-dir", type=Path, default=None, help="cache directory")
 
 
@@ -45,19 +49,37 @@ def row(r: dict) -> dict:
 
 
 def run(args) -> int:
-    from torquebench.io import print_json
-    from torquebench.scenes import scene_path
+    from torquebench.outputs import scene_plan
+    from torquebench.scenes import load_scene, scene_path
     from torquebench.sweep import parse_vary, run_sweep
 
     path = scene_path(str(args.scene))
-    rows = [row(r) for r in run_sweep(path, parse_vary(args.vary), None, args.executor,
+    vary = parse_vary(args.vary)
+    plan = scene_plan(load_scene(path), force=args.force)     # the scene and every file it reads
+    for key, values in vary:                                 # varied files (a design per variant)
+        for v in values:
+            for cand in (Path(str(v)), path.parent / str(v)):
+                if isinstance(v, str) and cand.is_file():
+                    plan.input(f"--vary {key}", cand)
+    plan.file("--png", args.png)
+    plan.check()                                             # before the points run
+    rows = [row(r) for r in run_sweep(path, vary, None, args.executor,
                                       str(args.cache_dir) if args.cache_dir else None)]
+    with plan.active():
+        return _report(args, path, rows)
+
+
+def _report(args, path, rows) -> int:
+    from torquebench.commands.sweep import _exit_on_failures
+    from torquebench.io import print_json
+
     out = {"scene": str(path), "rows": rows}
-    if args.png:
+    if args.png and any("error" not in r for r in rows):
         _plot(args.png, rows)
         out["png"] = str(args.png)
     if args.json:
         print_json(out)
+        _exit_on_failures(rows, "compare")
         return 0
     f = (lambda v, k=1.0, d=3: "—" if v is None or (isinstance(v, float) and math.isnan(v))   # noqa: E731
          else f"{v * k:.{d}g}")
@@ -72,6 +94,7 @@ def run(args) -> int:
               f"{f(r['torsional_stiffness_Nm_per_rad']):>9s} {f(r['safety_factor']):>6s} "
               f"{f(r['torque_noise_std_Nm']):>9s} {f(r['predicted_position_rms_m'], 1e3):>9s} "
               f"{f(r['simulated_position_rms_m'], 1e3):>8s}")
+    _exit_on_failures(rows, "compare")
     return 0
 
 
@@ -95,6 +118,6 @@ def _plot(path: Path, rows: list[dict]) -> None:
     a.legend()
     b.bar(x, val("torque_noise_std_Nm"))
     b.set(xticks=x, xticklabels=names, ylabel="torque noise σ_τ [N·m]")
-    with atomic_path(path) as tmp:
+    with atomic_path(path, overwrite=False) as tmp:      # the output plan decides (--force)
         fig.savefig(tmp, format="png", dpi=100)
     plt.close(fig)

@@ -24,8 +24,15 @@ SCENE = "paper_floating_link2"
 
 def add_arguments(parser) -> None:
     parser.add_argument("--out-dir", type=Path, default=Path("out/demo"),
-                        help="directory for the demo's files, created if missing; the demo replaces its own four files there (log.csv, log.truth.csv, estimate_dynamic.csv, estimate_paper.csv) (default: %(default)s)")
-    parser.add_argument("--seed", type=int, default=1, help="sensor-noise seed (default: %(default)s)")
+                        help="directory for the demo's files, created if missing: log.csv, log.truth.csv, "
+                             "estimate_dynamic.csv, estimate_paper.csv; a later demo replaces the files "
+                             "an earlier one wrote there, never a file of yours without --force "
+                             "(default: %(default)s)")
+    parser.add_argument("--force", action="store_true",
+                        help="replace files of those names in --out-dir that the demo did not write")
+    parser.add_argument("--seed", type=int, default=None,
+                        help="sensor-noise seed (default: the scene's, so that the demo and "
+                             "`torquebench run` of its scene give the same numbers)")
     parser.add_argument("--flexure", type=Path, default=None, metavar="DESIGN.toml",
                         help="take the torque sensor's strain per N·m from this flexure's FEM "
                              "(e.g. scenes/paper_disc.toml) instead of the paper's calibration")
@@ -37,25 +44,34 @@ def run(args) -> int:
     seed(args.seed)                              # negative seeds → exit 2
     from dataclasses import replace
 
+    from torquebench.outputs import scene_plan
+    from torquebench.scenes import load_scene, scene_path
+    from userio.files import check_input
+
+    scene = load_scene(scene_path(SCENE))
+    if args.flexure is not None:
+        check_input(args.flexure, "--flexure", what="flexure design TOML")
+        scene = replace(scene, chain=replace(scene.chain, flexure_design=args.flexure.resolve()))
+    plan = scene_plan(scene, force=args.force)
+    out_dir = plan.directory("--out-dir", args.out_dir)
+    for name in FILES:
+        plan.file_in("--out-dir", out_dir, name)
+    with plan.active():                      # checked now; every write obeys it
+        return _demo(args, scene, out_dir)
+
+
+FILES = ("log.csv", "log.truth.csv", "estimate_dynamic.csv", "estimate_paper.csv")
+
+
+def _demo(args, scene, out_dir) -> int:
     from estimator.log import SensorLog, write_log
     from estimator.sim.output import truth_csv
     from torquebench import pipeline as P
     from torquebench.cache import Cache
     from torquebench.commands.flexure import _pm
-    from torquebench.errors import InputError
     from torquebench.io import print_json, write_text_atomic
-    from torquebench.scenes import load_scene, scene_path
 
-    from torquebench.outputs import prepare_dir
-
-    out_dir = prepare_dir(args.out_dir, "--out-dir")
     say = (lambda *a: print(*a, file=sys.stderr)) if args.json else print
-
-    scene = load_scene(scene_path(SCENE))
-    if args.flexure is not None:
-        if not args.flexure.is_file():
-            raise InputError(f"--flexure: {args.flexure}: file not found")
-        scene = replace(scene, chain=replace(scene.chain, flexure_design=args.flexure.resolve()))
     arts, timing = P.execute(scene, ["localization_error", "predicted_error"], Cache(), seed=args.seed)
     chain, K = arts["chain"], scene.estimator.gain_per_s
     results = {"scene": SCENE, "methods": {}, "torque_noise_std_Nm": chain.noise_std_Nm,

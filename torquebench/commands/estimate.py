@@ -9,6 +9,7 @@ HELP = "estimate contacts (link, α, force, point) sample by sample from a senso
 EXAMPLES = """\
 torquebench estimate examples/leg_poke/leg_poke.csv
 torquebench estimate examples/sim/paper_fixed_link2.csv --method paper --out out/fixed_link2_estimate.csv --json
+torquebench estimate examples/spatial/leg_pokes.csv --robot robots/quadruped_leg.toml
 """
 
 
@@ -22,6 +23,22 @@ def _positive(text: str) -> float:
     if not math.isfinite(value) or value <= 0:
         raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
     return value
+
+
+def _in_range(rng_name: str):
+    """An argparse type: a finite number inside a Range of estimator.limits (unit in the message)."""
+    import argparse
+
+    def parse(text: str) -> float:
+        from estimator import limits
+
+        value = _positive(text)
+        why = getattr(limits, rng_name).problem(value)
+        if why:
+            raise argparse.ArgumentTypeError(why)
+        return value
+    parse.__name__ = "number"
+    return parse
 
 
 def _count(text: str) -> int:
@@ -48,13 +65,14 @@ def _chunk(text: str) -> int:
 def add_arguments(parser) -> None:
     parser.add_argument("log", type=Path, metavar="LOG.csv", help="sensor log: CSV (or Parquet for .parquet) with t,[x,z,theta,]q1,q2,[dx,dz,dtheta,]dq1,dq2,tau1,tau2,Fx,Fz,My in SI units (docs/conventions.md)")
     parser.add_argument("--robot", type=Path, default=None,
-                        help="robot TOML (default: robots/paper_leg.toml)")
+                        help="robot TOML (default: robots/paper_leg.toml), or a URDF robot: a .urdf or "
+                             "a declaration TOML naming one (robots/quadruped_leg.toml): the 3-D estimator")
     parser.add_argument("--method", choices=["paper", "dynamic"], default="dynamic",
                         help="localization: 'dynamic' (observer residual, least squares; default) "
                              "or 'paper' (eqs. 6-9, quasi-static)")
-    parser.add_argument("--gain", type=_positive, default=100.0, metavar="K",
+    parser.add_argument("--gain", type=_in_range("GAIN_RANGE"), default=100.0, metavar="K",
                         help="observer gain K in 1/s on every row (default: %(default)s)")
-    parser.add_argument("--threshold", type=_positive, default=None, metavar="EPS",
+    parser.add_argument("--threshold", type=_in_range("THRESHOLD_RANGE"), default=None, metavar="EPS",
                         help="use the paper's rule ||r|| > EPS (default for --method paper, EPS 0.06)")
     parser.add_argument("--false-alarm-rate", default="1/h", metavar="RATE",
                         help="dynamic detector: target false alarms, e.g. 1/h (default), 0.01/s, "
@@ -76,6 +94,12 @@ def add_arguments(parser) -> None:
                         help="joint-rate noise σ per sample (default 0)")
     parser.add_argument("--encoder-counts", default=None, metavar="COUNTS",
                         help="encoder counts per revolution (quantization noise; default 0 = none)")
+    parser.add_argument("--model-uncertainty", default=None, metavar="REL|none",
+                        help="how far the robot may be from its file, 1σ relative (masses, "
+                             "inertias, and centres of mass as a fraction of each link's length): "
+                             "the detector's covariance gains the model-error term; 'none' turns "
+                             "it off (default: the robot file's [identification] covariance, else "
+                             "its [model_uncertainty], else none)")
     parser.add_argument("--debounce", type=_count, default=0, metavar="N",
                         help="samples ||r|| must stay above EPS before a contact is declared (default: %(default)s)")
     parser.add_argument("--stance-foot", action="store_true",
@@ -89,6 +113,14 @@ def add_arguments(parser) -> None:
                         help="write t,contact,link,alpha,Fx,Fz,px,pz,rnorm per sample (s, -, -, -, N, N, m, m, -); "
                              "Parquet for .parquet, else CSV; its directory is created, an existing file is kept unless --force")
     parser.add_argument("--force", action="store_true", help="replace an existing --out file")
+    parser.add_argument("--weighting", choices=["whitened", "identity"], default="whitened",
+                        help="URDF robots: the localizer's least squares on the residual whitened by "
+                             "its no-contact covariance, or unweighted (the planar dynamic method's "
+                             "fit; the paper leg as a URDF then reproduces it) (default: %(default)s)")
+    parser.add_argument("--png", type=Path, default=None, metavar="OUT.png",
+                        help="URDF robots: the robot in 3-D at each contact interval's middle sample, the "
+                             "estimated contact and force arrow beside the true one (LOG.truth.csv, if "
+                             "there); one picture per interval: OUT.png, OUT_2.png, ...")
     parser.add_argument("--chunk-samples", type=_chunk, default=65536, metavar="N",
                         help="samples read, estimated and written per chunk: memory is bounded by "
                              "this, not by the log's length; results do not depend on it "
@@ -136,6 +168,21 @@ def _detector_options(args, n_links):
                       encoder_counts=enc, source=src), quiet, rate
 
 
+def model_uncertainty_option(text):
+    """--model-uncertainty REL | none → ModelUncertainty, False, or None (not given)."""
+    from estimator.model import ModelUncertainty
+    from torquebench.errors import InputError
+
+    if text is None:
+        return None
+    if str(text).strip().lower() == "none":
+        return False
+    rel = _floats(text, "--model-uncertainty", 1)[0]
+    if not (math.isfinite(rel) and 0 < rel <= 1):
+        raise InputError(f"--model-uncertainty: expected a relative 1σ in (0, 1] or 'none', got {text!r}")
+    return ModelUncertainty.uniform(rel)
+
+
 def _peak_memory_MB() -> float:
     """Peak resident memory of this process so far, MB: VmHWM (Linux; ru_maxrss would carry the
     parent's peak across fork + exec), else ru_maxrss."""
@@ -154,6 +201,28 @@ def _peak_memory_MB() -> float:
 
 
 def run(args) -> int:
+    import time
+
+    from torquebench.outputs import Outputs
+
+    start = time.perf_counter()
+
+    plan = Outputs(force=args.force)
+    plan.input("LOG.csv", args.log, log=True)           # the log and its side files
+    plan.input("--robot", args.robot)
+    from estimator.spatial.robot import is_spatial_robot_file
+
+    if args.robot is not None and is_spatial_robot_file(args.robot):   # the URDF it names, too
+        from estimator.spatial.robot import load_spatial_robot
+
+        plan.input("--robot's URDF", load_spatial_robot(args.robot).urdf_path)
+    plan.file("--out", args.out)
+    plan.file("--png", getattr(args, "png", None))       # the first contact's picture (3-D)
+    with plan.active():                                 # checked now; every write obeys it
+        return _run(args, start)
+
+
+def _run(args, start) -> int:
     import contextlib
     import time
 
@@ -163,19 +232,16 @@ def run(args) -> int:
     from estimator.outframe import BackgroundWriter, FrameWriter
     from estimator.pipeline import open_stream
     from estimator.robot import PAPER_LEG_TOML, load_robot
-    from torquebench.errors import InputError
     from torquebench.io import print_json
 
-    start = time.perf_counter()
-    if args.out is not None:
-        try:
-            same = args.out.resolve() == args.log.resolve()
-        except OSError:
-            same = False
-        if same:
-            raise InputError(f"--out {args.out}: is the input log; refusing to overwrite it")
-    from torquebench.outputs import prepare_file
-    prepare_file(args.out, "--out", force=args.force, inputs=(args.log, args.robot))
+    from estimator.spatial.robot import is_spatial_robot_file
+    if args.robot is not None and is_spatial_robot_file(args.robot):   # a URDF robot: the 3-D path
+        from torquebench.spatial_cli import estimate as estimate_3d
+        return estimate_3d(args)
+    if getattr(args, "png", None) is not None:
+        raise InputError("--png: the 3-D contact picture is drawn for URDF robots (--robot LEG.urdf)")
+    if getattr(args, "weighting", "whitened") != "whitened":
+        raise InputError("--weighting: for URDF robots; the planar dynamic method's fit is unweighted")
     robot = load_robot(args.robot or PAPER_LEG_TOML)
     noise, quiet, rate = _detector_options(args, robot.n_links)
     if noise is None and quiet is None:           # LOG.noise.toml beside the log, if any
@@ -189,11 +255,16 @@ def run(args) -> int:
     reader = LogReader(args.log, robot, chunk_samples=chunk)
     chunks = iter(reader)
     first = next(chunks)                          # the head: the sampling period is known
+    from estimator.plausibility import check_head, whole_log_contact
+
+    # the head against the robot's dynamics: unit/channel mix-ups refused, oddities warned about
+    found = check_head(robot, first, noise, expected_contact=args.stance_foot)
     stream = open_stream(robot, reader, method=args.method, gain_per_s=args.gain,
                          threshold=args.threshold, debounce=args.debounce,
                          expected_contacts="foot" if args.stance_foot else None, timing=timing,
                          noise=noise, quiet_window=quiet, false_alarm_rate=rate,
-                         detector=args.detector, quiet_chunks=lambda: LogReader(args.log, robot, chunk_samples=chunk))
+                         detector=args.detector, model_uncertainty=model_uncertainty_option(args.model_uncertainty),
+                         quiet_chunks=lambda: LogReader(args.log, robot, chunk_samples=chunk))
     with contextlib.ExitStack() as stack:
         writer = None
         if args.out is not None:                  # formatting runs beside the next chunk's work
@@ -222,6 +293,15 @@ def run(args) -> int:
                "chunk_samples": chunk, "peak_memory_MB": _peak_memory_MB()}
     if args.out is not None:
         summary["out"] = str(args.out)
+    found += [w for w in [whole_log_contact(summary, found)] if w]
+    found += list(getattr(reader, "plausibility_warnings", []) or []) + reader.constant_channels()
+    if found:
+        summary["warnings"] = found
+        import warnings
+
+        from estimator.plausibility import PlausibilityWarning
+        for w in found:
+            warnings.warn(w, PlausibilityWarning, stacklevel=2)
     if args.json:
         print_json(summary)
         return 0
@@ -241,6 +321,11 @@ def run(args) -> int:
         print(f"  contact {iv['t_start_s']:.4f}-{iv['t_end_s']:.4f} s: link {iv['link']}, "
               f"alpha {pm('alpha', '.3f')}, F = ({pm('Fx_N', '.3f')}, {pm('Fz_N', '.3f')}) N, "
               f"p = ({pm('px_m', '.4f')}, {pm('pz_m', '.4f')}) m")
+        if iv.get("error_over_bound") is not None:          # the episode estimate and its bounds
+            ps = iv.get("position_bound_per_sample_m")
+            print(f"    along the link ± {iv['position_m_error_estimate'] * 1e3:.3f} mm over "
+                  f"{iv['episode_samples']} samples; Cramér–Rao bound {iv['position_bound_m'] * 1e3:.3f} mm "
+                  f"({iv['error_over_bound']:.2f}×)" + (f", per sample {ps * 1e3:.3f} mm" if ps else ""))
     if args.out is not None:
         print(f"wrote {args.out}")
     return 0

@@ -64,20 +64,18 @@ def add_arguments(parser) -> None:
     parser.add_argument("--force", action="store_true", help="replace existing --vtu / --png files")
 
 
-def _check_outputs(args, design_path: Path) -> None:
-    """Refuse bad output paths before the (long) analysis runs."""
-    from torquebench.outputs import prepare_file
+def _check_outputs(args, design_path: Path, design=None):
+    """The output plan (userio.outputs), checked before the (long) analysis runs: --vtu / --png
+    never the design or the files it names (STL/STEP, sensor), never replaced without --force."""
+    from torquebench.outputs import Outputs
 
     for flag, path, suffix in (("--vtu", args.vtu, ".vtu"), ("--png", args.png, ".png")):
-        if path is None:
-            continue
-        if path.suffix.lower() != suffix:
+        if path is not None and path.suffix.lower() != suffix:
             raise InputError(f"{flag}: {path} must end in {suffix}")
-        if path.resolve() == design_path.resolve():
-            raise InputError(f"{flag}: {path} is the design file; refusing to overwrite it")
-        prepare_file(path, flag, force=args.force, inputs=(design_path,))
     if args.rtol is not None and args.single_level:
         raise InputError("--rtol: needs the error estimate; drop --single-level")
+    if args.rtol is not None and not 1e-6 <= args.rtol <= 0.5:
+        raise InputError(f"--rtol: must lie in [1e-6, 0.5] (relative), got {args.rtol:g}")
     if args.max_dofs is not None and args.max_dofs < 1000:
         raise InputError(f"--max-dofs: must be ≥ 1000, got {args.max_dofs}")
     if args.max_memory_gb is not None and not args.max_memory_gb > 0.1:
@@ -88,6 +86,14 @@ def _check_outputs(args, design_path: Path) -> None:
         raise InputError(f"--max-elements: must be ≥ 100, got {args.max_elements:g}")
     if args.sweep and args.vtu is not None:
         raise InputError("--vtu: one design at a time; drop --sweep to write fields")
+    plan = Outputs(force=args.force)
+    plan.input("design file", design_path)
+    if design is not None:
+        plan.input("geometry.file", design.file_path)
+        plan.input("bridge.sensor", design.sensor_path)
+    plan.file("--vtu", args.vtu)
+    plan.file("--png", args.png)
+    return plan.check()
 
 
 def _pm(res: dict, key: str) -> str:
@@ -145,33 +151,88 @@ def _print_design(res: dict) -> None:
 
 
 def run(args) -> int:
-    from flexure.analysis import analyze, parse_sweep, sweep, sweep_plot, sweep_table, sweep_warnings
+    from flexure.analysis import parse_sweep
     from flexure.design import load_design
-    from torquebench.io import print_json, shipped
+    from torquebench.io import shipped
 
-    path = args.design or shipped("scenes", "paper_disc.toml")
-    _check_outputs(args, path)
+    from userio.files import check_input
+
+    path = check_input(args.design or shipped("scenes", "paper_disc.toml"), what="flexure design TOML")
+    design = load_design(path)
+    plan = _check_outputs(args, path, design)
     params = parse_sweep(args.sweep)
     progress = sys.stderr.isatty() or not args.json
-    if params:
-        keys = [k for k, _ in params]
-        rows = sweep(path, params, args.size, args.order, progress=progress,
-                     error_estimate=not args.single_level)
-        warnings = sweep_warnings(rows, params)
-        if args.png is not None:
-            sweep_plot(rows, keys, args.png)
-        if args.json:
-            print_json({"design_file": str(path), "parameters": keys, "rows": rows, "warnings": warnings,
-                        "png": str(args.png) if args.png else None})
-        else:
-            print(sweep_table(rows, keys))
-            for w in warnings:
-                print(f"warning: {w}")
-            if args.png is not None:
-                print(f"trade-off plot: {args.png}")
-        return 0
+    with plan.active():                       # every write (--vtu, --png) obeys the plan
+        if params:
+            return _sweep(args, path, design, params, progress)
+        return _one(args, design, progress)
 
-    design = load_design(path)
+
+def _sweep(args, path, design, params, progress) -> int:
+    from flexure.analysis import sweep, sweep_plot, sweep_table, sweep_warnings
+    from flexure.design import preflight
+    from torquebench.io import print_json
+
+    if sum(1 for _ in params) and _count(params) > MAX_DESIGNS:
+        raise InputError(f"--sweep: {_count(params)} designs, above the {MAX_DESIGNS} a sweep runs "
+                         "(each is a FEM analysis); sweep fewer values")
+    import time
+    from itertools import product
+
+    keys = [k for k, _ in params]
+    combos = list(product(*[v for _, v in params]))
+    cost = preflight(design, args.size, args.order, args.max_elements,
+                     levels=1 if args.single_level else 2)
+    for w in cost["warnings"]:
+        print(f"warning: {w}", file=sys.stderr)
+    rows = []
+    for i, combo in enumerate(combos):       # one design at a time: the first one times the rest
+        t0 = time.perf_counter()
+        rows += sweep(path, [(k, [v]) for k, v in zip(keys, combo)], args.size, args.order,
+                      progress=False, error_estimate=not args.single_level)
+        if i == 0 and len(combos) > 1:
+            per = time.perf_counter() - t0
+            print(f"flexure: sweeping {len(combos)} designs (~{cost['elements_estimate']:.3g} tetrahedra "
+                  f"each); the first took {per:.3g} s: estimated total {_human(per * len(combos))}",
+                  file=sys.stderr)
+    warnings = sweep_warnings(rows, params)
+    if args.png is not None:
+        sweep_plot(rows, keys, args.png)
+    if args.json:
+        print_json({"design_file": str(path), "parameters": keys, "rows": rows, "warnings": warnings,
+                    "png": str(args.png) if args.png else None})
+    else:
+        print(sweep_table(rows, keys))
+        for w in warnings:
+            print(f"warning: {w}")
+        if args.png is not None:
+            print(f"trade-off plot: {args.png}")
+    return 0
+
+
+MAX_DESIGNS = 10_000
+
+
+def _count(params) -> int:
+    n = 1
+    for _, vals in params:
+        n *= len(vals)
+    return n
+
+
+def _human(seconds: float) -> str:
+    return (f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.1f} min" if seconds < 7200
+            else f"{seconds / 3600:.1f} h")
+
+
+def _one(args, design, progress) -> int:
+    from flexure.analysis import analyze
+    from flexure.design import preflight
+    from torquebench.io import print_json
+
+    for w in preflight(design, args.size, args.order, args.max_elements,
+                       levels=1 if args.single_level else 3)["warnings"]:
+        print(f"warning: {w}", file=sys.stderr)
     if args.single_level:
         res, fields = analyze(design, args.size, args.order, progress=progress, max_elements=args.max_elements)
     else:

@@ -25,12 +25,53 @@ def builders() -> dict:
             if not info.name.startswith("_")}
 
 
+#: where `report` keeps how long each area took the last time it rebuilt the shipped reports
+TIMES_FILE = "build_times.json"
+
+
+def describe(module_name: str) -> str:
+    """The first sentence of a builder's docstring, without its ``reports/x.md:`` prefix."""
+    import ast
+    import importlib.util
+
+    spec = importlib.util.find_spec(module_name)
+    doc = ast.get_docstring(ast.parse(Path(spec.origin).read_text(encoding="utf-8"))) or ""
+    import re
+
+    para = " ".join(doc.split("\n\n")[0].split())
+    first = re.split(r"(?<!eq)(?<!eqs)(?<!Fig)\. (?=[A-Z(`])", para)[0].rstrip(".") + "."
+    if first.startswith("reports/") and ": " in first:
+        first = first.split(": ", 1)[1]
+    return first[:1].upper() + first[1:]
+
+
+def recorded_times(reports_dir: Path) -> dict:
+    """{area: {"s": seconds, "date": "YYYY-MM-DD"}} of the last rebuild of the shipped reports."""
+    import json
+
+    try:
+        return json.loads((reports_dir / TIMES_FILE).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+
+
+def _listing(areas: dict) -> list[dict]:
+    from torquebench.io import REPO_ROOT
+
+    times = recorded_times(REPO_ROOT / "reports")
+    return [{"area": a, "description": describe(m),
+             "last_build_s": times.get(a, {}).get("s"), "last_build_date": times.get(a, {}).get("date")}
+            for a, m in areas.items()]
+
+
 def add_arguments(parser) -> None:
     parser.add_argument("--out-dir", type=Path, default=None,
                         help="directory to write the reports to, created if missing; reports are regenerated in place (default: the repository's reports/)")
     parser.add_argument("--only", action="append", metavar="AREA",
                         help="build only this area (repeatable; default: all); see --list")
     parser.add_argument("--list", action="store_true", help="list the report areas and exit")
+    parser.add_argument("--force", action="store_true",
+                        help="replace report files in --out-dir that `report` did not write there")
 
 
 def run(args) -> int:
@@ -38,18 +79,39 @@ def run(args) -> int:
 
     areas = builders()
     if args.list:
+        rows = _listing(areas)
         if args.json:
-            print_json({"areas": list(areas)})
-        else:
-            print("\n".join(areas))
+            print_json({"areas": list(areas), "reports": rows})
+            return 0
+        for r in rows:
+            took = (f"{r['last_build_s']:.0f} s when last built ({r['last_build_date']})"
+                    if r["last_build_s"] is not None else "not timed yet")
+            print(f"{r['area']:17s} {r['description']}\n{'':17s} run time: {took}")
         return 0
     chosen = args.only or list(areas)
     unknown = sorted(set(chosen) - set(areas))
     if unknown:
         raise InputError(f"--only: unknown report area {unknown[0]!r}; known: {', '.join(areas)}")
+    from torquebench.outputs import Outputs, foreign_files
+
+    shipped = args.out_dir is None                 # the repository's reports: regenerated in place
     out_dir = args.out_dir or REPO_ROOT / "reports"
-    from torquebench.outputs import prepare_dir
-    prepare_dir(out_dir, "--out-dir")
+    plan = Outputs(force=args.force)
+    plan.directory("--out-dir", out_dir, shipped=shipped)
+    plan.check()
+    if not shipped:
+        clash = foreign_files(out_dir, [*chosen, "README"], plan.force)
+        if clash:
+            raise InputError(f"--out-dir: {clash[0]} exists and was not written by `report` "
+                             f"({len(clash)} such file(s) with a report's name); add --force to "
+                             "replace them or choose another directory")
+    with plan.active():                            # every builder's write obeys it
+        return _build(args, areas, chosen, out_dir)
+
+
+def _build(args, areas, chosen, out_dir) -> int:
+    from torquebench.io import REPO_ROOT, print_json
+
     written, timings = {}, {}
     for area in chosen:
         start = time.perf_counter()
@@ -59,6 +121,16 @@ def run(args) -> int:
         written[area] = [str(p) for p in paths]
     from torquebench.reports_index import write_index
     index = write_index(out_dir, list(areas))
+    if out_dir == REPO_ROOT / "reports":           # the shipped reports: keep how long each took
+        import datetime
+        import json
+
+        from userio.files import write_text_atomic
+
+        times = recorded_times(out_dir)
+        today = datetime.date.today().isoformat()
+        times.update({a: {"s": round(timings[f"{a}_s"], 1), "date": today} for a in written})
+        write_text_atomic(out_dir / TIMES_FILE, json.dumps(times, indent=1, sort_keys=True) + "\n")
     if args.json:
         print_json({"written": written, "index": str(index), "build_time_s": timings})
     else:

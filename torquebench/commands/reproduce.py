@@ -29,6 +29,8 @@ def add_arguments(parser) -> None:
                         help="skip the integrator × scene stiffness table")
     parser.add_argument("--quick", action="store_true",
                         help="a reduced stiffness table (one scene, BDF and RK4, 0.2 s)")
+    parser.add_argument("--force", action="store_true",
+                        help="replace report files in --out-dir that `reproduce` did not write there")
 
 
 def reproduction_results(names, *, quick=False, stiffness=True) -> dict:
@@ -72,11 +74,27 @@ def run(args) -> int:
     if args.regenerate_shipped and (args.scene or args.quick):
         raise InputError("--regenerate-shipped: the shipped report covers every scene at full "
                          "settings; drop --scene/--quick or write elsewhere with --out-dir")
+    from torquebench.outputs import Outputs, foreign_files, prepare_dir
+
     if args.out_dir is not None:
-        from torquebench.outputs import prepare_dir
         prepare_dir(args.out_dir, "--out-dir")                     # created if missing
     out_dir = output_dir(args.out_dir, default="reproduction", shipped_dir=REPO_ROOT / "reports",
                          regenerate=args.regenerate_shipped)
+    plan = Outputs(force=args.force)
+    plan.directory("--out-dir", out_dir, shipped=args.regenerate_shipped)
+    plan.check()
+    clash = [] if args.regenerate_shipped else foreign_files(Path(out_dir), ["reproduction"], args.force)
+    if clash:
+        raise InputError(f"--out-dir: {clash[0]} exists and was not written by `reproduce`; add "
+                         "--force to replace it or choose another directory")
+    with plan.active():                                # every write obeys it
+        return _reproduce(args, names, out_dir)
+
+
+def _reproduce(args, names, out_dir) -> int:
+    from torquebench.io import print_json
+    from torquebench.reports import reproduction as rr
+
     results = reproduction_results(names, quick=args.quick, stiffness=not args.no_stiffness)
     paths = rr.write(results, Path(out_dir))
     summary = rr.summary(results)

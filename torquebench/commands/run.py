@@ -24,6 +24,9 @@ def add_arguments(parser) -> None:
                              "scene's [outputs] want)")
     parser.add_argument("--explain", action="store_true", help="print the plan; run nothing")
     parser.add_argument("--force", action="store_true", help="ignore cached results")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace report files in the scene's [outputs] dir that torquebench did "
+                             "not write (default: refuse, before any work)")
     parser.add_argument("--seed", type=int, default=None, help="sensor-noise seed (default: the scene's)")
     parser.add_argument("--cache-dir", type=Path, default=None,
                         help="cache directory (default $TORQUEBENCH_CACHE or .torquebench-cache)")
@@ -68,6 +71,13 @@ def run(args) -> int:
     from torquebench.io import print_json
     from torquebench.scenes import load_scene, scene_path
 
+    from estimator.spatial.scene import is_spatial_scene
+    from torquebench.outputs import run_plan
+    from userio.errors import seed
+
+    seed(args.seed)
+    if is_spatial_scene(scene_path(str(args.scene))):       # a URDF robot: the 3-D scene runner
+        return _run_3d(args)
     scene = load_scene(scene_path(str(args.scene)))
     cache = Cache(args.cache_dir)
     if args.explain:
@@ -79,7 +89,8 @@ def run(args) -> int:
             for r in rows:
                 print(f"{r['stage']:20s} {r['action']:7s} {r['reason']}")
         return 0
-    arts, timing = P.execute(scene, args.only, cache, args.seed, args.force)
+    with run_plan(scene, args.only, force=args.overwrite).active():     # inputs kept, reports checked
+        arts, timing = P.execute(scene, args.only, cache, args.seed, args.force)
     out = {"scene": scene.name, **summarize(arts),
            "stages": [{"stage": n, "action": a, "time_s": t} for n, a, t in timing]}
     if args.json:
@@ -118,4 +129,27 @@ def run(args) -> int:
         print(f"report: {r['summary']}" + (f" + {', '.join(r['areas'])} in {r['dir']}" if r["areas"] else ""))
     if "flagged_samples" in out:
         print(f"saturated/out-of-range samples kept out of detection: {out['flagged_samples']}")
+    return 0
+
+
+def _run_3d(args) -> int:
+    """A 3-D scene: simulate, estimate, measured against the truth, predicted at the pokes."""
+    from torquebench.errors import InputError
+    from torquebench.io import print_json
+    from torquebench.scenes import scene_path
+    from torquebench.spatial_scene import run_scene
+
+    if args.explain or args.only:
+        raise InputError("--explain/--only: a 3-D scene runs whole (simulate → estimate → compare)")
+    out = run_scene(scene_path(str(args.scene)), seed=args.seed)
+    if args.json:
+        print_json(out)
+        return 0
+    me, pr = out["measured"]["dynamic"], out["predicted"]["dynamic"]
+    f = (lambda v: f"{v * 1e3:.3f} mm" if v is not None else "—")   # noqa: E731
+    print(f"{out['scene']} ({out['robot']}, URDF): {me['contact_samples']} contact samples, link right on "
+          f"{100 * (me['isolation_fraction'] or 0):.1f} %, position RMS {f(me['position_error_rms_m'])} "
+          f"(median {f(me['position_error_median_m'])}); predicted {f(pr['position_rms_m'])}; "
+          f"false alarms {100 * (me['false_alarm_fraction'] or 0):.3f} % of {me['contact_free_samples']} "
+          f"contact-free samples; {out['run_time_s']:.1f} s")
     return 0

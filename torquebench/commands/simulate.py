@@ -15,6 +15,7 @@ HELP = "simulate a scene file: write a sensor log CSV (docs/conventions.md), LOG
 EXAMPLES = """\
 torquebench simulate scenes/paper_floating_link1.toml --out out/floating_link1.csv
 torquebench simulate scenes/paper_fixed_link2.toml --out out/fixed_link2.csv --seed 7 --duration 1.0 --json
+torquebench simulate scenes/spatial/quadruped_leg_pokes.toml --out out/leg_pokes.csv --duration 0.3
 """
 
 
@@ -63,40 +64,51 @@ def scene_from_args(args, max_run_time_s: float):
 
 def run(args) -> int:
     from estimator.noise import noise_side_file
-    from estimator.sim.output import log_files, timing_path
-    from torquebench.io import print_json
-    from torquebench import pipeline as P
-    from torquebench.cache import Cache
-    from torquebench.outputs import prepare_file
+    from estimator.sim.output import timing_path
+    from torquebench.outputs import scene_plan
     from userio.errors import finite, seed
-    from userio.files import plan_outputs, write_files_atomic
 
     seed(args.seed)
     if args.duration is not None:
         finite(args.duration, "--duration", positive=True)
     out, tpath = Path(args.out), truth_path(Path(args.out))
     timing_file, noise_file = timing_path(out), noise_side_file(out)
-    for p in (out, tpath, timing_file, noise_file):
-        prepare_file(p, "--out", force=args.force, inputs=(args.scene,))   # mkdir, --force
-    plan_outputs({"scene": args.scene}, {"--out": out, "truth (--out with .truth.csv)": tpath,
-                                         "timing (--out with .timing.toml)": timing_file,
-                                         "noise (--out with .noise.toml)": noise_file})
     if out.suffix == ".toml":
         raise InputError(f"--out: {out} looks like a scene/robot file; refusing to overwrite it "
                          "with a log (the log is a CSV)")
+    from estimator.spatial.scene import is_spatial_scene
+    if is_spatial_scene(args.scene):                  # a URDF robot: the 3-D simulator
+        from torquebench.spatial_cli import simulate as simulate_3d
+        return simulate_3d(args)
     tol = getattr(args, "error_tolerance", None)
     if tol is not None:
         finite(tol, "--error-tolerance", positive=True)
     max_run = finite(getattr(args, "max_run_time", 600.0), "--max-run-time", positive=True)
     scene = scene_from_args(args, max_run)
+    plan = scene_plan(scene, force=args.force)        # the scene and every file it reads
+    for label, p in (("--out", out), ("truth (--out with .truth.csv)", tpath),
+                     ("timing (--out with .timing.toml)", timing_file),
+                     ("noise (--out with .noise.toml)", noise_file)):
+        plan.file(label, p)
+    with plan.active():                               # checked now; every write obeys it
+        return _simulate(args, scene, out, tpath, timing_file, noise_file, tol)
+
+
+def _simulate(args, scene, out, tpath, timing_file, noise_file, tol) -> int:
+    from estimator.sim.output import log_files
+    from torquebench import pipeline as P
+    from torquebench.cache import Cache
+    from torquebench.io import print_json
+    from userio.files import remove, write_files_atomic
+
     want = "log" if scene.sim is not None else "static_log"    # the stage graph: simulation → sensor_log
     arts, _ = P.execute(scene, [want], Cache())
     log, truth, stats = (arts[want][k] for k in ("log", "truth", "stats"))
     noise = arts[want].get("noise")
     # log + truth + timing (+ noise): one set; an old noise file of another log is not left behind
     write_files_atomic(log_files(out, log, truth, tpath, noise))
-    if noise is None and noise_file.exists():
-        noise_file.unlink()
+    if noise is None:
+        remove(noise_file)            # an old noise file of another log: not left beside this one
     summary = {"scene": scene.name, "log": str(out), "truth": str(tpath),
                "timing": str(timing_file), "noise": str(noise_file) if noise is not None else None,
                "samples": len(log.t),

@@ -18,6 +18,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--executor", default="processes:2",
                         help="local, processes:N (default processes:2) or dask://HOST:PORT")
     parser.add_argument("--cache-dir", type=Path, default=None, help="cache directory")
+    parser.epilog = (parser.epilog or "") + ("\nExit code 2 when any point failed (the other points are "
+                                             "still printed).")
 
 
 def run(args) -> int:
@@ -33,6 +35,7 @@ def run(args) -> int:
     if args.json:
         print_json({"scene": str(path), "executor": args.executor, "points": rows,
                     "failed_points": len(failed), "shared_stages": info.get("shared_stages", [])})
+        _exit_on_failures(rows)
         return 0
     for r in rows:
         pt = ", ".join(f"{k}={v}" for k, v in r["point"].items())
@@ -43,4 +46,18 @@ def run(args) -> int:
         pr = r["result"].get("predicted", {}).get("dynamic", {}).get("position_rms_m")
         f = (lambda v: f"{v * 1e3:.2f} mm" if v is not None else "—")   # noqa: E731
         print(f"{pt}: measured RMS |p| err {f(me)}, predicted {f(pr)} (dynamic)")
+    _exit_on_failures(rows)
     return 0
+
+
+def _exit_on_failures(rows, what: str = "sweep") -> None:
+    """Exit 2 (one line) when any point failed: the rows were printed, the run is not a success."""
+    import sys
+
+    from torquebench.sweep import failed_points
+
+    msg = failed_points(rows, what)
+    if msg:
+        sys.stdout.flush()
+        from userio.errors import InputError
+        raise InputError(msg.split(": ", 1)[1] if msg.startswith(what) else msg)

@@ -45,6 +45,14 @@ FILTER_SAMPLES = 25
 TARE_S = 0.3          # no-load hold before static loads: the estimator's noise floors come from it
 
 
+
+def _save_png(fig, path) -> None:
+    """The figure as a PNG written atomically (userio.files: under the command's output plan)."""
+    from userio.files import atomic_path
+
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+
 def _progress(iterable, desc, enabled):
     if not enabled:
         return iterable
@@ -399,7 +407,7 @@ def _plots(results, out_dir: Path) -> list[Path]:
         fig.suptitle(f"{name}: true vs estimated |F| and α, observer residual")
         fig.tight_layout()
         p = out_dir / f"reproduction_{name}.png"
-        fig.savefig(p, dpi=110)
+        _save_png(fig, p)
         plt.close(fig)
         paths.append(p)
     sw = results["static"].get("paper_posture_sweep")
@@ -436,7 +444,7 @@ def _plots(results, out_dir: Path) -> list[Path]:
         fig.suptitle("posture sweep (7 N at −π/3, 8 contacts per posture); red ×n: n contacts flagged")
         fig.tight_layout()
         p = out_dir / "reproduction_sweep_heatmap.png"
-        fig.savefig(p, dpi=110)
+        _save_png(fig, p)
         plt.close(fig)
         paths.append(p)
     rows = [r for r in results.get("stiffness", []) if r.get("status") == "ok"]
@@ -454,7 +462,7 @@ def _plots(results, out_dir: Path) -> list[Path]:
         ax.set_title("integrator error against run time")
         fig.tight_layout()
         p = out_dir / "reproduction_integrators.png"
-        fig.savefig(p, dpi=110)
+        _save_png(fig, p)
         plt.close(fig)
         paths.append(p)
     return paths

@@ -1,0 +1,285 @@
+"""Suite-wide test set-up: the slow marker, one stage cache per run, and the CPU budget guard.
+
+- ``@pytest.mark.slow`` tests (convergence studies, end-to-end runs of the answer-level FEM) are
+  left out of a plain ``pytest`` / ``bash run.sh test`` run; ``--all`` (what ``.ci/run`` passes)
+  runs them too, as does any ``-m`` expression or a test named by its node id (``file::test``).
+  Slow tests are put first so that ``-n 2`` (with ``--maxschedchunk``) hands the long ones out
+  before the short ones and the two workers finish together.
+- ``TORQUEBENCH_CACHE`` points at ONE temporary directory for the whole run, shared by the xdist
+  workers and by every ``torquebench`` subprocess: a stage (a FEM of a design, a simulation, an
+  emcee fit) computed by one test is read back by the next one with the same inputs. The cache is
+  content-addressed (inputs + source hashes) and written atomically, so two workers writing the
+  same entry at once is safe. Tests that check cache behaviour pass their own directory.
+- The guard: an unmarked test whose CPU time (this process, all threads, plus the subprocesses it
+  waited for; its module- or session-scoped fixtures are charged separately) exceeds
+  ``TEST_BUDGET_CPU_S`` fails with a message asking for ``@pytest.mark.slow`` or a smaller case.
+  CPU time rather than wall time: a loaded machine slows a test down but hardly changes its CPU
+  time. ``TORQUEBENCH_TEST_BUDGET_S=0`` turns the guard off (e.g. under a profiler or coverage).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import resource
+import shutil
+import tempfile
+import time
+
+import pytest
+
+#: CPU seconds an unmarked test may take (its own setup + call); measured maxima of unmarked tests
+#: are a few seconds, so only a test that really grew (or a new heavy one) trips it.
+TEST_BUDGET_CPU_S = 20.0
+#: CPU seconds a shared (module/session) fixture used by unmarked tests may take: it is paid once
+#: per worker, so it may cost more than one test, not much more.
+FIXTURE_BUDGET_CPU_S = 40.0
+_CACHE_ENV = "TORQUEBENCH_CACHE"
+_OWN_CACHE = "_TORQUEBENCH_TEST_CACHE_OWNER"
+
+
+def pytest_addoption(parser):
+    parser.addoption("--all", action="store_true", dest="run_all",
+                     help="run the slow tests too (convergence studies, end-to-end runs); CI does")
+
+
+def _budget() -> float:
+    raw = os.environ.get("TORQUEBENCH_TEST_BUDGET_S")
+    return TEST_BUDGET_CPU_S if raw in (None, "") else float(raw)
+
+
+# ---------------------------------------------------------------- one stage cache per run
+def pytest_configure(config):
+    """The controller (or a plain run) makes the run's cache directory; xdist workers inherit the
+    environment variable, so all processes share it. Removed at the end of the run."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    d = tempfile.mkdtemp(prefix="torquebench-test-cache-")
+    config._torquebench_cache = (d, os.environ.get(_CACHE_ENV))
+    os.environ[_CACHE_ENV] = d
+
+
+def pytest_unconfigure(config):
+    held = getattr(config, "_torquebench_cache", None)
+    if held is None:
+        return
+    d, before = held
+    shutil.rmtree(d, ignore_errors=True)
+    if before is None:
+        os.environ.pop(_CACHE_ENV, None)
+    else:
+        os.environ[_CACHE_ENV] = before
+
+
+# ---------------------------------------------------------------- selection and order
+def _named_by_id(config) -> set[str]:
+    return {a for a in config.args if "::" in a}
+
+
+def pytest_collection_modifyitems(config, items):
+    explicit_m = bool(config.getoption("markexpr", ""))
+    if not (config.getoption("run_all") or explicit_m):
+        named = _named_by_id(config)
+        keep, slow = [], []
+        for it in items:
+            is_named = any(it.nodeid == n or it.nodeid.startswith(n + "[") or it.nodeid.endswith(n)
+                           for n in named)
+            (slow if it.get_closest_marker("slow") and not is_named else keep).append(it)
+        if slow:
+            config.hook.pytest_deselected(items=slow)
+            items[:] = keep
+            config._torquebench_slow_left_out = len(slow)
+    # slow tests first (in file order, so a module's fixtures stay with its tests): with
+    # `-n 2 --maxschedchunk 1` the workers take the long ones first and finish together
+    order = {it.nodeid.split("::", 1)[0]: i for i, it in reversed(list(enumerate(items)))}
+    rank = {id(it): (0 if it.get_closest_marker("slow") else 1, order[it.nodeid.split("::", 1)[0]], i)
+            for i, it in enumerate(items)}
+    items.sort(key=lambda it: rank[id(it)])
+
+def pytest_report_header(config):
+    if not (config.getoption("run_all") or config.getoption("markexpr", "")):
+        return "slow tests left out (run them with --all, as CI does: bash run.sh test --all)"
+    return None
+
+
+def pytest_terminal_summary(terminalreporter, config):
+    n = getattr(config, "_torquebench_slow_left_out", 0)
+    if n:
+        terminalreporter.write_line(f"{n} slow tests left out: `bash run.sh test --all` runs them (CI does)")
+
+
+# ---------------------------------------------------------------- the CPU budget guard
+def _cpu_s() -> float:
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + kids.ru_utime + kids.ru_stime
+
+
+class _Meter:
+    item = None
+    start = 0.0
+    shared = 0.0                 # CPU of module/session fixtures set up during this test
+    shared_by: dict = {}
+    depth = 0
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_setup(item):
+    _Meter.item, _Meter.start, _Meter.shared, _Meter.shared_by = item, _cpu_s(), 0.0, {}
+    yield
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_fixture_setup(fixturedef, request):
+    outer = fixturedef.scope != "function" and _Meter.depth == 0     # nested ones counted once
+    _Meter.depth += fixturedef.scope != "function"
+    t0 = _cpu_s()
+    try:
+        yield
+    finally:
+        _Meter.depth -= fixturedef.scope != "function"
+    if outer and _Meter.item is not None:
+        cost = _cpu_s() - t0
+        _Meter.shared += cost
+        _Meter.shared_by[fixturedef.argname] = _Meter.shared_by.get(fixturedef.argname, 0.0) + cost
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    outcome = yield
+    report = outcome.get_result()
+    budget = _budget()
+    if (call.when != "call" or budget <= 0 or not report.passed or item is not _Meter.item
+            or item.get_closest_marker("slow")):
+        return
+    own = _cpu_s() - _Meter.start - _Meter.shared
+    heavy = {k: v for k, v in _Meter.shared_by.items() if v > FIXTURE_BUDGET_CPU_S * budget / TEST_BUDGET_CPU_S}
+    msg = None
+    if own > budget:
+        msg = (f"test budget: this unmarked test took {own:.2f} s of CPU (budget {budget:g} s, "
+               "tests/conftest.py). Mark it @pytest.mark.slow (it then runs with --all, in CI) or "
+               "give it a smaller case (mesh, log, number of draws).")
+    elif heavy:
+        names = ", ".join(f"{k} ({v:.1f} s)" for k, v in heavy.items())
+        msg = (f"test budget: shared fixture(s) {names} took more CPU than the "
+               f"{FIXTURE_BUDGET_CPU_S * budget / TEST_BUDGET_CPU_S:g} s allowed for an unmarked test "
+               "(tests/conftest.py). Mark the tests that use it @pytest.mark.slow or make it cheaper.")
+    if msg:
+        report.outcome = "failed"
+        report.longrepr = msg
+
+
+# ---------------------------------------------------------------- shared expensive results
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+E2E_SCENE = os.path.join(ROOT, "scenes", "end_to_end.toml")
+#: the seed-independent, expensive stages of a scene: the FEM (three mesh levels), the emcee fit
+#: and the noise-free simulation; what depends on the seed or the estimator stays per test
+SHARED_STAGES = ("flexure", "calibration", "truth")
+
+
+def run_cache_dir() -> str:
+    """The run's stage cache directory ($TORQUEBENCH_CACHE, set by pytest_configure)."""
+    return os.environ[_CACHE_ENV]
+
+
+@contextlib.contextmanager
+def run_lock(name: str):
+    """An exclusive lock shared by the xdist workers of this run (flock on a file in the run's
+    cache directory): the first worker computes a shared result, the other waits and reads it."""
+    import fcntl
+
+    os.makedirs(os.path.join(run_cache_dir(), "locks"), exist_ok=True)
+    with open(os.path.join(run_cache_dir(), "locks", f"{name}.lock"), "w") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def warm_scene(path: str, outputs=SHARED_STAGES):
+    """A scene's ``outputs`` computed once per run into the shared stage cache (whichever worker
+    asks first; the other waits for it, then finds them cached). → the run's Cache."""
+    from torquebench import pipeline as P
+    from torquebench.cache import Cache
+    from torquebench.scenes import load_scene
+
+    cache = Cache(run_cache_dir())
+    scene = load_scene(path)
+    with run_lock("scene-" + hashlib.sha256(os.path.abspath(path).encode()).hexdigest()[:16]):
+        P.execute(scene, [o for o in outputs if o in P.BY_GIVES], cache)
+    return cache
+
+
+@pytest.fixture(scope="session")
+def e2e_stages():
+    """scenes/end_to_end.toml's FEM (the paper disc, three P2 levels), calibration fit and
+    simulation in the run's stage cache, computed once for all workers. Every pipeline run with
+    the default cache ($TORQUEBENCH_CACHE: `demo --flexure scenes/paper_disc.toml`, `run
+    scenes/end_to_end.toml`, in-process or as a subprocess) then reads them instead of re-solving."""
+    return warm_scene(E2E_SCENE)
+
+
+@pytest.fixture(scope="session")
+def stage_cache():
+    """The run's shared stage cache (torquebench.cache.Cache on $TORQUEBENCH_CACHE), nothing warmed."""
+    from torquebench.cache import Cache
+
+    return Cache(run_cache_dir())
+
+
+@pytest.fixture
+def private_stage_cache(tmp_path, e2e_stages):
+    """A private copy of the run's stage cache, for tests that corrupt or count cache entries: it
+    starts with the shared results, and what the test does to it stays in it."""
+    from torquebench.cache import Cache
+
+    d = tmp_path / "stage-cache"
+    shutil.copytree(e2e_stages.dir, d, ignore=shutil.ignore_patterns("locks"))
+    return Cache(d)
+
+
+def _memo_key(analyze, args, kwargs) -> str:
+    """Hash of analyze's inputs: the design (a dataclass of plain values, pickled) with the bytes
+    of the part file it names, and the mesh arguments (``progress`` left out)."""
+    import inspect
+    import pickle
+
+    bound = inspect.signature(analyze).bind(*args, **kwargs)
+    bound.apply_defaults()
+    a = dict(bound.arguments)
+    a.pop("progress", None)
+    design = a.pop("design")
+    h = hashlib.sha256(pickle.dumps((design, sorted(a.items())), protocol=4))
+    for named in (getattr(design, "file_path", None), getattr(design, "sensor_path", None)):
+        if named and os.path.isfile(named):          # the part and the sensor it reads, by content
+            h.update(open(named, "rb").read())
+    return "analyze-" + h.hexdigest()[:32]
+
+
+@pytest.fixture
+def fem_memo(monkeypatch):
+    """``flexure.analysis.analyze`` (one mesh level: mesh, assemble, solve, read the gauges)
+    remembered for the whole run, on disk in the run's cache directory and shared by the workers:
+    tests that put the same design on the same levels through different front ends (JSON, text,
+    --rtol, output files) solve it once. Each call gets its own unpickled copy (callers may mutate
+    it). Only for tests that check what is done with an analysis, never for the meshing or
+    solver tests themselves; progress lines of a remembered level are not printed again."""
+    import flexure.analysis as A
+    from torquebench.cache import Cache
+
+    real = A.analyze
+    cache = Cache(run_cache_dir())
+
+    def remembered(*args, **kwargs):
+        key = _memo_key(real, args, kwargs)
+        with run_lock(key):
+            hit = cache.get(key)
+            if hit is None:
+                hit = real(*args, **kwargs)
+                cache.put(key, hit)
+                return cache.get(key)
+        return hit
+
+    monkeypatch.setattr(A, "analyze", remembered)
+    return remembered
