@@ -80,8 +80,6 @@ def _check_outputs(args, design_path: Path, design=None):
         raise InputError(f"--max-dofs: must be ≥ 1000, got {args.max_dofs}")
     if args.max_memory_gb is not None and not args.max_memory_gb > 0.1:
         raise InputError(f"--max-memory-gb: must be > 0.1, got {args.max_memory_gb:g}")
-    if args.rtol is not None and not (0 < args.rtol < 1):
-        raise InputError(f"--rtol: must be in (0, 1), got {args.rtol:g}")
     if args.max_elements is not None and not args.max_elements >= 100:
         raise InputError(f"--max-elements: must be ≥ 100, got {args.max_elements:g}")
     if args.sweep and args.vtu is not None:
