@@ -273,8 +273,11 @@ def interval_rms(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise
     if Ym is not None:
         e = e - np.einsum("bnr,bdr->bdn", Ym, rng.standard_normal((B, draws, Ym.shape[2])))
     r = (r_true[:, None, :] - e).reshape(-1, n)
+    weights = _fit_weights(noise, robot.n_links, method)            # the estimator's own fit
+    tol = noise.ambiguity_tol(robot.n_links, method) if weights is None else \
+        AMBIGUITY_N_SIGMA * np.sqrt(robot.n_links + 3)
     a_out, _ = _localize(robot, method, np.repeat(q, draws, axis=0), r, np.repeat(link, draws),
-                         noise.ambiguity_tol(robot.n_links, method))
+                         tol, weights)
     bias = np.abs(a_out.reshape(B, draws) - alpha[:, None]) * _link_length(robot, q, link)[:, None]
     quiet = SensorNoise(torque_std_Nm=noise.torque_std_Nm, wrench_std=noise.wrench_std,
                         torque_gain_rel_std=np.zeros(1), sample_rate_Hz=noise.sample_rate_Hz,

@@ -322,10 +322,24 @@ def analyze_design(design, size: str | None = None, order: int | None = None, rt
 def design_figures(path, overrides: dict | None = None, size: str | None = None, order: int | None = None,
                    rtol: float | None = None, method: str = "levels") -> dict:
     """For the pipeline: a design file (+ overrides) → gauge strain per N·m, torsional stiffness,
-    safety factor, sensitivity, each with ``_error_estimate``/``_error_method``, and warnings."""
+    safety factor, sensitivity, each with ``_error_estimate``/``_error_method``; the minimum
+    detectable torque (1σ bridge noise; its relative error is the gauge strain's) and the largest
+    cross-talk (% of rated output); and warnings."""
     from flexure.design import load_design
 
     res, _ = analyze_design(load_design(path, overrides), size, order, rtol, method)
     keys = [k for f in FIGURES for k in (f, f"{f}_error_estimate", f"{f}_error_method")]
     flagged = {"nan_reason": res["nan_reason"]} if res.get("nan_reason") else {}
-    return {**{k: res[k] for k in keys}, "dofs": res["dofs"], "warnings": list(res["warnings"]), **flagged}
+    extra = {}
+    mdt = res.get("min_detectable_torque_Nm")
+    if mdt is not None:
+        rel = res["gauge_strain_per_Nm_error_estimate"] / abs(res["gauge_strain_per_Nm"]) \
+            if res.get("gauge_strain_per_Nm") else math.nan
+        extra.update(min_detectable_torque_Nm=mdt, min_detectable_torque_Nm_error_estimate=mdt * rel,
+                     min_detectable_torque_Nm_error_method="the gauge strain's relative error "
+                     "(the minimum torque is the bridge noise over the strain per N·m)")
+    xt = [abs(v) for v in (res.get("crosstalk_percent") or {}).values() if v is not None and math.isfinite(v)]
+    if xt:
+        extra["crosstalk_max_percent"] = max(xt)
+    return {**{k: res[k] for k in keys}, **extra, "dofs": res["dofs"], "warnings": list(res["warnings"]),
+            **flagged}

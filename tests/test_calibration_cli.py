@@ -123,3 +123,13 @@ def test_apply_bad_reading_names_the_file_line(tmp_path):
     (tmp_path / "r.csv").write_text("# reading_unit=mV\nreading\n6\nseven\n")
     p = _run("apply", str(cal), str(tmp_path / "r.csv"))
     assert p.returncode == 2 and "line 4: column 'reading': 'seven'" in p.stderr, p.stderr
+
+
+def test_apply_without_out_prints_a_summary_not_the_table():
+    """Its help says: without --out, a summary only (the per-reading table is --out or --json)."""
+    cal = REPO_ROOT / "calibration" / "data" / "paper_link1_cal.json"
+    p = _run("apply", str(cal), str(REPO_ROOT / "calibration" / "data" / "paper_link1_readings.csv"))
+    assert p.returncode == 0, p.stderr
+    lines = p.stdout.strip().splitlines()
+    assert len(lines) <= 4 and lines[0].startswith("11 readings") and "N·m" in lines[1]
+    assert "torque_std_Nm" not in p.stdout              # no CSV header

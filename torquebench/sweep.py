@@ -87,8 +87,19 @@ def shared_stages(scene_path, pts: list[dict], outputs) -> tuple[list[str], dict
             if all(ks.get(a) == k for ks in keysets[1:])], first
 
 
+def _bar(total: int, progress: bool):
+    """A point-by-point progress bar on stderr with the time left (tqdm's rate estimate); off
+    with ``progress=False`` (--json) and whenever stderr is not a terminal."""
+    import sys
+
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc="points", unit="point", file=sys.stderr,
+                disable=None if progress else True)
+
+
 def run_sweep(scene_path, vary, outputs=None, executor="processes:2", cache_dir=None,
-              info: dict | None = None) -> list[dict]:
+              info: dict | None = None, progress: bool = True) -> list[dict]:
     """Rows per point, in the order of the grid. Before fanning out, the first point that loads
     runs alone in this process: it computes the stages every point shares (``info``, if given,
     receives their names as ``shared_stages``) and imports what a point needs, which forked
@@ -109,11 +120,13 @@ def run_sweep(scene_path, vary, outputs=None, executor="processes:2", cache_dir=
         _check_dask_address(executor)
     if executor == "local":
         rows = []
-        for i, a in enumerate(args):
-            t0 = time.perf_counter()
-            rows.append(run_point(*a))
-            if i == 0 and "error" not in rows[0]:
-                _say_cost(len(pts), time.perf_counter() - t0, 1)
+        with _bar(len(args), progress) as bar:
+            for i, a in enumerate(args):
+                t0 = time.perf_counter()
+                rows.append(run_point(*a))
+                bar.update()
+                if i == 0 and "error" not in rows[0]:
+                    _say_cost(len(pts), time.perf_counter() - t0, 1)
         return rows
     shared, first = shared_stages(str(scene_path), pts, outputs)
     if info is not None:
@@ -136,7 +149,12 @@ def run_sweep(scene_path, vary, outputs=None, executor="processes:2", cache_dir=
 
         pool = ProcessPoolExecutor(workers, initializer=_ignore_sigint)
         try:
-            done = list(pool.map(run_point, *todo)) if rest else []
+            with _bar(len(pts), progress) as bar:
+                bar.update(len(pts) - len(rest))
+                done = []
+                for r in (pool.map(run_point, *todo) if rest else []):
+                    done.append(r)
+                    bar.update()
         except BaseException:          # Ctrl-C (only this process sees it): stop the workers now
             for proc in list((getattr(pool, "_processes", None) or {}).values()):
                 proc.terminate()

@@ -121,12 +121,32 @@ def _apply(args, plan) -> int:
                                       + (" and the reading noise" if noise else " (coefficients only)"))
         print_json(res)
     elif args.out is None:
-        print(buf.getvalue(), end="")
+        print(_summary(out, model, vals.size, n_nan, n_sat, n_range))
     else:
         print(f"wrote {args.out} ({vals.size} readings" +
               (f", {n_nan} flagged and left NaN: {n_sat} saturated ADC, {n_range} outside the "
                "calibrated range" if n_nan else "") + ")")
     return 0
+
+
+def _summary(out, model, n: int, n_nan: int, n_sat: int, n_range: int) -> str:
+    """The readings in a few lines: what came out and how sure it is (the per-reading table goes
+    to --out or --json)."""
+    import numpy as np
+
+    col, unit = ("torque_Nm", "N·m") if "torque_Nm" in out else ("mass_g", "g")
+    v = out[col].to_numpy(float)
+    sd = out[col.replace("_Nm", "_std_Nm").replace("mass_g", "mass_std_g")].to_numpy(float)
+    ok = np.isfinite(v)
+    lines = [f"{n} readings through {model.sensor_id} ({model.model} calibration)"]
+    if ok.any():
+        lines.append(f"  {col}: {v[ok].min():.4g} … {v[ok].max():.4g} {unit}, per-reading 1σ "
+                     f"{sd[ok].min():.3g} … {sd[ok].max():.3g} {unit}")
+    if n_nan:
+        lines.append(f"  {n_nan} flagged and left NaN: {n_sat} saturated ADC, {n_range} outside the "
+                     "calibrated range")
+    lines.append("  the per-reading table: --out FILE.csv (or --json)")
+    return "\n".join(lines)
 
 
 def _check_magnitude(vals, model, args) -> None:

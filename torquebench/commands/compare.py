@@ -29,6 +29,11 @@ def add_arguments(parser) -> None:
     parser.add_argument("--cache-dir", type=Path, default=None, help="cache directory")
 
 
+#: the flexure's figures a comparison carries with their error estimates (flexure.convergence)
+DESIGN_FIGURES = ("sensitivity_mV_per_V_per_Nm", "torsional_stiffness_Nm_per_rad", "safety_factor",
+                  "min_detectable_torque_Nm")
+
+
 def row(r: dict) -> dict:
     """One comparison row from a sweep point."""
     if "error" in r:
@@ -37,10 +42,12 @@ def row(r: dict) -> dict:
     fx, s = res.get("flexure", {}), res.get("sensor", {})
     pr = res.get("predicted", {}).get("dynamic", {})
     me = res.get("measured", {}).get("dynamic", {})
-    return {"point": r["point"],
-            "sensitivity_V_per_Nm": s.get("sensitivity_V_per_Nm"),
-            "torsional_stiffness_Nm_per_rad": fx.get("torsional_stiffness_Nm_per_rad"),
-            "safety_factor": fx.get("safety_factor"),
+    out = {"point": r["point"], "sensitivity_V_per_Nm": s.get("sensitivity_V_per_Nm")}
+    for key in DESIGN_FIGURES:                  # the FEM's figures, each with its ± and how
+        for suffix in ("", "_error_estimate", "_error_method"):
+            out[key + suffix] = fx.get(key + suffix)
+    out["crosstalk_max_percent"] = fx.get("crosstalk_max_percent")
+    return {**out,
             "torque_noise_std_Nm": s.get("torque_noise_std_Nm"),
             "predicted_position_rms_m": pr.get("position_rms_m"),
             "predicted_position_rms_m_error_estimate": pr.get("position_rms_m_error_estimate"),
@@ -64,7 +71,8 @@ def run(args) -> int:
     plan.file("--png", args.png)
     plan.check()                                             # before the points run
     rows = [row(r) for r in run_sweep(path, vary, None, args.executor,
-                                      str(args.cache_dir) if args.cache_dir else None)]
+                                      str(args.cache_dir) if args.cache_dir else None,
+                                      progress=not args.json)]
     with plan.active():
         return _report(args, path, rows)
 
@@ -83,17 +91,23 @@ def _report(args, path, rows) -> int:
         return 0
     f = (lambda v, k=1.0, d=3: "—" if v is None or (isinstance(v, float) and math.isnan(v))   # noqa: E731
          else f"{v * k:.{d}g}")
-    print(f"{'variant':30s} {'mV/N·m':>8s} {'N·m/rad':>9s} {'SF':>6s} {'σ_τ N·m':>9s} "
-          f"{'pred. mm':>9s} {'sim. mm':>8s}")
+
+    def pm(r, key, k=1.0, d=3):                 # value ± its error estimate
+        v, e = r.get(key), r.get(f"{key}_error_estimate")
+        return f(v, k, d) + ("" if e is None or v is None or not math.isfinite(e) else f"±{f(e, k, 2)}")
+
+    print(f"{'variant':26s} {'mV/V/N·m':>15s} {'N·m/rad':>13s} {'SF':>10s} {'τ_min mN·m':>12s} "
+          f"{'x-talk %':>8s} {'σ_τ N·m':>8s} {'pred. mm':>12s} {'sim. mm':>7s}")
     for r in rows:
-        name = ", ".join(f"{k}={v}" for k, v in r["point"].items())[:30]
+        name = ", ".join(f"{k}={v}" for k, v in r["point"].items())[:26]
         if "error" in r:
-            print(f"{name:30s} FAILED: {r['error']}")
+            print(f"{name:26s} FAILED: {r['error']}")
             continue
-        print(f"{name:30s} {f(r['sensitivity_V_per_Nm'], 1e3):>8s} "
-              f"{f(r['torsional_stiffness_Nm_per_rad']):>9s} {f(r['safety_factor']):>6s} "
-              f"{f(r['torque_noise_std_Nm']):>9s} {f(r['predicted_position_rms_m'], 1e3):>9s} "
-              f"{f(r['simulated_position_rms_m'], 1e3):>8s}")
+        print(f"{name:26s} {pm(r, 'sensitivity_mV_per_V_per_Nm'):>15s} "
+              f"{pm(r, 'torsional_stiffness_Nm_per_rad', d=4):>13s} {pm(r, 'safety_factor'):>10s} "
+              f"{pm(r, 'min_detectable_torque_Nm', 1e3):>12s} {f(r['crosstalk_max_percent'], 1, 2):>8s} "
+              f"{f(r['torque_noise_std_Nm']):>8s} {pm(r, 'predicted_position_rms_m', 1e3):>12s} "
+              f"{f(r['simulated_position_rms_m'], 1e3):>7s}")
     _exit_on_failures(rows, "compare")
     return 0
 
@@ -110,10 +124,24 @@ def _plot(path: Path, rows: list[dict]) -> None:
     ok = [r for r in rows if "error" not in r]
     names = [", ".join(str(v) for v in r["point"].values()) for r in ok]
     x = np.arange(len(ok))
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
-    val = lambda k: [r[k] if r[k] is not None else np.nan for r in ok]   # noqa: E731
-    a.bar(x - 0.2, np.array(val("predicted_position_rms_m")) * 1e3, 0.4, label="predicted (MC)")
-    a.bar(x + 0.2, np.array(val("simulated_position_rms_m")) * 1e3, 0.4, label="simulated")
+    val = lambda k: np.array([r.get(k) if r.get(k) is not None else np.nan for r in ok], float)  # noqa: E731
+    panels = [("sensitivity_mV_per_V_per_Nm", 1.0, "sensitivity [mV/V per N·m]"),
+              ("torsional_stiffness_Nm_per_rad", 1.0, "torsional stiffness [N·m/rad]"),
+              ("safety_factor", 1.0, "safety factor at rated torque [-]"),
+              ("min_detectable_torque_Nm", 1e3, "minimum detectable torque (1σ) [mN·m]")]
+    panels = [p for p in panels if np.isfinite(val(p[0])).any()]
+    cols = (len(panels) + 3) // 2
+    fig, grid = plt.subplots(2, cols, figsize=(4 * cols, 7), constrained_layout=True, squeeze=False)
+    axes = list(grid.ravel())
+    for ax in axes[len(panels):-2]:
+        ax.set_visible(False)
+    for ax, (key, k, label) in zip(axes, panels):
+        ax.bar(x, val(key) * k, yerr=val(f"{key}_error_estimate") * k, capsize=4)
+        ax.set(xticks=x, xticklabels=names, ylabel=label)
+    a, b = axes[-2], axes[-1]
+    a.bar(x - 0.2, val("predicted_position_rms_m") * 1e3, 0.4,
+          yerr=val("predicted_position_rms_m_error_estimate") * 1e3, capsize=4, label="predicted (MC, ±1σ)")
+    a.bar(x + 0.2, val("simulated_position_rms_m") * 1e3, 0.4, label="simulated")
     a.set(xticks=x, xticklabels=names, ylabel="contact position RMS error [mm]")
     a.legend()
     b.bar(x, val("torque_noise_std_Nm"))

@@ -30,7 +30,8 @@ def run(args) -> int:
     path = scene_path(str(args.scene))
     info = {}
     rows = run_sweep(path, parse_vary(args.vary), args.only, args.executor,
-                     str(args.cache_dir) if args.cache_dir else None, info=info)
+                     str(args.cache_dir) if args.cache_dir else None, info=info,
+                     progress=not args.json)
     failed = [r for r in rows if "error" in r]
     if args.json:
         print_json({"scene": str(path), "executor": args.executor, "points": rows,
