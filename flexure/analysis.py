@@ -54,9 +54,10 @@ class Fields:
 
 
 def build_mesh(design: Design, size: str | None = None, order: int | None = None, h_factor: float = 1.0,
-               max_elements: float | None = None):
+               max_elements: float | None = None, curvature_h_factor: float | None = None):
     """Mesh of the design (P1/P2), finer at the gauges: a swept or tetgen mesh of the parametric
-    profile, or tetgen on the surface of an STL (repaired if need be) or a STEP solid (gmsh)."""
+    profile, or tetgen on the surface of an STL (repaired if need be) or a STEP solid (gmsh).
+    ``curvature_h_factor``: the curved faces' resolution as at that level (default ``h_factor``)."""
     from flexure.geometry import extrude, load_stl, profile
     from flexure.meshing import MAX_ELEMENTS, mesh_design_surface
 
@@ -73,13 +74,15 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
         _check_gauges(design, solid)
         return mesh_design_surface(poly, design.disc.thickness, size, centres, extent, design.disc.thickness,
                                    order, gauge_width=gw, mesher=design.mesher, h_factor=h_factor,
-                                   max_elements=cap, exact_disc=design.disc, feature_surface=solid)
+                                   max_elements=cap, exact_disc=design.disc, feature_surface=solid,
+                                   curvature_h_factor=curvature_h_factor)
     where = f"{design.path}: geometry.file"
     if design.kind == "step":
         from flexure.cad import load_step
         from flexure.meshing import size_field
         surf = load_step(design.file_path, where=where,
-                         size_for=lambda scale: size_field(size, scale, centres, extent, gw, h_factor))
+                         size_for=lambda scale: size_field(size, scale, centres, extent, gw, h_factor,
+                                                           curvature_h_factor=curvature_h_factor))
     else:
         surf = load_stl(design.file_path, design.file_unit_m, where=where)
     _check_gauges(design, surf)
@@ -87,13 +90,15 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
     if design.kind == "step" and design.mesher == "gmsh":     # mesh the exact solid, not its triangles
         from flexure.gmsh_mesh import mesh_step
         from flexure.meshing import MeshResult, mesh_report
-        field = size_field(size, scale, centres, extent, gw, h_factor, surface=surf)
+        field = size_field(size, scale, centres, extent, gw, h_factor, surface=surf,
+                           curvature_h_factor=curvature_h_factor)
         from flexure.meshing import check_cost, surface_area, surface_volume
         check_cost(field, surface_volume(surf), surface_area(surf), cap, where)
         mesh = mesh_step(design.file_path, field, order, where=where)
         return MeshResult(mesh, surf, mesh_report(mesh, size, "gmsh", None, field))
     return mesh_design_surface(surf, None, size, centres, extent, scale, order, gauge_width=gw,
-                               mesher=design.mesher, h_factor=h_factor, max_elements=cap)
+                               mesher=design.mesher, h_factor=h_factor, max_elements=cap,
+                               curvature_h_factor=curvature_h_factor)
 
 
 def _check_gauges(design: Design, surface) -> None:
@@ -160,10 +165,12 @@ RTOL = 1e-8
 SMOOTHED_COARSE = {"sweep": True, "tetgen": False, "gmsh": True}
 
 
-def _solve_cases(design: Design, mesh, K, load_nodes, fixed_nodes, ref: np.ndarray, wrench: np.ndarray):
+def _solve_cases(design: Design, mesh, K, load_nodes, fixed_nodes, ref: np.ndarray, wrench: np.ndarray,
+                 x0: np.ndarray | None = None, solver=None, rtol: float | None = None):
     """Displacements U (n, 3, cases) and hub rotations Θ (3, cases) for unit wrenches (cases, 6)
     at ``ref``, with one factorization (direct, below solve.DIRECT_MAX_DOFS) or one AMG hierarchy
-    (P2: the p-multigrid) for all cases.
+    (P2: the p-multigrid) for all cases; ``x0`` (n_q, cases): the iterative solver's initial guess;
+    ``solver``: a ``solve.prepared`` solver of this very system (set up already), else one is made.
 
     coupling "rigid": the bore nodes move as a rigid body (multipoint constraint), Θ its rotation;
     "distributed": the statically equivalent linear traction on the bore faces, Θ its
@@ -178,7 +185,11 @@ def _solve_cases(design: Design, mesh, K, load_nodes, fixed_nodes, ref: np.ndarr
         fsolve._check_restrained(system)
         B = np.repeat(system.b[:, None], len(wrench), axis=1)
         B[system.ref_slices[0], :] = wrench.T
-        q, info = fsolve.solve_reduced(system, B, rtol=RTOL, smoothed_coarse=SMOOTHED_COARSE[design.mesher])
+        if solver is not None:
+            q, info = solver(B, x0, rtol or RTOL)
+        else:
+            q, info = fsolve.solve_reduced(system, B, rtol=rtol or RTOL, smoothed_coarse=SMOOTHED_COARSE[design.mesher],
+                                           x0=x0)
         U = np.stack([problem.expand(system, q[:, j]) for j in range(len(wrench))], axis=-1)
         return U, q[system.ref_slices[0]][3:, :], info
     is_load = np.zeros(mesh.n_nodes, bool)
@@ -189,7 +200,11 @@ def _solve_cases(design: Design, mesh, K, load_nodes, fixed_nodes, ref: np.ndarr
     fsolve._check_restrained(system)
     B = np.column_stack([wrench_traction(mesh, faces, ref, w[:3], w[3:]).ravel() for w in wrench])
     B[system.fixed_q] = 0.0                       # fixed dofs hold zero displacement
-    q, info = fsolve.solve_reduced(system, B, rtol=RTOL, smoothed_coarse=SMOOTHED_COARSE[design.mesher])
+    if solver is not None:
+        q, info = solver(B, x0, rtol or RTOL)
+    else:
+        q, info = fsolve.solve_reduced(system, B, rtol=rtol or RTOL, smoothed_coarse=SMOOTHED_COARSE[design.mesher],
+                                       x0=x0)
     U = q.reshape(mesh.n_nodes, 3, len(wrench))
     return U, np.column_stack([mean_rotation(mesh, faces, U[..., j]) for j in range(len(wrench))]), info
 
@@ -209,6 +224,21 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
             h_factor: float = 1.0, max_elements: float | None = None):
     """Mesh (element sizes × ``h_factor``), solve the six load cases, read the gauges → (results
     dict, Fields). One mesh level: flexure.convergence adds the discretisation error estimate."""
+    t0 = time.perf_counter()
+    mres = build_mesh(design, size, order, h_factor, max_elements)
+    mesh_s = time.perf_counter() - t0
+    if progress:
+        print(f"flexure: mesh {mres.report['n_elements']} P{mres.mesh.order} tetrahedra, {mres.mesh.n_dofs} dofs "
+              f"({mesh_s:.1f} s)", file=sys.stderr)
+    return analyze_mesh(design, mres, mesh_s, progress)
+
+
+def analyze_mesh(design: Design, mres, mesh_s: float = 0.0, progress: bool = False, x0=None, K=None,
+                 solver=None, rtol: float | None = None):
+    """``analyze`` on a given mesh (``mres``: meshing.MeshResult; ``mesh_s`` its meshing time):
+    the six load cases (``x0``: an initial guess of the solver, (n_q, 6); ``K`` the stiffness matrix
+    and ``solver`` a prepared solver of the system, if already made; ``rtol`` the CG tolerance,
+    default RTOL), the gauges, the figures → (results dict, Fields)."""
     from bridge.budget import min_detectable_strain
     from bridge.wheatstone import output_ratio
     from flexure import solve as fsolve
@@ -218,23 +248,19 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
         if progress:
             print(f"flexure: {msg}", file=sys.stderr)
 
-    t_all = time.perf_counter()
-    t0 = time.perf_counter()
-    mres = build_mesh(design, size, order, h_factor, max_elements)
+    t_all = time.perf_counter() - mesh_s
     mesh = mres.mesh
-    mesh_s = time.perf_counter() - t0
-    say(f"mesh {mres.report['n_elements']} P{mesh.order} tetrahedra, {mesh.n_dofs} dofs ({mesh_s:.1f} s)")
     load_nodes, fixed_nodes = _selections(design, mesh)
     t_mid = 0.5 * (mesh.points[:, 2].min() + mesh.points[:, 2].max())
     ref = np.array([0.0, 0.0, t_mid])
     t0 = time.perf_counter()
-    K = stiffness_matrix(mesh, design.material)
+    K = stiffness_matrix(mesh, design.material) if K is None else K
     assemble_s = time.perf_counter() - t0
     wrench = np.zeros((6, 6))                        # rows: cases; cols: (F, M)
     for i, c in enumerate(CASES):
         wrench[i, {"Fx": 0, "Fy": 1, "Fz": 2, "Mx": 3, "My": 4, "Mz": 5}[c]] = 1.0
     t0 = time.perf_counter()
-    U, theta, info = _solve_cases(design, mesh, K, load_nodes, fixed_nodes, ref, wrench)
+    U, theta, info = _solve_cases(design, mesh, K, load_nodes, fixed_nodes, ref, wrench, x0, solver, rtol)
     solve_s = time.perf_counter() - t0
     say(f"solved {len(CASES)} load cases ({info['solver']}, {solve_s:.1f} s, residual {info['residual_norm']:.1e})")
     warnings, metrics = fsolve.conditioning_warnings(mesh, design.material)

@@ -374,6 +374,25 @@ class Problem:
                               3 * len(free_nodes) + np.arange(6 * len(kin))])
         return I, B[sel]
 
+    def restrict(self, system: LinearSystem, u: np.ndarray, reference=None) -> np.ndarray:
+        """q of nodal displacements u (n,3[,k]) (``expand``'s inverse on the free nodes; the
+        couplings' reference dofs from ``reference`` (6·couplings[,k]), else zero) — an initial
+        guess from a coarser level's solution prolongated (flexure.refine)."""
+        u = np.asarray(u, dtype=np.float64)
+        k = u.shape[2:] if u.ndim == 3 else ()
+        if system.T is None:
+            return u.reshape((-1,) + k).copy()
+        coupled = np.zeros(system.n_nodes, bool)
+        for c in self.couplings:
+            if c.kind == "kinematic":
+                coupled[c.nodes] = True
+        free = u[~coupled].reshape((-1,) + k)
+        nref = system.A.shape[0] - len(free)
+        ref = np.zeros((nref,) + k) if reference is None else np.asarray(reference, float).reshape((nref,) + k)
+        q = np.concatenate([free, ref])
+        q[system.fixed_q] = 0.0
+        return q
+
     def expand(self, system: LinearSystem, q: np.ndarray) -> np.ndarray:
         """Nodal displacements (n,3) from the reduced solution q."""
         u = q if system.T is None else system.T @ q

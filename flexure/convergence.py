@@ -290,15 +290,44 @@ def analyze_with_error(design, size: str | None = None, order: int | None = None
     return res, fields
 
 
+def analyze_design(design, size: str | None = None, order: int | None = None, rtol: float | None = None,
+                   method: str = "levels", max_dofs: int | None = None, max_memory_gb: float | None = None,
+                   progress: bool = False, max_elements: float | None = None):
+    """The analysis with its discretisation error estimates, by ``method``: "levels" (this module's
+    Richardson over gmsh mesh levels; the default) or "adaptive" (goal-oriented estimates on nested,
+    locally refined meshes, flexure.adaptive; opt-in: its effectivity is not yet established on
+    unseen parts, reports/fem_adaptive.md). P1 (order 1) always uses the levels (the refinement
+    works on P2 meshes), and says so. → (results, Fields)."""
+    eff_order = order or design.order
+    if method == "adaptive" and eff_order != 2:
+        res, fields = analyze_with_error(design, size, order, rtol, max_dofs=max_dofs or MAX_DOFS,
+                                         progress=progress, max_elements=max_elements)
+        res["warnings"] = list(res["warnings"]) + [
+            "order 1: the error estimate is the levels' (Richardson); adaptive refinement works on order 2"]
+        return res, fields
+    if method == "adaptive":
+        from flexure import adaptive
+
+        return adaptive.analyze_adaptive(design, size, rtol=rtol, max_dofs=max_dofs or adaptive.MAX_DOFS,
+                                         max_memory_gb=max_memory_gb or adaptive.MAX_MEMORY_GB,
+                                         progress=progress, max_elements=max_elements)
+    if method != "levels":
+        raise InputError(f"error method must be 'adaptive' or 'levels', got {method!r}")
+    res, fields = analyze_with_error(design, size, order, rtol, max_dofs=max_dofs or MAX_DOFS, progress=progress,
+                                     max_elements=max_elements)
+    res["error_method"] = "levels"
+    return res, fields
+
+
 def design_figures(path, overrides: dict | None = None, size: str | None = None, order: int | None = None,
-                   rtol: float | None = None) -> dict:
+                   rtol: float | None = None, method: str = "levels") -> dict:
     """For the pipeline: a design file (+ overrides) → gauge strain per N·m, torsional stiffness,
     safety factor, sensitivity, each with ``_error_estimate``/``_error_method``; the minimum
     detectable torque (1σ bridge noise; its relative error is the gauge strain's) and the largest
     cross-talk (% of rated output); and warnings."""
     from flexure.design import load_design
 
-    res, _ = analyze_with_error(load_design(path, overrides), size, order, rtol)
+    res, _ = analyze_design(load_design(path, overrides), size, order, rtol, method)
     keys = [k for f in FIGURES for k in (f, f"{f}_error_estimate", f"{f}_error_method")]
     flagged = {"nan_reason": res["nan_reason"]} if res.get("nan_reason") else {}
     extra = {}

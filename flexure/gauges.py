@@ -126,10 +126,11 @@ def _area_centroid(poly: np.ndarray):
 FOOTPRINT_COVER_TOL = 1e-3
 
 
-def footprint_pieces(gauge: Gauge, mesh, inset_m: float | None = None):
+def footprint_pieces(gauge: Gauge, mesh, inset_m: float | None = None, polygons: bool = False):
     """The grid rectangle cut by the mesh's boundary faces lying in its plane (normal ≈ n):
     → (elements (k,), points (k,3) at the pieces' centroids moved ``inset`` inside, weights (k,)
-    = piece area / grid area), or None if the pieces do not cover the grid (|Σw − 1| > tol)."""
+    = piece area / grid area[, with ``polygons`` the pieces (list of (p,2) in the grid's (a, b)
+    coordinates)]), or None if the pieces do not cover the grid (|Σw − 1| > tol)."""
     c, a, b, n = gauge.frame()
     faces = mesh.boundary_faces()[:, :3]
     owners = mesh._cache["bface_tets"]
@@ -143,21 +144,80 @@ def footprint_pieces(gauge: Gauge, mesh, inset_m: float | None = None):
     near = ((np.abs(d @ n) < 1e-6 * scale).all(axis=1) & (nrm @ n > 0.999 * nlen)
             & (s.max(1) > -L / 2) & (s.min(1) < L / 2) & (t.max(1) > -W / 2) & (t.min(1) < W / 2))
     rect = np.array([[-L / 2, -W / 2], [L / 2, -W / 2], [L / 2, W / 2], [-L / 2, W / 2]])
-    elems, cents, areas = [], [], []
+    elems, cents, areas, polys = [], [], [], []
     for f in np.flatnonzero(near):                  # a few dozen faces per gauge
         tri = np.column_stack([s[f], t[f]])         # CCW seen along n (outward normal · n > 0)
-        area, cen = _area_centroid(_clip(rect, tri))
+        poly = _clip(rect, tri)
+        area, cen = _area_centroid(poly)
         if area > 1e-12 * L * W:
             elems.append(owners[f])
             cents.append(cen)
             areas.append(area)
+            polys.append(poly)
     w = np.asarray(areas) / (L * W)
     if not len(w) or abs(w.sum() - 1.0) > FOOTPRINT_COVER_TOL:
         return None
     inset = 1e-4 * min(L, W) if inset_m is None else inset_m
     cents = np.asarray(cents)
     pts = c + cents[:, :1] * a + cents[:, 1:] * b - inset * n
+    if polygons:
+        return np.asarray(elems, np.int64), pts, w / w.sum(), polys
     return np.asarray(elems, np.int64), pts, w / w.sum()
+
+
+def quadrature(gauge: Gauge, mesh, inset_m: float | None = None):
+    """A rule for the grid average (1/LW)∫ f dA of functions of higher degree than the P2 strain
+    (flexure.dwr's cubic weights): each footprint piece fanned into triangles with the degree-4
+    rule (fem.TRI_QUAD) → (elements (k,), reference coordinates ξ (k,3), weights (k,) summing to
+    1); the Gauss points of ``sample_points`` on a grid not covered by flat faces."""
+    from flexure.fem import TRI_QUAD
+    from flexure.post import _newton_xi, locate
+
+    pieces = footprint_pieces(gauge, mesh, polygons=True)
+    if pieces is None:
+        pts, w = sample_points(gauge)
+        elems, xi = locate(mesh, pts)
+        return elems, xi, w
+    elems, _, _, polys = pieces
+    c, a, b, n = gauge.frame()
+    st, wq = TRI_QUAD
+    inset = 1e-4 * min(gauge.length_m, gauge.width_m) if inset_m is None else inset_m
+    E, P, W = [], [], []
+    for e, poly in zip(elems, polys):
+        for k in range(1, len(poly) - 1):
+            v0, v1, v2 = poly[0], poly[k], poly[k + 1]
+            area = 0.5 * ((v1[0] - v0[0]) * (v2[1] - v0[1]) - (v1[1] - v0[1]) * (v2[0] - v0[0]))
+            q2 = v0 + st[:, :1] * (v1 - v0) + st[:, 1:] * (v2 - v0)
+            E.append(np.full(len(st), e))
+            P.append(c + q2[:, :1] * a + q2[:, 1:] * b - inset * n)
+            W.append(2.0 * wq * area)
+    elems, pts, w = np.concatenate(E), np.vstack(P), np.concatenate(W)
+    V = mesh.points[mesh.corner_tets[elems]]
+    T = np.transpose(V[:, 1:] - V[:, :1], (0, 2, 1))
+    xi = np.linalg.solve(T, (pts - V[:, 0])[..., None])[..., 0]
+    if mesh.order == 2:
+        xi = _newton_xi(mesh, elems, xi, pts)
+    return elems, xi, w / w.sum()
+
+
+def _read_points(gauge: Gauge, mesh):
+    """Where and with what weights ``read_footprint`` samples one gauge: (elements (k,), reference
+    coordinates ξ (k,3), weights (k,) summing to 1) — the footprint pieces' centroids, or the
+    Gauss points of ``sample_points`` where the grid is not covered by flat faces in its plane."""
+    from flexure.post import _newton_xi, locate
+
+    pieces = footprint_pieces(gauge, mesh)
+    if pieces is None:
+        pts, w = sample_points(gauge)
+        elems, xi = locate(mesh, pts)
+        return elems, xi, w
+    elems, pts, w = pieces
+    V = mesh.points[mesh.corner_tets[elems]]
+    T = np.transpose(V[:, 1:] - V[:, :1], (0, 2, 1))
+    xi = np.linalg.solve(T, (pts - V[:, 0])[..., None])[..., 0]
+    if mesh.order == 2:
+        xi = _newton_xi(mesh, elems, xi, pts)
+    return elems, xi, w
 
 
 def read_footprint(gauges: list[Gauge], mesh, U) -> np.ndarray:
@@ -171,22 +231,37 @@ def read_footprint(gauges: list[Gauge], mesh, U) -> np.ndarray:
     discontinuous integrand), the read-out carries no quadrature error that changes erratically
     from one mesh to the next. A grid not covered by flat faces in its plane (a curved face) is
     read with the Gauss rule (``read``)."""
-    from flexure.post import _newton_xi, gradient_at, strain_at, strain_from_gradient
+    from flexure.post import gradient_at, strain_from_gradient
 
     out = []
     for g in gauges:
-        pieces = footprint_pieces(g, mesh)
-        if pieces is None:
-            out.append(read([g], lambda p: strain_at(mesh, U, p))[0])
-            continue
-        elems, pts, w = pieces
-        V = mesh.points[mesh.corner_tets[elems]]
-        T = np.transpose(V[:, 1:] - V[:, :1], (0, 2, 1))
-        xi = np.linalg.solve(T, (pts - V[:, 0])[..., None])[..., 0]
-        if mesh.order == 2:
-            xi = _newton_xi(mesh, elems, xi, pts)
+        elems, xi, w = _read_points(g, mesh)
         eps = strain_from_gradient(gradient_at(mesh, U, elems, xi))       # (k,[cases,]3,3)
         _, a, _, _ = g.frame()
         e_aa = np.einsum("i,k...ij,j->k...", a, eps, a)
         out.append(np.tensordot(w, e_aa, axes=1))
     return np.asarray(out)
+
+
+def functionals(gauges: list[Gauge], mesh) -> np.ndarray:
+    """The read-outs as linear functionals of the nodal displacements: F (n, 3, g) with
+    ``read_footprint(gauges, mesh, U)[g] = Σ F[:, :, g] · U``, i.e.
+
+        F[node, i, g] = Σ_points w_p a_i (a · ∇N_node(x_p)),
+
+    the right-hand sides of the gauges' dual (adjoint) problems (flexure.dwr)."""
+    from flexure.fem import tet_shape
+
+    F = np.zeros((mesh.n_nodes, 3, len(gauges)))
+    for col, g in enumerate(gauges):
+        elems, xi, w = _read_points(g, mesh)
+        _, dN = tet_shape(mesh.order, xi)                                  # (k,nn,3)
+        X = mesh.points[mesh.tets[elems]]
+        J = np.einsum("kai,kaj->kij", X, dN)
+        G = np.einsum("kaj,kji->kai", dN, np.linalg.inv(J))                # ∂N_a/∂x_i
+        _, a, _, _ = g.frame()
+        contrib = (w[:, None] * (G @ a))[:, :, None] * a[None, None, :]    # (k,nn,3)
+        for i in range(3):
+            F[:, i, col] = np.bincount(mesh.tets[elems].ravel(), weights=contrib[..., i].ravel(),
+                                       minlength=mesh.n_nodes)
+    return F

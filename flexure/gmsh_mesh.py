@@ -103,7 +103,7 @@ def _size_field(gmsh, field, spots=None) -> None:
 
 def _volume_tets(gmsh, where: str):
     """Generate the 3-D mesh (Delaunay, gmsh- and Netgen-optimised, then gmsh's optimiser once
-    more) → (points m, corner tets)."""
+    more) → (points m, corner tets, the boundary classification ``_entities``)."""
     for key, value in VOLUME_OPTIONS.items():
         gmsh.option.setNumber(key, value)
     try:
@@ -128,7 +128,24 @@ def _volume_tets(gmsh, where: str):
     x = points[tets]
     vol = np.einsum("ij,ij->i", x[:, 1] - x[:, 0], np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 0]))
     tets[vol < 0] = tets[vol < 0][:, [0, 2, 1, 3]]
-    return points, tets
+    return points, tets, _entities(gmsh, remap[index])
+
+
+def _entities(gmsh, node_of_tag: np.ndarray):
+    """The boundary triangles and curve segments gmsh made, with the tag of the surface or curve
+    each lies on, in our node numbering: (triangles (k,3), their tags, lines (j,2), their tags)
+    (flexure.project.classify; what new nodes of a refined mesh are projected onto)."""
+    out = []
+    for dim, etype, nn in ((2, 2, 3), (1, 1, 2)):
+        conn, tags = [np.zeros((0, nn), np.int64)], [np.zeros(0, np.int64)]
+        for _, tag in gmsh.model.getEntities(dim):
+            _, enodes = gmsh.model.mesh.getElementsByType(etype, tag)
+            e = node_of_tag[np.asarray(enodes, np.int64)].reshape(-1, nn)
+            e = e[(e >= 0).all(axis=1)]
+            conn.append(e)
+            tags.append(np.full(len(e), tag, np.int64))
+        out += [np.vstack(conn), np.concatenate(tags)]
+    return tuple(out)
 
 
 def _geometric_midpoints(gmsh, points: np.ndarray):
@@ -227,26 +244,29 @@ def _session(build, field, where: str, order: int, curved: bool = False):
 
     spots, best = np.zeros((0, 4)), None
     for _ in range(QUALITY_PASSES + 1):
-        points, tets, geometric = _one_pass(build, field, where, order, curved, spots)
+        points, tets, geometric, entities = _one_pass(build, field, where, order, curved, spots)
         worst = element_shape_metrics(points, tets)["dihedral_deg"].min(axis=1)
         if best is None or worst.min() > best[0]:
-            best = (worst.min(), points, tets, geometric)
+            best = (worst.min(), points, tets, geometric, entities)
         bad = worst < MIN_DIHEDRAL_DEG
         if not bad.any():
             break
         x = points[tets[bad]] * MM
         longest = np.linalg.norm(x[:, :, None] - x[:, None], axis=-1).max(axis=(1, 2))
         spots = np.vstack([spots, np.column_stack([x.mean(axis=1), SPOT_REFINEMENT * longest])])
-    _, points, tets, geometric = best
+    _, points, tets, geometric, entities = best
     if geometric is not None:
-        return _curved_quadratic(points, tets, *geometric)
-    mesh = Mesh(points, tets)
-    return to_quadratic(mesh) if order == 2 else mesh
+        mesh = _curved_quadratic(points, tets, *geometric)
+    else:
+        mesh = Mesh(points, tets)
+        mesh = to_quadratic(mesh) if order == 2 else mesh
+    mesh._cache["entities"] = entities          # gmsh's classification (flexure.project.classify)
+    return mesh
 
 
 def _one_pass(build, field, where: str, order: int, curved: bool, spots):
     """One gmsh session: the volume meshed with ``field`` (+ ``spots``) → (points, corner tets,
-    gmsh's curved mid-edge nodes or None)."""
+    gmsh's curved mid-edge nodes or None, the boundary's classification (``_entities``))."""
     import gmsh
 
     from flexure.cad import _quiet_stdout
@@ -257,7 +277,7 @@ def _one_pass(build, field, where: str, order: int, curved: bool, spots):
         with _quiet_stdout():
             build(gmsh)
             _size_field(gmsh, field, spots)
-            points, tets = _volume_tets(gmsh, where)
+            points, tets, entities = _volume_tets(gmsh, where)
             geometric = None
             if order == 2 and curved:
                 try:
@@ -266,7 +286,7 @@ def _one_pass(build, field, where: str, order: int, curved: bool, spots):
                     pass
     finally:
         gmsh.finalize()
-    return points, tets, geometric
+    return points, tets, geometric, entities
 
 
 def mesh_extrusion(poly, height: float, field, order: int = 1, where: str = "mesh"):

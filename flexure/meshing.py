@@ -326,7 +326,8 @@ def check_cost(field: SizeField, volume_m3: float, area_m2: float, max_elements:
 
 
 def size_field(size: str, h_scale: float, gauge_centres, gauge_extent: float,
-               gauge_width: float | None = None, h_factor: float = 1.0, surface: Surface | None = None) -> SizeField:
+               gauge_width: float | None = None, h_factor: float = 1.0, surface: Surface | None = None,
+               curvature_h_factor: float | None = None) -> SizeField:
     """h_far = f · SIZES[size].far · h_scale; h_gauge = f · SIZES[size].gauge · gauge width (≤ h_far),
     f = ``h_factor`` (the refinement levels of flexure.convergence). With the part's ``surface``,
     its sharp re-entrant edges (``reentrant_edges``) get h_edge = clip(f·D/EDGE_DISTANCE_RATIO,
@@ -347,7 +348,8 @@ def size_field(size: str, h_scale: float, gauge_centres, gauge_extent: float,
     # grading × f and curvature elements / f too, so that the whole size function scales by f
     # (h_f(x) = f·h_1(x)): similar levels
     return SizeField(h_far, h_gauge, centres, r_gauge=gauge_extent, grading=SizeField.grading * h_factor,
-                     curvature_elements=CURVATURE_ELEMENTS * SIZES["coarse"]["far"] / s["far"] / h_factor,
+                     curvature_elements=CURVATURE_ELEMENTS * SIZES["coarse"]["far"] / s["far"]
+                     / (curvature_h_factor or h_factor),
                      edges=edges, h_edge=h_edge)
 
 
@@ -377,6 +379,7 @@ def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gau
                         gauge_extent: float, h_scale: float, order: int = 1,
                         gauge_width: float | None = None, mesher: str = "sweep",
                         h_factor: float = 1.0, max_elements: float = MAX_ELEMENTS, exact_disc=None,
+                        curvature_h_factor: float | None = None,
                         feature_surface: Surface | None = None) -> MeshResult:
     """Mesh an extruded profile (shapely polygon + thickness) or a closed Surface (user STL).
     With ``exact_disc`` (a geometry.SpokeDisc) the gmsh mesher meshes that disc's exact solid
@@ -395,7 +398,8 @@ def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gau
     if feature_surface is None and isinstance(surface_or_poly, Surface):
         feature_surface = surface_or_poly
     field = size_field(size, h_scale, gauge_centres, gauge_extent, gauge_width, h_factor,
-                       surface=feature_surface if mesher == "gmsh" else None)
+                       surface=feature_surface if mesher == "gmsh" else None,
+                       curvature_h_factor=curvature_h_factor)
     s, h_far, h_gauge = SIZES[size], field.h_far, field.h_gauge
     surface, layers = None, None
     is_surface = isinstance(surface_or_poly, Surface)

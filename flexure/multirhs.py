@@ -110,18 +110,21 @@ def block_gauss_seidel(A, Dinv: np.ndarray, X: np.ndarray, B: np.ndarray, forwar
             X[:, g] = Xg
 
 
-def pcg(A, B: np.ndarray, M, rtol: float, maxiter: int):
+def pcg(A, B: np.ndarray, M, rtol: float, maxiter: int, X0: np.ndarray | None = None):
     """CG on the columns of B (n, k) together, preconditioner M(R) → Z for R (n, m) (the active
-    columns). Returns X (n, k), iterations per column, and whether each column converged."""
+    columns), from the initial guess X0 (n, k) (zero by default; a coarser level's solution
+    prolongated saves iterations). Stops each column at ‖b − A x‖ ≤ rtol ‖b‖. Returns X (n, k),
+    iterations per column, and whether each column converged."""
     n, k = B.shape
-    X = np.zeros((n, k))
+    X = np.zeros((n, k)) if X0 is None else np.array(X0, dtype=np.float64).reshape(n, k)
     its = np.zeros(k, dtype=np.int64)
     bn = np.sqrt(np.einsum("ij,ij->j", B, B))
-    act = np.flatnonzero(bn > 0)
-    done = bn == 0
+    R0 = B - spmm(A, X) if X0 is not None else B
+    done = (bn == 0) | (np.sqrt(np.einsum("ij,ij->j", R0, R0)) <= rtol * bn)
+    act = np.flatnonzero(~done)
     if not len(act):
         return X, its.tolist(), done
-    R = B[:, act].copy()
+    R = R0[:, act].copy()
     Z = M(R)
     P = Z.copy()
     rz = np.einsum("ij,ij->j", R, Z)

@@ -167,11 +167,13 @@ def _multirhs_available() -> bool:
 def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, method: str = "auto",
                  rtol: float = 1e-10, maxiter: int = 2000, condition_estimate: bool = True,
                  coarse: sp.csr_matrix | None = None, B_coarse: np.ndarray | None = None,
-                 smoothed_coarse: bool = False):
+                 smoothed_coarse: bool = False, x0: np.ndarray | None = None):
     """Solve A q = b (b (n,) or (n, k) for k load cases); returns (q, info).
 
     ``B`` near-nullspace (rigid modes) for AMG; the factorization / AMG hierarchy is built once
-    for all columns. ``residual_norm`` is the largest column's ‖b − A q‖/‖b‖.
+    for all columns. ``x0`` (shape of b): initial guess of the iterative solvers (the P2
+    p-multigrid CG with all cases together; ignored by the others). ``residual_norm`` is the
+    largest column's ‖b − A q‖/‖b‖.
     """
     n = A.shape[0]
     if method == "auto":
@@ -198,7 +200,8 @@ def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, m
             M, ml = _pmg_multi(A, coarse, B_coarse, smoothed_coarse, PMG_SWEEPS)
             info["setup_s"] = time.perf_counter() - t0
             tc = time.perf_counter()
-            q, its, _ = multirhs.pcg(A.tocsr(), np.ascontiguousarray(cols, dtype=np.float64), M, rtol, maxiter)
+            X0 = None if x0 is None else np.asarray(x0, dtype=np.float64).reshape(cols.shape)
+            q, its, _ = multirhs.pcg(A.tocsr(), np.ascontiguousarray(cols, dtype=np.float64), M, rtol, maxiter, X0)
             info["cg_s"] = time.perf_counter() - tc
             info["solver"] = ("amg-cg (p-multigrid: P2 block Gauss-Seidel + pyamg "
                               f"{'smoothed ' if smoothed_coarse else ''}aggregation AMG "
@@ -283,7 +286,7 @@ def solve(problem, method: str = "auto", rtol: float = 1e-10, K: sp.csr_matrix |
 
 
 def solve_reduced(system, b: np.ndarray | None = None, method: str = "auto", rtol: float = 1e-10,
-                  condition_estimate: bool = True, smoothed_coarse: bool = False):
+                  condition_estimate: bool = True, smoothed_coarse: bool = False, x0: np.ndarray | None = None):
     """Solve a ``Problem.reduced_system`` for its own b or for load cases ``b`` (n_q,) / (n_q, k).
 
     One factorization / AMG hierarchy for all columns; passes the P2 → P1 coarse space so P2
@@ -293,4 +296,63 @@ def solve_reduced(system, b: np.ndarray | None = None, method: str = "auto", rto
     if b.shape[0] != system.A.shape[0]:
         raise InputError(f"solve_reduced: b has {b.shape[0]} rows, the system {system.A.shape[0]}")
     return solve_system(system.A, b, system.B, method, rtol, condition_estimate=condition_estimate,
-                        coarse=system.coarse, B_coarse=system.B_coarse, smoothed_coarse=smoothed_coarse)
+                        coarse=system.coarse, B_coarse=system.B_coarse, smoothed_coarse=smoothed_coarse, x0=x0)
+
+
+def prepared(system, rtol: float = 1e-10, smoothed_coarse: bool = False):
+    """A solver for ``system`` that is set up once and reused for further right-hand sides:
+    → solve(B (n_q,) or (n_q, k), x0=None, rtol=None) → (q, info). The P2 p-multigrid (all columns
+    together) keeps its hierarchy, a small system its LU factors; otherwise each call is
+    ``solve_reduced``. An adaptive analysis solves its goals and, on its last mesh, the remaining
+    load cases with one set-up."""
+    A = system.A
+    n = A.shape[0]
+    t0 = time.perf_counter()
+    if n <= DIRECT_MAX_DOFS:
+        lu = spla.splu(A.tocsc(), permc_spec="COLAMD")
+        setup_s = time.perf_counter() - t0
+
+        def solve_direct(B, x0=None, rtol_=None):
+            t = time.perf_counter()
+            q = lu.solve(np.asarray(B, dtype=np.float64))
+            return q, _residual_info(A, B, q, {"solver": "direct (SuperLU)", "dofs": int(n), "iterations": 1,
+                                              "setup_s": setup_s, "solve_s": time.perf_counter() - t})
+        return solve_direct
+    if system.coarse is not None and n % 3 == 0 and _multirhs_available():
+        from flexure import multirhs
+
+        M, ml = _pmg_multi(A, system.coarse, system.B_coarse, smoothed_coarse, PMG_SWEEPS)
+        Ac = A.tocsr()
+        setup_s = time.perf_counter() - t0
+
+        def solve_pmg(B, x0=None, rtol_=None):
+            t = time.perf_counter()
+            B = np.asarray(B, dtype=np.float64)
+            cols = np.ascontiguousarray(B[:, None] if B.ndim == 1 else B)
+            X0 = None if x0 is None else np.asarray(x0, dtype=np.float64).reshape(cols.shape)
+            q, its, _ = multirhs.pcg(Ac, cols, M, rtol_ or rtol, 2000, X0)
+            q = q[:, 0] if B.ndim == 1 else q
+            return q, _residual_info(A, B, q, {
+                "solver": ("amg-cg (p-multigrid: P2 block Gauss-Seidel + pyamg "
+                           f"{'smoothed ' if smoothed_coarse else ''}aggregation AMG on the P1 vertex system, "
+                           "6 rigid-body modes; all load cases together)"),
+                "dofs": int(n), "iterations": its, "setup_s": setup_s, "cg_s": time.perf_counter() - t,
+                "solve_s": time.perf_counter() - t, "amg_levels": len(ml.levels),
+                "operator_complexity": float(ml.operator_complexity())})
+        return solve_pmg
+
+    def solve_each(B, x0=None, rtol_=None):
+        return solve_reduced(system, B, rtol=rtol_ or rtol, condition_estimate=False,
+                             smoothed_coarse=smoothed_coarse, x0=x0)
+    return solve_each
+
+
+def _residual_info(A, b, q, info: dict) -> dict:
+    """``info`` with the largest column's relative residual ‖b − A q‖/‖b‖ and each column's."""
+    n = A.shape[0]
+    r = np.linalg.norm((b - A @ q).reshape(n, -1), axis=0)
+    bn = np.linalg.norm(np.asarray(b).reshape(n, -1), axis=0)
+    rel = r / np.where(bn > 0, bn, 1.0)
+    info["residual_norm"] = float(np.max(rel))
+    info["case_residuals"] = rel.tolist()
+    return info

@@ -106,9 +106,9 @@ def test_a_tetrahedron_below_10_degrees_sends_the_mesher_back_finer_around_it(mo
     one_pass = gmsh_mesh._one_pass
 
     def spy(*args):
-        points, tets, geometric = one_pass(*args)
+        points, tets, geometric, entities = one_pass(*args)
         passes.append((len(tets), element_shape_metrics(points, tets)["dihedral_deg"].min()))
-        return points, tets, geometric
+        return points, tets, geometric, entities
 
     monkeypatch.setattr(gmsh_mesh, "_one_pass", spy)
     mesh = build_mesh(load_design(DATA / "reentrant.toml"), order=1, h_factor=2 ** -0.5).mesh

@@ -240,6 +240,7 @@ def test_simulator_bridge_sensor_takes_the_given_chain():
     assert abs(t_weak.mean() - 0.5) < 5 * weak.noise_std_Nm / np.sqrt(t_weak.size)
 
 
+@pytest.mark.slow
 def test_the_fem_figures_in_the_loop_carry_their_discretisation_error(cache):
     """The flexure stage answers as `torquebench flexure` does: the finest of three mesh levels,
     every figure with its error estimate (a bound from the levels), and the sensor chain uses

@@ -1,8 +1,11 @@
 """`torquebench flexure DESIGN.toml`: judge a torque-sensor flexure before machining it.
 
-One design: mesh (tetgen, P2 by default), six load cases with one solver set-up, gauge read-out,
+One design: mesh (gmsh, P2 by default), six load cases with one solver set-up, gauge read-out,
 bridge output, stiffness, stress, cross-talk and minimum detectable torque; optional VTU (ParaView)
-and off-screen PNG of the strain or von Mises field with the gauges drawn.
+and off-screen PNG of the strain or von Mises field with the gauges drawn. Each figure carries its
+discretisation error estimate: by default Richardson over three gmsh mesh levels (flexure.convergence);
+``--error-method adaptive`` (opt-in): goal-oriented (dual-weighted residuals) on a mesh refined where
+they say until --rtol (flexure.adaptive; its measured effectivity: reports/fem_adaptive.md).
 ``--sweep PARAM=v1,v2,...`` (once or twice): the sensitivity–stiffness–stress trade-off table,
 and with ``--png`` the trade-off plot instead of the field picture.
 """
@@ -20,6 +23,7 @@ EXAMPLES = """\
 torquebench flexure
 torquebench flexure scenes/paper_disc.toml --size medium --png out/disc_strain.png --json
 torquebench flexure --sweep spoke_width_mm=3,3.5,4 --order 2 --png out/spoke_sweep.png
+torquebench flexure tests/data/fem_reference/step_part.toml --error-method adaptive --rtol 0.01
 """
 HEADLINE = ("sensitivity_mV_per_V_per_Nm", "torsional_stiffness_Nm_per_rad", "max_von_mises_Pa",
             "safety_factor", "min_detectable_torque_Nm", "gauge_strain_per_Nm", "dofs", "solve_s")
@@ -39,11 +43,18 @@ def add_arguments(parser) -> None:
     parser.add_argument("--field", choices=("strain", "von_mises"), default="strain",
                         help="field drawn in --png: strain = max shear strain (what ±45° gauges read), von_mises = stress in Pa (default: %(default)s)")
     parser.add_argument("--rtol", type=float, default=None, metavar="R",
-                        help="refine the mesh (h/√2 per level) until the gauge strain's and the stiffness's "
-                             "discretisation error estimates are below R (relative, e.g. 0.01); the last level is "
-                             "fitted under --max-dofs (default: none, three levels)")
+                        help="refine until every gauge strain's, the bridge strain's and the stiffness's error "
+                             "estimates are below R (relative; default: none, three levels; with --error-method adaptive "
+                             "0.02). The levels refine by h/√2 until R is met, the last one fitted under --max-dofs")
+    parser.add_argument("--error-method", choices=("levels", "adaptive"), default="levels",
+                        help="levels: Richardson over three gmsh mesh levels; adaptive (opt-in, experimental): "
+                             "goal-oriented (dual-weighted residual) estimates on locally refined nested meshes "
+                             "(order 2 only; P1 always uses the levels) (default: %(default)s)")
     parser.add_argument("--max-dofs", type=int, default=None, metavar="N",
-                        help="DOF cap for --rtol refinement (default: 2,000,000)")
+                        help="DOF budget of the refinement: stop before a level would exceed N (default: 2,000,000)")
+    parser.add_argument("--max-memory-gb", type=float, default=None, metavar="GB",
+                        help="memory budget of the adaptive refinement: stop before a level is predicted to "
+                             "need more than GB of resident memory (default: 3.0)")
     parser.add_argument("--max-elements", type=float, default=None, metavar="N",
                         help="refuse, before meshing, a mesh estimated above N tetrahedra (default: 500,000, "
                              "about 6 GB for P2 by its estimate; it usually binds before --max-dofs)")
@@ -68,6 +79,8 @@ def _check_outputs(args, design_path: Path, design=None):
         raise InputError(f"--rtol: must lie in [1e-6, 0.5] (relative), got {args.rtol:g}")
     if args.max_dofs is not None and args.max_dofs < 1000:
         raise InputError(f"--max-dofs: must be ≥ 1000, got {args.max_dofs}")
+    if args.max_memory_gb is not None and not args.max_memory_gb > 0.1:
+        raise InputError(f"--max-memory-gb: must be > 0.1, got {args.max_memory_gb:g}")
     if args.max_elements is not None and not args.max_elements >= 100:
         raise InputError(f"--max-elements: must be ≥ 100, got {args.max_elements:g}")
     if args.sweep and args.vtu is not None:
@@ -114,6 +127,12 @@ def _print_design(res: dict) -> None:
           f"safety factor {res['safety_factor']:.2f}{_pm(res, 'safety_factor')}")
     if "gauge_strain_per_Nm_error_method" in res:
         print(f"error estimates: {res['gauge_strain_per_Nm_error_method']} (gauge strain)")
+    if res.get("error_method") == "adaptive":
+        arms = res.get("gauge_strains_per_Nm_error_estimate", {})
+        per = ", ".join(f"{k} ± {100 * v / abs(res['gauge_strains_per_Nm'][k]):.2g} %" for k, v in arms.items()
+                        if res["gauge_strains_per_Nm"].get(k))
+        print(f"refinement: {len(res['discretization_levels'])} nested levels, stopped by {res['stopped_by']} "
+              f"(--rtol {res['rtol']:g}); each gauge: {per}")
     print(f"minimum detectable torque: {res['min_detectable_torque_Nm'] * 1e3:.3g} mN·m (1σ noise), "
           f"{res['min_detectable_torque_enob_Nm'] * 1e3:.3g} mN·m (ENOB resolution)")
     print("cross-talk, % of rated output per N (forces) or per N·m (moments); "
@@ -208,10 +227,10 @@ def _one(args, design, progress) -> int:
     if args.single_level:
         res, fields = analyze(design, args.size, args.order, progress=progress, max_elements=args.max_elements)
     else:
-        from flexure.convergence import MAX_DOFS, analyze_with_error
-        res, fields = analyze_with_error(design, args.size, args.order, rtol=args.rtol,
-                                         max_dofs=args.max_dofs or MAX_DOFS, progress=progress,
-                                         max_elements=args.max_elements)
+        from flexure.convergence import analyze_design
+        res, fields = analyze_design(design, args.size, args.order, rtol=args.rtol, method=args.error_method,
+                                     max_dofs=args.max_dofs, max_memory_gb=args.max_memory_gb,
+                                     progress=progress and not args.json, max_elements=args.max_elements)
     if args.vtu is not None:
         from flexure.render import write_vtu
         res["vtu"] = str(write_vtu(fields, args.vtu))

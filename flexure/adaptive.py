@@ -1,0 +1,334 @@
+"""Goal-oriented adaptive analysis of a flexure design: one coarse gmsh mesh, then nested local
+refinement (flexure.refine) where the dual-weighted residuals of the goals are large, until every
+goal's error estimate is below ``rtol`` or a budget stops it.
+
+Level ℓ: solve the torque case and the gauges' duals together (flexure.goals; the previous
+level's fields prolongated as the CG's initial guess), read the goals J — the hub rotation θ
+(stiffness k = 1/θ) and each gauge's strain (their bridge combination ε_ref too) — and their raw
+DWR estimates η_ℓ ≈ J − J_ℓ (flexure.dwr). Mark by Dörfler (the fewest elements carrying
+DORFLER of the sum of the goals' indicators, each goal weighted by 1/(rtol |J|) while it is not
+yet converged) and bisect them (closure keeps the mesh conforming; new boundary nodes go onto the
+true surface).
+
+Estimate. The raw DWR estimate η_ℓ (weight w ≈ u − I_h u from Bank–Weiser local problems driven
+by the element residuals and traction jumps, flexure.bank_weiser) is an estimate, not a bound: its
+effectivity κ = η/E (E = J − J_ℓ the true error) depends on the part. The nested sequence measures
+it (two-level check): J_ℓ − J_(ℓ−1) is the exact change of the goal and E_(ℓ−1) − E_ℓ equals it, so
+
+    κ̂_ℓ = (η_(ℓ−1) − η_ℓ) / (J_ℓ − J_(ℓ−1)),        e_ℓ = SAFETY · |η_ℓ| / clip(κ̂_ℓ, KAPPA_MIN, 1)
+
+(κ̂ assumed equal on the last two levels; SAFETY covers its change between them; an estimate that
+over-estimated the last change (κ̂ > 1) is not scaled down). κ̂ is a measurement only where the
+estimate fell by at least MIN_DROP of itself over the step (a smaller drop is of the order of the
+estimate's own noise; the κ̂ from it can be anything) and is positive; otherwise the goal's
+previous κ̂ is used, or 1 on the first levels. Hence at least MIN_LEVELS levels.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+import numpy as np
+
+from flexure.errors import InputError
+
+DEFAULT_RTOL = 0.02
+#: the first mesh: the design's size function × this, its curved faces resolved as at
+#: CURVATURE_SHARE × this (h × 1: 12 elements per turn): the refinement cannot bring back the true
+#: shape of a hole meshed as a polygon of few sides (its nodes would have to move by a large part of
+#: the elements next to them), so curved faces are resolved from the start
+INITIAL_H_FACTOR = 2.0
+CURVATURE_SHARE = 0.5
+DORFLER = 0.5
+#: ... and at least this fraction of the elements (those with the largest indicators): a level
+#: then grows the DOFs by about 1.6–2×, few enough levels for the set-up of each to pay
+MIN_MARKED = 0.12
+#: bisection rounds per level (1: each marked element halved once, + closure)
+ROUNDS = 2
+SAFETY = 1.5
+#: CG tolerance of the last mesh's six load cases (cross-talk, stress): the goal solves' 1e-6 gives
+#: goal values within 1e-9 of 1e-8's (flexure.goals.GOAL_RTOL)
+FINAL_RTOL = 3e-7       # below solve.RESIDUAL_LIMIT (1e-6), which flags a solve as not converged
+KAPPA_MIN = 0.25
+MIN_DROP = 0.25
+MIN_LEVELS = 2
+MAX_LEVELS = 14
+MAX_DOFS = 2_000_000
+MAX_MEMORY_GB = 3.0
+#: the bridge's arm signs (bridge.wheatstone "full_bending": ε1 − ε2 + ε3 − ε4)
+ARM_SIGN = {1: 1.0, 2: -1.0, 3: 1.0, 4: -1.0}
+METHOD = ("goal-oriented (dual-weighted residual) estimate on nested adaptively refined meshes "
+          "({levels} levels, {dofs} dofs): the raw DWR estimate {raw} divided by its effectivity measured "
+          "over the last refinement step ({kappa}) and × {safety}; a bound-like figure, not 1σ")
+
+
+def _rss_gb() -> float:
+    """Peak resident memory of this process so far (GB)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+
+
+def geometry(design, mres):
+    """(TaggedMesh, projector or None) of an initial mesh: gmsh's classification on an exact CAD
+    solid (spoke disc, STEP: projection with gmsh), the STL's triangles (trimesh), or none (the
+    polygonal sweep/tetgen meshes, whose faces are flat)."""
+    from flexure.project import CadProjector, StlProjector, classify
+    from flexure.refine import TaggedMesh
+
+    mesh = mres.mesh
+    ent = mesh._cache.get("entities")
+    if design.kind == "stl":
+        return TaggedMesh.boundary_tagged(mesh), StlProjector(mres.surface)
+    if ent is not None and design.mesher == "gmsh":
+        if design.kind == "spoke_disc":
+            from flexure.gmsh_mesh import build_spoke_disc
+            disc = design.disc
+            return classify(mesh, *ent), CadProjector(lambda g: build_spoke_disc(g, disc))
+        if design.kind == "step":
+            from flexure.cad import import_step
+            path = design.file_path
+            return classify(mesh, *ent), CadProjector(lambda g: import_step(g, path))
+    return TaggedMesh.untagged(mesh), None
+
+
+def goal_values(design, sol) -> dict:
+    """Figures of one level: θ, k = 1/θ, each gauge's strain, the bridge strain ε_ref."""
+    arms = [g.arm for g in design.gauges]
+    s = np.array([ARM_SIGN.get(a, 0.0) for a in arms])
+    return {"theta": sol.theta, "eps": sol.eps.copy(), "eps_ref": float(s @ sol.eps / 4.0), "sign": s}
+
+
+def calibrate(eta_prev: float, eta: float, J_prev: float, J: float, kappa_prev: float | None) -> tuple[float, str]:
+    """κ̂ = (η_(ℓ−1) − η_ℓ)/(J_ℓ − J_(ℓ−1)) clipped to [KAPPA_MIN, 1] where it is a measurement
+    (module docstring), else the previous κ̂, or 1 → (κ used, how)."""
+    dJ = J - J_prev
+    drop = abs(eta_prev) - abs(eta)
+    if dJ != 0 and drop >= MIN_DROP * abs(eta_prev) and eta_prev * eta > 0:
+        k = (eta_prev - eta) / dJ
+        if math.isfinite(k) and k > 0:
+            return float(min(max(k, KAPPA_MIN), 1.0)), "measured"
+    if kappa_prev is not None:
+        return kappa_prev, "previous level's"
+    return 1.0, "not measured yet"
+
+
+def _mark(mesh, eta_vertex: np.ndarray, weights: np.ndarray, fraction: float) -> np.ndarray:
+    """Dörfler: the fewest elements whose combined indicator Σ_goals w_g |η_K,g| carries
+    ``fraction`` of the total (at least MIN_MARKED of the elements)."""
+    from flexure.dwr import element_indicators
+
+    comb = element_indicators(mesh, eta_vertex) @ weights
+    order = np.argsort(-comb)
+    csum = np.cumsum(comb[order])
+    n = max(int(np.searchsorted(csum, fraction * csum[-1])) + 1, int(MIN_MARKED * len(comb)))
+    return order[:n]
+
+
+def analyze_adaptive(design, size: str | None = None, rtol: float | None = None, max_dofs: int = MAX_DOFS,
+                     max_memory_gb: float = MAX_MEMORY_GB, progress: bool = False,
+                     max_elements: float | None = None, initial_h_factor: float = INITIAL_H_FACTOR):
+    """Adaptive analysis (module docstring) → (results as ``analysis.analyze`` gives them on the
+    final mesh, with ``<figure>_error_estimate``/``_error_method``, the levels and what stopped
+    the refinement; Fields). ``initial_h_factor``: the first mesh's coarsening of the size field."""
+    from flexure.analysis import analyze_mesh, build_mesh
+    from flexure.goals import indicators, solve_goals
+    from flexure.meshing import MeshResult, mesh_report
+    from flexure.mesh import quality
+    from flexure.refine import bisect, snap
+
+    rtol = DEFAULT_RTOL if rtol is None else rtol
+    if not (math.isfinite(rtol) and 0 < rtol < 1):
+        raise InputError(f"--rtol: must be in (0, 1), got {rtol!r}")
+    if (design.order or 2) != 2:
+        raise InputError("adaptive refinement needs order 2 (10-node tetrahedra); use the levels estimate for P1")
+    t_start = time.perf_counter()
+    t0 = time.perf_counter()
+    bar = _bar(progress)
+    hist, kappas = [], {}
+    x0 = ref0 = None
+    stopped = None
+    try:
+        bar.set_description("flexure: meshing")
+        mres = build_mesh(design, size, 2, initial_h_factor, max_elements,
+                          curvature_h_factor=CURVATURE_SHARE * initial_h_factor)
+        tm, projector = geometry(design, mres)
+        snapped = snap(tm, projector) if projector is not None else {}
+        mesh_s = time.perf_counter() - t0
+        bar.set_description(f"flexure: mesh {tm.mesh.n_dofs} dofs ({mesh_s:.0f} s)")
+        for lv in range(MAX_LEVELS):
+            mesh = tm.mesh
+            tl = time.perf_counter()
+            sol = solve_goals(design, mesh, x0, ref0)
+            vals = goal_values(design, sol)
+            td = time.perf_counter()
+            eta_v = indicators(design, mesh, sol)
+            dwr_s = time.perf_counter() - td
+            eta = eta_v.sum(axis=0)
+            rec = {"level": lv, "dofs": int(mesh.n_dofs), "elements": int(mesh.n_elements),
+                   "theta": vals["theta"], "torsional_stiffness_Nm_per_rad": 1.0 / vals["theta"],
+                   "gauge_strain_per_Nm": vals["eps_ref"], "gauge_strains": vals["eps"].tolist(),
+                   "eta": {"theta": float(eta[0]), "gauges": eta[1:].tolist(),
+                           "eps_ref": float(vals["sign"] @ eta[1:] / 4.0)},
+                   "safety_factor": _safety_factor(design, mesh, sol.U[:, :, 0]),
+                   "cg_iterations": sol.info.get("iterations"), "solve_s": sol.info["total_s"], "dwr_s": dwr_s,
+                   "min_dihedral_deg": float(quality(mesh)["min_dihedral_deg"]), "pending_nodes": int(len(tm.pending[0]))}
+            rec.update(_estimates(rec, hist[-1] if hist else None, kappas, design))
+            hist.append(rec)
+            rel = _relative(rec)
+            worst = _worst(rel)
+            bar.update(1)
+            bar.set_description(f"flexure: level {lv} {mesh.n_dofs} dofs, worst error ±{worst:.2%}")
+            rec["level_s"] = time.perf_counter() - tl
+            rec["peak_rss_gb"] = _rss_gb()
+            if worst <= rtol and lv + 1 >= MIN_LEVELS:
+                stopped = "rtol"
+                break
+            if lv + 1 == MAX_LEVELS:
+                stopped = "max_levels"
+                break
+            growth = hist[-1]["dofs"] / hist[-2]["dofs"] if len(hist) >= 2 else 1.6
+            nxt = int(mesh.n_dofs * max(growth, 1.2))
+            if nxt > max_dofs:
+                stopped = "max_dofs"
+                break
+            if rec["peak_rss_gb"] * nxt / mesh.n_dofs > max_memory_gb:
+                stopped = "memory"
+                break
+            weights = np.array([1.0 / max(abs(rec["theta"]), 1e-300)]
+                               + [1.0 / max(abs(e), 1e-300) for e in rec["gauge_strains"]])
+            open_goals = np.array([rel["torsional_stiffness_Nm_per_rad"] > rtol]
+                                  + [r > rtol for r in rel["arms"]])
+            w = weights * np.where(open_goals, 1.0, 1e-3)
+            tr = time.perf_counter()
+            marked = _mark(mesh, eta_v, w, DORFLER)
+            ref0 = sol.q[-6:] if design.coupling == "rigid" else None
+            tm, (x0,), rinfo = bisect(tm, marked, [sol.U], rounds=ROUNDS, projector=projector)
+            sol = None                                       # free the old level's matrix and hierarchy
+            rec["refine_s"] = time.perf_counter() - tr
+            rec["marked"] = int(len(marked))
+            rec["projection"] = {k: rinfo.get(k, 0) for k in ("projected", "projection_partial", "projection_undone")}
+    finally:
+        bar.close()
+    # the final mesh: all six load cases, the figures as analysis.analyze gives them
+    mesh = tm.mesh
+    report = mesh_report(mesh, mres.report["size"], "gmsh+bisection", None, _field(mres), mres.surface)
+    report.update({k: mres.report[k] for k in ("h_far_m", "h_gauge_m") if k in mres.report})
+    fin = MeshResult(mesh, mres.surface, report)
+    x0_final = np.zeros((sol.q.shape[0], 6))
+    x0_final[:, 0] = sol.q[:, 0]
+    res, fields = analyze_mesh(design, fin, mesh_s, progress=False, x0=x0_final, K=sol.K, solver=sol.solver,
+                               rtol=FINAL_RTOL)
+    _attach(res, hist, design, rtol, stopped, max_dofs, max_memory_gb)
+    res["mesh"]["initial_snap"] = snapped
+    res["total_s"] = float(time.perf_counter() - t_start)
+    return res, fields
+
+
+def _safety_factor(design, mesh, u_unit) -> float:
+    """σ_y / max von Mises at the rated torque (element-nodal stresses, as analysis.analyze)."""
+    from flexure.post import element_nodal_strains, stress_from_strain, von_mises
+
+    vm = von_mises(stress_from_strain(element_nodal_strains(mesh, u_unit * design.rated_torque_Nm), design.material))
+    return float(design.material.yield_Pa / vm.max())
+
+
+def _field(mres):
+    from flexure.meshing import SizeField
+
+    r = mres.report
+    return SizeField(r.get("h_far_m", math.nan), r.get("h_gauge_m", math.nan), np.zeros((0, 3)), 0.0)
+
+
+def _bar(progress: bool):
+    from tqdm import tqdm
+
+    return tqdm(total=None, file=sys.stderr, disable=not progress, unit="level", leave=False)
+
+
+def _estimates(rec: dict, prev: dict | None, kappas: dict, design) -> dict:
+    """Calibrated error estimates of this level's goals (module docstring), absolute, in the
+    goals' units: θ (then k), each gauge, ε_ref."""
+    eta = rec["eta"]
+    J = {"theta": rec["theta"], "eps_ref": rec["gauge_strain_per_Nm"],
+         **{f"g{i}": e for i, e in enumerate(rec["gauge_strains"])}}
+    E = {"theta": eta["theta"], "eps_ref": eta["eps_ref"], **{f"g{i}": e for i, e in enumerate(eta["gauges"])}}
+    out, how = {}, {}
+    for key in J:
+        if prev is None:
+            k, h = 1.0, "no previous level"
+        else:
+            Jp = {"theta": prev["theta"], "eps_ref": prev["gauge_strain_per_Nm"],
+                  **{f"g{i}": e for i, e in enumerate(prev["gauge_strains"])}}[key]
+            Ep = {"theta": prev["eta"]["theta"], "eps_ref": prev["eta"]["eps_ref"],
+                  **{f"g{i}": e for i, e in enumerate(prev["eta"]["gauges"])}}[key]
+            k, h = calibrate(Ep, E[key], Jp, J[key], kappas.get(key))
+        kappas[key] = k
+        out[key] = SAFETY * abs(E[key]) / k
+        how[key] = (k, h)
+    k_est = out["theta"] / abs(rec["theta"]) * rec["torsional_stiffness_Nm_per_rad"]
+    return {"estimate": {"torsional_stiffness_Nm_per_rad": k_est, "gauge_strain_per_Nm": out["eps_ref"],
+                         "gauge_strains": [out[f"g{i}"] for i in range(len(rec["gauge_strains"]))]},
+            "kappa": {k: v[0] for k, v in how.items()}, "kappa_how": {k: v[1] for k, v in how.items()}}
+
+
+def _relative(rec: dict) -> dict:
+    """Relative error estimates of one level: stiffness, bridge strain, each arm (list)."""
+    e = rec["estimate"]
+    arms = [x / max(abs(v), 1e-300) for x, v in zip(e["gauge_strains"], rec["gauge_strains"])]
+    return {"torsional_stiffness_Nm_per_rad": e["torsional_stiffness_Nm_per_rad"] / abs(rec["torsional_stiffness_Nm_per_rad"]),
+            "gauge_strain_per_Nm": e["gauge_strain_per_Nm"] / max(abs(rec["gauge_strain_per_Nm"]), 1e-300),
+            "arms": arms}
+
+
+def _worst(rel: dict) -> float:
+    return max([rel["torsional_stiffness_Nm_per_rad"], rel["gauge_strain_per_Nm"], *rel["arms"]])
+
+
+def _attach(res: dict, hist: list, design, rtol: float, stopped: str, max_dofs: int, max_memory_gb: float) -> None:
+    """Error keys beside the figures of ``res`` (the final level), the levels, the stop."""
+    last = hist[-1]
+    est = last["estimate"]
+    kap = last["kappa"]
+    n = len(hist)
+
+    def method(key_eta: str, key_kappa: str, J: float) -> str:
+        raw = abs(last["eta"][key_eta] if key_eta != "gauges" else 0.0) / max(abs(J), 1e-300)
+        return METHOD.format(levels=n, dofs=last["dofs"], raw=f"{raw:.2%}",
+                             kappa=f"κ = {kap[key_kappa]:.2f}, {last['kappa_how'][key_kappa]}", safety=SAFETY)
+
+    e_k = est["torsional_stiffness_Nm_per_rad"]
+    e_s = est["gauge_strain_per_Nm"]
+    rel_s = e_s / max(abs(last["gauge_strain_per_Nm"]), 1e-300)
+    res["torsional_stiffness_Nm_per_rad_error_estimate"] = float(e_k / last["torsional_stiffness_Nm_per_rad"]
+                                                                 * res["torsional_stiffness_Nm_per_rad"])
+    res["torsional_stiffness_Nm_per_rad_error_method"] = method("theta", "theta", last["theta"])
+    res["gauge_strain_per_Nm_error_estimate"] = float(rel_s * abs(res["gauge_strain_per_Nm"]))
+    res["gauge_strain_per_Nm_error_method"] = method("eps_ref", "eps_ref", last["gauge_strain_per_Nm"])
+    res["sensitivity_mV_per_V_per_Nm_error_estimate"] = float(rel_s * abs(res["sensitivity_mV_per_V_per_Nm"]))
+    res["sensitivity_mV_per_V_per_Nm_error_method"] = ("the bridge strain's relative estimate (the sensitivity "
+                                                       "is proportional to it)")
+    arms = [g.arm for g in design.gauges]
+    res["gauge_strains_per_Nm_error_estimate"] = {
+        f"arm{a}": float(e) for a, e in zip(arms, est["gauge_strains"])}
+    if len(hist) >= 2:
+        res["safety_factor_error_estimate"] = float(abs(hist[-1]["safety_factor"] - hist[-2]["safety_factor"]))
+        res["safety_factor_error_method"] = (
+            "its change over the last refinement step; not a bound: the peak stress is not a goal of the "
+            "refinement, and at a sharp edge it need not converge")
+    else:
+        res["safety_factor_error_estimate"] = math.nan
+        res["safety_factor_error_method"] = "not estimated (one level)"
+    res["discretization_levels"] = hist
+    res["error_method"] = "adaptive"
+    res["rtol"] = rtol
+    res["stopped_by"] = stopped
+    worst = _worst(_relative(last))
+    if stopped != "rtol":
+        why = {"max_dofs": f"the next level would exceed --max-dofs {max_dofs}",
+               "memory": f"the next level would exceed the memory budget {max_memory_gb:g} GB",
+               "max_levels": f"{MAX_LEVELS} levels"}[stopped]
+        res["warnings"] = list(res["warnings"]) + [
+            f"--rtol {rtol:g} not reached: worst error estimate {worst:.2%} at {last['dofs']} dofs; stopped by {why}"]

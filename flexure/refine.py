@@ -1,0 +1,359 @@
+"""Local, nested refinement of a P2 tetrahedral mesh: longest-edge bisection with closure.
+
+A marked element is bisected at its longest edge (a, b): its mid-edge node m becomes a vertex and
+the two children are the parent with b, resp. a, replaced by m (orientation kept). New mid-edge
+nodes (a–m and m–b at the quarter points of a–b; m–c and m–d on the faces a b c, a b d) are placed
+by the parent's own (isoparametric) map at their reference points, so a child of a curved element
+reproduces its curved geometry exactly, and every nodal field handed in (a P2 solution) is
+prolongated by the parent's shape functions: the sequence of meshes and spaces is nested.
+
+Conformity (Rivara's longest-edge bisection): an edge to split is split in every element that
+contains it, and an element may only be split at its own longest edge, so the closure
+
+    element has a marked edge  ⇒  its longest edge is marked                        (to a fixpoint)
+
+is applied before every pass, and passes (each bisects every element whose longest edge is marked)
+repeat until no marked edge is left. The longest edge is chosen by (length, vertex-pair code), one
+total order for all elements, so neighbours agree; the closure propagates along longest-edge paths
+and ends (edges grow along a path). Between passes the mesh has hanging nodes; after the last one
+it is conforming again (checked by ``check_conforming``).
+
+Boundary: every element carries the geometric entity each of its faces (``face_tag`` (m,4): a
+surface tag > 0, 0 inside) and edges (``edge_tag`` (m,6): a curve tag > 0, e.g. a sharp CAD edge)
+lie on; children inherit them. New nodes on a tagged edge or face are moved onto the true curve or
+surface by a ``Projector`` (the CAD model through gmsh, an STL through trimesh: flexure.project);
+a move that would fold an element (det J ≤ 0 at a quadrature point or node) is undone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from flexure.mesh import TET_EDGES, Mesh
+
+#: for edge t = (p, q): the two other local vertices (increasing)
+_OTHER = np.array([[v for v in range(4) if v not in e] for e in TET_EDGES.tolist()], dtype=np.int64)
+#: projection target priority by dim: a curve (1) over a surface (2) over none (0)
+_PRIORITY = np.array([0, 2, 1])
+#: local edge index of the vertex pair (p, q)
+_EDGE_OF = np.full((4, 4), -1, dtype=np.int64)
+for _t, (_p, _q) in enumerate(TET_EDGES.tolist()):
+    _EDGE_OF[_p, _q] = _EDGE_OF[_q, _p] = _t
+
+
+@dataclass
+class TaggedMesh:
+    """A P2 mesh with the geometric entity of each element face (``face_tag`` (m,4), face f opposite
+    local vertex f; 0: none) and edge (``edge_tag`` (m,6), TET_EDGES order; 0: none)."""
+
+    mesh: Mesh
+    face_tag: np.ndarray
+    edge_tag: np.ndarray
+    #: nodes still off their curve or surface (their move would have folded an element), retried
+    #: at every refinement: (nodes, dims, tags)
+    pending: tuple = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64))
+
+    @classmethod
+    def untagged(cls, mesh: Mesh) -> "TaggedMesh":
+        m = mesh.n_elements
+        return cls(mesh, np.zeros((m, 4), np.int64), np.zeros((m, 6), np.int64))
+
+    @classmethod
+    def boundary_tagged(cls, mesh: Mesh, tag: int = 1) -> "TaggedMesh":
+        """Every boundary face on surface ``tag`` (one surface: an STL)."""
+        tm = cls.untagged(mesh)
+        tm.face_tag[_boundary_face_mask(mesh)] = tag
+        return tm
+
+
+def _boundary_face_mask(mesh: Mesh) -> np.ndarray:
+    """(m,4) bool: element face f (opposite local vertex f) lies on the boundary."""
+    from flexure.mesh import TET_FACES
+
+    key = np.sort(mesh.corner_tets[:, TET_FACES].astype(np.int64), axis=2).reshape(-1, 3)
+    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    return (cnt[inv.ravel()] == 1).reshape(-1, 4)
+
+
+def edge_codes(tets: np.ndarray) -> np.ndarray:
+    """(m,6) int64 code lo·2³² + hi of every element edge's vertex pair."""
+    V = tets[:, :4].astype(np.int64)
+    a, b = V[:, TET_EDGES[:, 0]], V[:, TET_EDGES[:, 1]]
+    return (np.minimum(a, b) << 32) | np.maximum(a, b)
+
+
+def longest_edge(points: np.ndarray, tets: np.ndarray, codes: np.ndarray | None = None) -> np.ndarray:
+    """Local index (m,) of each element's longest edge, ties broken by the larger vertex-pair code
+    (the same total order in every element, so neighbours sharing an edge agree)."""
+    codes = edge_codes(tets) if codes is None else codes
+    uc, inv = np.unique(codes.ravel(), return_inverse=True)
+    return _longest(points, codes, uc, inv.reshape(codes.shape))
+
+
+def _longest(points, codes, uc, eid):
+    lo, hi = uc >> 32, uc & 0xFFFFFFFF
+    d = points[hi] - points[lo]
+    L = np.einsum("ei,ei->e", d, d)[eid]
+    best = L.max(axis=1)
+    return np.where(L == best[:, None], codes, -1).argmax(axis=1)
+
+
+def _edge_targets(face_tag: np.ndarray, edge_tag: np.ndarray):
+    """(dim, tag) (m,6) of every element edge as the element sees it: its curve (1) if tagged,
+    else the surface (2) of the element's faces that hold it (opposite its two other vertices)."""
+    fa, fb = face_tag[:, _OTHER[:, 0]], face_tag[:, _OTHER[:, 1]]                # (m,6)
+    surf = np.where(fa == fb, fa, np.where(fa == 0, fb, np.where(fb == 0, fa, 0)))
+    return (np.where(edge_tag > 0, 1, np.where(surf > 0, 2, 0)), np.where(edge_tag > 0, edge_tag, surf))
+
+
+def mid_node_targets(tm: TaggedMesh):
+    """Every mid-edge node on a tagged curve (dim 1) or surface (dim 2): (nodes, dims, tags)."""
+    dims, tags = _edge_targets(tm.face_tag, tm.edge_tag)
+    return _strongest(tm.mesh.tets[:, 4:].astype(np.int64).ravel(), dims.ravel(), tags.ravel())
+
+
+def _strongest(nodes, dims, tags):
+    """One (dim, tag) per node, the strongest (curve > surface) of its listings; dim 0 dropped."""
+    sel = dims > 0
+    nodes, dims, tags = nodes[sel], dims[sel], tags[sel]
+    order = np.lexsort((_PRIORITY[dims], nodes))
+    nodes, dims, tags = nodes[order], dims[order], tags[order]
+    last = np.r_[nodes[1:] != nodes[:-1], True] if len(nodes) else np.zeros(0, bool)
+    return nodes[last], dims[last], tags[last]
+
+
+def snap(tm: TaggedMesh, projector) -> dict:
+    """Project every mid-edge node on a tagged curve or surface (in place; isoparametric P2 on the
+    true geometry where no element folds); the rest become ``pending``."""
+    nodes, dims, tags = mid_node_targets(tm)
+    info = project_nodes(tm.mesh, nodes, dims, tags, projector)
+    tm.pending = info.pop("pending")
+    return info
+
+
+def _p2_weights(bary: np.ndarray) -> np.ndarray:
+    """P2 shape functions (k,10) at barycentric points (k,4) (VTK order, flexure.mesh)."""
+    N = np.empty((len(bary), 10))
+    N[:, :4] = bary * (2.0 * bary - 1.0)
+    N[:, 4:] = 4.0 * bary[:, TET_EDGES[:, 0]] * bary[:, TET_EDGES[:, 1]]
+    return N
+
+
+def _bisect_pass(points, tets, face_tag, edge_tag, flag, marked_codes, fields):
+    """One pass: closure, then every element whose longest edge is marked is bisected.
+    → (points, tets, face_tag, edge_tag, flag, marked_codes, fields, targets, n_bisected)."""
+    codes = edge_codes(tets)
+    uc, inv = np.unique(codes.ravel(), return_inverse=True)
+    eid = inv.reshape(codes.shape)
+    le = _longest(points, codes, uc, eid)
+    rows = np.arange(len(tets))
+    at = np.minimum(np.searchsorted(uc, marked_codes), len(uc) - 1)
+    emark = np.zeros(len(uc), bool)
+    emark[at[uc[at] == marked_codes]] = True
+    mk = emark[eid]
+    while True:                                   # closure to a fixpoint
+        need = mk.any(axis=1) & ~mk[rows, le]
+        if not need.any():
+            break
+        emark[eid[need, le[need]]] = True
+        mk = emark[eid]
+    marked_codes = uc[emark]
+    B = np.flatnonzero(mk[rows, le])
+    if len(B) == 0:
+        return points, tets, face_tag, edge_tag, flag, marked_codes, fields, None, 0
+    e = le[B]
+    i, j = TET_EDGES[e, 0], TET_EDGES[e, 1]
+    k, l = _OTHER[e, 0], _OTHER[e, 1]
+    TB = tets[B].astype(np.int64)
+    r = np.arange(len(B))
+    vi, vj, vk, vl = TB[r, i], TB[r, j], TB[r, k], TB[r, l]
+    m = TB[r, 4 + e]
+    # the four new edges per bisected element, their reference points in the parent, and where
+    # they lie: on the split edge (a curve, or a surface face next to it) or on a parent face
+    pair = lambda x, y: (np.minimum(x, y) << 32) | np.maximum(x, y)  # noqa: E731
+    new_codes = np.concatenate([pair(vi, m), pair(vj, m), pair(m, vk), pair(m, vl)])
+    bary = np.zeros((4, len(B), 4))
+    bary[0, r, i], bary[0, r, j] = 0.75, 0.25
+    bary[1, r, i], bary[1, r, j] = 0.25, 0.75
+    bary[2, r, i] = bary[2, r, j] = bary[3, r, i] = bary[3, r, j] = 0.25
+    bary[2, r, k] = bary[3, r, l] = 0.5
+    fk, fl = face_tag[B, k], face_tag[B, l]          # faces opposite k (contains i j l), opposite l
+    # an edge's target (curve > surface > none) over every element that holds it: an element that
+    # touches the boundary only along the edge does not know it
+    edim, etag = _edge_targets(face_tag, edge_tag)
+    order = np.lexsort((_PRIORITY[edim.ravel()], eid.ravel()))
+    best_dim = np.zeros(len(uc), np.int64)
+    best_tag = np.zeros(len(uc), np.int64)
+    best_dim[eid.ravel()[order]] = edim.ravel()[order]
+    best_tag[eid.ravel()[order]] = etag.ravel()[order]
+    dim_e, tag_e = best_dim[eid[B, e]], best_tag[eid[B, e]]
+    dims = np.concatenate([dim_e, dim_e, np.where(fl > 0, 2, 0), np.where(fk > 0, 2, 0)])
+    tags = np.concatenate([tag_e, tag_e, fl, fk])
+    parent = np.tile(B, 4)
+    # existing edges keep their node; each new one gets one node (placed by its first parent)
+    ex_codes = uc
+    ex_nodes = np.empty(len(uc), np.int64)
+    ex_nodes[eid.ravel()] = tets[:, 4:].ravel()
+    uniq, first, inv = np.unique(new_codes, return_index=True, return_inverse=True)
+    pos = np.minimum(np.searchsorted(ex_codes, uniq), len(ex_codes) - 1)
+    exists = ex_codes[pos] == uniq
+    n = len(points)
+    node_of = np.where(exists, ex_nodes[pos], 0)
+    fresh = np.flatnonzero(~exists)
+    node_of[fresh] = n + np.arange(len(fresh))
+    src = first[fresh]                            # occurrence that places each fresh node
+    N = _p2_weights(bary.reshape(-1, 4)[src])
+    P = tets[parent[src]]
+    points = np.vstack([points, np.einsum("ka,kai->ki", N, points[P])])
+    fields = [np.concatenate([f, np.einsum("ka,ka...->k...", N, f[P])]) for f in fields]
+    # projection target of each fresh node: the strongest (curve > surface > none) of its occurrences
+    prio = np.zeros(len(uniq), np.int64)
+    best_tag = np.zeros(len(uniq), np.int64)
+    order = np.lexsort((_PRIORITY[dims], inv))    # by node, then priority ascending: last wins
+    prio[inv[order]] = dims[order]
+    best_tag[inv[order]] = tags[order]
+    targets = [np.concatenate([node_of[fresh], m]), np.concatenate([prio[fresh], dim_e]),
+               np.concatenate([best_tag[fresh], tag_e])]
+    qa, qb, nk, nl = node_of[inv].reshape(4, len(B))
+    children = []
+    for gone, q in ((j, qa), (i, qb)):            # child 1: vj → m; child 2: vi → m
+        child = TB.copy()
+        child[r, gone] = m
+        ft = face_tag[B].copy()
+        ft[r, np.where(gone == j, i, j)] = 0      # the new interior face (opposite the kept end)
+        et = edge_tag[B].copy()
+        for t in range(6):
+            p_, q_ = TET_EDGES[t]
+            touches = (p_ == gone) | (q_ == gone)
+            other = np.where(p_ == gone, q_, p_)
+            split = touches & (t == e)
+            face_edge = touches & ~split
+            child[:, 4 + t] = np.where(~touches, TB[:, 4 + t],
+                                       np.where(split, q, np.where(other == k, nk, nl)))
+            et[face_edge, t] = 0
+        children.append((child, ft, et))
+    keep = np.ones(len(tets), bool)
+    keep[B] = False
+    tets = np.vstack([tets[keep], children[0][0], children[1][0]])
+    face_tag = np.vstack([face_tag[keep], children[0][1], children[1][1]])
+    edge_tag = np.vstack([edge_tag[keep], children[0][2], children[1][2]])
+    flag = np.concatenate([flag[keep], flag[B], flag[B]])
+    return points, tets, face_tag, edge_tag, flag, marked_codes, fields, targets, len(B)
+
+
+def bisect(tm: TaggedMesh, elements, fields=(), rounds: int = 1, projector=None, max_passes: int = 200):
+    """Bisect ``elements`` (indices or an (m,) bool mask) ``rounds`` times (each round bisects every
+    descendant of theirs once at its longest edge; 3 rounds ≈ halving h), with closure.
+
+    ``fields``: nodal arrays (n, ...) prolongated by the parents' P2 shape functions. New boundary
+    nodes are projected with ``projector`` (``project(points, dim, tag) → points``) if given.
+    → (TaggedMesh, [fields], info dict: passes, bisections, projected nodes, undone moves)."""
+    mesh = tm.mesh
+    if mesh.order != 2:
+        raise ValueError("bisect: a P2 mesh is expected")
+    points, tets = mesh.points.copy(), mesh.tets.astype(np.int64)
+    face_tag, edge_tag = tm.face_tag.astype(np.int64), tm.edge_tag.astype(np.int64)
+    flag = np.zeros(len(tets), bool)
+    flag[np.asarray(elements)] = True
+    fields = [np.asarray(f, float) for f in fields]
+    n0 = len(points)
+    moved_nodes, moved_dim, moved_tag = [], [], []
+    passes = bisections = 0
+    for _ in range(rounds):
+        codes = edge_codes(tets)
+        marked = np.unique(codes[flag, longest_edge(points, tets[flag], codes[flag])])
+        while True:
+            points, tets, face_tag, edge_tag, flag, marked, fields, tgt, nb = _bisect_pass(
+                points, tets, face_tag, edge_tag, flag, marked, fields)
+            if nb == 0:
+                break
+            passes += 1
+            bisections += nb
+            moved_nodes.append(tgt[0]); moved_dim.append(tgt[1]); moved_tag.append(tgt[2])
+            if passes > max_passes:
+                raise RuntimeError("bisect: the closure did not end")
+    info = {"passes": passes, "bisections": bisections, "new_nodes": len(points) - n0,
+            "projected": 0, "projection_undone": 0, "max_projection_m": 0.0}
+    out = TaggedMesh(Mesh(points, tets), face_tag, edge_tag, tm.pending)
+    if projector is not None and (moved_nodes or len(tm.pending[0])):
+        # new nodes, the vertices made from mid nodes, and the nodes left off their geometry before;
+        # a node listed twice keeps its strongest target (curve > surface)
+        nodes, dims, tags = _strongest(*[np.concatenate([p] + q) for p, q in
+                                         zip(tm.pending, (moved_nodes, moved_dim, moved_tag))])
+        info.update(project_nodes(out.mesh, nodes, dims, tags, projector))
+        out.pending = info.pop("pending")
+    return out, fields, info
+
+
+#: a projected node may not leave an element with det J below this fraction of its straight det at a
+#: quadrature point or node (gmsh_mesh.MIN_SCALED_JACOBIAN: below it the nodal stresses are spurious)
+MIN_SCALED_JACOBIAN = 0.25
+
+
+def project_nodes(mesh: Mesh, nodes, dims, tags, projector, min_scaled_jacobian: float = MIN_SCALED_JACOBIAN,
+                  tries: int = 6) -> dict:
+    """Move ``nodes`` of ``mesh`` (in place) onto their curve (dim 1) or surface (dim 2) ``tags``.
+    Where an element would fold (det J at a quadrature point or node below ``min_scaled_jacobian``
+    × its straight det, or a straight det ≤ 0) the moves of its nodes are halved, ``tries`` times,
+    then undone; nodes not on their geometry are returned as ``pending``."""
+    if len(nodes) == 0:
+        return {"projected": 0, "projection_undone": 0, "max_projection_m": 0.0, "pending": (nodes, dims, tags)}
+    old = mesh.points[nodes].copy()
+    new = np.asarray(projector.project(old, dims, tags), float)
+    ok = np.isfinite(new).all(axis=1)
+    new[~ok] = old[~ok]
+    step = np.linalg.norm(new - old, axis=1)
+    sel = step > 0
+    nodes, dims, tags, old, new, step = nodes[sel], dims[sel], tags[sel], old[sel], new[sel], step[sel]
+    beta = np.ones(len(nodes))
+    where = np.full(mesh.n_nodes, -1, np.int64)
+    where[nodes] = np.arange(len(nodes))
+    for k in range(tries + 1):
+        mesh.points[nodes] = old + beta[:, None] * (new - old)
+        touched = np.flatnonzero((where[mesh.tets] >= 0).any(axis=1))
+        bad = touched[~element_valid(mesh, touched, min_scaled_jacobian)]
+        if len(bad) == 0:
+            break
+        back = where[np.unique(mesh.tets[bad])]
+        back = back[back >= 0]
+        beta[back] = 0.0 if k >= tries - 1 else 0.5 * beta[back]
+    mesh._cache.clear()
+    left = beta < 1.0
+    return {"projected": int((~left).sum()), "projection_undone": int((beta == 0).sum()),
+            "projection_partial": int(((beta > 0) & left).sum()),
+            "max_projection_m": float(step.max()) if len(step) else 0.0,
+            "pending": (nodes[left], dims[left], tags[left])}
+
+
+def element_valid(mesh: Mesh, elements: np.ndarray, min_scaled: float = 0.05) -> np.ndarray:
+    """(k,) bool: straight det > 0 and the P2 map's det J ≥ ``min_scaled`` × it at the degree-2
+    quadrature points and the ten nodes."""
+    from flexure.fem import TET_QUAD, tet_shape
+    from flexure.post import REF_NODES
+
+    X = mesh.points[mesh.tets[elements]]
+    straight = np.linalg.det(np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2))
+    _, dN = tet_shape(2, np.vstack([TET_QUAD[2][0], REF_NODES]))
+    det = np.linalg.det(np.einsum("eai,qak->eqik", X, dN))
+    return (straight > 0) & (det >= min_scaled * straight[:, None]).all(axis=1)
+
+
+def check_conforming(mesh: Mesh) -> None:
+    """Raise AssertionError unless every edge has one mid node and every interior face is shared
+    by exactly two elements (no hanging node)."""
+    from flexure.mesh import TET_FACES
+
+    codes = edge_codes(mesh.tets).ravel()
+    mids = mesh.tets[:, 4:].ravel()
+    order = np.lexsort((mids, codes))
+    c, mnode = codes[order], mids[order]
+    same = c[1:] == c[:-1]
+    assert np.all(mnode[1:][same] == mnode[:-1][same]), "an edge has two mid nodes"
+    vert = np.zeros(mesh.n_nodes, bool)
+    vert[mesh.corner_tets] = True
+    assert not vert[mids].any(), "a mid node is also a vertex (hanging node)"
+    key = np.sort(mesh.corner_tets[:, TET_FACES].astype(np.int64), axis=2).reshape(-1, 3)
+    _, cnt = np.unique(key, axis=0, return_counts=True)
+    assert cnt.max() <= 2, "a face is shared by more than two elements"

@@ -1,0 +1,141 @@
+"""Nested local refinement (flexure.refine): longest-edge bisection with closure on P2 meshes,
+exact prolongation, boundary nodes put back on the true geometry (flexure.project)."""
+
+import numpy as np
+import pytest
+
+from flexure.mesh import box_mesh, cylinder_mesh, quality, to_quadratic
+from flexure.refine import TaggedMesh, bisect, check_conforming, snap
+
+
+def _quadratic(p):
+    x, y, z = p.T
+    return np.stack([x * x + y * z - 0.3 * z, y * y - x + 2 * x * z, z * x + 0.5 * y * y], axis=1)
+
+
+def test_bisection_is_conforming_nested_and_prolongates_p2_exactly():
+    """Random local marks over several steps: the mesh stays conforming (one mid node per edge,
+    no hanging node, every interior face shared by two elements), the volume is unchanged (the
+    children tile their parents), every marked element was split, and a P2 field (a quadratic)
+    is carried over exactly."""
+    rng = np.random.default_rng(3)
+    tm = TaggedMesh.untagged(to_quadratic(box_mesh(3, 3, 4, size=(1.0, 0.8, 1.3))))
+    u = _quadratic(tm.mesh.points)
+    v0 = quality(tm.mesh)["total_volume_m3"]
+    for _ in range(4):
+        m = tm.mesh.n_elements
+        marked = np.flatnonzero(rng.random(m) < 0.15)
+        new, (u,), info = bisect(tm, marked, [u], rounds=2)
+        check_conforming(new.mesh)
+        assert new.mesh.n_elements >= m + 3 * len(marked)        # two rounds: ≥ 4 children each
+        assert quality(new.mesh)["total_volume_m3"] == pytest.approx(v0, rel=1e-12)
+        assert quality(new.mesh)["n_inverted"] == 0
+        assert np.abs(u - _quadratic(new.mesh.points)).max() < 1e-12
+        assert info["passes"] >= 2 and info["bisections"] >= 2 * len(marked)
+        tm = new
+
+
+def test_children_keep_face_tags_and_the_old_nodes():
+    """Old nodes keep their numbers (a prolongated vector is the old one plus new entries); the
+    boundary faces of the refined mesh all carry their parent's surface tag."""
+    mesh = to_quadratic(box_mesh(2, 2, 2))
+    tm = TaggedMesh.boundary_tagged(mesh, tag=7)
+    new, _, _ = bisect(tm, np.arange(mesh.n_elements), [], rounds=3)
+    assert np.array_equal(new.mesh.points[:mesh.n_nodes], mesh.points)
+    from flexure.refine import _boundary_face_mask
+    on_boundary = _boundary_face_mask(new.mesh)
+    assert np.all(new.face_tag[on_boundary] == 7) and np.all(new.face_tag[~on_boundary] == 0)
+
+
+class _Cylinder:
+    """Projector onto the lateral surface r = R (tag 1) of a cylinder along z."""
+
+    def __init__(self, R):
+        self.R = R
+
+    def project(self, points, dim, tag):
+        p = np.array(points, float)
+        r = np.hypot(p[:, 0], p[:, 1])
+        p[:, :2] *= (self.R / r)[:, None]
+        return p
+
+
+def test_new_boundary_nodes_go_onto_the_curved_surface():
+    """A hollow cylinder meshed with straight P2 (mid nodes on the chords); snapping and
+    refinement with the projector put every mid node and every new node of the outer face on
+    r = R, with no element folded."""
+    R = 1.0
+    mesh = cylinder_mesh(0.5, R, 0.4, 2, 12, 2, order=1)
+    mesh = to_quadratic(mesh)
+    tm = TaggedMesh.untagged(mesh)
+    from flexure.refine import _boundary_face_mask
+    from flexure.mesh import TET_FACES
+    bf = _boundary_face_mask(mesh)
+    outer = np.hypot(*mesh.points[mesh.corner_tets][:, :, :2].transpose(2, 0, 1))[:, TET_FACES].min(axis=2) > R - 1e-9
+    tm.face_tag[bf & outer] = 1
+    proj = _Cylinder(R)
+    snap(tm, proj)
+    for _ in range(2):
+        c = tm.mesh.points[tm.mesh.corner_tets].mean(axis=1)
+        tm, _, info = bisect(tm, np.flatnonzero(c[:, 0] > 0.2), [], rounds=2, projector=proj)
+        check_conforming(tm.mesh)
+    faces = tm.mesh.boundary_faces()
+    p = tm.mesh.points
+    r = np.hypot(p[:, 0], p[:, 1])
+    on_outer = faces[(r[faces[:, :3]] > R - 1e-9).all(axis=1)]
+    assert len(on_outer) > 0
+    assert np.abs(r[np.unique(on_outer)] - R).max() < 1e-12
+    assert quality(tm.mesh)["n_inverted"] == 0 and len(tm.pending[0]) == 0
+
+
+def test_gmsh_projector_on_a_cad_cylinder():
+    """CadProjector: points near the lateral face of an OpenCASCADE cylinder (built in a gmsh
+    session, mm) land on it; points near an edge curve land on the circle."""
+    from flexure.project import CadProjector
+
+    def build(gmsh):
+        gmsh.model.occ.addCylinder(0, 0, 0, 0, 0, 5.0, 2.0)
+        gmsh.model.occ.synchronize()
+
+    proj = CadProjector(build)
+    import gmsh
+    rng = np.random.default_rng(0)
+    a = rng.uniform(0, 2 * np.pi, 20)
+    z = rng.uniform(0.5e-3, 4.5e-3, 20)
+    pts = np.column_stack([2.1e-3 * np.cos(a), 2.1e-3 * np.sin(a), z])
+    gmsh.initialize()
+    try:
+        build(gmsh)
+        lateral = [t for _, t in gmsh.model.getEntities(2)
+                   if abs(gmsh.model.getBoundingBox(2, t)[5] - gmsh.model.getBoundingBox(2, t)[2]) > 1.0]
+        circles = [t for _, t in gmsh.model.getEntities(1)]
+    finally:
+        gmsh.finalize()
+    out = proj.project(pts, np.full(20, 2), np.full(20, lateral[0]))
+    assert np.abs(np.hypot(out[:, 0], out[:, 1]) - 2e-3).max() < 1e-9
+    assert np.allclose(out[:, 2], z)
+    edge = np.column_stack([1.9e-3 * np.cos(a), 1.9e-3 * np.sin(a), np.full(20, 0.1e-3)])
+    bottom = [c for c in circles if proj.project(edge[:1], np.array([1]), np.array([c]))[0, 2] < 1e-9]
+    out = proj.project(edge, np.full(20, 1), np.full(20, bottom[0]))
+    assert np.abs(np.hypot(out[:, 0], out[:, 1]) - 2e-3).max() < 1e-9 and np.abs(out[:, 2]).max() < 1e-9
+
+
+def test_stl_projector_finds_the_closest_triangle_point():
+    """StlProjector against a brute-force closest point over every triangle of an icosphere."""
+    import trimesh
+    from trimesh.triangles import closest_point
+
+    from flexure.geometry import Surface
+    from flexure.project import StlProjector
+
+    ico = trimesh.creation.icosphere(2, radius=0.01)
+    proj = StlProjector(Surface(np.asarray(ico.vertices), np.asarray(ico.faces)))
+    rng = np.random.default_rng(1)
+    d = rng.normal(size=(40, 3))
+    pts = 0.0101 * d / np.linalg.norm(d, axis=1, keepdims=True)
+    got = proj.project(pts)
+    tri = ico.vertices[ico.faces]
+    for p, g in zip(pts, got):
+        best = closest_point(tri, np.repeat(p[None], len(tri), axis=0))
+        dist = np.linalg.norm(best - p, axis=1).min()
+        assert np.linalg.norm(g - p) == pytest.approx(dist, rel=1e-9, abs=1e-15)
