@@ -33,7 +33,16 @@ def test_readme_has_examples():
     assert len(readme_commands()) >= 5
 
 
-@pytest.mark.parametrize("command", readme_commands())
+#: examples that solve a flexure's FEM (three mesh levels) or a whole sweep: a minute of CPU each
+HEAVY = ("flexure", "compare ", "end_to_end", "reproduce", "report --only")
+
+
+def _params():
+    return [pytest.param(c, marks=pytest.mark.slow) if any(h in c for h in HEAVY) else c
+            for c in readme_commands()]
+
+
+@pytest.mark.parametrize("command", _params())
 def test_readme_example_runs(command, tmp_path):
     work = tmp_path / "repo"
     work.mkdir()
