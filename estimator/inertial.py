@@ -321,17 +321,23 @@ def robot_toml(robot, identification: dict | None = None, header: str = "") -> s
             [f"relative = {num(unc.relative or 0.0)}"]
         L.append("")
     if identification:
-        L += ["[identification]"] + [f"{k} = {_toml_value(v)}" for k, v in identification.items()
-                                     if not isinstance(v, dict) and not _is_table_list(v)]
-        for k, v in identification.items():
-            if isinstance(v, dict):
-                L += ["", f"[identification.{k}]"] + [f"{kk} = {_toml_value(vv)}" for kk, vv in v.items()]
-        for k, v in identification.items():
-            if _is_table_list(v):
-                for item in v:
-                    L += ["", f"[[identification.{k}]]"] + [f"{kk} = {_toml_value(vv)}"
-                                                            for kk, vv in item.items()]
+        L += ["[identification]"] + toml_lines(identification, "identification")
     return "\n".join(L).rstrip() + "\n"
+
+
+def toml_lines(data: dict, table: str = "") -> list[str]:
+    """TOML lines of ``data`` (one level of sub-tables and lists of tables) inside ``table``:
+    its plain keys, then ``[table.k]`` per dict, then ``[[table.k]]`` per list of dicts."""
+    pre = f"{table}." if table else ""
+    L = [f"{k} = {_toml_value(v)}" for k, v in data.items() if not isinstance(v, dict) and not _is_table_list(v)]
+    for k, v in data.items():
+        if isinstance(v, dict):
+            L += ["", f"[{pre}{k}]"] + [f"{kk} = {_toml_value(vv)}" for kk, vv in v.items()]
+    for k, v in data.items():
+        if _is_table_list(v):
+            for item in v:
+                L += ["", f"[[{pre}{k}]]"] + [f"{kk} = {_toml_value(vv)}" for kk, vv in item.items()]
+    return L
 
 
 def _is_table_list(v) -> bool:

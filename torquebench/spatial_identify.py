@@ -10,7 +10,6 @@ the log's first posture, diagonal (``ft_map``); the joint rows: the torque senso
 from __future__ import annotations
 
 import datetime
-import math
 import sys
 from pathlib import Path
 
@@ -44,7 +43,6 @@ def _keep_rows(e, rows):
 
 def identify(args) -> int:
     from estimator import identification as ident
-    from estimator.model import ModelUncertainty
     from estimator.spatial.logs import make_noise, read_noise, read_spatial_log, read_timing
     from estimator.spatial.model import UrdfModel
     from estimator.spatial.noise import default_noise
@@ -52,7 +50,7 @@ def identify(args) -> int:
     from estimator.spatial.robot import load_spatial_robot
     from estimator.spatial.write import declaration_toml, urdf_with_parameters
     from estimator.timing import describe as describe_timing
-    from torquebench.commands.identify import DEFAULT_PRIOR, _sha256
+    from torquebench.commands.identify import _sha256, fit_prior
     from torquebench.io import print_json
     from torquebench.outputs import prepare_file
     from userio.files import read_toml, write_text_atomic
@@ -68,17 +66,7 @@ def identify(args) -> int:
     prepare_file(out, "--out", force=args.force, inputs=inputs)
     prepare_file(out_urdf, "--out (its URDF)", force=args.force, inputs=inputs)
     model = UrdfModel(robot)
-    if args.prior is not None:
-        if not (math.isfinite(args.prior) and 0 < args.prior <= 1):
-            raise InputError(f"--prior: must be in (0, 1], got {args.prior}")
-        prior, prior_source = ModelUncertainty.uniform(args.prior), "--prior"
-    elif robot.model_uncertainty is not None:
-        prior, prior_source = robot.model_uncertainty, f"{robot_path}: [model_uncertainty]"
-    else:
-        prior, prior_source = ModelUncertainty.uniform(DEFAULT_PRIOR), "default"
-    if prior.mass_rel <= 0 or prior.inertia_rel <= 0 or (prior.com_m is not None and prior.com_m <= 0) \
-            or (prior.com_m is None and not (prior.relative or 0) > 0):
-        raise InputError(f"prior ({prior_source}): every σ must be > 0 to serve as the fit's prior")
+    prior, prior_source = fit_prior(args.prior, robot, robot_path)
     n_sensed = int(sum(robot.sensed))
     rows = used_rows(model)
     eqs, logs_info = [], []

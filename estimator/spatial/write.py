@@ -61,7 +61,7 @@ def declaration_toml(declaration: dict, urdf_name: str, name: str, decl_dir: Pat
                      identification: dict | None = None, header: str = "") -> str:
     """A declaration TOML: the original's fields (``declaration``, read from ``decl_dir``) naming
     ``urdf_name``, without its [model_uncertainty], with an [identification] table."""
-    from estimator.inertial import _is_table_list, _toml_value
+    from estimator.inertial import toml_lines
 
     data = {k: v for k, v in declaration.items() if k not in ("model_uncertainty", "identification")}
     data["name"], data["urdf"] = name, urdf_name
@@ -69,24 +69,7 @@ def declaration_toml(declaration: dict, urdf_name: str, name: str, decl_dir: Pat
         if isinstance(c, dict) and "mesh" in c:
             c["mesh"] = str((decl_dir / c["mesh"]).resolve())
     L = [header.rstrip()] if header else []
-    L += [f"{k} = {_toml_value(v)}" for k, v in data.items()
-          if not isinstance(v, dict) and not _is_table_list(v)]
-    for k, v in data.items():
-        if isinstance(v, dict):
-            L += ["", f"[{k}]"] + [f"{kk} = {_toml_value(vv)}" for kk, vv in v.items()]
-    for k, v in data.items():
-        if _is_table_list(v):
-            for item in v:
-                L += ["", f"[[{k}]]"] + [f"{kk} = {_toml_value(vv)}" for kk, vv in item.items()]
+    L += toml_lines(data)
     if identification:                       # the layout of estimator.inertial.robot_toml
-        L += ["", "[identification]"] + [f"{k} = {_toml_value(v)}" for k, v in identification.items()
-                                         if not isinstance(v, dict) and not _is_table_list(v)]
-        for k, v in identification.items():
-            if isinstance(v, dict):
-                L += ["", f"[identification.{k}]"] + [f"{kk} = {_toml_value(vv)}" for kk, vv in v.items()]
-        for k, v in identification.items():
-            if _is_table_list(v):
-                for item in v:
-                    L += ["", f"[[identification.{k}]]"] + [f"{kk} = {_toml_value(vv)}"
-                                                            for kk, vv in item.items()]
+        L += ["", "[identification]"] + toml_lines(identification, "identification")
     return "\n".join(L).rstrip() + "\n"

@@ -108,6 +108,25 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
+def fit_prior(prior_option, robot, robot_path):
+    """(ModelUncertainty, source) the fit's prior: ``--prior REL``, else the robot file's
+    [model_uncertainty], else DEFAULT_PRIOR; every σ must be > 0."""
+    from estimator.model import ModelUncertainty
+
+    if prior_option is not None:
+        if not (math.isfinite(prior_option) and 0 < prior_option <= 1):
+            raise InputError(f"--prior: must be in (0, 1], got {prior_option}")
+        prior, source = ModelUncertainty.uniform(prior_option), "--prior"
+    elif robot.model_uncertainty is not None:
+        prior, source = robot.model_uncertainty, f"{robot_path}: [model_uncertainty]"
+    else:
+        prior, source = ModelUncertainty.uniform(DEFAULT_PRIOR), "default"
+    if prior.mass_rel <= 0 or prior.inertia_rel <= 0 or (prior.com_m is not None and prior.com_m <= 0) \
+            or (prior.com_m is None and not (prior.relative or 0) > 0):
+        raise InputError(f"prior ({source}): every σ must be > 0 to serve as the fit's prior")
+    return prior, source
+
+
 def run(args) -> int:
     import datetime
     import sys
@@ -116,7 +135,6 @@ def run(args) -> int:
 
     from estimator import identification as ident
     from estimator.inertial import robot_toml
-    from estimator.model import ModelUncertainty
     from estimator.robot import PAPER_LEG_TOML, load_robot
     from estimator.timing import describe as describe_timing
     from torquebench.io import print_json
@@ -130,17 +148,7 @@ def run(args) -> int:
     robot_path = args.robot or PAPER_LEG_TOML
     prepare_file(args.out, "--out", force=args.force, inputs=(*args.logs, robot_path))
     robot = load_robot(robot_path)
-    if args.prior is not None:
-        if not (math.isfinite(args.prior) and 0 < args.prior <= 1):
-            raise InputError(f"--prior: must be in (0, 1], got {args.prior}")
-        prior, prior_source = ModelUncertainty.uniform(args.prior), "--prior"
-    elif robot.model_uncertainty is not None:
-        prior, prior_source = robot.model_uncertainty, f"{robot_path}: [model_uncertainty]"
-    else:
-        prior, prior_source = ModelUncertainty.uniform(DEFAULT_PRIOR), "default"
-    if prior.mass_rel <= 0 or prior.inertia_rel <= 0 or (prior.com_m is not None and prior.com_m <= 0) \
-            or (prior.com_m is None and not (prior.relative or 0) > 0):
-        raise InputError(f"prior ({prior_source}): every σ must be > 0 to serve as the fit's prior")
+    prior, prior_source = fit_prior(args.prior, robot, robot_path)
     eqs, logs_info = [], []
     for path in args.logs:
         log = _read(args, path, robot)
