@@ -401,7 +401,7 @@ class EstimatorStream:
                  cov_stride_s: float = 0.01, stats_samples: int = STATS_SAMPLES,
                  detector: str = "chi2", cusum_calibration=None, isolation_quiet: bool = False,
                  model_cov=None, model_cov_source: str = "",
-                 residual_drive=None, release_test: bool = True):
+                 residual_drive=None, release_test: bool = True, onset_restart: bool = True):
         if method not in METHODS:
             raise InputError(f"method: unknown {method!r}; use one of {', '.join(METHODS)}")
         if detector not in sequential.DETECTORS:
@@ -475,7 +475,7 @@ class EstimatorStream:
             self.model_term = None
         # the localization reads the observer restarted at each contact's onset (estimator.onset)
         self.restart = onset.RestartState() if method == "dynamic" and discretization == "exact" \
-            else None
+            and onset_restart else None
         self.lag = None
         if method == "dynamic" and lag_compensation:
             self.lag = float(np.mean(observer.lag_s(self.K, self.dt, discretization)))
@@ -675,6 +675,8 @@ class EstimatorStream:
         r_obs = r
         if self.restart is not None:         # localize on the observer restarted at the onset
             r, rec["since_s"] = onset.restart(t, r, contact, self.K, self.restart)
+        else:                                # the running observer: its stationary covariance
+            rec["since_s"] = np.where(contact, 1e6, np.nan)
         sel = np.flatnonzero(contact)
         if sel.size == T:
             sel = slice(None)                          # every sample: views, no copies
@@ -899,7 +901,8 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
              false_alarm_rate=DEFAULT_FALSE_ALARM_RATE, cov_stride_s: float = 0.01,
              stats_samples: int = STATS_SAMPLES, chunk_samples: int | None = None,
              detector: str = "chi2", quiet_where: str = "--quiet-window",
-             model_uncertainty=None, release_test: bool = True) -> ContactEstimate:
+             model_uncertainty=None, release_test: bool = True,
+             onset_restart: bool = True) -> ContactEstimate:
     """Run observer, detection and localization on a whole log (offline, vectorized).
 
     ``EstimatorStream`` on the log in one chunk (or in chunks of ``chunk_samples``: the same
@@ -935,7 +938,8 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
     unit) with unit 'sample', 's' or 'h' (default one per hour); ``rnorm`` is then √(rᵀR⁻¹r).
     ``detector="cusum"``: a CUSUM on the same statistic (estimator.sequential) instead. With the
     chi-square test (and no debounce) a contact ends at its release (estimator.release;
-    ``release_test=False``: when ‖r‖ has decayed under the threshold, as before). ``paper``
+    ``release_test=False``: when ‖r‖ has decayed under the threshold, as before;
+    ``onset_restart=False``: localize on the running observer, not the one restarted at the onset). ``paper``
     isolates on rows whitened by the noise model (detection.whitened_thresholds) at the per-row
     probability of ``false_alarm_rate``; with a ``quiet_window``, on the robust σ of the stretch.
 
@@ -955,7 +959,8 @@ def estimate(robot: Robot, log: SensorLog, method: str = "dynamic", gain_per_s=1
                          quiet_chunks=lambda: [log], quiet_where=quiet_where,
                          false_alarm_rate=false_alarm_rate,
                          cov_stride_s=cov_stride_s, stats_samples=stats_samples, detector=detector,
-                         model_uncertainty=model_uncertainty, release_test=release_test)
+                         model_uncertainty=model_uncertainty, release_test=release_test,
+                         onset_restart=onset_restart)
     T = len(log.t)
     step = T if not chunk_samples else int(chunk_samples)
     parts = []

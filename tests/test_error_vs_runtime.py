@@ -101,6 +101,7 @@ def test_fem_extrapolation_recovers_the_limit_and_the_order_and_bounds_oscillati
     assert np.isnan(osc["order"]) and osc["value"] == 5.0 and osc["uncertainty"] == pytest.approx(0.25)
 
 
+@pytest.mark.slow
 def test_fem_section_quick_has_the_contract_and_p1_error_falls_with_refinement(tmp_path):
     from torquebench.reports.fem import error_vs_runtime_section
 

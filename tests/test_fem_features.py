@@ -12,6 +12,7 @@ from flexure.design import load_design
 from flexure.geometry import extrude
 from flexure.mesh import to_quadratic
 from flexure.meshing import reentrant_edges
+import pytest
 
 DATA = Path(__file__).resolve().parent / "data" / "fem_reference"
 
@@ -75,6 +76,7 @@ def test_p2_on_a_cad_solid_puts_mid_edge_nodes_on_its_curved_faces():
     assert (np.linalg.det(J) >= MIN_SCALED_JACOBIAN * affine).all()
 
 
+@pytest.mark.slow
 def test_curved_elements_do_not_make_stress_spikes(monkeypatch):
     """Nearly folded curved elements (det J ≪ its straight value at a node) read spurious nodal
     strains: the paper disc's peak von Mises was 965 MPa at h × √2 with any positive det J allowed,

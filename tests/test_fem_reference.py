@@ -101,6 +101,7 @@ def test_levels_are_what_the_code_computes(name, path):
         assert now[key] == pytest.approx(stored[key], rel=1e-6), key
 
 
+@pytest.mark.slow
 def test_default_path_on_the_step_part():
     """The whole default path (three levels, the estimate beside every figure): the stored levels,
     an estimate that brackets the reference, no slivers, arms within 2 %, no warnings."""

@@ -39,6 +39,7 @@ def test_thick_disc_default_mesh_has_no_slivers_and_balanced_arms(thick):
     assert res["gauge_arm_imbalance"] < 0.02              # four-fold symmetric part: arms agree
 
 
+@pytest.mark.slow
 def test_thick_disc_as_stl_agrees_arm_to_arm_and_with_the_parametric_one(thick):
     """The same disc as an STL of its polygonal outline (tests/data/fem_reference/thick_disc.stl,
     written by flexure.geometry.spoke_disc_surface(disc, 3)), re-meshed by gmsh, held at its whole

@@ -21,6 +21,7 @@ def _run(capsys, *argv):
     return code, out.out, out.err
 
 
+@pytest.mark.slow
 def test_json_keys_vtu_and_png(capsys, tmp_path):
     vtu, png = tmp_path / "disc.vtu", tmp_path / "disc.png"
     code, out, _ = _run(capsys, "--order", "1", "--json", "--vtu", str(vtu), "--png", str(png))
@@ -52,6 +53,7 @@ def test_json_keys_vtu_and_png(capsys, tmp_path):
     assert [lv["h_factor"] for lv in data["discretization_levels"]] == pytest.approx([2 ** 0.5, 1, 2 ** -0.5])
 
 
+@pytest.mark.slow
 def test_text_output(capsys):
     code, out, _ = _run(capsys, "--order", "1")
     assert code == 0
@@ -61,6 +63,7 @@ def test_text_output(capsys):
     assert out.count("±") >= 4                        # strain, sensitivity, stiffness, safety factor
 
 
+@pytest.mark.slow
 def test_rtol_stopped_by_the_dof_cap_says_so(capsys):
     """An unreachable --rtol with a small --max-dofs: no refinement beyond the cap, one warning."""
     code, out, _ = _run(capsys, "--order", "1", "--json", "--rtol", "1e-6", "--max-dofs", "20000")
@@ -70,6 +73,7 @@ def test_rtol_stopped_by_the_dof_cap_says_so(capsys):
     assert any("--rtol 1e-06 not reached" in w and "--max-dofs 20000" in w for w in data["warnings"])
 
 
+@pytest.mark.slow
 def test_rtol_stopped_by_a_refused_finer_level_keeps_the_levels_solved(capsys, monkeypatch):
     """A finer level refused by the mesh-cost check (an InputError) ends the refinement with a
     warning naming it; the levels already solved are the answer, not an exit 2."""
@@ -100,6 +104,7 @@ def test_bad_rtol_options_exit_2(capsys, argv, where):
     assert code == 2 and out == "" and err.strip().count("\n") == 0 and where in err
 
 
+@pytest.mark.slow
 def test_sweep_table_with_an_infeasible_row_and_plot(capsys, tmp_path):
     png = tmp_path / "sweep.png"
     code, out, _ = _run(capsys, "--order", "1", "--sweep", "spoke_width_mm=3.5,4.5,14", "--png", str(png),
@@ -160,6 +165,7 @@ def test_design_file_is_never_an_output(capsys, tmp_path):
     assert code == 2 and "design file" in err and p.read_text() == "name = 'x'\n"
 
 
+@pytest.mark.slow
 def test_demo_from_the_flexure_design(capsys, tmp_path):
     """Design → FEM strain → bridge/ADC noise → simulated leg → localization, and the Monte Carlo
     prediction of that error agrees with what the estimator measured."""

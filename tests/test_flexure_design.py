@@ -327,6 +327,7 @@ def _write_step(poly, thickness_mm: float, path, copies: int = 1):
         gmsh.finalize()
 
 
+@pytest.mark.slow
 def test_step_design_matches_the_parametric_one(tmp_path, paper, capfd):
     """A STEP solid (gmsh/OpenCASCADE) of the same disc reads the same strain; nothing reaches stdout."""
     pytest.importorskip("gmsh")

@@ -65,6 +65,7 @@ def _stl_design(tmp_path: Path, scale: float, unit_line: str, offset_mm=(0.0, 0.
     return p
 
 
+@pytest.mark.slow
 def test_stl_in_metres_with_unit_mm_1000_reads_as_the_millimetre_original(tmp_path):
     from flexure.geometry import load_stl
 
@@ -87,6 +88,7 @@ def test_stl_in_metres_read_as_millimetres_is_refused(capsys, tmp_path):
     assert str(p) in err and "gauge" in err and "0.06 × 0.06" in err and "length unit" in err
 
 
+@pytest.mark.slow
 def test_part_off_the_torque_axis_is_refused(capsys, tmp_path):
     """The torque axis is the file's z axis through its origin: a part drawn 100 mm away from it
     has no bore there; the message says which axis and where the part is."""
@@ -157,6 +159,7 @@ def test_unit_mm_on_a_step_is_refused(capsys, tmp_path):
     assert str(p) in err and "unit_mm" in err and "STEP file declares its own length unit" in err
 
 
+@pytest.mark.slow
 def test_stl_text_output_states_the_remesh_volume_change(capsys, tmp_path):
     """Re-meshing an STL changes its geometry a little (gmsh re-triangulates the classified
     patches): the text output says by how much, the same figure as the JSON's mesh report."""

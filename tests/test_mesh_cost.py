@@ -12,6 +12,7 @@ from flexure.design import load_design
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("design, h_factor", [
     ("scenes/paper_disc.toml", 1.0),
     ("tests/data/fem_reference/thick_disc.toml", 0.5),           # 5 mm thick, 0.15 mm at the gauges

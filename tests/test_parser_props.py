@@ -93,6 +93,7 @@ def test_false_alarm_rate_parser(value, unit):
     assert 1e-15 <= alpha <= 0.5
 
 
+@pytest.mark.slow
 @PROPS
 @given(text=st.one_of(tokens, st.lists(tokens, min_size=1, max_size=4).map(",".join)))
 def test_propagate_contact_option(text):

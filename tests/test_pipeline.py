@@ -49,6 +49,7 @@ def _band_hits(scene, cache):
     return np.array(hits), np.array(bias)
 
 
+@pytest.mark.slow
 def test_measured_localization_error_falls_in_predicted_95_band_at_stated_rate(cache):
     """24 seeds × 4 samples 150 ms apart (≈ independent): the count inside the predicted p95 band
     must lie in the central 99 % interval of Binomial(96, 0.95)."""
@@ -72,6 +73,7 @@ def test_sensor_with_15_percent_gain_error_is_flagged(cache):
     assert abs(bias.mean() - bias_ok.mean()) > 10 * se
 
 
+@pytest.mark.slow
 def test_changing_only_the_contact_point_reruns_neither_fem_nor_calibration_fit(cache):
     scene = load_scene(E2E)
     P.execute(scene, None, cache)

@@ -94,6 +94,7 @@ def test_spectral_model_integrates_to_the_closed_form_covariance(declared):
     assert th < th_iid / 5
 
 
+@pytest.mark.slow
 def test_cusum_false_alarm_rate_matches_target():
     """600 s of contact-free noise (static leg, velocity noise, instantaneous readings): the number
     of alarm onsets at 0.1/s is the target within 3 Poisson σ."""

@@ -47,9 +47,12 @@ def both():
     planar_log = read_log("examples/leg_poke/leg_poke.csv", paper_leg())
     model = UrdfModel(load_spatial_robot("robots/paper_leg_urdf.toml"))
     log3 = to_3d(planar_log)
-    planar = estimate(paper_leg(), planar_log, noise=paper_leg_noise())
+    # the planar estimator's release test and onset restart are not in the 3-D one yet: compared
+    # without them (both fits weighted by the noise, as the planar dynamic method is)
+    planar = estimate(paper_leg(), planar_log, noise=paper_leg_noise(), release_test=False,
+                      onset_restart=False)
     noise = make_noise(0.005, [0.1, 0.1, 0.1, 0.01, 0.01, 0.01], 2)
-    spatial = estimate_log(model, [log3], planar_log.period_s, noise=noise, weighting="identity")
+    spatial = estimate_log(model, [log3], planar_log.period_s, noise=noise, weighting="whitened")
     return planar, spatial, model
 
 
