@@ -10,7 +10,7 @@
   emcee fit) computed by one test is read back by the next one with the same inputs. The cache is
   content-addressed (inputs + source hashes) and written atomically, so two workers writing the
   same entry at once is safe. Tests that check cache behaviour pass their own directory.
-- The guard: an unmarked test whose CPU time (this process, all threads, plus the subprocesses it
+- The guard (on the default run; ``--all`` runs everything): an unmarked test whose CPU time (this process, all threads, plus the subprocesses it
   waited for; its module- or session-scoped fixtures are charged separately) exceeds
   ``TEST_BUDGET_CPU_S`` fails with a message asking for ``@pytest.mark.slow`` or a smaller case.
   CPU time rather than wall time: a loaded machine slows a test down but hardly changes its CPU
@@ -150,8 +150,8 @@ def pytest_runtest_makereport(item, call):
     report = outcome.get_result()
     budget = _budget()
     if (call.when != "call" or budget <= 0 or not report.passed or item is not _Meter.item
-            or item.get_closest_marker("slow")):
-        return
+            or item.get_closest_marker("slow") or item.config.getoption("run_all")):
+        return                     # --all (CI) runs everything: the budget guards the default run
     own = _cpu_s() - _Meter.start - _Meter.shared
     heavy = {k: v for k, v in _Meter.shared_by.items() if v > FIXTURE_BUDGET_CPU_S * budget / TEST_BUDGET_CPU_S}
     msg = None

@@ -97,6 +97,7 @@ def test_curved_elements_do_not_make_stress_spikes(monkeypatch):
     np.testing.assert_allclose(curved, straight, rtol=0.15)
 
 
+@pytest.mark.slow
 def test_a_tetrahedron_below_10_degrees_sends_the_mesher_back_finer_around_it(monkeypatch):
     """The re-entrant part at its answer level (h × 1/√2): gmsh's first volume mesh has a 9.7°
     tetrahedron at the rim (all four nodes on the plate's faces, which no optimiser moves); the
