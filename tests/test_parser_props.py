@@ -93,17 +93,18 @@ def test_false_alarm_rate_parser(value, unit):
     assert 1e-15 <= alpha <= 0.5
 
 
-@pytest.mark.slow
 @PROPS
 @given(text=st.one_of(tokens, st.lists(tokens, min_size=1, max_size=4).map(",".join)))
 def test_propagate_contact_option(text):
     """`--contact LINK,ALPHA`: exactly two values, or one line; never a dropped value."""
-    from types import SimpleNamespace
+    import argparse
 
     from torquebench.commands import propagate
 
-    args = SimpleNamespace(seed=0, strain_per_Nm=None, torque_noise_Nm=None, gain_error=None,
-                           robot=None, contact=text, force="7,-1.0", grid=0, draws=0)
+    parser = argparse.ArgumentParser()
+    propagate.add_arguments(parser)                    # every option at its default, as the CLI has it
+    args = parser.parse_args([])
+    args.json, args.contact, args.force, args.grid, args.draws = False, text, "7,-1.0", 0, 0
     try:
         propagate.run(args)
     except InputError as exc:
