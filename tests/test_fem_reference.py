@@ -84,6 +84,7 @@ def test_default_answer_within_2_percent_of_the_reference(name):
     assert abs(levels[-1]["gauge_strain_per_Nm"] - ref["value"]) + ref["allowance"] <= 0.02 * ref["value"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name,path", [("step_part", DATA / "step_part.toml"),
                                        ("thick_disc", DATA / "thick_disc.toml")])
 def test_levels_are_what_the_code_computes(name, path):

@@ -59,6 +59,7 @@ def test_measured_localization_error_falls_in_predicted_95_band_at_stated_rate(c
     assert lo <= hits.sum() <= hi, (hits.sum(), n, lo, hi)
 
 
+@pytest.mark.slow
 def test_sensor_with_15_percent_gain_error_is_flagged(cache):
     """True gain 15 % above the calibrated one: coverage collapses below the binomial bound and
     the α bias is many standard errors larger than the calibrated sensor's. (The localization is
