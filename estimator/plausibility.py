@@ -274,6 +274,18 @@ def _groups(n: int) -> list[tuple[str, list[int], dict]]:
              list(range(3, 3 + n)), torque)]
 
 
+def attach_warnings(summary: dict, found: list[str]) -> None:
+    """What a log's checks found, into a command's ``summary["warnings"]`` and as
+    PlausibilityWarnings (the CLI prints them on stderr); nothing when nothing was found."""
+    if not found:
+        return
+    import warnings
+
+    summary["warnings"] = list(found)
+    for w in found:
+        warnings.warn(w, PlausibilityWarning, stacklevel=3)
+
+
 def check_head_model(model, log, noise=None, where: str | None = None) -> list[str]:
     """``check_head`` for any RobotModel (a URDF robot's 3-D log, estimator.spatial.logs): the
     mean generalized force the first samples measure (base rows from the FT sensor, sensed joint

@@ -98,14 +98,9 @@ def estimate(args) -> int:
         summary["out"] = str(args.out)
     if getattr(args, "png", None) is not None:
         summary["png"] = pictures
-    if found:
-        import warnings
+    from estimator.plausibility import attach_warnings
 
-        from estimator.plausibility import PlausibilityWarning
-
-        summary["warnings"] = found
-        for w in found:
-            warnings.warn(w, PlausibilityWarning, stacklevel=2)
+    attach_warnings(summary, found)
     if args.json:
         print_json(summary)
         return 0

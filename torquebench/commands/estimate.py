@@ -295,13 +295,9 @@ def _run(args, start) -> int:
         summary["out"] = str(args.out)
     found += [w for w in [whole_log_contact(summary, found)] if w]
     found += list(getattr(reader, "plausibility_warnings", []) or []) + reader.constant_channels()
-    if found:
-        summary["warnings"] = found
-        import warnings
+    from estimator.plausibility import attach_warnings
 
-        from estimator.plausibility import PlausibilityWarning
-        for w in found:
-            warnings.warn(w, PlausibilityWarning, stacklevel=2)
+    attach_warnings(summary, found)
     if args.json:
         print_json(summary)
         return 0
