@@ -82,8 +82,9 @@ def side_file(log_path) -> Path:
     return p.with_name(p.stem + ".timing.toml")
 
 
-def read_declaration(log_path, n_links: int):
-    """Per-channel [(kind, delay_s)] from the side file, or None when there is none."""
+def read_side_table(log_path, names, what: str = "column names"):
+    """(path, the [timing] table) of a log's ``LOG.timing.toml``, its keys checked against
+    default, wrench, tau and ``names`` (the log's channels); None when the log has none."""
     from userio.files import read_toml
 
     path = side_file(log_path)
@@ -93,8 +94,7 @@ def read_declaration(log_path, n_links: int):
     table = data.get("timing")
     if not isinstance(table, dict) or set(data) - {"timing"}:
         raise InputError(f"{path}: expected one table [timing] with keys default, wrench, tau or "
-                         f"column names")
-    names = channel_names(n_links)
+                         f"{what}")
     allowed = ["default", "wrench", "tau", *names]
     for key in table:
         if key not in allowed:
@@ -102,6 +102,16 @@ def read_declaration(log_path, n_links: int):
             did = f" (did you mean '{hint[0]}'?)" if hint else ""
             raise InputError(f"{path}: timing.{key}: unknown channel{did}; use one of "
                              f"{', '.join(allowed)}")
+    return path, table
+
+
+def read_declaration(log_path, n_links: int):
+    """Per-channel [(kind, delay_s)] from the side file, or None when there is none."""
+    names = channel_names(n_links)
+    found = read_side_table(log_path, names)
+    if found is None:
+        return None
+    path, table = found
     default = parse(table.get("default", "instant"), f"{path}: timing.default")
     out = []
     for j, name in enumerate(names):

@@ -231,23 +231,12 @@ def read_timing(log_path, robot):
     [(kind, delay_s)] (six base rows, then the joints; unsensed joints 'instant'), or None.
     The six wrench channels must share one timing: the sensor → base transform mixes them."""
     from estimator import timing as tm
-    from userio.files import read_toml
 
-    path = tm.side_file(log_path)
-    if not path.exists():
-        return None
-    data = read_toml(path)
-    table = data.get("timing")
-    if not isinstance(table, dict) or set(data) - {"timing"}:
-        raise InputError(f"{path}: expected one table [timing] with keys default, wrench, tau or "
-                         f"channel names")
     names = timing_channels(robot)
-    allowed = ["default", "wrench", "tau", *names]
-    for key in table:
-        if key not in allowed:
-            hint = difflib.get_close_matches(key, allowed, n=1)
-            did = f" (did you mean '{hint[0]}'?)" if hint else ""
-            raise InputError(f"{path}: timing.{key}: unknown channel{did}; use one of {', '.join(allowed)}")
+    found = tm.read_side_table(log_path, names, "channel names")
+    if found is None:
+        return None
+    path, table = found
     default = tm.parse(table.get("default", "instant"), f"{path}: timing.default")
 
     def of(name, group):
