@@ -283,6 +283,7 @@ def _explicit_design(design, kind: str, file: str) -> str:
             f'[mesh]\nsize = "coarse"\n')
 
 
+@pytest.mark.slow
 def test_stl_design_matches_the_parametric_one(tmp_path, paper):
     """The same disc exported as an STL (mm) with its gauges declared explicitly reads the same."""
     import trimesh

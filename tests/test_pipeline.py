@@ -87,6 +87,7 @@ def test_changing_only_the_contact_point_reruns_neither_fem_nor_calibration_fit(
     assert arts["localization_error"]["dynamic"]["scored_samples"] > 0
 
 
+@pytest.mark.slow
 def test_corrupt_cache_entry_is_reported_and_recomputed(cache, capsys):
     scene = load_scene(E2E)
     steps = P.plan(scene, ["predicted_error"], cache)
