@@ -19,9 +19,11 @@ values with its declared uncertainty (``RobotModel.parameter_covariance``):
     H = Σ_w A_wᵀ C_w⁻¹ A_w + Σ₀⁻¹,    θ̂ = H⁻¹ (Σ_w A_wᵀ C_w⁻¹ b_w + Σ₀⁻¹ θ₀),    Cov θ̂ = H⁻¹ · max(1, χ²/dof)
 
 so a direction the log does not excite stays at its nominal value with its prior σ (named:
-``unexcited``). If θ̂ is not physically consistent, the same quadratic form is minimized subject to
-``consistency_margins`` ≥ 0 (SLSQP). Windows whose whitened residual is an outlier (a contact,
-a bump) are excluded and reported as time spans; if they cover too much of a log, it is refused.
+``unexcited``). If θ̂ is not physically consistent, the same quadratic form is minimized over the
+consistent θ, the linear matrix inequalities ``RobotModel.consistency_lmis`` ⪰ 0 (a semidefinite
+program, solved by a barrier method with a certified gap). Windows whose
+whitened residual is an outlier (a contact, a bump) are excluded and reported as time spans; if
+they cover too much of a log, it is refused.
 """
 
 from __future__ import annotations
@@ -283,34 +285,68 @@ def _residual_rms(eqs, theta) -> dict:
     return {"rms": np.sqrt(np.mean(r * r, axis=0)), "whitened": float(np.sqrt(np.mean(z * z)))}
 
 
-def _constrained(model, H, theta_free, theta0, P0):
-    """argmin (θ − θ_free)ᵀ H (θ − θ_free) s.t. consistency margins ≥ a small floor (SLSQP, in
-    prior-σ units from the consistent θ₀); falls back to the consistent point on the segment θ₀ →
-    θ_free for a model without margins."""
-    from scipy.optimize import minimize
-
-    margins = getattr(model, "consistency_margins", None)
-    if margins is None:
-        lo, hi = 0.0, 1.0
-        for _ in range(50):
-            mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if not model.consistency_problems(theta0 + mid * (theta_free - theta0)) else (lo, mid)
-        return theta0 + lo * (theta_free - theta0), ["(no margins: the consistent point nearest on "
-                                                     "the segment from the nominal values)"]
+def _constrained(model, H, theta_free, theta0, P0, *, gap: float = 1e-10):
+    """argmin (θ − θ_free)ᵀ H (θ − θ_free) over the consistent θ: a semidefinite program, since
+    consistency is a set of linear matrix inequalities S_b(θ) ⪰ 0 affine in θ
+    (``model.consistency_lmis``: the pseudo-inertias in 3-D). Solved by the barrier method (Boyd &
+    Vandenberghe §11.3): Newton's method on t·q(x) − Σ_b log det S_b, t × 10 per round, from the
+    strictly consistent θ₀, in prior-σ units x = (θ − θ₀)/σ with q(0) = 1. The central point at t is
+    within ν/t of the optimum (ν = Σ_b size of S_b), so it stops at ν/t ≤ ``gap`` (relative to the
+    objective at θ₀). Returns (θ, names of the margins active at the optimum)."""
     sig = np.sqrt(np.diag(P0))
     Hs = H * np.outer(sig, sig)
     x_free = (theta_free - theta0) / sig
-    floor = 1e-6 * np.abs(margins(theta0))
-    scale = np.abs(margins(theta0)) + 1e-300
-    cons = {"type": "ineq", "fun": lambda x: (margins(theta0 + sig * x) - floor) / scale}
-    Hs = Hs / max(float(x_free @ Hs @ x_free), 1e-300)       # the objective is 1 at θ₀
-    out = minimize(lambda x: (x - x_free) @ Hs @ (x - x_free), np.zeros_like(x_free),
-                   jac=lambda x: 2 * Hs @ (x - x_free), constraints=[cons], method="SLSQP",
-                   options={"maxiter": 1000, "ftol": 1e-14})
-    theta = theta0 + sig * out.x
+    Hs = Hs / max(float(x_free @ Hs @ x_free), 1e-300)      # q(0) = 1
+    Hs = 0.5 * (Hs + Hs.T)
+    n = x_free.size
+    S0 = model.consistency_lmis(theta0)
+    # the LMIs are affine: S(x) = S0 + Σ_i x_i G_i, G_i = S(e_i) − S0 (exact up to rounding)
+    G = [np.stack([s_i - s0 for s_i in cols]) for s0, cols in
+         zip(S0, zip(*(model.consistency_lmis(theta0 + sig * e) for e in np.eye(n))))]
+    nu = sum(s0.shape[0] * s0.shape[1] for s0 in S0)
+
+    def blocks(x):
+        return [s0 + np.einsum("i,ibkl->bkl", x, g) for s0, g in zip(S0, G)]
+
+    def barrier(x):
+        """−Σ log det S_b(x), +∞ outside the strictly consistent set."""
+        try:
+            return -2.0 * sum(np.log(np.diagonal(np.linalg.cholesky(S), axis1=1, axis2=2)).sum()
+                              for S in blocks(x))
+        except np.linalg.LinAlgError:
+            return np.inf
+
+    if not np.isfinite(barrier(np.zeros(n))):
+        raise InputError("identification: the robot file's own inertial parameters are not strictly "
+                         "physically consistent, so there is no consistent start for the fit")
+    x, t = np.zeros(n), 1.0
+    while True:
+        for _ in range(200):                                     # Newton's method at this t
+            Wg = [np.einsum("bkl,iblm->ibkm", np.linalg.inv(S), g) for S, g in zip(blocks(x), G)]
+            grad = 2 * t * Hs @ (x - x_free) - sum(np.einsum("ibkk->i", w) for w in Wg)
+            hess = 2 * t * Hs + sum(np.einsum("ibkl,jblk->ij", w, w) for w in Wg)
+            step = -np.linalg.lstsq(hess, grad, rcond=None)[0]
+            decrement = float(-grad @ step)
+            if decrement < 1e-8:                                 # ≪ ν: centred enough
+                break
+            f0, s_ = t * (x - x_free) @ Hs @ (x - x_free) + barrier(x), 1.0
+            while s_ > 1e-12:                                    # backtracking (Armijo 0.25)
+                xn = x + s_ * step
+                if t * (xn - x_free) @ Hs @ (xn - x_free) + barrier(xn) <= f0 - 0.25 * s_ * decrement:
+                    break
+                s_ *= 0.5
+            else:
+                break
+            x = xn
+        if nu / t <= gap:
+            break
+        t *= 10.0
+    theta = theta0 + sig * x
     if model.consistency_problems(theta):
-        raise InputError(f"identification: no physically consistent fit found ({out.message})")
-    m = margins(theta) - floor
+        raise InputError("identification: no physically consistent fit found (the barrier method "
+                         "ended outside the consistent set)")
+    m0 = np.abs(model.consistency_margins(theta0))
+    m = model.consistency_margins(theta)
     names = getattr(model, "consistency_margin_names", None) or [f"consistency margin {j}"
                                                                   for j in range(m.size)]
-    return theta, [names[j] for j in np.flatnonzero(m < 1e-3 * np.abs(margins(theta0)))]
+    return theta, [names[j] for j in np.flatnonzero(m < 1e-3 * m0)]

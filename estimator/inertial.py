@@ -78,6 +78,21 @@ def consistency_margins(robot, theta) -> np.ndarray:
     return np.concatenate([[mb, Ib], links.ravel()])
 
 
+def consistency_lmis(robot, theta) -> list[np.ndarray]:
+    """The conditions of ``consistency_margins`` as symmetric matrices affine in θ, each ⪰ 0 exactly
+    when its condition holds: per link [[I_o, h∥, h⊥], [h∥, m, 0], [h⊥, 0, m]] (its Schur complement
+    is I_o − |h|²/m = I_c), and 1 × 1: m_b, I_b, h∥, l m − h∥, l m − h⊥, l m + h⊥ per link."""
+    mb, Ib, L = _split(theta, robot.n_links)
+    m, hp, hq, Io = L.T
+    l = robot.lengths_m
+    S = np.zeros((robot.n_links, 3, 3))
+    S[:, 0, 0], S[:, 1, 1], S[:, 2, 2] = Io, m, m
+    S[:, 0, 1] = S[:, 1, 0] = hp
+    S[:, 0, 2] = S[:, 2, 0] = hq
+    scalars = np.concatenate([[mb, Ib], np.stack([hp, l * m - hp, l * m - hq, l * m + hq], 1).ravel()])
+    return [S, scalars[:, None, None]]
+
+
 def margin_names(n_links: int) -> list[str]:
     """What each entry of ``consistency_margins`` bounds."""
     per = ("mass > 0", "inertia about the COM > 0", "COM along the axis ≥ 0",

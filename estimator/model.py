@@ -102,6 +102,11 @@ class RobotModel(Protocol):
         """Smooth constraint values of θ, every one ≥ 0 exactly when θ is consistent (what a
         constrained fit keeps ≥ 0)."""
 
+    def consistency_lmis(self, theta: np.ndarray) -> list[np.ndarray]:
+        """The consistency conditions as linear matrix inequalities: stacks (B, k, k) of symmetric
+        matrices affine in θ, all ⪰ 0 exactly when θ is consistent (≻ 0: strictly); what the
+        constrained fit's semidefinite program keeps ⪰ 0."""
+
     def parameter_covariance(self, uncertainty: ModelUncertainty) -> np.ndarray:
         """Σ_θ (n_θ, n_θ) of a declared physical uncertainty, linearized at this model's θ."""
 

@@ -116,6 +116,11 @@ class Robot:
 
         return inertial.consistency_margins(self, theta)
 
+    def consistency_lmis(self, theta) -> list[np.ndarray]:
+        from estimator import inertial
+
+        return inertial.consistency_lmis(self, theta)
+
     @property
     def consistency_margin_names(self) -> list[str]:
         from estimator import inertial

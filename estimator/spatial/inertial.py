@@ -15,7 +15,7 @@ real; Descartes' rule of signs). So per body the margins
 
     m,   e₁, e₂, e₃ of m I_c = m I_o − S(h),   e₂, e₃ of m Σ_c = ½ tr(m I_c) 1 − m I_c
 
-are polynomials in θ (degree ≤ 6: smooth everywhere, for SLSQP), invariant under rotations of the
+are polynomials in θ (degree ≤ 6: smooth everywhere), invariant under rotations of the
 body frame, and all ≥ 0 exactly when m ≥ 0, I_c ⪰ 0 and the triangle inequalities hold (all > 0:
 strictly consistent). e₁(m Σ_c) = ½ e₁(m I_c) is left out; the I_c group is implied by the Σ_c
 group (λ_i = d_j + d_k) and kept so that each violated condition has its own named margin.
@@ -112,6 +112,16 @@ def from_physical(m, c, Sc) -> np.ndarray:
     m, c, Sc = (np.asarray(x, float) for x in (m, c, Sc))
     Ic = np.trace(Sc, axis1=-2, axis2=-1)[..., None, None] * np.eye(3) - Sc
     return pack(m, m[..., None] * c, Ic + m[..., None, None] * _S(c))
+
+
+def pseudo_inertia(theta) -> np.ndarray:
+    """J = [[Σ_o, h], [hᵀ, m]] per body (NB, 4, 4), Σ_o = ½ tr(I_o) 1 − I_o (module doc)."""
+    m, h, Io = unpack(theta)
+    J = np.empty((len(m), 4, 4))
+    J[:, :3, :3] = 0.5 * np.trace(Io, axis1=1, axis2=2)[:, None, None] * np.eye(3) - Io
+    J[:, :3, 3] = J[:, 3, :3] = h
+    J[:, 3, 3] = m
+    return J
 
 
 _SHEARS = ((0, 1), (0, 2), (1, 2))

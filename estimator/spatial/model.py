@@ -195,6 +195,10 @@ class UrdfModel:
         when the pseudo-inertia is positive semidefinite (estimator.spatial.inertial)."""
         return spatial_inertial.consistency_margins(theta)
 
+    def consistency_lmis(self, theta) -> list[np.ndarray]:
+        """The pseudo-inertias J_b ⪰ 0 (estimator.spatial.inertial.pseudo_inertia)."""
+        return [spatial_inertial.pseudo_inertia(theta)]
+
     @property
     def consistency_margin_names(self) -> list[str]:
         return spatial_inertial.margin_names(self.tree.body_names)
