@@ -12,7 +12,6 @@ from estimator import localization as loc_mod
 FRAME_COLUMNS = ["t", "contact", "link", "alpha", "Fx", "Fz", "px", "pz", "rnorm"]
 
 
-
 @dataclass
 class ContactEstimate:
     """Per-sample arrays (T,) unless noted. link is 1-based, 0 = no contact; F ON the robot."""

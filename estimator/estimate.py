@@ -37,6 +37,7 @@ from estimator.log import SensorLog
 from estimator.robot import Robot
 from estimator.stream import DEFAULT_FALSE_ALARM_RATE, METHODS, STATS_SAMPLES, EstimatorStream
 
+
 def _expected(robot: Robot, expected_contacts):
     if expected_contacts is None or expected_contacts is False or len(expected_contacts) == 0:
         return ()

@@ -25,8 +25,6 @@ from estimator.interval_summary import EpisodeAccumulator, add_model_error, epis
 
 METHODS = ("dynamic", "paper")
 DEFAULT_FALSE_ALARM_RATE = (1.0, "h")
-
-
 STATS_SAMPLES = 65536           # the noise floors come from the contact-free samples among these
 WORK_SAMPLES = 16384            # samples per piece of work inside a chunk (cache-sized)
 
