@@ -71,7 +71,7 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
     say "installing torquebench and its dependencies into $VENV (about a minute the first time)"
     quiet_pip install -e ".[test]" || exit 1
     # the compiled loops (numba: estimator, CUSUM calibration, FEM multi-RHS solve) are compiled once here
-    "$VENV/bin/python" -c "from estimator import kernels, sequential; from flexure import multirhs; kernels.warm(); sequential.warm(); multirhs.warm()" >/dev/null 2>&1 || true
+    "$VENV/bin/python" -c "from estimator import warmup; from flexure import multirhs; warmup.warm(); multirhs.warm()" >/dev/null 2>&1 || true
     touch "$stamp"
     say "ready: $VENV/bin/torquebench ($("$VENV/bin/torquebench" --version 2>/dev/null || echo installed));" \
         "run 'source $VENV/bin/activate' to put it on PATH, or keep using 'bash run.sh COMMAND'"

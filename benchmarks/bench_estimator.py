@@ -46,7 +46,7 @@ def bench_offline(n_samples: int, repeat: int = 3) -> dict:
 
     from estimator import localization as L
     from estimator import observer as O
-    from estimator.pipeline import estimate
+    from estimator.estimate import estimate
     from estimator.robot import paper_leg
     from estimator.synthetic import moving_leg_poke
 
@@ -77,20 +77,20 @@ def bench_offline(n_samples: int, repeat: int = 3) -> dict:
     stages["estimate_model_s"] = _best(lambda: estimate(robot, log, model_uncertainty=declared),
                                        repeat, key="estimate_model")
     stages["estimate_dynamic_again_s"] = _best(full, repeat, key="estimate_again")
-    from estimator import kernels
+    from estimator import compiled
 
-    kernels.ENABLED = False                 # before: the numpy forms (same run, same log)
+    compiled.ENABLED = False                 # before: the numpy forms (same run, same log)
     try:
         stages["estimate_numpy_forms_s"] = _best(full, repeat, key="estimate_numpy")
     finally:
-        kernels.ENABLED = True
+        compiled.ENABLED = True
 
     def detector_only():                  # whitening + chi-square threshold on the residual
         from estimator import noise as Nz
         R = Nz.residual_covariance(robot, log.q[:1], log.dq[:1], Nz.paper_leg_noise(), 100.0, 1e-3)[0]
-        from estimator.pipeline import _chi2_isf, _whitened
+        from estimator.detection import chi2_isf, whitened_sumsq
         Linv = np.linalg.inv(np.linalg.cholesky(R))
-        _whitened(np.ascontiguousarray(terms["r"].T), Linv) > _chi2_isf(1e-3 / 3600, 5)
+        whitened_sumsq(np.ascontiguousarray(terms["r"].T), Linv) > chi2_isf(1e-3 / 3600, 5)
 
     stages["detector_s"] = _best(detector_only, repeat)
     est = result["est"]
@@ -111,7 +111,7 @@ def bench_offline(n_samples: int, repeat: int = 3) -> dict:
                 CPU["estimate"], CPU["estimate_again"])) / n_samples,
             "ratio_model_over_plain": stages["estimate_model_s"] / min(
                 stages["estimate_dynamic_s"], stages["estimate_dynamic_again_s"]),
-            "compiled_kernels": kernels.available(),
+            "compiled_kernels": compiled.available(),
             "detector_samples_per_s": n_samples / stages["detector_s"],
             "observer_plus_localize_samples_per_s":
                 n_samples / (stages["observer_s"] + stages["localize_dynamic_s"]),

@@ -66,7 +66,7 @@ def main() -> None:
             rows.append(("demo, warm cache", min(timed(tb + ["demo", "--out-dir", out], env) for _ in range(2))))
             rows.append(("run end_to_end --explain", timed(tb + ["run", "scenes/end_to_end.toml", "--explain"], env)))
             code = ("import time; t=time.perf_counter(); import torquebench.pipeline, torquebench.scenes, "
-                    "estimator.pipeline, calibration.model; print(time.perf_counter()-t)")
+                    "estimator.estimate, calibration.model; print(time.perf_counter()-t)")
             r = subprocess.run([py, "-c", code], cwd=ROOT, capture_output=True, text=True)
             rows.append(("imports of a log-only scene (in process)", float(r.stdout.strip())))
         par = {w: parallel_anchor(w) for w in (1, 2)}

@@ -265,13 +265,13 @@ def per_sample_alpha_var(robot, q, link, alpha, force_N, Rinv, ui) -> np.ndarray
     """The per-sample bound² of α, (I⁻¹)_αα, for samples with their own link (T,), α, F (T, 2) at
     postures q (T, n), sample k's inverse covariance Rinv[ui[k]]: one compiled loop (numba), or the
     numpy form (``design_fast``, ``fisher``, ``profiled``) without it."""
-    from estimator import kernels
+    from estimator import compiled
 
     full = robot if robot.floating else robot.with_base(True)
     q = np.ascontiguousarray(q, float)
     link = np.asarray(link, np.int64)
     out = np.full(len(q), np.nan)
-    if kernels.available():
+    if compiled.available():
         global _BOUND_LOOP
         if _BOUND_LOOP is None:
             from numba import njit

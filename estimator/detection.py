@@ -11,6 +11,8 @@ estimate of row i over the samples with no detected contact (``noise_thresholds`
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 
 from estimator.errors import InputError
@@ -69,3 +71,53 @@ def whitened_thresholds(R, alpha: float) -> np.ndarray:
         raise InputError(f"false-alarm probability per sample must be in (0, 1), got {alpha}")
     return np.sqrt(np.diag(R)[3:]) * float(-ndtri(alpha / 2))
 
+
+@dataclass
+class DetectorState:
+    """What a detector carries from one chunk to the next: the debounce run (samples in a row
+    above the threshold, up to the last one seen), and room for a sequential test's state."""
+
+    run: int = 0
+    extra: dict = field(default_factory=dict)
+
+
+def debounce_chunk(raw: np.ndarray, debounce: int, state: DetectorState) -> np.ndarray:
+    """contact[k] = raw for the ``debounce`` + 1 samples k−debounce…k (all of them), counted
+    across chunk boundaries through ``state.run`` (updated): the rule of ``detect``."""
+    raw = np.asarray(raw, bool)
+    if raw.size == 0:
+        return raw
+    idx = np.arange(raw.size)
+    last_false = np.maximum.accumulate(np.where(raw, -1, idx))
+    run = np.where(last_false >= 0, idx - last_false, state.run + idx + 1)
+    state.run = int(run[-1])
+    return run >= debounce + 1
+
+
+def chi2_isf(alpha: float, dof: int) -> float:
+    """h with P(χ²_dof > h) = α: scipy.special.chdtri, what scipy.stats.chi2.isf evaluates (and
+    noise.chi2_threshold), without importing scipy.stats (seconds at start-up)."""
+    from scipy.special import chdtri
+
+    return float(chdtri(dof, alpha))
+
+
+def sumsq_rows(xT: np.ndarray) -> np.ndarray:
+    """Σ_k x_k² per sample of a link-major (n, T) array, rows added in order (batch-independent)."""
+    out = xT[0] * xT[0]
+    for k in range(1, len(xT)):
+        out += xT[k] * xT[k]
+    return out
+
+
+def whitened_sumsq(rT: np.ndarray, Linv: np.ndarray) -> np.ndarray:
+    """s_k = ‖L⁻¹ r_k‖², with one lower-triangular L⁻¹ (n, n) or one per sample (T, n, n)."""
+    n = rT.shape[0]
+    out = np.zeros(rT.shape[1])
+    for i in range(n):
+        z = None
+        for j in range(i + 1):
+            c = Linv[i, j] if Linv.ndim == 2 else Linv[:, i, j]
+            z = c * rT[j] if z is None else z + c * rT[j]
+        out += z * z
+    return out

@@ -24,9 +24,12 @@ with a_i the angular-velocity row of link i (ones on θ, q_1…q_i) and J_{i,z} 
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from estimator.robot import Robot
+if TYPE_CHECKING:                  # annotations only: robot.py's methods call this module
+    from estimator.robot import Robot
 
 
 def _perp(a: np.ndarray) -> np.ndarray:

@@ -328,11 +328,11 @@ _LOOP = None
 
 def _compiled_loop():
     """The numba-compiled ``_nodes_loop`` (cached beside this file), or None without numba or
-    with the kernels disabled (estimator.kernels.ENABLED)."""
+    with the kernels disabled (estimator.compiled.ENABLED)."""
     global _LOOP
-    from estimator import kernels
+    from estimator import compiled
 
-    if not kernels.available():
+    if not compiled.available():
         return None
     if _LOOP is None:
         from numba import njit

@@ -17,7 +17,7 @@ so, for the translation rows and for an angle row with origin o (velocity ȯ) th
     (Cᵀv)_o = −ȯ × Σ_S L_i  (0 on x, z),   G_z = g (m_b + Σ m_i),   G_o = g Σ_S [m_i (p_i − o)_x + h_i,x]
 
 each a sum of (known function of q, v) × (one entry of θ): the regressor Y_P, Y_u = Y_{Cᵀv} − Y_G
-(``momentum_regressor``; compiled in estimator.kernels, this numpy form is its reference).
+(``momentum_regressor``; compiled in estimator.model_kernels, this numpy form is its reference).
 """
 
 from __future__ import annotations

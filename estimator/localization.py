@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimator import compiled, localization_loops
 from estimator import dynamics as dyn
 from estimator.errors import InputError
 from estimator.robot import Robot
@@ -219,7 +220,7 @@ def localize_dynamic(robot: Robot, q: np.ndarray, residual: np.ndarray, *, expec
     contacts → not_identifiable.
 
     Without expected contacts the per-sample solve runs as one compiled loop when numba is there
-    (``estimator.kernels``; the numpy form below is its reference, equal to rounding).
+    (``estimator.localization_loops``; the numpy form below is its reference, equal to rounding).
     """
     rob = _full(robot)
     q = np.atleast_2d(np.asarray(q, float))
@@ -230,10 +231,8 @@ def localize_dynamic(robot: Robot, q: np.ndarray, residual: np.ndarray, *, expec
         raise InputError(f"localize: q and residual must both be (T, {n}), got {q.shape}, {r.shape}")
     Wb, widx = weight_blocks(n, len(q), row_weights, weight)
     args = (min_force_N, max_condition, ambiguity_tol, position_tol_m, bound_tol)
-    from estimator import kernels
-
-    if not expected and kernels.available():        # the same per-sample solve, compiled
-        link, alpha, force, point, condition, reason, cost = kernels.localize_dynamic(
+    if not expected and compiled.available():       # the same per-sample solve, compiled
+        link, alpha, force, point, condition, reason, cost = localization_loops.localize(
             rob, q, r, (Wb, widx), min_force_N=min_force_N, max_condition=max_condition,
             ambiguity_tol=ambiguity_tol, position_tol_m=position_tol_m, bound_tol=bound_tol)
         return Localization(link=link, alpha=alpha, force_N=force, point_m=point,

@@ -1,8 +1,9 @@
 """Compiled loops of the inertial-parameter model (numba): the planar chain's momentum regressor
 (estimator.inertial) and the detector's statistic with the model-error term (estimator.model_error),
 alone or fused with the regressor. The numpy forms in those modules are their references; without
-numba (or with ``estimator.kernels.ENABLED`` False) every entry point returns False / the caller
-falls back. Loaded lazily, cached beside this file, like estimator.kernels.
+numba (or with ``estimator.compiled.ENABLED`` False) every entry point returns False / the caller
+falls back. Loaded lazily, cached beside this file (estimator.compiled; estimator.warmup compiles
+them at install).
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import math
 
 import numpy as np
 
-from estimator import kernels as _base
+from estimator import compiled
 
 _KERNELS = None
 _regressor = None               # compiled _regressor_py and _model_chi2_py: globals for the fused
@@ -20,7 +21,7 @@ _mchi2 = None                   # loop _planar_model_chi2_py
 
 def _load():
     global _KERNELS, _regressor, _mchi2
-    if not _base.available():
+    if not compiled.available():
         return None
     if _KERNELS is None:
         from numba import njit
@@ -38,19 +39,6 @@ def _load():
 
 def available() -> bool:
     return _load() is not None
-
-
-def warm(robot) -> None:
-    """Compile the loops on a two-sample chain (numba caches them)."""
-    if not available():
-        return
-    from estimator.model_error import ModelTerm
-
-    q = np.zeros((2, robot.n_links + 3))
-    momentum_regressor(robot, q, q)
-    term = ModelTerm(robot, np.eye(len(robot.parameter_names)), 100.0, 1e-3)
-    term.statistic(np.arange(2) * 1e-3, q, q, np.zeros((robot.n_links + 3, 2)),
-                   np.eye(robot.n_links + 3)[None], np.zeros(2, np.int64))
 
 
 def _regressor_py(q, dq, l, g, YP, Yu):

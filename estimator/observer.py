@@ -17,7 +17,7 @@ Discretization over a step Δt, with d_k = (P_{k+1} − P_k)/Δt − ū_k the st
 * ``"explicit"`` (paper eq. 4): p_int ← p_int + (u_k + r_k) Δt, i.e. r_{k+1} = (1 − KΔt) r_k
   + KΔt d_k with ū_k = u_k. Unstable for K Δt ≥ 2, which is refused.
 
-The offline form evaluates the recurrence in a compiled loop (``kernels.first_order``; without
+The offline form evaluates the recurrence in a compiled loop (``first_order``; without
 numba ``scipy.signal.lfilter``, one call per channel and regular segment: the same arithmetic,
 tested bit-equal); the streaming ``MomentumObserver.step`` runs the
 same arithmetic one sample at a time.
@@ -25,12 +25,18 @@ same arithmetic one sample at a time.
 
 from __future__ import annotations
 
+import math
+from typing import TYPE_CHECKING
+
 import numpy as np
 
+from estimator import compiled
 from estimator import dynamics as dyn
 from estimator import timing as timing_mod
 from estimator.errors import InputError
-from estimator.robot import Robot
+
+if TYPE_CHECKING:                  # annotations only: robot.py's methods call this module
+    from estimator.robot import Robot
 
 METHODS = ("exact", "explicit")
 
@@ -188,7 +194,7 @@ def momentum_terms(robot: Robot, q: np.ndarray, dq: np.ndarray, tau_meas: np.nda
     """P = M q̇ and u = τ_meas + Cᵀ q̇ − G for every sample, shapes (T, n) each (floating coords).
 
     Uses ``chain_terms`` (suffix sums over the chain), in chunks that stay in cache, or the same
-    sums in one compiled loop (``estimator.kernels``, numba) when it is available.
+    sums in one compiled loop (``momentum_terms_T``, numba) when it is available.
     """
     q = np.asarray(q, float)
     dq = np.asarray(dq, float)
@@ -197,10 +203,8 @@ def momentum_terms(robot: Robot, q: np.ndarray, dq: np.ndarray, tau_meas: np.nda
     if single:
         q, dq, tau_meas = q[None], dq[None], tau_meas[None]
     T, n = q.shape
-    from estimator import kernels
-
-    if kernels.available():                # the same equations in one compiled loop
-        PT, uT = kernels.momentum_terms_T(full_robot(robot), q, dq, tau_meas)
+    if compiled.available():               # the same equations in one compiled loop
+        PT, uT = momentum_terms_T(full_robot(robot), q, dq, tau_meas)
         return (PT[:, 0], uT[:, 0]) if single else (PT.T, uT.T)
     PT = np.empty((n, T))                  # link-major storage; returned as (T, n) views
     uT = np.empty((n, T))
@@ -212,6 +216,88 @@ def momentum_terms(robot: Robot, q: np.ndarray, dq: np.ndarray, tau_meas: np.nda
     if single:
         return PT[:, 0], uT[:, 0]
     return PT.T, uT.T
+
+
+def _terms_py(q, dq, tau, m, l, rc, rp, Irot, g, Gz, msuf, PT, uT):
+    """P = M q̇ and u = τ + Cᵀq̇ − G (observer._FastTerms) for every sample, link-major."""
+    T, n = q.shape
+    N = n - 3
+    cx = np.empty(N)
+    cz = np.empty(N)
+    vx = np.empty(N)
+    vz = np.empty(N)
+    ox = np.empty(N)
+    oz = np.empty(N)
+    vox = np.empty(N)
+    voz = np.empty(N)
+    for k in range(T):
+        phi = q[k, 2]
+        dphi = dq[k, 2]
+        jx = 0.0
+        jz = 0.0
+        vjx = dq[k, 0]
+        vjz = dq[k, 1]
+        for i in range(N):
+            phi += q[k, 3 + i]
+            dphi += dq[k, 3 + i]
+            s = math.sin(phi)
+            c = math.cos(phi)
+            ox[i] = jx
+            oz[i] = jz
+            vox[i] = vjx
+            voz[i] = vjz
+            cx[i] = jx + rc[i] * s + rp[i] * c
+            cz[i] = jz - rc[i] * c + rp[i] * s
+            vx[i] = vjx + dphi * (rc[i] * c - rp[i] * s)
+            vz[i] = vjz + dphi * (rc[i] * s + rp[i] * c)
+            jx = jx + l[i] * s
+            jz = jz - l[i] * c
+            vjx = vjx + l[i] * dphi * c
+            vjz = vjz + l[i] * dphi * s
+        for i in range(n):
+            acc = 0.0
+            for j in range(n):
+                acc += Irot[i, j] * dq[k, j]
+            PT[i, k] = acc
+            uT[i, k] = tau[k, i]
+        uT[1, k] -= Gz
+        A = 0.0
+        Bx = 0.0
+        Bz = 0.0
+        Gs = 0.0
+        for i in range(N - 1, -1, -1):
+            A += m[i] * (cx[i] * vz[i] - cz[i] * vx[i])
+            Bx += m[i] * vx[i]
+            Bz += m[i] * vz[i]
+            Gs += m[i] * cx[i]
+            Pang = A - (ox[i] * Bz - oz[i] * Bx)
+            Cang = -(vox[i] * Bz - voz[i] * Bx)
+            Gang = g * (Gs - ox[i] * msuf[i])
+            if i == 0:
+                PT[2, k] += Pang
+                uT[2, k] += Cang - Gang
+            PT[3 + i, k] += Pang
+            uT[3 + i, k] += Cang - Gang
+        PT[0, k] += Bx
+        PT[1, k] += Bz
+
+
+def momentum_terms_T(robot, q, dq, tau):
+    """(P, u) link-major (n, T) with the compiled loop (robot: floating coordinates)."""
+    k = _LOOPS.get()
+    q = np.ascontiguousarray(q, float)
+    dq = np.ascontiguousarray(dq, float)
+    tau = np.ascontiguousarray(tau, float)
+    T, n = q.shape
+    m = np.asarray(robot.masses_kg, float)
+    g = float(robot.gravity_m_per_s2)
+    PT = np.empty((n, T))
+    uT = np.empty((n, T))
+    msuf = np.cumsum(m[::-1])[::-1].copy()
+    k["terms"](q, dq, tau, m, np.asarray(robot.lengths_m, float), np.asarray(robot.com_m, float),
+               np.asarray(robot.com_perp_m, float), _irot(robot), g,
+               g * (float(robot.base_mass_kg) + float(m.sum())), msuf, PT, uT)
+    return PT, uT
 
 
 PERIOD_HEAD_STEPS = 1024
@@ -232,10 +318,10 @@ def residual_offline(robot: Robot, t, q, dq, tau_meas, gain_per_s=100.0, method:
     instantaneous); the step mean ū_k of the measured force uses the matching quadrature.
 
     Steps equal to the nominal period ``dt_s`` (default: ``regular_period``) run through
-    the compiled recursion (``kernels.first_order``; ``scipy.signal.lfilter`` without numba, the
+    the compiled recursion (``first_order``; ``scipy.signal.lfilter`` without numba, the
     same arithmetic); a longer step (a gap left by skipped NaN rows) is taken exactly with
     its own Δt and starts a new segment (a Python loop over gaps, not samples). The same
-    arithmetic as ``residual_window`` on a log read in chunks (estimator.pipeline).
+    arithmetic as ``residual_window`` on a log read in chunks (estimator.stream).
     """
     t = np.asarray(t, float)
     T = len(t)
@@ -263,8 +349,6 @@ def residual_window(t, PT, uT, tauT, K, dt_s: float, method: str, timing, r0) ->
     only on r0 and rows ≤ k (+ ``lookahead_rows`` for a group delay), so a log cut into windows
     that overlap by one row gives the same numbers as one window.
     """
-    from estimator import kernels
-
     n, W = PT.shape
     rT = np.empty((n, W))
     rT[:, 0] = r0
@@ -284,7 +368,7 @@ def residual_window(t, PT, uT, tauT, K, dt_s: float, method: str, timing, r0) ->
     bounds = np.flatnonzero(gap)
     start = 0                              # r[start] is known
     for stop in [*bounds, W - 1]:          # regular steps start … stop−1, then the gap step stop
-        if stop > start and not kernels.first_order(a, b, drive, rT, start, stop):
+        if stop > start and not first_order(a, b, drive, rT, start, stop):
             from scipy.signal import lfilter
 
             for j in range(n):
@@ -295,6 +379,68 @@ def residual_window(t, PT, uT, tauT, K, dt_s: float, method: str, timing, r0) ->
             rT[:, stop + 1] = ag * rT[:, stop] + bg * drive[:, stop]
             start = stop + 1
     return rT
+
+
+def _first_order_py(a, b, drive, out, start, stop):
+    """out[j, k+1] = a_j out[j, k] + b_j drive[j, k] for k = start … stop−1 (the observer's
+    recursion, in the order ``scipy.signal.lfilter`` evaluates it: b·x first, then + a·y)."""
+    for j in range(drive.shape[0]):
+        y = out[j, start]
+        for k in range(start, stop):
+            y = b[j] * drive[j, k] + a[j] * y
+            out[j, k + 1] = y
+
+
+def first_order(a, b, drive, out, start: int, stop: int) -> bool:
+    """Run ``_first_order_py`` compiled in place on ``out``; False without numba."""
+    k = _LOOPS.get()
+    if k is None:
+        return False
+    k["filter"](a, b, drive, out, start, stop)
+    return True
+
+
+class ObserverRun:
+    """The observer over a log fed in chunks: ``feed(log, final)`` → the finalized rows as a dict
+    (t, q, dq, tau (T, n), r (T, n)); rows a group delay still needs the future of are held back
+    (``lookahead_rows``) until the next chunk or ``final``."""
+
+    def __init__(self, robot, K, dt, method, timing):
+        self.robot, self.K, self.dt, self.method, self.timing = robot, K, dt, method, timing
+        self.ahead = lookahead_rows(timing, dt)
+        self.prev = None                 # (t, P, u, τ, r) of the last finalized row (link-major rows)
+        self.pending = None              # held-back raw rows: (t, q, dq, τ)
+
+    def feed(self, t, q, dq, tau, final: bool = False):
+        if self.pending is not None:
+            pt, pq, pdq, ptau = self.pending
+            t, q, dq, tau = np.r_[pt, t], np.vstack([pq, q]), np.vstack([pdq, dq]), np.vstack([ptau, tau])
+            self.pending = None
+        T = len(t)
+        keep = 0 if final else min(self.ahead, T)
+        if T == 0 or T - keep == 0:
+            self.pending = (t, q, dq, tau) if T else None
+            return None
+        P, u = momentum_terms(self.robot, q, dq, tau)
+        PT, uT, tauT = P.T, u.T, tau.T
+        if self.prev is not None:
+            t0, P0, u0, tau0, r0 = self.prev
+            tw = np.r_[t0, t]
+            PT, uT, tauT = (np.concatenate([x0[:, None], x], axis=1) for x0, x in
+                            ((P0, PT), (u0, uT), (tau0, tauT)))
+        else:
+            tw, r0 = t, np.zeros(self.K.size)
+        rT = residual_window(tw, np.ascontiguousarray(PT), np.ascontiguousarray(uT),
+                                      tauT, self.K, self.dt, self.method, self.timing, r0)
+        off = 1 if self.prev is not None else 0
+        m = T - keep                                            # rows finalized now
+        last = off + m - 1
+        self.prev = (tw[last], PT[:, last].copy(), uT[:, last].copy(), tauT[:, last].copy(),
+                     rT[:, last].copy())
+        if keep:
+            self.pending = (t[m:], q[m:], dq[m:], tau[m:])
+        return {"t": t[:m], "q": q[:m], "dq": dq[:m], "tau": tau[:m],
+                "rT": rT[:, off:off + m]}
 
 
 def lag_s(K: np.ndarray, dt_s: float, method: str = "exact") -> np.ndarray:
@@ -415,3 +561,7 @@ class _FastTerms:
         P[3:] += Pang
         u[3:] += np.subtract(Cang, Gang)
         return P, u
+
+
+_LOOPS = compiled.Loops(lambda: {"terms": compiled.jit(_terms_py),
+                                 "filter": compiled.jit(_first_order_py)})

@@ -2,7 +2,7 @@
 
 CSV (floats rounded to 9–10 significant digits, ``round_significant``, and printed as pyarrow's CSV
 writer prints them: in at most as many digits, NaN as ``nan``; a compiled formatter,
-``estimator.kernels.format_rows``, writes the same bytes several times faster), or
+``format_rows``, writes the same bytes several times faster), or
 Parquet (float64, exact) for a ``.parquet`` path. The file is written to a temporary path beside
 the target and moved into place on success (``userio.files.atomic_path``): nothing half-written
 is left, and an error leaves the old file untouched.
@@ -13,7 +13,11 @@ from __future__ import annotations
 from contextlib import ExitStack
 from pathlib import Path
 
+import math
+
 import numpy as np
+
+from estimator import compiled
 
 COLUMNS = ["t", "contact", "link", "alpha", "Fx", "Fz", "px", "pz", "rnorm"]
 FLOATS = ["t", "alpha", "Fx", "Fz", "px", "pz", "rnorm"]
@@ -37,6 +41,142 @@ def round_significant(x: np.ndarray, digits: int = 9) -> np.ndarray:
     with np.errstate(over="ignore", invalid="ignore"):
         y = np.where(k >= 0, np.rint(x * p) / p, np.rint(x / p) * p)
     return np.where(np.isfinite(y) & (x != 0) & (np.abs(k) <= 22), y, x)
+
+
+_POW10_INT = np.array([10 ** i for i in range(19)], dtype=np.int64)
+
+
+def _put_uint_py(buf, pos, v, width):
+    """Write v ≥ 0 in decimal at buf[pos:], at least ``width`` digits (leading zeros); → new pos."""
+    n = 1
+    while n < 19 and v >= _POW10_INT[n]:
+        n += 1
+    if n < width:
+        n = width
+    end = pos + n
+    while n > 0:
+        end_i = pos + n - 1
+        buf[end_i] = 48 + v % 10
+        v //= 10
+        n -= 1
+    return end
+
+
+def _put_float_py(buf, pos, x, digits):
+    """x rounded to ``digits`` significant digits (round_significant) and printed as
+    pyarrow's CSV writer prints that double (its shortest decimal: plain for a decimal exponent
+    in [−6, 10), else d.ddde±x; nan, inf, -inf, 0, -0); → new pos, or −1 for the few values
+    round_significant leaves as they are (|x| < 1e−14 or ≥ 1e31 at 9 digits)."""
+    if x != x:
+        buf[pos], buf[pos + 1], buf[pos + 2] = 110, 97, 110            # nan
+        return pos + 3
+    if x < 0 or (x == 0 and math.copysign(1.0, x) < 0):
+        buf[pos] = 45                                                   # -
+        pos += 1
+    a = abs(x)
+    if a == math.inf:
+        buf[pos], buf[pos + 1], buf[pos + 2] = 105, 110, 102            # inf
+        return pos + 3
+    if a == 0:
+        buf[pos] = 48
+        return pos + 1
+    _, e2 = math.frexp(a)
+    k = (digits - 1) - int(math.floor((e2 - 1) * 0.30102999566398120))
+    if k > 22 or k < -22:
+        return -1
+    if k >= 0:
+        m = np.int64(np.rint(a * _POW10[k]))
+    else:
+        m = np.int64(np.rint(a / _POW10[-k]))
+    # the double nearest m·10^−k prints as m·10^−k without its trailing zeros
+    while m % 10 == 0:
+        m //= 10
+        k -= 1
+    nd = 1
+    while nd < 19 and m >= _POW10_INT[nd]:
+        nd += 1
+    e = nd - 1 - k                                                      # decimal exponent
+    if -6 <= e < 10:
+        if e < 0:
+            buf[pos], buf[pos + 1] = 48, 46                             # 0.
+            pos += 2
+            for _ in range(-e - 1):
+                buf[pos] = 48
+                pos += 1
+            return _put_uint(buf, pos, m, nd)
+        if nd <= e + 1:
+            pos = _put_uint(buf, pos, m, nd)
+            for _ in range(e + 1 - nd):
+                buf[pos] = 48
+                pos += 1
+            return pos
+        low = nd - e - 1
+        pos = _put_uint(buf, pos, m // _POW10_INT[low], 1)
+        buf[pos] = 46
+        return _put_uint(buf, pos + 1, m % _POW10_INT[low], low)
+    pos = _put_uint(buf, pos, m // _POW10_INT[nd - 1], 1)
+    if nd > 1:
+        buf[pos] = 46
+        pos = _put_uint(buf, pos + 1, m % _POW10_INT[nd - 1], nd - 1)
+    buf[pos] = 101                                                      # e
+    buf[pos + 1] = 43 if e > 0 else 45
+    return _put_uint(buf, pos + 2, abs(e), 1)
+
+
+def _format_rows_py(t, contact, link, alpha, Fx, Fz, px, pz, rnorm, digits, buf):
+    """The rows ``t,contact,link,alpha,Fx,Fz,px,pz,rnorm`` (outframe.COLUMNS) as CSV text in buf;
+    → bytes written, or −1 if a value needs pyarrow's writer (``_put_float_py``)."""
+    pos = 0
+    for i in range(len(t)):
+        pos = _put_float(buf, pos, t[i], digits)
+        if pos < 0:
+            return -1
+        buf[pos] = 44
+        buf[pos + 1] = 49 if contact[i] else 48
+        buf[pos + 2] = 44
+        pos += 3
+        v = link[i]
+        if v < 0:
+            buf[pos] = 45
+            pos += 1
+            v = -v
+        pos = _put_uint(buf, pos, v, 1)
+        for x in (alpha[i], Fx[i], Fz[i], px[i], pz[i], rnorm[i]):
+            buf[pos] = 44
+            pos = _put_float(buf, pos + 1, x, digits)
+            if pos < 0:
+                return -1
+        buf[pos] = 10
+        pos += 1
+    return pos
+
+
+def format_rows(part, digits: int = 9) -> bytes | None:
+    """The CSV rows of an estimate part (no header) as pyarrow's writer prints the part rounded
+    by ``round_significant``, or None if a value needs pyarrow's writer (compiled loops only:
+    ``compiled.available()``)."""
+    k = _LOOPS.get()
+    T = len(part.t)
+    buf = np.empty(T * (7 * 24 + 30), np.uint8)
+    f = [np.ascontiguousarray(a, float) for a in (part.t, part.alpha, part.Fx, part.Fz, part.px,
+                                                  part.pz, part.rnorm)]
+    n = k["rows"](f[0], np.ascontiguousarray(part.contact, np.bool_),
+                  np.ascontiguousarray(part.link, np.int64), *f[1:], int(digits), buf)
+    return None if n < 0 else buf[:n].tobytes()
+
+
+_put_uint = None                # the compiled _put_uint_py and _put_float_py, globals for the rows
+_put_float = None
+
+
+def _build():
+    global _put_uint, _put_float
+    _put_uint = compiled.jit(_put_uint_py)
+    _put_float = compiled.jit(_put_float_py)
+    return {"rows": compiled.jit(_format_rows_py)}
+
+
+_LOOPS = compiled.Loops(_build)
 
 
 def _table(part):
@@ -82,14 +222,12 @@ class FrameWriter:
 
     def _write_csv(self, part) -> None:
         """The rows as pyarrow's CSV writer prints them rounded by ``round_significant``: the
-        compiled formatter (estimator.kernels.format_rows, tested byte for byte against pyarrow)
-        where it can, else pyarrow's writer itself."""
-        from estimator import kernels
-
+        compiled formatter (``format_rows``, tested byte for byte against pyarrow) where it can,
+        else pyarrow's writer itself."""
         if self._writer is None:
             self._writer = open(self.tmp, "wb")
             self._writer.write((",".join(COLUMNS) + "\n").encode())
-        text = kernels.format_rows(part) if kernels.available() else None
+        text = format_rows(part) if compiled.available() else None
         if text is not None:
             self._writer.write(text)
             return
@@ -116,7 +254,7 @@ class FrameWriter:
 
 
 def _empty_part():
-    from estimator.pipeline import ContactEstimate
+    from estimator.contact_estimate import ContactEstimate
 
     e = np.zeros(0)
     return ContactEstimate(t=e, contact=e.astype(bool), link=e.astype(int), alpha=e, Fx=e, Fz=e,

@@ -1,6 +1,6 @@
 """Plausibility of a sensor log beyond its syntax: units and sampling a robot can produce.
 
-Checked (``check_log``, called by ``estimator.log.read_log``):
+Checked (``check_log``, called by ``estimator.log_reader.read_log``):
 - sampling period Δt = median(t_{k+1} − t_k) in [10 µs, 1 s] (else InputError; a period of
   ~1 usually means time in milliseconds, < 10 µs microseconds or nanoseconds);
 - joint angles |q_i| ≤ 2π (a leg joint never turns a full revolution; larger angles look like
@@ -22,6 +22,7 @@ import warnings
 
 import numpy as np
 
+from estimator import compiled
 from userio.errors import InputError
 
 DT_MIN_S, DT_MAX_S = 10e-6, 1.0
@@ -57,6 +58,49 @@ def velocity_scale(t: np.ndarray, q: np.ndarray, dq: np.ndarray) -> tuple[float,
     return s, r
 
 
+def _plausibility_py(t, q, dq, base, n, max_angle, has_last, t0, q0, d0, sums):
+    """Checker.rows in one pass: the first (k, j) with |q_j| > max_angle (joint angles) or
+    (−1, −1); else the sums Σ fd·mid, Σ mid·mid, Σ fd·fd over the steps of [last] + rows
+    (fd = Δq/Δt, mid = ½(q̇_k + q̇_{k+1}), coordinates from ``base`` on) added to ``sums``."""
+    T, C = q.shape
+    for k in range(T):
+        for j in range(n):
+            if abs(q[k, 3 + j]) > max_angle:
+                return k, j
+    s0, s1, s2 = 0.0, 0.0, 0.0
+    for k in range(-1 if has_last else 0, T - 1):
+        ta = t0 if k < 0 else t[k]
+        h = t[k + 1] - ta
+        for j in range(base, C):
+            qa = q0[j - base] if k < 0 else q[k, j]
+            da = d0[j - base] if k < 0 else dq[k, j]
+            fd = (q[k + 1, j] - qa) / h
+            mid = (dq[k + 1, j] + da) * 0.5
+            s0 += fd * mid
+            s1 += mid * mid
+            s2 += fd * fd
+    sums[0] += s0
+    sums[1] += s1
+    sums[2] += s2
+    return -1, -1
+
+
+def plausibility_rows(t, q, dq, base, n, max_angle, last, sums):
+    """``_plausibility_py`` compiled; ``last``: (t, q, q̇) of the previous row (coordinates from
+    ``base`` on) or None. → (k, j) of the first joint angle beyond ``max_angle``, or (−1, −1).
+    Needs ``compiled.available()``."""
+    k = _LOOPS.get()
+    has = last is not None
+    q0 = np.ascontiguousarray(last[1], float).ravel() if has else np.zeros(q.shape[1] - base)
+    d0 = np.ascontiguousarray(last[2], float).ravel() if has else np.zeros(q.shape[1] - base)
+    return k["plaus"](np.ascontiguousarray(t, float), np.ascontiguousarray(q, float),
+                      np.ascontiguousarray(dq, float), int(base), int(n), float(max_angle), has,
+                      float(last[0]) if has else 0.0, q0, d0, sums)
+
+
+_LOOPS = compiled.Loops(lambda: {"plaus": compiled.jit(_plausibility_py)})
+
+
 class Checker:
     """The same checks on a log read in chunks: ``rows`` per chunk (angles; the velocity sums,
     including the step across the chunk boundary), ``period`` once the period is known, and
@@ -69,12 +113,10 @@ class Checker:
         self._last = None                  # (t, q, dq) of the previous chunk's last row
 
     def rows(self, t, q, dq):
-        from estimator import kernels
-
         t, q, dq = np.asarray(t, float), np.asarray(q, float), np.asarray(dq, float)
-        if kernels.available() and len(t):             # the same checks and sums in one pass
-            k, j = kernels.plausibility_rows(t, q, dq, self.base, self.n, MAX_JOINT_ANGLE_RAD,
-                                             self._last, self.sums)
+        if compiled.available() and len(t):            # the same checks and sums in one pass
+            k, j = plausibility_rows(t, q, dq, self.base, self.n, MAX_JOINT_ANGLE_RAD,
+                                     self._last, self.sums)
             if k >= 0:
                 self._angle_error(t, q[:, 3:3 + self.n], k, j)
             self.steps += len(t) - (0 if self._last is not None else 1)

@@ -128,10 +128,10 @@ def _loop(t, r, K, Linv, W, idx, h, h_rel, st_f, st_prev, st_vprev, st_anchor, c
 def _kernel():
     global _KERNEL
     if _KERNEL is None:
-        from estimator import kernels
+        from estimator import compiled
 
         try:
-            if not kernels.available():
+            if not compiled.available():
                 raise ImportError
             from numba import njit
 
@@ -144,9 +144,9 @@ def _kernel():
 
 
 def _kernels_enabled() -> bool:
-    from estimator import kernels
+    from estimator import compiled
 
-    return kernels.ENABLED
+    return compiled.ENABLED
 
 
 def detect(t, r, K, Linv, W, idx, h: float, h_rel: float, state: ReleaseState):

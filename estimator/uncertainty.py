@@ -134,7 +134,7 @@ def _check(robot: Robot, q_joint, link, alpha, force_N):
 
 def _fit_weights(noise: SensorNoise, n_links: int, method: str):
     """The estimator's fit weights: the inverse of the residual's white-noise variance per row
-    (estimator.pipeline whitens by its noise covariance R; white sensor noise makes R diagonal,
+    (estimator.stream whitens by its noise covariance R; white sensor noise makes R diagonal,
     (f σ)²), or None (unweighted) where a σ is zero or for the paper method."""
     sig_n, _ = noise.per_row(n_links)
     if method != "dynamic" or not np.all(sig_n > 0):

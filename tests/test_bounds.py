@@ -254,7 +254,7 @@ def test_propagate_json_carries_the_bound_maps(capsys):
 
 
 def test_per_sample_alpha_variance_loop_matches_the_numpy_form(monkeypatch):
-    from estimator import kernels
+    from estimator import compiled
 
     rng = np.random.default_rng(8)
     T = 40
@@ -266,7 +266,7 @@ def test_per_sample_alpha_variance_loop_matches_the_numpy_form(monkeypatch):
     Rinv = M @ np.swapaxes(M, 1, 2) + np.eye(5)
     ui = rng.integers(0, 3, T)
     fast = bounds.per_sample_alpha_var(ROBOT, q, link, alpha, F, Rinv, ui)
-    monkeypatch.setattr(kernels, "ENABLED", False)
+    monkeypatch.setattr(compiled, "ENABLED", False)
     ref = bounds.per_sample_alpha_var(ROBOT, q, link, alpha, F, Rinv, ui)
     np.testing.assert_allclose(fast, ref, rtol=1e-9)
     one = bounds.per_sample(ROBOT, q[:1], int(link[0]), alpha[0], F[0], np.linalg.inv(Rinv[ui[0]]))

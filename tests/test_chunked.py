@@ -1,5 +1,5 @@
 """The estimator in chunks: the same numbers as the one-shot run, in memory that does not grow
-with the log (estimator.pipeline.EstimatorStream, estimator.log.LogReader, `estimate --out`)."""
+with the log (estimator.stream.EstimatorStream, estimator.log_reader.LogReader, `estimate --out`)."""
 
 import json
 import tracemalloc
@@ -8,11 +8,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from estimator.log import LogReader, read_log, write_log
-from estimator.noise import NoiseModel
-from estimator.pipeline import DetectorState, debounce_chunk, estimate
-from estimator.detection import detect
+from estimator.detection import DetectorState, debounce_chunk, detect
 from estimator.errors import InputError
+from estimator.estimate import estimate
+from estimator.log import write_log
+from estimator.log_reader import LogReader, read_log
+from estimator.noise import NoiseModel
 from estimator.robot import paper_leg
 from estimator.synthetic import inverse_dynamics_log, sinusoidal_motion
 from torquebench.cli import main
@@ -175,7 +176,7 @@ def test_cli_chunked_output_equals_estimate(tmp_path, capsys, suffix):
 
 def _peak_bytes(path, chunk):
     """Peak traced memory of the streaming CLI path over ``path`` (reader → stream → writer)."""
-    from estimator.pipeline import open_stream
+    from estimator.estimate import open_stream
     from estimator.outframe import FrameWriter
 
     out = path.with_name(path.stem + "_out.csv")
@@ -222,13 +223,13 @@ def test_memory_does_not_grow_with_the_log(tmp_path):
 
 
 def test_compiled_kernels_match_the_numpy_reference(monkeypatch):
-    """estimator.kernels (numba) against the numpy forms: same flags and links, numbers to rounding."""
-    from estimator import kernels
+    """The compiled loops (numba; estimator.compiled) against the numpy forms: same flags and links, numbers to rounding."""
+    from estimator import compiled
 
-    assert kernels.available()                  # numba is a dependency (pyproject.toml)
+    assert compiled.available()                  # numba is a dependency (pyproject.toml)
     log, _ = _poked_log()
     fast = estimate(ROBOT, log)
-    monkeypatch.setattr(kernels, "ENABLED", False)
+    monkeypatch.setattr(compiled, "ENABLED", False)
     ref = estimate(ROBOT, log)
     for f in ("contact", "link", "reason"):
         assert np.array_equal(getattr(fast, f), getattr(ref, f)), f

@@ -6,7 +6,7 @@ import pytest
 
 from estimator import timing
 from estimator.log import SensorLog
-from estimator.pipeline import estimate
+from estimator.estimate import estimate
 from estimator.robot import paper_leg
 from estimator.synthetic import inverse_dynamics_log, sinusoidal_motion
 

@@ -8,11 +8,11 @@ from scipy.optimize import minimize_scalar
 from scipy.stats import binom
 
 from estimator import episode as E
-from estimator import kernels
+from estimator import compiled
 from estimator import dynamics as D
 from estimator.log import SensorLog
 from estimator.noise import NoiseModel
-from estimator.pipeline import estimate
+from estimator.estimate import estimate
 from estimator.robot import paper_leg
 from estimator.synthetic import inverse_dynamics_log
 
@@ -45,7 +45,7 @@ def _rows(T=300, seed=0, alpha=0.37, c=2, force=(2.5, -1.5)):
 
 @pytest.mark.parametrize("enabled", [True, False], ids=["compiled", "numpy"])
 def test_grid_minimum_matches_a_direct_minimization(monkeypatch, enabled):
-    monkeypatch.setattr(kernels, "ENABLED", enabled)
+    monkeypatch.setattr(compiled, "ENABLED", enabled)
     x, q, W = _rows()
     T = len(x)
     lay = E.Layout(2)
@@ -80,7 +80,7 @@ def test_compiled_loop_matches_the_numpy_reference(monkeypatch):
     bins = np.arange(T) // 20
     out = []
     for enabled in (True, False):
-        monkeypatch.setattr(kernels, "ENABLED", enabled)
+        monkeypatch.setattr(compiled, "ENABLED", enabled)
         a, lf, ea, st = E.binned_terms(FULL, x[:50], q[:50], qn[:50], lk[:50], Wb, S0, S1, widx[:50],
                                        first[:50], bins[:50], 3, None)
         b, lf2, eb, _ = E.binned_terms(FULL, x[50:], q[50:], qn[50:], lk[50:], Wb, S0, S1, widx[50:],

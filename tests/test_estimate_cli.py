@@ -7,7 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from estimator.log import log_to_frame, read_log, write_log
+from estimator.log import log_to_frame, write_log
+from estimator.log_reader import read_log
 from estimator.robot import paper_leg
 from estimator.synthetic import inverse_dynamics_log
 from torquebench.cli import main

@@ -1,7 +1,8 @@
 """No import cycle among the project's modules (the graph built with ``ast`` from every ``.py`` of
 the packages). Module-level imports (run when the module is imported: the body, class bodies,
 ``if``/``try`` blocks; not ``if TYPE_CHECKING:``) must form no cycle. Imports inside functions run
-later and may close a loop without harm to import order; ``function_level_cycles`` lists those."""
+later and may close a loop without harm to import order; ``function_level_cycles`` lists those:
+none among the estimator's own modules, and no new one anywhere (``KNOWN_FUNCTION_LEVEL_CYCLES``)."""
 
 from __future__ import annotations
 
@@ -123,7 +124,7 @@ def function_level_cycles() -> list[list[str]]:
 def test_the_graph_sees_the_projects_imports():
     top, inner = import_graph()
     assert "torquebench.scene_views" in top["torquebench.pipeline"]          # module level
-    assert "estimator.pipeline" in inner["torquebench.pipeline"]             # inside a stage
+    assert "estimator.estimate" in inner["torquebench.pipeline"]             # inside a stage
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 
@@ -131,3 +132,37 @@ def test_no_module_level_import_cycle():
     top, _ = import_graph()
     found = cycles(top)
     assert not found, "module-level import cycles: " + "; ".join(" ↔ ".join(c) for c in found)
+
+
+# Cycles closed only by an import inside a function when this test was extended (a new one fails;
+# one that is fixed is simply no longer found and should be dropped from this list).
+KNOWN_FUNCTION_LEVEL_CYCLES = [
+    ["calibration", "calibration.store"],
+    ["estimator.sim.core", "estimator.sim.cost"],
+    ["estimator.spatial.geometry", "estimator.spatial.inertial", "estimator.spatial.model",
+     "estimator.spatial.robot"],
+    ["flexure.bank_weiser", "flexure.dwr"],
+    ["flexure.cad", "flexure.gmsh_mesh", "flexure.meshing"],
+    ["torquebench.commands.estimate", "torquebench.spatial_cli"],
+    ["torquebench.commands.identify", "torquebench.spatial_identify"],
+    ["torquebench.pipeline", "torquebench.reports.reproduction"],
+]
+
+
+def test_no_new_function_level_cycle():
+    new = [c for c in function_level_cycles() if c not in KNOWN_FUNCTION_LEVEL_CYCLES]
+    assert not new, "import cycles through function-level imports: " + \
+        "; ".join(" ↔ ".join(c) for c in new)
+
+
+def test_the_estimators_modules_form_no_cycle_even_inside_functions():
+    """The modules of ``estimator`` itself (not its sim/spatial subpackages), counting the imports
+    inside functions too: each compiled loop sits beside the function it speeds up and imports
+    only estimator.compiled; estimator.warmup, which runs them all, is imported by none."""
+    top, inner = import_graph()
+    own = {m for m in top if m == "estimator" or (m.startswith("estimator.") and m.count(".") == 1)}
+    assert {"estimator.compiled", "estimator.warmup", "estimator.estimate"} <= own
+    found = cycles({m: (top[m] | inner[m]) & own for m in own})
+    assert not found, "estimator import cycles: " + "; ".join(" ↔ ".join(c) for c in found)
+    assert not any("estimator.warmup" in inner[m] | top[m] for m in top)
+

@@ -7,7 +7,7 @@ from scipy.stats import norm
 
 from estimator import noise as Nz
 from estimator.log import SensorLog
-from estimator.pipeline import estimate
+from estimator.estimate import estimate
 from estimator.robot import paper_leg
 from estimator.synthetic import inverse_dynamics_log
 

@@ -16,8 +16,8 @@ import pytest
 
 from estimator import dynamics as D
 from estimator.localization import bias_forces
-from estimator.log import read_log
-from estimator.pipeline import estimate
+from estimator.log_reader import read_log
+from estimator.estimate import estimate
 from estimator.robot import paper_leg
 
 SAMPLES = Path(__file__).resolve().parents[1] / "examples" / "leg_poke"

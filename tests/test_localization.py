@@ -7,7 +7,7 @@ import pytest
 from estimator import dynamics as D
 from estimator import localization as L
 from estimator.detection import isolate
-from estimator.pipeline import estimate
+from estimator.estimate import estimate
 from estimator.robot import Robot, paper_leg
 from estimator.synthetic import moving_leg_poke
 
@@ -231,15 +231,15 @@ def test_fast_least_squares_matches_generic_lstsq():
             else:                              # clipped: cost can only be higher than the free one
                 assert cost[t] >= np.linalg.norm(e) - 1e-12
     # the compiled loop is the same solve
-    from estimator import kernels
+    from estimator import compiled
 
-    if kernels.available():
+    if compiled.available():
         ref = L.localize_dynamic(robot, q, r, weight=W)
-        kernels.ENABLED = False
+        compiled.ENABLED = False
         try:
             plain = L.localize_dynamic(robot, q, r, weight=W)
         finally:
-            kernels.ENABLED = True
+            compiled.ENABLED = True
         np.testing.assert_allclose(ref.cost, plain.cost, rtol=1e-9)
         same = ref.link == plain.link              # else a tie: α = 1 on a link and 0 on the next
         assert same.mean() > 0.9

@@ -4,9 +4,10 @@ and pandas (the fallback that names a bad field's line), value for value to the 
 import numpy as np
 import pytest
 
-import estimator.log as L
+import estimator.log_parsing as P
 from estimator.errors import InputError
-from estimator.log import LogReader, log_columns
+from estimator.log import log_columns
+from estimator.log_reader import LogReader, read_log
 from estimator.robot import paper_leg
 
 ROBOT = paper_leg()
@@ -47,7 +48,7 @@ def _write(path, rows, header=None):
 def _read(path, chunk=None, mode="arrow", monkeypatch=None):
     """The log's arrays and skipped lines through one of the three parsers."""
     if mode == "pandas-blocks":          # every byte block through pandas
-        monkeypatch.setattr(L, "_arrow_values", lambda *a: None)
+        monkeypatch.setattr(P, "arrow_values", lambda *a: None)
     elif mode == "pandas-file":          # the whole file through pandas' chunked reader
         monkeypatch.setattr(LogReader, "_csv_header_line", lambda self: None)
     reader = LogReader(path, ROBOT, chunk_samples=chunk)
@@ -87,12 +88,12 @@ def test_spellings_and_padding_pandas_accepts_read_the_same(tmp_path, monkeypatc
     rows[70][4] = '" 0.5"'
     rows[80][5] = "\t-0.75"
     path = _write(tmp_path / "odd.csv", rows)
-    monkeypatch.setattr(L, "CSV_MIN_BLOCK_BYTES", 512)       # many byte blocks, few fall back
+    monkeypatch.setattr(P, "CSV_MIN_BLOCK_BYTES", 512)       # many byte blocks, few fall back
     fast, skipped, sizes = _read(path, 333, "arrow", monkeypatch)
     assert skipped == [k + 2 for k in sorted(odd)] and sum(sizes) == 2500 - len(odd)
     assert fast["q"][50 - 0, 1] == 0.25 and fast["q"][60, 2] == 0.125 and fast["q"][70, 3] == 0.5
     for mode in ("pandas-blocks", "pandas-file"):
-        monkeypatch.setattr(L, "CSV_MIN_BLOCK_BYTES", 512)
+        monkeypatch.setattr(P, "CSV_MIN_BLOCK_BYTES", 512)
         slow, skipped_slow, sizes_slow = _read(path, 333, mode, monkeypatch)
         _same(fast, slow)
         assert skipped_slow == skipped and sizes_slow == sizes
@@ -105,7 +106,7 @@ def test_fields_pandas_refuses_name_their_line_on_the_fast_path(tmp_path, monkey
     rows = _rows(3000, seed=2, hard=False)
     rows[2700][4] = text                     # q1
     path = _write(tmp_path / "bad.csv", rows)
-    monkeypatch.setattr(L, "CSV_MIN_BLOCK_BYTES", 1024)
+    monkeypatch.setattr(P, "CSV_MIN_BLOCK_BYTES", 1024)
     with pytest.raises(InputError, match=r"bad.csv: line 2702, column 'q1': .* is not a number"):
         list(LogReader(path, ROBOT, chunk_samples=100))
     with pytest.raises(InputError, match=r"line 2702, column 'q1'"):
@@ -117,7 +118,7 @@ def test_chunk_sizes_and_byte_blocks_do_not_change_the_log(tmp_path, monkeypatch
     whole, _, sizes = _read(path, None, "arrow", monkeypatch)
     assert sizes == [4000]
     for chunk, block in ((97, 300), (1025, 4096), (4000, 1 << 20)):
-        monkeypatch.setattr(L, "CSV_MIN_BLOCK_BYTES", block)
+        monkeypatch.setattr(P, "CSV_MIN_BLOCK_BYTES", block)
         part, _, sizes = _read(path, chunk, "arrow", monkeypatch)
         _same(whole, part)
 
@@ -147,9 +148,9 @@ def _fixed_rows(rows):
 
 @pytest.mark.parametrize("floating", [True, False], ids=["floating", "fixed"])
 def test_compiled_row_split_equals_the_numpy_form(tmp_path, monkeypatch, floating):
-    """kernels.split_rows / check_steps against the numpy forms: the same arrays, skipped lines
+    """log_reader.split_rows / check_steps (compiled) against the numpy forms: the same arrays, skipped lines
     and chunk sizes on a log with NaN rows (also at a chunk's first and last row)."""
-    from estimator import kernels
+    from estimator import compiled
 
     rows = _rows(3000, seed=5)
     for k in (0, 1, 499, 500, 1234, 2999):
@@ -158,9 +159,9 @@ def test_compiled_row_split_equals_the_numpy_form(tmp_path, monkeypatch, floatin
     if not floating:
         rows, header = _fixed_rows(rows)
     path = _write(tmp_path / "gaps.csv", rows, header)
-    assert kernels.available()
+    assert compiled.available()
     fast = _read(path, 500, "arrow", monkeypatch)
-    monkeypatch.setattr(kernels, "ENABLED", False)
+    monkeypatch.setattr(compiled, "ENABLED", False)
     slow = _read(path, 500, "arrow", monkeypatch)
     _same(fast[0], slow[0])
     assert fast[1] == slow[1] == [2, 3, 501, 502, 1236, 3001] and fast[2] == slow[2]
@@ -168,30 +169,30 @@ def test_compiled_row_split_equals_the_numpy_form(tmp_path, monkeypatch, floatin
         assert np.all(fast[0]["q"][:, :3] == 0) and np.all(fast[0]["dq"][:, :3] == 0)
 
 
-@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "numpy"])
+@pytest.mark.parametrize("use_compiled", [True, False], ids=["compiled", "numpy"])
 @pytest.mark.parametrize("edit, message", [
     (lambda rows: rows[1700].__setitem__(0, rows[1699][0]), r"line 1702, column 't': time .* does not increase"),
     (lambda rows: rows[1001].__setitem__(0, repr(1.0014)), r"line 1003, column 't': irregular sampling"),
     (lambda rows: [r.__setitem__(0, repr(float(r[0]) + 5e-4)) for r in rows[500:]], r"line 502, column 't': irregular"),
     (lambda rows: rows[999].__setitem__(0, repr(0.9995)), r"line 1001, column 't': irregular"),  # at a chunk's end
 ], ids=["repeat", "jitter", "shift", "boundary"])
-def test_time_errors_name_the_same_line_compiled_or_not(tmp_path, monkeypatch, compiled, edit, message):
-    from estimator import kernels
+def test_time_errors_name_the_same_line_compiled_or_not(tmp_path, monkeypatch, use_compiled, edit, message):
+    from estimator import compiled
 
     rows = _rows(2000, seed=6, hard=False)
     edit(rows)
     path = _write(tmp_path / "time.csv", rows)
-    monkeypatch.setattr(kernels, "ENABLED", compiled)
+    monkeypatch.setattr(compiled, "ENABLED", use_compiled)
     with pytest.raises(InputError, match=message):
         list(LogReader(path, ROBOT, chunk_samples=500))
 
 
 @pytest.mark.parametrize("floating", [True, False], ids=["floating", "fixed"])
 def test_compiled_plausibility_sums_match_the_numpy_form(monkeypatch, floating):
-    """plausibility.Checker.rows compiled (kernels.plausibility_rows) against its numpy form, fed
+    """plausibility.Checker.rows compiled (plausibility.plausibility_rows) against its numpy form, fed
     the same chunks: the same step count, the velocity sums to rounding (summation order), the
     same angle error naming the same column and time."""
-    from estimator import kernels
+    from estimator import compiled
     from estimator.plausibility import Checker
 
     rng = np.random.default_rng(9)
@@ -202,8 +203,8 @@ def test_compiled_plausibility_sums_match_the_numpy_form(monkeypatch, floating):
     if not floating:
         q[:, :3] = dq[:, :3] = 0.0
     checkers = []
-    for compiled in (True, False):
-        monkeypatch.setattr(kernels, "ENABLED", compiled)
+    for use_compiled in (True, False):
+        monkeypatch.setattr(compiled, "ENABLED", use_compiled)
         c = Checker("log.csv", floating, 2)
         for a, b in ((0, 1), (1, 700), (700, 3001), (3001, T)):
             c.rows(t[a:b], q[a:b], dq[a:b])
@@ -213,8 +214,8 @@ def test_compiled_plausibility_sums_match_the_numpy_form(monkeypatch, floating):
     np.testing.assert_allclose(fast.sums, slow.sums, rtol=1e-12)
     assert fast.scale() == pytest.approx(slow.scale(), rel=1e-12)
     q[3456, 4] = 7.0                                     # q2 beyond 2π
-    for compiled in (True, False):
-        monkeypatch.setattr(kernels, "ENABLED", compiled)
+    for use_compiled in (True, False):
+        monkeypatch.setattr(compiled, "ENABLED", use_compiled)
         c = Checker("log.csv", floating, 2)
         c.rows(t[:3000], q[:3000], dq[:3000])
         with pytest.raises(InputError, match=r"column 'q2': joint angle 7 rad at t = 3.456 s"):
@@ -241,5 +242,5 @@ def test_parquet_with_nulls_and_integer_columns_reads_as_the_csv(tmp_path, monke
     b, skipped_b, _ = _read(parquet, 333, "arrow", monkeypatch)
     _same(a, b)
     assert skipped_a == skipped_b == [779]
-    whole = L.read_log(parquet)                          # four row groups, one log
+    whole = read_log(parquet)                          # four row groups, one log
     assert np.array_equal(whole.t, a["t"]) and whole.skipped_lines.tolist() == [779]

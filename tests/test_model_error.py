@@ -10,13 +10,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimator import inertial, kernels, observer
+from estimator import compiled, inertial, observer
 from estimator.errors import InputError
 from estimator.log import SensorLog
 from estimator.model import ModelUncertainty
 from estimator.model_error import ModelTerm, statistic_numpy
 from estimator.noise import NoiseModel, quiet_covariance, residual_covariance
-from estimator.pipeline import estimate
+from estimator.estimate import estimate
 from estimator.robot import paper_leg
 from estimator.synthetic import inverse_dynamics_log, sinusoidal_motion
 
@@ -65,11 +65,11 @@ def test_compiled_term_equals_the_numpy_form_in_any_chunks():
     parts = [a.statistic(t[s], log.q[s], log.dq[s], r[:, s], Rn, blk[s])
              for s in (slice(0, 700), slice(700, 1900), slice(1900, None))]
     s1, G1 = np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
-    kernels.ENABLED = False
+    compiled.ENABLED = False
     try:
         s2, G2 = ModelTerm(NOMINAL, cov, 100.0, 1e-3).statistic(t, log.q, log.dq, r, Rn, blk)
     finally:
-        kernels.ENABLED = True
+        compiled.ENABLED = True
     np.testing.assert_allclose(G1, G2, rtol=1e-9, atol=1e-15)
     np.testing.assert_allclose(s1, s2, rtol=1e-8)
     np.testing.assert_allclose(s2, statistic_numpy(r, G2, Rn, blk), rtol=1e-10)

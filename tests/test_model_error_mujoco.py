@@ -36,7 +36,7 @@ from estimator import identification as ident  # noqa: E402
 from estimator import inertial  # noqa: E402
 from estimator.model import ModelUncertainty  # noqa: E402
 from estimator.noise import NoiseModel  # noqa: E402
-from estimator.pipeline import estimate  # noqa: E402
+from estimator.estimate import estimate  # noqa: E402
 from estimator.robot import load_robot, paper_leg  # noqa: E402
 from estimator.sim.config import Poke  # noqa: E402
 from estimator.uncertainty import SensorNoise, interval_rms  # noqa: E402

@@ -99,7 +99,7 @@ def test_episode_error_estimate_matches_the_spread_of_answers():
     per-sample answers over the episode (within 15 %); the episode's own α is within 4 of its
     (much smaller) 1σ of the truth."""
     from estimator.log import SensorLog
-    from estimator.pipeline import estimate
+    from estimator.estimate import estimate
 
     T = 60_000
     t = np.arange(T) * DT

@@ -1,4 +1,4 @@
-"""`estimate --out OUT.csv`: the compiled row formatter (estimator.kernels.format_rows) writes
+"""`estimate --out OUT.csv`: the compiled row formatter (estimator.outframe.format_rows) writes
 the bytes pyarrow's CSV writer writes for the same rounded values (the reference)."""
 
 import io
@@ -7,9 +7,9 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pc
 
-from estimator import kernels
-from estimator.outframe import COLUMNS, FLOATS, FrameWriter, round_significant
-from estimator.pipeline import ContactEstimate
+from estimator import compiled
+from estimator.outframe import COLUMNS, FLOATS, FrameWriter, format_rows, round_significant
+from estimator.contact_estimate import ContactEstimate
 
 
 def _part(T, seed, lo=-13.5, hi=30.5):
@@ -43,10 +43,10 @@ def _pyarrow_rows(part) -> bytes:
 
 
 def test_formatter_writes_pyarrows_bytes():
-    assert kernels.available()
+    assert compiled.available()
     for seed in range(3):
         part = _part(100_000, seed)
-        mine = kernels.format_rows(part)
+        mine = format_rows(part)
         assert mine is not None
         ref = _pyarrow_rows(part)
         bad = [(a, b) for a, b in zip(mine.split(b"\n"), ref.split(b"\n")) if a != b]
@@ -57,19 +57,19 @@ def test_formatter_writes_pyarrows_bytes():
     part = ContactEstimate(t=edge, contact=edge > 1, link=np.arange(len(edge)), alpha=-edge, Fx=edge,
                            Fz=edge, px=edge, pz=edge, rnorm=edge, condition=edge,
                            reason=np.zeros(len(edge), np.int8), residual=np.zeros((len(edge), 5)))
-    assert kernels.format_rows(part) == _pyarrow_rows(part)
+    assert format_rows(part) == _pyarrow_rows(part)
 
 
 def test_values_round_significant_keeps_go_through_pyarrow(tmp_path, monkeypatch):
     """|x| < 1e-14 or ≥ 1e31 (kept with 17 digits): the formatter declines the part and the
     writer uses pyarrow's, so the file is the same with the compiled loops or without."""
     tiny = _part(2000, 7, lo=-20, hi=40)
-    assert kernels.format_rows(tiny) is None
+    assert format_rows(tiny) is None
     parts = [_part(3000, 8), tiny, _part(500, 9)]
     files = []
-    for compiled in (True, False):
-        monkeypatch.setattr(kernels, "ENABLED", compiled)
-        path = tmp_path / f"out_{compiled}.csv"
+    for use_compiled in (True, False):
+        monkeypatch.setattr(compiled, "ENABLED", use_compiled)
+        path = tmp_path / f"out_{use_compiled}.csv"
         with FrameWriter(path) as w:
             for p in parts:
                 w.write(p)

@@ -144,7 +144,7 @@ cell = st.one_of(st.floats(-1e3, 1e3).map(repr), tokens)
        rows=st.lists(st.lists(cell, min_size=0, max_size=12), max_size=30),
        regular=st.booleans())
 def test_log_reader_returns_a_valid_log_or_one_input_error(tmp_path, header, rows, regular):
-    from estimator.log import read_log
+    from estimator.log_reader import read_log
 
     lines = [header]
     for k, r in enumerate(rows):
@@ -168,7 +168,7 @@ def test_log_reader_returns_a_valid_log_or_one_input_error(tmp_path, header, row
 @PROPS
 @given(data=st.binary(max_size=300))
 def test_log_reader_on_binary_garbage(tmp_path, data):
-    from estimator.log import read_log
+    from estimator.log_reader import read_log
 
     path = tmp_path / "g.csv"
     path.write_bytes(data)

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from estimator.errors import InputError
-from estimator.log import SensorLog, read_log, write_log
+from estimator.log import SensorLog, write_log
+from estimator.log_reader import read_log
 from estimator.plausibility import PlausibilityWarning, check_log, velocity_scale
 
 

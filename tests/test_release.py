@@ -7,9 +7,10 @@ import pytest
 from scipy.special import chdtri
 
 from estimator import dynamics as D
-from estimator.log import SensorLog, read_log
+from estimator.log import SensorLog
+from estimator.log_reader import read_log
 from estimator.noise import NoiseModel
-from estimator.pipeline import estimate
+from estimator.estimate import estimate
 from estimator.robot import paper_leg
 from estimator.synthetic import inverse_dynamics_log
 

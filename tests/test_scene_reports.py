@@ -132,7 +132,7 @@ def _leg_estimates():
     """Both methods on a short leg log (inverse dynamics, 5 N on link 2 from 0.3 s) with the
     chi-square detector, and the true contact flags."""
     from estimator.noise import NoiseModel
-    from estimator.pipeline import estimate
+    from estimator.estimate import estimate
     from estimator.robot import paper_leg
     from estimator.synthetic import moving_leg_poke
 

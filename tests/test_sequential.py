@@ -7,12 +7,13 @@ import json
 import numpy as np
 import pytest
 
+from estimator import cusum_calibration as C
 from estimator import noise as Nz
 from estimator import sequential as S
 from estimator import timing
 from estimator.errors import InputError
+from estimator.estimate import estimate
 from estimator.log import SensorLog
-from estimator.pipeline import estimate
 from estimator.robot import paper_leg
 
 from test_noise_detection import NOISE, _noisy
@@ -83,12 +84,12 @@ def test_spectral_model_integrates_to_the_closed_form_covariance(declared):
     tim = timing.uniform(declared, 2)
     a, b, B0, B1 = Nz.filter_terms(ROBOT, Q0, 0 * Q0, NOISE, 100.0, 1e-3, tim)
     R = Nz.residual_covariance(ROBOT, Q0, 0 * Q0, NOISE, 100.0, 1e-3, tim)[0]
-    Sz = S.spectral_matrix(a, b, B0[0], B1[0], R)
+    Sz = C.spectral_matrix(a, b, B0[0], B1[0], R)
     assert np.allclose(Sz.mean(axis=0), np.eye(5), atol=1e-6)
-    lam = S.whitened_spectrum(a, b, B0[0], B1[0], R)
+    lam = C.whitened_spectrum(a, b, B0[0], B1[0], R)
     # the correlated residual has a smaller large-deviation exponent than independent samples
-    th = S.exponent(lam, 5, 5.0)
-    th_iid = S.exponent(np.ones((16, 5)), 5, 5.0)
+    th = C.exponent(lam, 5, 5.0)
+    th_iid = C.exponent(np.ones((16, 5)), 5, 5.0)
     # Wald's root for independent χ²_5: −(5/2) log(1 − 2θ) = 10 θ
     assert -2.5 * np.log1p(-2 * th_iid) == pytest.approx(10 * th_iid, rel=1e-9)
     assert th < th_iid / 5
@@ -121,11 +122,11 @@ def test_cusum_threshold_meets_its_rate_on_an_independent_synthetic_run():
     with a seed other than the calibration's: the onset count is the target within 3σ, σ the
     Poisson error of the count and the calibration's own stated error combined."""
     model = _paper_leg_model()
-    cal = S.calibrate_model(*model)
+    cal = C.calibrate_model(*model)
     alpha, T = 1e-3, 1_500_000
     h = cal.threshold(alpha)
     assert cal.rate(h) == pytest.approx(alpha, rel=1e-6)
-    s = S.synthetic_statistic(*model, T, seed=99)
+    s = C.synthetic_statistic(*model, T, seed=99)
     alarm, _ = S.cusum(s, 5, h, cal.drift)
     k = int(np.count_nonzero(np.diff(alarm.astype(np.int8)) == 1) + alarm[0])
     expected = alpha * T
@@ -141,8 +142,8 @@ def test_cusum_calibration_is_seeded_and_its_rate_decreases_with_the_threshold()
     monotonically with h over the whole range down to the splitting floor and beyond it
     (θ* extrapolation), and the thresholds for 1e-2 … 1e-9 per sample increase."""
     model = _paper_leg_model()
-    a = S.calibrate(model, 5, samples=200_000, particles=4000, rate_floor=1e-6)
-    b = S.calibrate(model, 5, samples=200_000, particles=4000, rate_floor=1e-6)
+    a = C.calibrate(model, 5, samples=200_000, particles=4000, rate_floor=1e-6)
+    b = C.calibrate(model, 5, samples=200_000, particles=4000, rate_floor=1e-6)
     assert np.array_equal(a.log_nu, b.log_nu) and a.retrigger == b.retrigger
     hs = np.linspace(0.5, 2 * a.h_grid[-1], 400)
     assert np.all(np.diff(a.rate(hs)) <= 0)
@@ -158,15 +159,15 @@ def test_compiled_splitting_stage_agrees_with_the_numpy_form():
     """The numba stage (one particle at a time, its own seeded generator) and the vectorized numpy
     form run the same particles from the same states: the fraction reaching the next level, the
     mean steps and the mean alarm duration (capped run) agree within 4 sampling σ."""
-    if not S._compiled():
+    if not C._compiled():
         pytest.skip("numba not installed: only the numpy form exists")
     a, b, B0, B1, R = _paper_leg_model()
-    At, C0, C1, _ = S.state_model(a, b, B0, B1, R)
-    z, w = S._free_run(a, b, B0, B1, R, 20_000, np.random.default_rng(5))
+    At, C0, C1, _ = C.state_model(a, b, B0, B1, R)
+    z, w = C._free_run(a, b, B0, B1, R, 20_000, np.random.default_rng(5))
     idx = np.random.default_rng(6).integers(0, 20_000, 6000)
     g0 = np.full(idx.size, 10.0)
     res = {}
-    for name, fn in (("numba", S._run_stage), ("numpy", S._stage)):
+    for name, fn in (("numba", C._run_stage), ("numpy", C._stage)):
         up = fn(z[idx], w[idx], g0, 15.0, At, C0, C1, 5, 5.0, np.random.default_rng(7))
         dur = fn(z[idx], w[idx], g0, np.inf, At, C0, C1, 5, 5.0, np.random.default_rng(8), cap=10.0)
         res[name] = (up[1].mean(), up[5], dur[5])
@@ -179,14 +180,14 @@ def test_compiled_splitting_stage_agrees_with_the_numpy_form():
 
 
 def test_warm_compiles_the_calibration_loops():
-    assert S.warm() == bool(S._compiled())
+    assert C.warm() == bool(C._compiled())
 
 
 def test_onset_counts_equal_the_detector():
     """The compiled onset counter (several thresholds at once) counts what ``cusum`` flags."""
     s = _stat(50_000, 3, shift_every=600)
     hs = np.array([5.0, 20.0, 35.0, 80.0])
-    got = S.onset_counts(s, 5, hs, 5.0)
+    got = C.onset_counts(s, 5, hs, 5.0)
     for hh, k in zip(hs, got):
         alarm, _ = S.cusum(s, 5, hh, 5.0)
         assert k == int(np.count_nonzero(np.diff(alarm.astype(np.int8)) == 1) + alarm[0])
@@ -243,7 +244,7 @@ def test_arma_theta_is_recovered_from_the_lag1_autocorrelation(theta):
     a = np.exp(-0.1)
     x = lfilter([1.0, theta], [1.0, -a], np.random.default_rng(3).standard_normal(400_000))[500:]
     rho1 = np.corrcoef(x[1:], x[:-1])[0, 1]
-    assert S.arma_theta(a, rho1) == pytest.approx(theta, abs=0.08)
+    assert C.arma_theta(a, rho1) == pytest.approx(theta, abs=0.08)
 
 
 def test_cusum_with_a_quiet_window():

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from estimator.pipeline import estimate
+from estimator.estimate import estimate
 from estimator.robot import paper_leg
 from estimator.sim import Controller, Poke, Sensors, SimConfig, check_stability, simulate, static_readings
 from estimator.sim.static import static_hold_log

@@ -86,7 +86,7 @@ def test_simulate_cli_writes_log_and_truth(tmp_path):
 
 
 def test_simulate_cli_reads_back_through_the_estimator(tmp_path):
-    from estimator.log import read_log
+    from estimator.log_reader import read_log
     from estimator.robot import paper_leg
 
     out = tmp_path / "f.csv"

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from estimator import timing
-from estimator.log import read_log
-from estimator.pipeline import estimate
+from estimator.log_reader import read_log
+from estimator.estimate import estimate
 from estimator.robot import paper_leg
 from estimator.sim import Controller, Sensors, SimConfig, simulate
 from estimator.sim.output import log_files, timing_toml

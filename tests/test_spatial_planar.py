@@ -10,9 +10,9 @@ import pytest
 
 pytest.importorskip("pinocchio")
 
-from estimator.log import read_log  # noqa: E402
+from estimator.log_reader import read_log  # noqa: E402
 from estimator.noise import paper_leg_noise  # noqa: E402
-from estimator.pipeline import estimate  # noqa: E402
+from estimator.estimate import estimate  # noqa: E402
 from estimator.robot import paper_leg  # noqa: E402
 from estimator.spatial.logs import SpatialLog, make_noise  # noqa: E402
 from estimator.spatial.model import UrdfModel  # noqa: E402

@@ -7,7 +7,7 @@ import pytest
 from estimator.errors import InputError
 from estimator.log import SensorLog
 from estimator.observer import residual_offline
-from estimator.pipeline import estimate
+from estimator.estimate import estimate
 from estimator.robot import paper_leg
 from estimator.sim.static import static_readings
 from estimator.uncertainty import SensorNoise, first_order, monte_carlo

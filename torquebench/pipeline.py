@@ -391,7 +391,7 @@ def _read_counts_log(scene):
     """A recorded log; with counts columns, those are read here (pandas), torques come later."""
     import pandas as pd
 
-    from estimator.log import read_log
+    from estimator.log_reader import read_log
 
     c = scene.chain
     log = read_log(c.log_file, scene.robot)
@@ -511,7 +511,7 @@ def run_estimates(scene, inp):
     [estimator].false_alarm_rate; ``paper`` → ε = 0.06 (or the threshold), its isolation rows
     whitened by the same noise model. A scene that sets threshold gets ‖r‖ > threshold for both."""
     from estimator.log import SensorLog
-    from estimator.pipeline import estimate
+    from estimator.estimate import estimate
 
     rd, tq = inp["readings"], inp["torques"]
     robot = scene.robot                 # the file the estimator reads (the simulation: sim.robot)

@@ -15,7 +15,7 @@ Columns (SI units, one row per sample):
                                      (moment about the sensor origin)
 
 A fixed-base log omits the base columns: the base is at the declaration's mount pose, at rest.
-The reader reuses estimator.log's block parsers (pyarrow / pandas, the same rules for NaN rows,
+The reader reuses estimator.log_reader's block parsers (pyarrow / pandas, the same rules for NaN rows,
 time order, irregular steps) and yields ``SpatialLog`` chunks.
 """
 
@@ -28,7 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from estimator.errors import InputError
-from estimator.log import DEFAULT_CHUNK_SAMPLES, LogReader, _check_steps, _line, rows_to_lines
+from estimator.log_parsing import file_line
+from estimator.log_reader import DEFAULT_CHUNK_SAMPLES, LogReader, check_steps_numpy, rows_to_lines
 
 BASE_POSE = ["x", "y", "z", "qx", "qy", "qz", "qw"]
 BASE_TWIST = ["vx", "vy", "vz", "wx", "wy", "wz"]
@@ -91,7 +92,7 @@ def _check_header(names, robot, source):
 
 
 class SpatialLogReader(LogReader):
-    """A 3-D log read in chunks (estimator.log.LogReader's parsers and checks, the 3-D columns)."""
+    """A 3-D log read in chunks (estimator.log_reader.LogReader's parsers and checks, the 3-D columns)."""
 
     def __init__(self, path, robot, model, chunk_samples: int | None = DEFAULT_CHUNK_SAMPLES,
                  max_jitter: float = 0.01):
@@ -143,7 +144,7 @@ class SpatialLogReader(LogReader):
             off = np.flatnonzero(np.abs(norm - 1) > 1e-3)
             if off.size:
                 k = off[0]
-                raise InputError(f"{self.source}: line {_line(rows[k])}: the base quaternion "
+                raise InputError(f"{self.source}: line {file_line(rows[k])}: the base quaternion "
                                  f"(qx, qy, qz, qw) has norm {norm[k]:.6g}, expected 1")
         else:
             q[:, :7] = self.robot.rest_q()[:7]
@@ -158,13 +159,13 @@ class SpatialLogReader(LogReader):
         if self.period_s is None:
             tt = t if self._last is None else np.r_[self._last[0], t]
             self.period_s = regular_period(tt)
-        kind, k = _check_steps(t, rows, self._last, self.period_s, self.max_jitter,
+        kind, k = check_steps_numpy(t, rows, self._last, self.period_s, self.max_jitter,
                                self._last is not None or len(t) > 2)
         if kind:
             tt = t if self._last is None else np.r_[self._last[0], t]
             rr = rows if self._last is None else np.r_[self._last[1], rows]
             what = "does not increase" if kind == 1 else "is an irregular step"
-            raise InputError(f"{self.source}: line {_line(rr[k + 1])}, column 't': time {tt[k + 1]:g} s "
+            raise InputError(f"{self.source}: line {file_line(rr[k + 1])}, column 't': time {tt[k + 1]:g} s "
                              f"{what} (previous sample {tt[k]:g} s; period {self.period_s:.6g} s)")
         self._last = (t[-1], rows[-1])
         self.n_samples += T

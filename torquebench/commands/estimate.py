@@ -228,10 +228,11 @@ def _run(args, start) -> int:
 
     from tqdm import tqdm
 
-    from estimator.log import LogReader, prefetch
+    from estimator.estimate import open_stream
+    from estimator.log_reader import LogReader, prefetch
     from estimator.outframe import BackgroundWriter, FrameWriter
-    from estimator.pipeline import open_stream
     from estimator.robot import PAPER_LEG_TOML, load_robot
+    from torquebench.errors import InputError
     from torquebench.io import print_json
 
     from estimator.spatial.robot import is_spatial_robot_file

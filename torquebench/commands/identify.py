@@ -84,7 +84,7 @@ def _noise(args, log_path, n_links):
 def _read(args, path: Path, robot):
     """A log as one contiguous SensorLog; a stretch of NaN/inf rows is refused (the momentum
     balance cannot bridge it)."""
-    from estimator.log import read_log
+    from estimator.log_reader import read_log
 
     log = read_log(path, robot)
     if log.n_skipped:

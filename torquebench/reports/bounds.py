@@ -80,7 +80,7 @@ def evaluate(robot, log0, truth, link, alpha, noise, seeds, steady_bound=True, t
     stated σ and bound, the release delay."""
     from estimator import bounds
     from estimator.noise import NoiseModel, residual_covariance
-    from estimator.pipeline import estimate
+    from estimator.estimate import estimate
 
     _, tau_s, ft_s = noise
     nm = NoiseModel(torque_sigma_Nm=[tau_s], ft_sigma=list(ft_s))
@@ -235,7 +235,7 @@ def build(out_dir: Path, quick: bool = False) -> list[Path]:
         w, wo = [], []
         for s in rel_seeds:
             from estimator.noise import NoiseModel
-            from estimator.pipeline import estimate
+            from estimator.estimate import estimate
 
             nm = NoiseModel(torque_sigma_Nm=[0.005], ft_sigma=[0.1, 0.1, 0.01])
             log = _noisy(res.log, 0.005, (0.1, 0.1, 0.01), 500 + s)
@@ -272,7 +272,7 @@ def _leg_poke_section(robot, seeds) -> list[str]:
     """examples/leg_poke (MuJoCo, noise-free) with the paper leg's sensor noise added."""
     import pandas as pd
 
-    from estimator.log import read_log
+    from estimator.log_reader import read_log
     from torquebench.io import REPO_ROOT
 
     log = read_log(REPO_ROOT / "examples/leg_poke/leg_poke.csv", robot)

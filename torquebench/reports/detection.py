@@ -84,7 +84,7 @@ def _pokes(T, magnitude, seed, period=500, on=100):
 
 def _stats(robot, log):
     """(chi-square statistic s_k, ‖r‖, chi2 dof) on a log with the default detector settings."""
-    from estimator.pipeline import estimate
+    from estimator.estimate import estimate
 
     est = estimate(robot, log)
     paper = np.linalg.norm(est.residual, axis=1)
@@ -93,11 +93,11 @@ def _stats(robot, log):
 
 def _calibration(robot, log):
     """The CUSUM calibration the pipeline uses for these logs (paper leg noise, declared timing)."""
-    from estimator import observer, sequential
+    from estimator import cusum_calibration, observer
     from estimator.noise import paper_leg_noise
 
-    return sequential.model_calibration(robot, log.q[0], log.dq[0], paper_leg_noise(), 100.0,
-                                        observer.regular_period(log.t), log.timing)
+    return cusum_calibration.model_calibration(robot, log.q[0], log.dq[0], paper_leg_noise(), 100.0,
+                                               observer.regular_period(log.t), log.timing)
 
 
 def _onsets(flag) -> int:
@@ -132,7 +132,7 @@ def build(out_dir: Path, quick: bool = False) -> list[Path]:
     import matplotlib.pyplot as plt
     from scipy.stats import chi2
 
-    from estimator.pipeline import estimate
+    from estimator.estimate import estimate
     from estimator.robot import paper_leg
     from estimator.sequential import cusum
 
@@ -218,7 +218,7 @@ def build(out_dir: Path, quick: bool = False) -> list[Path]:
     lines.append("")
     # the threshold formula alone, on a long synthetic run of the same residual process
     from estimator import noise as noise_mod
-    from estimator import sequential as seq
+    from estimator import cusum_calibration as seq
 
     n_syn = 1_000_000 if quick else 6_000_000
     q0 = np.array([0.0, 0.0, 0.0, 0.9, -1.6])

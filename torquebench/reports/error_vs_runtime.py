@@ -149,7 +149,7 @@ def _sim_scene(quick: bool):
 
 def simulator_rows(quick: bool = False) -> tuple[list[dict], dict]:
     """Trajectory and localization error of every integrator setting on a moving, poked leg."""
-    from estimator.pipeline import estimate
+    from estimator.estimate import estimate
     from estimator.sim import simulate
 
     cfg = _sim_scene(quick)
@@ -351,7 +351,7 @@ def observer_rows(quick: bool = False) -> tuple[list[dict], dict]:
     that holds the force (the delay is then < one sample period Δt, reported as such); for a poke
     sized so that the steady whitened residual is twice the threshold, the crossing delay is
     informative: a first-order lag r(t) = r_ss (1 − e^{−Kt}) crosses r_ss/2 at t = ln 2 / K."""
-    from estimator.pipeline import estimate
+    from estimator.estimate import estimate
 
     gains_ = (30.0, 300.0) if quick else (10.0, 30.0, 100.0, 300.0, 1000.0)
     rates = (250.0, 1000.0) if quick else (250.0, 1000.0, 4000.0)
@@ -405,7 +405,7 @@ def observer_section(out_dir: Path, quick: bool = False):
                    error_label="RMS force error / |F| (steady state)",
                    reference="the exact applied force (static hold: F is known exactly)",
                    notes=["Fixed-base paper leg held at q = (0.5, −1.0) rad, Table II sensor noise; a 7 N poke on "
-                          "link 2 at α = 0.6 switches on after a 0.5 s tare. `estimator.pipeline.estimate` "
+                          "link 2 at α = 0.6 switches on after a 0.5 s tare. `estimator.estimate.estimate` "
                           "(`dynamic`, exact discretization, chi-square detector at 1 false alarm per hour). "
                           "Error, bias and noise over the contact window's last 0.5 s.",
                           "Detection delay, from the force step to the first detected sample, with the pipeline's "
@@ -426,7 +426,7 @@ def observer_section(out_dir: Path, quick: bool = False):
 
 def localizer_rows(quick: bool = False) -> tuple[list[dict], dict]:
     """`paper` and `dynamic` on the static step log and on the moving leg."""
-    from estimator.pipeline import estimate
+    from estimator.estimate import estimate
     from estimator.sim import simulate
 
     robot, slog, struth, _ = _static_step_log(1000.0)

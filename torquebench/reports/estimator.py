@@ -31,8 +31,8 @@ def _leg_poke(out_dir: Path, lines: list[str]) -> list[Path]:
     import matplotlib.pyplot as plt
     import pandas as pd
 
-    from estimator.log import read_log
-    from estimator.pipeline import estimate
+    from estimator.log_reader import read_log
+    from estimator.estimate import estimate
     from estimator.robot import paper_leg
 
     log_path = SAMPLES / "leg_poke.csv"
@@ -95,7 +95,7 @@ def _moving(out_dir: Path, lines: list[str]) -> list[Path]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from estimator.pipeline import estimate
+    from estimator.estimate import estimate
     from estimator.robot import paper_leg
     from estimator.synthetic import moving_leg_poke
 

@@ -85,7 +85,7 @@ def _identify(nominal, true, seconds=20.0, seed=0, noise_scale=1.0):
 
 
 def _poke_error(robot, log, truth, model_uncertainty=None):
-    from estimator.pipeline import estimate
+    from estimator.estimate import estimate
 
     est = estimate(robot, log, noise=_noise(), model_uncertainty=model_uncertainty)
     phase = (log.t >= 1.05) & (log.t < 3.0)
@@ -97,7 +97,7 @@ def _poke_error(robot, log, truth, model_uncertainty=None):
 
 def _smallest_detected(robot, model_uncertainty, seed=0):
     """The smallest poke (link 2, α = 0.5, −π/3, held leg) flagged within 20 ms of its onset."""
-    from estimator.pipeline import estimate
+    from estimator.estimate import estimate
 
     for mag in MAGNITUDES_N:
         F = mag * np.array([math.cos(-math.pi / 3), math.sin(-math.pi / 3)])
@@ -116,7 +116,7 @@ def build(out_dir: Path, quick: bool = False) -> list[Path]:
 
     from estimator import inertial
     from estimator.model import ModelUncertainty
-    from estimator.pipeline import estimate
+    from estimator.estimate import estimate
     from estimator.robot import paper_leg
     from estimator.uncertainty import SensorNoise, interval_rms
 

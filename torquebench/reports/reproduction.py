@@ -108,7 +108,7 @@ def evaluate_dynamic(scene, res, *, with_traces=True, chain=None) -> dict:
     """Estimate a simulated dynamic scene with both methods (+ filtered dynamic) and score them.
     The detector knows the log's sensor noise (pipeline.scene_noise_model, readings="log";
     ``chain``: the scene's sensor chain for a bridge torque model, else built from the scene)."""
-    from estimator.pipeline import estimate
+    from estimator.estimate import estimate
     from torquebench.pipeline import collision_phase_mask, scene_noise_model
     from userio.errors import InputError
 
@@ -168,7 +168,7 @@ def evaluate_dynamic(scene, res, *, with_traces=True, chain=None) -> dict:
 
 def evaluate_static(scene) -> dict:
     """Static holds (Table IV or the sweep): per-point mean estimate over the window, errors, flags."""
-    from estimator.pipeline import estimate
+    from estimator.estimate import estimate
     from estimator.sim.static import static_hold_log
     from estimator.localization import REASONS
 
@@ -291,7 +291,7 @@ def stiffness_cases(quick: bool = False):
 
 def stiffness_table(quick=False, progress=True) -> list[dict]:
     from estimator.errors import InputError
-    from estimator.pipeline import estimate
+    from estimator.estimate import estimate
     from estimator.sim import simulate
 
     scenes, cases = stiffness_cases(quick)
@@ -519,7 +519,7 @@ def markdown(results, plot_names) -> str:
          "`estimator.sim` (BDF, rtol 1e-6, continuous PD; checked against the MuJoCo sample log to",
          "1e-8 rad / 3e-6 N·m / 5e-5 N). Sensors: FT noise σ_FT = [0.1 N, 0.1 N, 0.01 N·m] (Table II),",
          "joint torques read through the paper's bridge/ADC chain (`bridge.chain.paper_chain()`,",
-         "σ ≈ 0.013 N·m), 1 kHz. Estimator: `estimator.pipeline.estimate`, K = 100 1/s, ε_res = 0.06.",
+         "σ ≈ 0.013 N·m), 1 kHz. Estimator: `estimator.estimate.estimate`, K = 100 1/s, ε_res = 0.06.",
          "",
          "**Collision phase** = true poke active and t ≥ t_on + 5/K (50 ms after the onset: the",
          "residual has converged to 0.7 %). Errors are estimate − truth per sample; |F| and |p| are the",

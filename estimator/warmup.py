@@ -1,0 +1,53 @@
+"""Compile the estimator's numba loops once, so that the first estimate, log read or CUSUM
+calibration does not pay the compilation (numba writes the machine code to its cache beside each
+module). ``run.sh`` calls ``warm()`` when it installs the project; no module imports this one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from estimator import compiled, cusum_calibration, localization_loops, log_reader, model_kernels
+from estimator import observer, outframe, plausibility
+from estimator.localization import weight_blocks
+from estimator.model_error import ModelTerm
+from estimator.robot import paper_leg
+
+
+def warm() -> bool:
+    """Run every compiled loop once on a two-sample paper leg; False without numba."""
+    if not compiled.available():
+        return False
+    robot = observer.full_robot(paper_leg())
+    q = np.zeros((2, 5))
+    PT, uT = observer.momentum_terms_T(robot, q, q, q)
+    _warm_model(robot)
+    for q_now in (q, None):         # the estimator passes the current posture; localize alone not
+        localization_loops.localize(robot, q, uT.T + 1.0, weight_blocks(5, 2), q_now,
+                                    min_force_N=0.05, max_condition=20.0, ambiguity_tol=1e-3,
+                                    position_tol_m=0.005, bound_tol=0.05)
+    for base in (3, 0):             # the log reader's loops: floating and fixed base
+        width = 1 + 2 * (base + 2) + 5
+        log_reader.split_rows(np.zeros((width, 3)).T, base, 2)          # column-major blocks
+        log_reader.split_rows(np.zeros((width, 4)).T[1:], base, 2)      # and slices of them
+        valid, t, *_, rows = log_reader.split_rows(np.zeros((3, width)), base, 2)
+        log_reader.check_steps(t + np.arange(3), rows, None, 1.0, 0.01, True)
+        log_reader.check_steps(t + np.arange(3), rows, (-1.0, -1), 1.0, 0.01, True)
+    outframe.format_rows(outframe._empty_part())
+    observer.first_order(np.ones(2), np.ones(2), np.zeros((2, 2)), np.zeros((2, 3)), 0, 2)
+    plausibility.plausibility_rows(t, np.zeros((3, 5)), np.zeros((3, 5)), 0, 2, 6.3, None, np.zeros(3))
+    plausibility.plausibility_rows(t, np.zeros((3, 5)), np.zeros((3, 5)), 3, 2, 6.3,
+                                   (-1.0, np.zeros(2), np.zeros(2)), np.zeros(3))
+    cusum_calibration.warm()
+    return True
+
+
+def _warm_model(robot) -> None:
+    """The inertial-parameter model's loops (estimator.model_kernels) on a two-sample chain."""
+    if not model_kernels.available():
+        return
+    q = np.zeros((2, robot.n_links + 3))
+    model_kernels.momentum_regressor(robot, q, q)
+    term = ModelTerm(robot, np.eye(len(robot.parameter_names)), 100.0, 1e-3)
+    term.statistic(np.arange(2) * 1e-3, q, q, np.zeros((robot.n_links + 3, 2)),
+                   np.eye(robot.n_links + 3)[None], np.zeros(2, np.int64))
