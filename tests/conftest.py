@@ -107,6 +107,10 @@ def pytest_terminal_summary(terminalreporter, config):
     n = getattr(config, "_torquebench_slow_left_out", 0)
     if n:
         terminalreporter.write_line(f"{n} slow tests left out: `bash run.sh test --all` runs them (CI does)")
+    top = sorted(_SHARED_SEEN.items(), key=lambda kv: -kv[1])[:5]
+    if top and top[0][1] >= 1.0:
+        terminalreporter.write_line("shared fixtures, CPU s summed over workers, charged to no test: "
+                                    + ", ".join(f"{k} {v:.1f}" for k, v in top))
 
 
 # ---------------------------------------------------------------- the CPU budget guard
@@ -148,6 +152,7 @@ def pytest_fixture_setup(fixturedef, request):
 def pytest_runtest_makereport(item, call):
     outcome = yield
     report = outcome.get_result()
+    _record_shared(report, item)
     budget = _budget()
     if (call.when != "call" or budget <= 0 or not report.passed or item is not _Meter.item
             or item.get_closest_marker("slow") or item.config.getoption("run_all")):
@@ -167,6 +172,23 @@ def pytest_runtest_makereport(item, call):
     if msg:
         report.outcome = "failed"
         report.longrepr = msg
+
+
+def _record_shared(report, item):
+    """The CPU of the shared fixtures set up for this test travels with its report (xdist sends
+    user_properties to the controller), so the run can list them apart from the tests."""
+    if report.when == "call" and item is _Meter.item and _Meter.shared_by:
+        report.user_properties.append(("shared_fixture_cpu_s", dict(_Meter.shared_by)))
+
+
+_SHARED_SEEN: dict = {}
+
+
+def pytest_runtest_logreport(report):
+    for name, value in report.user_properties:
+        if name == "shared_fixture_cpu_s":
+            for k, v in value.items():
+                _SHARED_SEEN[k] = _SHARED_SEEN.get(k, 0.0) + v
 
 
 # ---------------------------------------------------------------- shared expensive results
@@ -195,6 +217,28 @@ def run_lock(name: str):
             yield
         finally:
             fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def shared_result(name: str, compute, *inputs):
+    """``compute()`` once per run for all xdist workers: the first worker to ask computes it under
+    a lock and puts it in the run's cache directory, the other waits (no CPU) and unpickles it.
+    ``name`` and ``inputs`` (plain values, paths: a file's bytes are hashed) make the key. Call it
+    from a module- or session-scoped fixture: the guard charges that to the fixture, not a test."""
+    from torquebench.cache import Cache
+
+    h = hashlib.sha256(name.encode())
+    for x in inputs:
+        h.update(repr(x).encode())
+        if isinstance(x, (str, os.PathLike)) and os.path.isfile(x):
+            h.update(open(x, "rb").read())
+    key = h.hexdigest()[:32]                       # the cache takes hex keys only
+    cache = Cache(run_cache_dir())
+    with run_lock(key):
+        hit = cache.get(key)
+        if hit is None:
+            cache.put(key, compute())
+            hit = cache.get(key)
+    return hit
 
 
 def warm_scene(path: str, outputs=SHARED_STAGES):
@@ -237,49 +281,3 @@ def private_stage_cache(tmp_path, e2e_stages):
     d = tmp_path / "stage-cache"
     shutil.copytree(e2e_stages.dir, d, ignore=shutil.ignore_patterns("locks"))
     return Cache(d)
-
-
-def _memo_key(analyze, args, kwargs) -> str:
-    """Hash of analyze's inputs: the design (a dataclass of plain values, pickled) with the bytes
-    of the part file it names, and the mesh arguments (``progress`` left out)."""
-    import inspect
-    import pickle
-
-    bound = inspect.signature(analyze).bind(*args, **kwargs)
-    bound.apply_defaults()
-    a = dict(bound.arguments)
-    a.pop("progress", None)
-    design = a.pop("design")
-    h = hashlib.sha256(pickle.dumps((design, sorted(a.items())), protocol=4))
-    for named in (getattr(design, "file_path", None), getattr(design, "sensor_path", None)):
-        if named and os.path.isfile(named):          # the part and the sensor it reads, by content
-            h.update(open(named, "rb").read())
-    return "analyze-" + h.hexdigest()[:32]
-
-
-@pytest.fixture
-def fem_memo(monkeypatch):
-    """``flexure.analysis.analyze`` (one mesh level: mesh, assemble, solve, read the gauges)
-    remembered for the whole run, on disk in the run's cache directory and shared by the workers:
-    tests that put the same design on the same levels through different front ends (JSON, text,
-    --rtol, output files) solve it once. Each call gets its own unpickled copy (callers may mutate
-    it). Only for tests that check what is done with an analysis, never for the meshing or
-    solver tests themselves; progress lines of a remembered level are not printed again."""
-    import flexure.analysis as A
-    from torquebench.cache import Cache
-
-    real = A.analyze
-    cache = Cache(run_cache_dir())
-
-    def remembered(*args, **kwargs):
-        key = _memo_key(real, args, kwargs)
-        with run_lock(key):
-            hit = cache.get(key)
-            if hit is None:
-                hit = real(*args, **kwargs)
-                cache.put(key, hit)
-                return cache.get(key)
-        return hit
-
-    monkeypatch.setattr(A, "analyze", remembered)
-    return remembered
