@@ -13,6 +13,10 @@
 - The guard (on the default run; ``--all`` runs everything): an unmarked test whose CPU time (this process, all threads, plus the subprocesses it
   waited for; its module- or session-scoped fixtures are charged separately) exceeds
   ``TEST_BUDGET_CPU_S`` fails with a message asking for ``@pytest.mark.slow`` or a smaller case.
+  What one test pays for all the others is not charged to it, so the verdict does not depend on
+  which worker took which test first: shared fixtures (computed once per run for all workers
+  with ``shared_result``) and numba compiling in the test process (a cache miss on a fresh
+  clone) are summed apart and listed at the end of the run.
   CPU time rather than wall time: a loaded machine slows a test down but hardly changes its CPU
   time. ``TORQUEBENCH_TEST_BUDGET_S=0`` turns the guard off (e.g. under a profiler or coverage).
 """
@@ -53,6 +57,7 @@ def _budget() -> float:
 def pytest_configure(config):
     """The controller (or a plain run) makes the run's cache directory; xdist workers inherit the
     environment variable, so all processes share it. Removed at the end of the run."""
+    _install_jit_meter()
     if os.environ.get("PYTEST_XDIST_WORKER"):
         return
     d = tempfile.mkdtemp(prefix="torquebench-test-cache-")
@@ -107,9 +112,9 @@ def pytest_terminal_summary(terminalreporter, config):
     n = getattr(config, "_torquebench_slow_left_out", 0)
     if n:
         terminalreporter.write_line(f"{n} slow tests left out: `bash run.sh test --all` runs them (CI does)")
-    top = sorted(_SHARED_SEEN.items(), key=lambda kv: -kv[1])[:5]
+    top = sorted(_SHARED_SEEN.items(), key=lambda kv: -kv[1])[:6]
     if top and top[0][1] >= 1.0:
-        terminalreporter.write_line("shared fixtures, CPU s summed over workers, charged to no test: "
+        terminalreporter.write_line("shared fixtures and numba compiling, CPU s summed over workers, charged to no test: "
                                     + ", ".join(f"{k} {v:.1f}" for k, v in top))
 
 
@@ -125,11 +130,40 @@ class _Meter:
     shared = 0.0                 # CPU of module/session fixtures set up during this test
     shared_by: dict = {}
     depth = 0
+    jit = 0.0                    # CPU of numba compiling (cache misses) in this process, ever
+    jit_start = 0.0
+
+
+def _install_jit_meter():
+    """Count the CPU numba spends compiling (a cache miss: the first process of a fresh clone to
+    call a kernel) apart from the test that happened to call it first. Only real compiles fire
+    "numba:compile"; loading from the on-disk cache (cache=True) does not."""
+    try:
+        from numba.core import event
+    except ImportError:
+        return
+
+    class JitMeter(event.Listener):
+        level = 0
+        t0 = 0.0
+
+        def on_start(self, ev):
+            if JitMeter.level == 0:
+                JitMeter.t0 = time.process_time()
+            JitMeter.level += 1
+
+        def on_end(self, ev):
+            JitMeter.level -= 1
+            if JitMeter.level == 0:
+                _Meter.jit += time.process_time() - JitMeter.t0
+
+    event.register("numba:compile", JitMeter())
 
 
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_setup(item):
     _Meter.item, _Meter.start, _Meter.shared, _Meter.shared_by = item, _cpu_s(), 0.0, {}
+    _Meter.jit_start = _Meter.jit
     yield
 
 
@@ -137,13 +171,13 @@ def pytest_runtest_setup(item):
 def pytest_fixture_setup(fixturedef, request):
     outer = fixturedef.scope != "function" and _Meter.depth == 0     # nested ones counted once
     _Meter.depth += fixturedef.scope != "function"
-    t0 = _cpu_s()
+    t0, jit0 = _cpu_s(), _Meter.jit
     try:
         yield
     finally:
         _Meter.depth -= fixturedef.scope != "function"
     if outer and _Meter.item is not None:
-        cost = _cpu_s() - t0
+        cost = _cpu_s() - t0 - (_Meter.jit - jit0)          # compiling is counted apart
         _Meter.shared += cost
         _Meter.shared_by[fixturedef.argname] = _Meter.shared_by.get(fixturedef.argname, 0.0) + cost
 
@@ -157,7 +191,7 @@ def pytest_runtest_makereport(item, call):
     if (call.when != "call" or budget <= 0 or not report.passed or item is not _Meter.item
             or item.get_closest_marker("slow") or item.config.getoption("run_all")):
         return                     # --all (CI) runs everything: the budget guards the default run
-    own = _cpu_s() - _Meter.start - _Meter.shared
+    own = _cpu_s() - _Meter.start - _Meter.shared - (_Meter.jit - _Meter.jit_start)
     heavy = {k: v for k, v in _Meter.shared_by.items() if v > FIXTURE_BUDGET_CPU_S * budget / TEST_BUDGET_CPU_S}
     msg = None
     if own > budget:
@@ -179,6 +213,8 @@ def _record_shared(report, item):
     user_properties to the controller), so the run can list them apart from the tests."""
     if report.when == "call" and item is _Meter.item and _Meter.shared_by:
         report.user_properties.append(("shared_fixture_cpu_s", dict(_Meter.shared_by)))
+    if report.when == "call" and item is _Meter.item and _Meter.jit > _Meter.jit_start:
+        report.user_properties.append(("shared_fixture_cpu_s", {"(numba compiling)": _Meter.jit - _Meter.jit_start}))
 
 
 _SHARED_SEEN: dict = {}
