@@ -13,6 +13,10 @@
 - The guard (on the default run; ``--all`` runs everything): an unmarked test whose CPU time (this process, all threads, plus the subprocesses it
   waited for; its module- or session-scoped fixtures are charged separately) exceeds
   ``TEST_BUDGET_CPU_S`` fails with a message asking for ``@pytest.mark.slow`` or a smaller case.
+  What one test pays for all the others is not charged to it, so the verdict does not depend on
+  which worker took which test first: shared fixtures (computed once per run for all workers
+  with ``shared_result``) and numba compiling in the test process (a cache miss on a fresh
+  clone) are summed apart and listed at the end of the run.
   CPU time rather than wall time: a loaded machine slows a test down but hardly changes its CPU
   time. ``TORQUEBENCH_TEST_BUDGET_S=0`` turns the guard off (e.g. under a profiler or coverage).
 """
@@ -53,6 +57,7 @@ def _budget() -> float:
 def pytest_configure(config):
     """The controller (or a plain run) makes the run's cache directory; xdist workers inherit the
     environment variable, so all processes share it. Removed at the end of the run."""
+    _install_jit_meter()
     if os.environ.get("PYTEST_XDIST_WORKER"):
         return
     d = tempfile.mkdtemp(prefix="torquebench-test-cache-")
@@ -107,6 +112,10 @@ def pytest_terminal_summary(terminalreporter, config):
     n = getattr(config, "_torquebench_slow_left_out", 0)
     if n:
         terminalreporter.write_line(f"{n} slow tests left out: `bash run.sh test --all` runs them (CI does)")
+    top = sorted(_SHARED_SEEN.items(), key=lambda kv: -kv[1])[:6]
+    if top and top[0][1] >= 1.0:
+        terminalreporter.write_line("shared fixtures and numba compiling, CPU s summed over workers, charged to no test: "
+                                    + ", ".join(f"{k} {v:.1f}" for k, v in top))
 
 
 # ---------------------------------------------------------------- the CPU budget guard
@@ -121,11 +130,40 @@ class _Meter:
     shared = 0.0                 # CPU of module/session fixtures set up during this test
     shared_by: dict = {}
     depth = 0
+    jit = 0.0                    # CPU of numba compiling (cache misses) in this process, ever
+    jit_start = 0.0
+
+
+def _install_jit_meter():
+    """Count the CPU numba spends compiling (a cache miss: the first process of a fresh clone to
+    call a kernel) apart from the test that happened to call it first. Only real compiles fire
+    "numba:compile"; loading from the on-disk cache (cache=True) does not."""
+    try:
+        from numba.core import event
+    except ImportError:
+        return
+
+    class JitMeter(event.Listener):
+        level = 0
+        t0 = 0.0
+
+        def on_start(self, ev):
+            if JitMeter.level == 0:
+                JitMeter.t0 = time.process_time()
+            JitMeter.level += 1
+
+        def on_end(self, ev):
+            JitMeter.level -= 1
+            if JitMeter.level == 0:
+                _Meter.jit += time.process_time() - JitMeter.t0
+
+    event.register("numba:compile", JitMeter())
 
 
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_setup(item):
     _Meter.item, _Meter.start, _Meter.shared, _Meter.shared_by = item, _cpu_s(), 0.0, {}
+    _Meter.jit_start = _Meter.jit
     yield
 
 
@@ -133,13 +171,13 @@ def pytest_runtest_setup(item):
 def pytest_fixture_setup(fixturedef, request):
     outer = fixturedef.scope != "function" and _Meter.depth == 0     # nested ones counted once
     _Meter.depth += fixturedef.scope != "function"
-    t0 = _cpu_s()
+    t0, jit0 = _cpu_s(), _Meter.jit
     try:
         yield
     finally:
         _Meter.depth -= fixturedef.scope != "function"
     if outer and _Meter.item is not None:
-        cost = _cpu_s() - t0
+        cost = _cpu_s() - t0 - (_Meter.jit - jit0)          # compiling is counted apart
         _Meter.shared += cost
         _Meter.shared_by[fixturedef.argname] = _Meter.shared_by.get(fixturedef.argname, 0.0) + cost
 
@@ -148,11 +186,12 @@ def pytest_fixture_setup(fixturedef, request):
 def pytest_runtest_makereport(item, call):
     outcome = yield
     report = outcome.get_result()
+    _record_shared(report, item)
     budget = _budget()
     if (call.when != "call" or budget <= 0 or not report.passed or item is not _Meter.item
             or item.get_closest_marker("slow") or item.config.getoption("run_all")):
         return                     # --all (CI) runs everything: the budget guards the default run
-    own = _cpu_s() - _Meter.start - _Meter.shared
+    own = _cpu_s() - _Meter.start - _Meter.shared - (_Meter.jit - _Meter.jit_start)
     heavy = {k: v for k, v in _Meter.shared_by.items() if v > FIXTURE_BUDGET_CPU_S * budget / TEST_BUDGET_CPU_S}
     msg = None
     if own > budget:
@@ -167,6 +206,25 @@ def pytest_runtest_makereport(item, call):
     if msg:
         report.outcome = "failed"
         report.longrepr = msg
+
+
+def _record_shared(report, item):
+    """The CPU of the shared fixtures set up for this test travels with its report (xdist sends
+    user_properties to the controller), so the run can list them apart from the tests."""
+    if report.when == "call" and item is _Meter.item and _Meter.shared_by:
+        report.user_properties.append(("shared_fixture_cpu_s", dict(_Meter.shared_by)))
+    if report.when == "call" and item is _Meter.item and _Meter.jit > _Meter.jit_start:
+        report.user_properties.append(("shared_fixture_cpu_s", {"(numba compiling)": _Meter.jit - _Meter.jit_start}))
+
+
+_SHARED_SEEN: dict = {}
+
+
+def pytest_runtest_logreport(report):
+    for name, value in report.user_properties:
+        if name == "shared_fixture_cpu_s":
+            for k, v in value.items():
+                _SHARED_SEEN[k] = _SHARED_SEEN.get(k, 0.0) + v
 
 
 # ---------------------------------------------------------------- shared expensive results
@@ -195,6 +253,28 @@ def run_lock(name: str):
             yield
         finally:
             fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def shared_result(name: str, compute, *inputs):
+    """``compute()`` once per run for all xdist workers: the first worker to ask computes it under
+    a lock and puts it in the run's cache directory, the other waits (no CPU) and unpickles it.
+    ``name`` and ``inputs`` (plain values, paths: a file's bytes are hashed) make the key. Call it
+    from a module- or session-scoped fixture: the guard charges that to the fixture, not a test."""
+    from torquebench.cache import Cache
+
+    h = hashlib.sha256(name.encode())
+    for x in inputs:
+        h.update(repr(x).encode())
+        if isinstance(x, (str, os.PathLike)) and os.path.isfile(x):
+            h.update(open(x, "rb").read())
+    key = h.hexdigest()[:32]                       # the cache takes hex keys only
+    cache = Cache(run_cache_dir())
+    with run_lock(key):
+        hit = cache.get(key)
+        if hit is None:
+            cache.put(key, compute())
+            hit = cache.get(key)
+    return hit
 
 
 def warm_scene(path: str, outputs=SHARED_STAGES):
@@ -237,49 +317,3 @@ def private_stage_cache(tmp_path, e2e_stages):
     d = tmp_path / "stage-cache"
     shutil.copytree(e2e_stages.dir, d, ignore=shutil.ignore_patterns("locks"))
     return Cache(d)
-
-
-def _memo_key(analyze, args, kwargs) -> str:
-    """Hash of analyze's inputs: the design (a dataclass of plain values, pickled) with the bytes
-    of the part file it names, and the mesh arguments (``progress`` left out)."""
-    import inspect
-    import pickle
-
-    bound = inspect.signature(analyze).bind(*args, **kwargs)
-    bound.apply_defaults()
-    a = dict(bound.arguments)
-    a.pop("progress", None)
-    design = a.pop("design")
-    h = hashlib.sha256(pickle.dumps((design, sorted(a.items())), protocol=4))
-    for named in (getattr(design, "file_path", None), getattr(design, "sensor_path", None)):
-        if named and os.path.isfile(named):          # the part and the sensor it reads, by content
-            h.update(open(named, "rb").read())
-    return "analyze-" + h.hexdigest()[:32]
-
-
-@pytest.fixture
-def fem_memo(monkeypatch):
-    """``flexure.analysis.analyze`` (one mesh level: mesh, assemble, solve, read the gauges)
-    remembered for the whole run, on disk in the run's cache directory and shared by the workers:
-    tests that put the same design on the same levels through different front ends (JSON, text,
-    --rtol, output files) solve it once. Each call gets its own unpickled copy (callers may mutate
-    it). Only for tests that check what is done with an analysis, never for the meshing or
-    solver tests themselves; progress lines of a remembered level are not printed again."""
-    import flexure.analysis as A
-    from torquebench.cache import Cache
-
-    real = A.analyze
-    cache = Cache(run_cache_dir())
-
-    def remembered(*args, **kwargs):
-        key = _memo_key(real, args, kwargs)
-        with run_lock(key):
-            hit = cache.get(key)
-            if hit is None:
-                hit = real(*args, **kwargs)
-                cache.put(key, hit)
-                return cache.get(key)
-        return hit
-
-    monkeypatch.setattr(A, "analyze", remembered)
-    return remembered

@@ -15,6 +15,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from conftest import shared_result
+
 ROOT = Path(__file__).resolve().parents[1]
 SIM = ROOT / "examples" / "sim"
 SCENES = ("paper_floating_link1", "paper_fixed_link2")
@@ -38,10 +40,31 @@ def _declared_sigma(log: Path, columns: list[str]) -> dict[str, float]:
     return out
 
 
-@pytest.mark.parametrize("scene", SCENES)
-def test_shipped_sim_log_is_what_the_simulator_makes(scene, tmp_path):
-    proc = _tb("simulate", ROOT / "scenes" / f"{scene}.toml", "--out", tmp_path / "log.csv")
-    assert proc.returncode == 0, proc.stderr
+def _simulate(scene: str):
+    """`torquebench simulate` of a shipped scene → (exit code, stderr, {file name: bytes})."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        proc = _tb("simulate", ROOT / "scenes" / f"{scene}.toml", "--out", Path(d) / "log.csv")
+        return proc.returncode, proc.stderr, {f.name: f.read_bytes() for f in Path(d).iterdir()}
+
+
+@pytest.fixture(scope="module", params=SCENES)
+def simulated(request, tmp_path_factory):
+    """The scene re-simulated by the CLI once per run (shared by the workers and by the two tests
+    below), its files written to a fresh directory: (scene, exit code, stderr, directory)."""
+    scene = request.param
+    code, err, files = shared_result("simulate-" + scene, lambda: _simulate(scene),
+                                     str(ROOT / "scenes" / f"{scene}.toml"))
+    d = tmp_path_factory.mktemp(scene)
+    for name, data in files.items():
+        (d / name).write_bytes(data)
+    return scene, code, err, d
+
+
+def test_shipped_sim_log_is_what_the_simulator_makes(simulated):
+    scene, code, err, tmp_path = simulated
+    assert code == 0, err
     for made, shipped in ((tmp_path / "log.csv", SIM / f"{scene}.csv"),
                           (tmp_path / "log.truth.csv", SIM / f"{scene}.truth.csv")):
         a, b = pd.read_csv(made), pd.read_csv(shipped)
@@ -61,11 +84,10 @@ def test_shipped_sim_log_is_what_the_simulator_makes(scene, tmp_path):
         assert np.array_equal(np.isnan(a.to_numpy()), np.isnan(b.to_numpy()))
 
 
-@pytest.mark.parametrize("scene", SCENES)
-def test_shipped_noise_declaration_is_what_the_simulator_writes(scene, tmp_path):
+def test_shipped_noise_declaration_is_what_the_simulator_writes(simulated):
     """`simulate` declares the sensor noise it drew (LOG.noise.toml); the shipped one matches."""
-    proc = _tb("simulate", ROOT / "scenes" / f"{scene}.toml", "--out", tmp_path / "log.csv")
-    assert proc.returncode == 0, proc.stderr
+    scene, code, err, tmp_path = simulated
+    assert code == 0, err
     assert (tmp_path / "log.noise.toml").read_text() == (SIM / f"{scene}.noise.toml").read_text()
 
 

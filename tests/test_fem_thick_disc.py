@@ -32,6 +32,9 @@ def thick(tmp_path_factory):
     return d, res
 
 
+@pytest.mark.slow       # 31 s of CPU; in the default run the paper disc's default mesh is checked for
+# slivers (test_flexure_design.test_mesh_quality_report_and_refinement_at_the_gauges) and its arms
+# for balance (test_flexure_design.test_crosstalk_of_a_symmetric_layout_cancels)
 def test_thick_disc_default_mesh_has_no_slivers_and_balanced_arms(thick):
     _, res = thick
     m = res["mesh"]

@@ -33,8 +33,10 @@ def test_readme_has_examples():
     assert len(readme_commands()) >= 5
 
 
-#: examples that solve a flexure's FEM (three mesh levels) or a whole sweep: a minute of CPU each
-HEAVY = ("flexure", "compare ", "end_to_end", "reproduce", "report --only")
+#: examples that solve a flexure's FEM (three mesh levels) or a whole sweep: a minute of CPU each;
+#: and the 3-D propagate map (8 s of CPU at the README's grid), whose command line runs in the
+#: default suite at a small grid (test_spatial_predict.test_propagate_3d_map_and_picture)
+HEAVY = ("flexure", "compare ", "end_to_end", "reproduce", "report --only", "propagate --robot")
 
 
 def _params():
