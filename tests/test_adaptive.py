@@ -20,15 +20,15 @@ grid_width_mm = 2.0
 {gauges}
 [loads]
 rated_torque_Nm = 2.0
-load_radius_max_mm = 3.02
-fixed_radius_min_mm = 9.9
+load_radius_max_mm = {load_max}
+fixed_radius_min_mm = {fixed_min}
 [mesh]
 size = "coarse"
 order = 2
 """
 
 
-def annulus(tmp_path, sections: int = 48):
+def annulus(tmp_path, sections: int = 48, load_max_mm: float = 3.02, fixed_min_mm: float = 9.9):
     """A 3 mm thick annulus (r 3 … 10 mm) as an STL, four ±45° gauges at r = 6.5 mm on top."""
     import trimesh
 
@@ -43,7 +43,8 @@ def annulus(tmp_path, sections: int = 48):
             (math.cos(a - math.pi / 4), math.sin(a - math.pi / 4), 0.0)
         gauges.append(f"[[gauges.gauge]]\ncentre_mm = [{c[0]:.6f}, {c[1]:.6f}, {c[2]:.6f}]\n"
                       f"axis = [{ax[0]:.9f}, {ax[1]:.9f}, 0.0]\narm = {arm}")
-    (tmp_path / "annulus.toml").write_text(ANNULUS.format(gauges="\n".join(gauges)))
+    (tmp_path / "annulus.toml").write_text(ANNULUS.format(gauges="\n".join(gauges), load_max=load_max_mm,
+                                                         fixed_min=fixed_min_mm))
     return load_design(tmp_path / "annulus.toml")
 
 
