@@ -20,15 +20,15 @@ grid_width_mm = 2.0
 {gauges}
 [loads]
 rated_torque_Nm = 2.0
-load_radius_max_mm = 3.02
-fixed_radius_min_mm = 9.9
+load_radius_max_mm = {load_max}
+fixed_radius_min_mm = {fixed_min}
 [mesh]
 size = "coarse"
 order = 2
 """
 
 
-def annulus(tmp_path, sections: int = 48):
+def annulus(tmp_path, sections: int = 48, load_max_mm: float = 3.02, fixed_min_mm: float = 9.9):
     """A 3 mm thick annulus (r 3 … 10 mm) as an STL, four ±45° gauges at r = 6.5 mm on top."""
     import trimesh
 
@@ -43,7 +43,8 @@ def annulus(tmp_path, sections: int = 48):
             (math.cos(a - math.pi / 4), math.sin(a - math.pi / 4), 0.0)
         gauges.append(f"[[gauges.gauge]]\ncentre_mm = [{c[0]:.6f}, {c[1]:.6f}, {c[2]:.6f}]\n"
                       f"axis = [{ax[0]:.9f}, {ax[1]:.9f}, 0.0]\narm = {arm}")
-    (tmp_path / "annulus.toml").write_text(ANNULUS.format(gauges="\n".join(gauges)))
+    (tmp_path / "annulus.toml").write_text(ANNULUS.format(gauges="\n".join(gauges), load_max=load_max_mm,
+                                                         fixed_min=fixed_min_mm))
     return load_design(tmp_path / "annulus.toml")
 
 
@@ -139,3 +140,87 @@ def test_levels_are_the_default_and_adaptive_is_opt_in(tmp_path, monkeypatch):
     assert calls == ["levels", "adaptive"]
     with pytest.raises(InputError, match="error method"):
         convergence.analyze_design(d, order=2, method="richardson")
+
+
+def annulus_gauge_exact(design, thickness_m: float = 3e-3, torque_Nm: float = 1.0):
+    """Each gauge's exact read-out on the annulus (r a … b, thickness t, rigid bore, clamped rim)
+    under a torque about z: the field u_θ(r) = B/r − B r/b² (z-independent, free faces
+    traction-free) is exact, τ_rθ = −2μB/r², T = 4πμtB, so ε = −(T/(4πμ t r²))·2(e_r·a)(e_θ·a) along
+    the gauge axis a — the read-out does not depend on a or b. Averaged over the grid square (tensor
+    Gauss–Legendre, 40 × 40: converged to 1e-12 for this smooth integrand)."""
+    import numpy as np
+
+    B = torque_Nm / (4.0 * math.pi * design.material.shear_modulus_Pa * thickness_m)
+    s, w = np.polynomial.legendre.leggauss(40)
+    out = []
+    for g in design.gauges:
+        c, a, b, _ = g.frame()
+        P = (c[None, None, :] + 0.5 * g.length_m * s[:, None, None] * a[None, None, :]
+             + 0.5 * g.width_m * s[None, :, None] * b[None, None, :])
+        r = np.hypot(P[..., 0], P[..., 1])
+        er = np.stack([P[..., 0], P[..., 1], 0 * r], -1) / r[..., None]
+        et = np.stack([-P[..., 1], P[..., 0], 0 * r], -1) / r[..., None]
+        eps = -B / r**2 * 2.0 * (er @ a) * (et @ a)
+        out.append(float(np.einsum("i,j,ij->", w, w, eps) / 4.0))
+    return np.array(out)
+
+
+@pytest.fixture(scope="module")
+def round_annulus_run(tmp_path_factory):
+    """The annulus with a 192-sided polygon (within 1.3e-4 of the circle), adaptive at --rtol 0.01."""
+    d = annulus(tmp_path_factory.mktemp("round_annulus"), sections=192)
+    return d, analyze_adaptive(d, rtol=0.01)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "measured 2026-11-26 (reports/fem_adaptive.md): at 56k dofs the arms' true errors are 0.011-0.086 % and "
+    "their estimates 0.028-0.113 %: effectivity 0.58 (under) on one arm and 10 on another; the gauge read-outs "
+    "move non-monotonically by 0.05-0.1 % between nested levels: the STL's chorded, asymmetric discrete "
+    "boundary changes with the projection where the bisection refines, a geometric error no residual sees"))
+def test_gauge_estimates_bracket_the_exact_torsion_strain(round_annulus_run):
+    """Against the exact read-outs of the torsion field (``annulus_gauge_exact``: no reference run,
+    no allowance): every arm's estimate covers its true error and is at most 3× conservative, the
+    bridge strain's too."""
+    import numpy as np
+
+    design, (res, _) = round_annulus_run
+    exact = annulus_gauge_exact(design)
+    arms = [g.arm for g in design.gauges]
+    got = np.array([res["gauge_strains_per_Nm"][f"arm{a}"] for a in arms])
+    est = np.array([res["gauge_strains_per_Nm_error_estimate"][f"arm{a}"] for a in arms])
+    true = np.abs(got - exact)
+    assert np.all(est >= true) and np.all(est <= 3.0 * true), est / true
+    ref = float(np.mean(np.abs(exact)))
+    e_ref = abs(abs(res["gauge_strain_per_Nm"]) - ref)
+    assert e_ref <= res["gauge_strain_per_Nm_error_estimate"] <= 3.0 * e_ref
+
+
+@pytest.mark.slow
+def test_adaptive_answer_is_within_rtol_of_the_exact_torsion_strain(round_annulus_run):
+    """--rtol 0.01 on the round annulus: every arm's read-out and the bridge strain within 1 % of the
+    exact torsion field's (``annulus_gauge_exact``), and the refinement says it stopped at --rtol."""
+    import numpy as np
+
+    design, (res, _) = round_annulus_run
+    exact = annulus_gauge_exact(design)
+    got = np.array([res["gauge_strains_per_Nm"][f"arm{g.arm}"] for g in design.gauges])
+    assert res["stopped_by"] == "rtol"
+    assert np.all(np.abs(got - exact) <= 0.01 * np.abs(exact)), (got - exact) / exact
+    assert abs(abs(res["gauge_strain_per_Nm"]) - np.mean(np.abs(exact))) <= 0.01 * np.mean(np.abs(exact))
+
+
+def test_bridge_estimate_bounds_through_its_arms():
+    """The arms' DWR estimates cancel in the bridge's own sum (η = +1, −1 … with signs +, +: Σ s_i η_i
+    = 0); the bridge's estimate is still Σ |s_i| e_i / 4 of the arms' estimates, so it bounds the
+    bridge's error wherever theirs bound the arms'."""
+    from types import SimpleNamespace
+
+    design = SimpleNamespace(gauges=[SimpleNamespace(arm=a) for a in (1, 2, 3, 4)])
+    rec = {"theta": 1e-3, "torsional_stiffness_Nm_per_rad": 1e3, "gauge_strain_per_Nm": 1e-5,
+           "gauge_strains": [1e-5, -1e-5, 1e-5, -1e-5],
+           "eta": {"theta": 1e-6, "gauges": [2e-8, 2e-8, -2e-8, -2e-8], "eps_ref": 0.0}}
+    out = adaptive._estimates(rec, None, {}, design)
+    arms = out["estimate"]["gauge_strains"]
+    assert arms == pytest.approx([adaptive.SAFETY * 2e-8] * 4)
+    assert out["estimate"]["gauge_strain_per_Nm"] == pytest.approx(sum(arms) / 4) and sum(arms) > 0
