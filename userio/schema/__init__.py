@@ -11,9 +11,9 @@ one module per file kind; ``python -m userio.schema.docs`` writes docs/inputs.md
 from __future__ import annotations
 
 
-def parse(model, data, source):
+def parse(model, data, source, context: dict | None = None):
     """``data`` validated as ``model`` (a userio.schema model class); InputError naming
     ``source`` and the field on failure."""
     from userio.schema.base import parse as _parse
 
-    return _parse(model, data, source)
+    return _parse(model, data, source, context)

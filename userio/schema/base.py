@@ -179,9 +179,10 @@ def message(exc: ValidationError) -> str:
     return _line(exc.errors(include_url=False)[0])
 
 
-def parse(model: type[Model], data, source) -> Model:
-    """``data`` (a parsed file) validated as ``model``; InputError ``SOURCE: field: problem``."""
+def parse(model: type[Model], data, source, context: dict | None = None) -> Model:
+    """``data`` (a parsed file) validated as ``model`` (``context``: what its validators need to
+    know beyond the file, e.g. a log's channel names); InputError ``SOURCE: field: problem``."""
     try:
-        return model.model_validate(data)
+        return model.model_validate(data, context=context)
     except ValidationError as exc:
         raise InputError(f"{source}: {message(exc)}") from None
