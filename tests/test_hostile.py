@@ -209,9 +209,9 @@ def _rehashed(work, mutate):
 
 @pytest.mark.parametrize("mutate, match", [
     (lambda d: d["coefficients"].__setitem__("slope", 0.0), "slope is 0"),
-    (lambda d: d.__setitem__("lever_arm_m", -0.2), "'lever_arm_m': must be > 0"),
-    (lambda d: d.__setitem__("model", "cubic"), "unknown model 'cubic'"),
-    (lambda d: d.pop("covariance"), "'covariance': missing"),
+    (lambda d: d.__setitem__("lever_arm_m", -0.2), "lever_arm_m: must be > 0"),
+    (lambda d: d.__setitem__("model", "cubic"), "model: must be 'linear', 'quadratic' or 'hysteresis', got 'cubic'"),
+    (lambda d: d.pop("covariance"), "covariance: missing field"),
     (lambda d: d["covariance"].__setitem__("matrix", [[1.0, 0.0], [0.0, -1.0]]),
      "not positive semi-definite"),
     (lambda d: d["covariance"].__setitem__("matrix", [[1.0, 0.5], [0.0, 1.0]]), "not symmetric"),
