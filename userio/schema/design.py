@@ -29,7 +29,23 @@ HOLES = Range(0, 360, "holes")
 
 
 def _mm(description: str):
-    return Field(None, description=description + " (default: flexure.geometry.SpokeDisc)")
+    """A spoke-disc key, its default flexure.geometry.SpokeDisc's (in the file's unit)."""
+    return Field(None, description=description)
+
+
+def _disc_defaults(cls):
+    """Geometry's spoke-disc keys default to SpokeDisc's values, in mm (documented, applied)."""
+    import dataclasses
+
+    from flexure.geometry import SpokeDisc
+
+    si = {f.name: f.default for f in dataclasses.fields(SpokeDisc)}
+    for key in DISC_KEYS:
+        name = key.removesuffix("_mm")
+        value = si[name] * 1e3 if key.endswith("_mm") else si[name]
+        cls.model_fields[key].default = round(value, 9) if isinstance(value, float) else value
+    cls.model_rebuild(force=True)
+    return cls
 
 
 class Geometry(Model):
@@ -62,7 +78,8 @@ class Geometry(Model):
 
     @property
     def disc_keys(self) -> list[str]:
-        return [k for k in DISC_KEYS if getattr(self, k) is not None]
+        """The spoke-disc keys the file gives."""
+        return [k for k in DISC_KEYS if k in self.model_fields_set]
 
     def disc(self):
         """The flexure.geometry.SpokeDisc (SI units) of a spoke disc; None for a CAD part."""
@@ -71,7 +88,7 @@ class Geometry(Model):
         from flexure.geometry import SpokeDisc
 
         return SpokeDisc(**{k.removesuffix("_mm"): getattr(self, k) * (1e-3 if k.endswith("_mm") else 1)
-                            for k in self.disc_keys})
+                            for k in self.disc_keys})      # the rest: SpokeDisc's own SI defaults
 
     @model_validator(mode="after")
     def _consistent(self):
@@ -98,6 +115,7 @@ class Geometry(Model):
 
 DISC_KEYS = [k for k in Geometry.model_fields
              if k not in ("kind", "segments_per_quarter", "file", "unit_mm")]
+_disc_defaults(Geometry)
 
 
 class Material(Model):
