@@ -38,6 +38,7 @@ def kinds():
     from userio.schema.logs import NoiseFile, TimingFile
     from userio.schema.robot import RobotFile, SpatialRobotFile
     from userio.schema.sensor import SensorFile
+    from userio.schema.spatial_scene import SpatialSceneFile
 
     out = [("Planar robot", RobotFile, "`--robot FILE.toml`, a scene's `robot`"),
            ("URDF robot declaration", SpatialRobotFile, "`--robot FILE.toml` naming a URDF"),
@@ -45,7 +46,8 @@ def kinds():
            ("Flexure design", DesignFile, "`flexure DESIGN.toml`, a scene's `[flexure] design`"),
            ("Log timing declaration", TimingFile, "`LOG.timing.toml` beside `LOG.csv`"),
            ("Log noise declaration", NoiseFile, "`LOG.noise.toml` beside `LOG.csv`"),
-           ("Calibration", CalibrationFile, "`apply CAL.json`, a scene's `[calibration] file`")]
+           ("Calibration", CalibrationFile, "`apply CAL.json`, a scene's `[calibration] file`"),
+           ("3-D scene", SpatialSceneFile, "`simulate SCENE.toml` (a scene whose robot is a URDF)")]
     return out
 
 
@@ -93,6 +95,9 @@ def _type(ann, extra=()) -> str:
         return f"list of {n} {word}" if n else f"list of {word}"
     if origin is dict:
         return f"table of {_type(typing.get_args(core)[1])}"
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join("table" if isinstance(a, type) and issubclass(a, BaseModel) else _type(a)
+                           for a in typing.get_args(core))
     return {float: "number", int: "integer", str: "string", bool: "true/false"}.get(core, "any")
 
 
