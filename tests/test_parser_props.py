@@ -176,3 +176,36 @@ def test_log_reader_on_binary_garbage(tmp_path, data):
         read_log(path)
     except InputError:
         pass
+
+
+# ----------------------------------------------------------------------------- the schema layer
+def _schema_model():
+    from userio.schema.base import Field, Model, num, vector
+
+    class Table(Model):
+        k: num(Range(-5.0, 5.0, "m"), gt=-3.0) = Field(1.0)
+        v: vector(2, Range(0.0, 1e3, "N"), ge=0) = Field((0.0, 0.0))
+
+    class File(Model):
+        table: Table = Field(Table())
+
+    return File
+
+
+@PROPS
+@given(value=numbers, key=st.sampled_from(["k", "v", "kk", "w"]))
+def test_schema_fields_never_pass_nonsense(value, key):
+    from userio.schema import parse
+
+    File = _schema_model()
+    try:
+        t = parse(File, {"table": {key: value}}, "x.toml").table
+    except InputError as exc:
+        msg = str(exc)
+        assert msg.startswith("x.toml: table.") and "\n" not in msg
+        if key in ("kk", "w"):
+            assert "unknown field" in msg
+        return
+    assert key in ("k", "v")
+    assert isinstance(t.k, float) and math.isfinite(t.k) and -3.0 < t.k <= 5.0
+    assert len(t.v) == 2 and all(math.isfinite(x) and 0 <= x <= 1e3 for x in t.v)

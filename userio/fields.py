@@ -1,28 +1,20 @@
-"""Validated fields of a parsed TOML table: every error names the file and the dotted field.
+"""The older typed readers of a parsed TOML table, used only by the planar scene reader
+(torquebench/scenes.py) until scenes move onto the one schema layer (userio.schema, which every
+other input file goes through)::
 
     f = Fields(path)
     f.known(table, {"kp", "kd"}, "controller")          # unknown key → error with the nearest valid key
     kp = f.number(table, "kp", "controller", 500.0, nonneg=True)
-
-Physical ranges are declared once, next to the field they bound, as a :class:`Range` in the
-dataclass field's metadata (``ranged(default, Range(...))``) or beside a CLI option; the checks
-(``Range.check``, ``Fields.ranges``, ``check_ranges``) read them from there. The declaration is
-data (lo, hi, unit, hints), so it maps one to one onto a schema library's bounds later
-(pydantic ``Field(ge=lo, le=hi)``, msgspec ``Meta(ge=lo, le=hi)``).
 """
 
 from __future__ import annotations
 
-import dataclasses
-import difflib
 import math
 from pathlib import Path
 
 import numpy as np
 
-from userio.errors import InputError
-
-
+from userio.errors import InputError, nearest  # noqa: F401  (scenes.py imports nearest from here)
 from userio.ranges import Range, check_ranges, field_range, ranged  # noqa: F401  (moved)
 
 
@@ -35,12 +27,6 @@ def _interval(lo, hi, positive: bool = False) -> str:
 
 def _dotted(where: str, key: str) -> str:
     return f"{where}.{key}" if where else key
-
-
-def nearest(key: str, allowed) -> str:
-    """`` (did you mean 'x'?)`` for the closest allowed key, or ``""``."""
-    close = difflib.get_close_matches(key, sorted(allowed), n=1, cutoff=0.6)
-    return f" (did you mean {close[0]!r}?)" if close else ""
 
 
 class Fields:
