@@ -257,8 +257,8 @@ def test_apply_flags_saturated_adc_counts(work, capsys):
 
 # --------------------------------------------------------------------------- scene checks
 @pytest.mark.parametrize("edit, match", [
-    (lambda s: s.replace("rtol = 1e-6", "rtol = 1.0"), "integrator.rtol: must lie in"),
-    (lambda s: s.replace("atol = 1e-8", "atol = 0.5"), "integrator.atol: must lie in"),
+    (lambda s: s.replace("rtol = 1e-6", "rtol = 1.0"), "integrator.rtol: must be ≤ 0.01, got 1.0"),
+    (lambda s: s.replace("atol = 1e-8", "atol = 0.5"), "integrator.atol: must be ≤ 0.01, got 0.5"),
 ])
 def test_scene_tolerances_outside_sensible_range_exit_2(tmp_path, capsys, edit, match):
     scene = tmp_path / "s.toml"

@@ -95,9 +95,9 @@ class LengthCheck:
         return v
 
 
-def vector(length: int | None = None, rng: Range | None = None, *, ge=None, gt=None):
+def vector(length: int | None = None, rng: Range | None = None, *, ge=None, gt=None, le=None):
     """A list of finite numbers (``length`` of them when given, else at least one)."""
-    elem = num(rng, ge=ge, gt=gt)
+    elem = num(rng, ge=ge, gt=gt, le=le)
     if length is not None:
         return Annotated[list[elem], AfterValidator(LengthCheck(length))]
     return Annotated[list[elem], Field(min_length=1)]
@@ -109,9 +109,28 @@ def fail(field: str, msg: str):
 
 
 # --------------------------------------------------------------------------- one error line
+_TAGS = {"str", "float", "int", "bool", "list", "dict"}
+
+
+def _model_names(cls=None) -> set[str]:
+    cls = cls or Model
+    out = {cls.__name__}
+    for sub in cls.__subclasses__():
+        out |= _model_names(sub)
+    return out
+
+
+def _is_tag(part) -> bool:
+    return isinstance(part, str) and (part in _TAGS or part in _model_names() or "[" in part)
+
+
 def _where(loc) -> str:
+    """``link[2].mass_kg`` from pydantic's loc; the branch tags of a union ("str", a model's
+    class name, "list[float]") are not keys and are left out."""
     out = ""
     for part in loc:
+        if _is_tag(part):
+            continue
         if isinstance(part, int):
             out += f"[{part + 1}]"
         elif part:
@@ -164,19 +183,34 @@ def _literals(ctx) -> list[str]:
 
 
 def _line(e: dict) -> str:
-    loc = list(e["loc"])
     ctx = e.get("ctx") or {}
-    if e["type"] == "unknown_field":
-        loc.append(ctx["key"])
-    elif e["type"] == "field":
-        loc.append(ctx["field"])
-    where = _where(loc)
+    where = _where(e["loc"])
+    extra = ctx.get("key") if e["type"] == "unknown_field" else ctx.get("field") if e["type"] == "field" else None
+    if extra is not None:
+        where = f"{where}.{extra}" if where else str(extra)
     return f"{where}: {_problem(e)}" if where else _problem(e)
+
+
+_TYPE_ERRORS = {"string_type", "float_type", "int_type", "bool_type", "model_type", "dict_type",
+                "list_type", "model_attributes_type"}
+
+
+def _first(errors: list[dict]) -> dict:
+    """The first problem; where it is one branch of a union (a string or a table) refusing the
+    value's type, the problem another branch found inside the value, if any."""
+    e = errors[0]
+    if e["type"] in _TYPE_ERRORS and any(_is_tag(p) for p in e["loc"]):
+        key = [p for p in e["loc"] if not _is_tag(p)]
+        for other in errors[1:]:
+            if [p for p in other["loc"] if not _is_tag(p)][:len(key)] == key and \
+                    other["type"] not in _TYPE_ERRORS:
+                return other
+    return e
 
 
 def message(exc: ValidationError) -> str:
     """The first problem of a ValidationError as ``[table.]field: problem``."""
-    return _line(exc.errors(include_url=False)[0])
+    return _line(_first(exc.errors(include_url=False)))
 
 
 def parse(model: type[Model], data, source, context: dict | None = None) -> Model:

@@ -37,10 +37,12 @@ def kinds():
     from userio.schema.design import DesignFile
     from userio.schema.logs import NoiseFile, TimingFile
     from userio.schema.robot import RobotFile, SpatialRobotFile
+    from userio.schema.scene import SceneFile
     from userio.schema.sensor import SensorFile
     from userio.schema.spatial_scene import SpatialSceneFile
 
-    out = [("Planar robot", RobotFile, "`--robot FILE.toml`, a scene's `robot`"),
+    out = [("Planar scene", SceneFile, "`run SCENE`, `simulate`, `sweep`, `compare`"),
+           ("Planar robot", RobotFile, "`--robot FILE.toml`, a scene's `robot`"),
            ("URDF robot declaration", SpatialRobotFile, "`--robot FILE.toml` naming a URDF"),
            ("Sensor", SensorFile, "`bridge --config`, a scene's `[sensor] file`, a design's `[bridge] sensor`"),
            ("Flexure design", DesignFile, "`flexure DESIGN.toml`, a scene's `[flexure] design`"),
