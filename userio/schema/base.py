@@ -13,13 +13,18 @@ Lists of tables and vector elements are numbered from 1 (``link[2].mass_kg``, ``
 
 from __future__ import annotations
 
+import os
 from typing import Annotated
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
-from pydantic_core import PydanticCustomError
+# no third-party pydantic plugins: finding them scans every installed package's entry points
+# (~30–150 ms at the first model); a user who needs one can set the variable to ""
+os.environ.setdefault("PYDANTIC_DISABLE_PLUGINS", "__all__")
 
-from userio.errors import InputError, nearest
-from userio.ranges import Range
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator  # noqa: E402
+from pydantic_core import PydanticCustomError  # noqa: E402
+
+from userio.errors import InputError, nearest  # noqa: E402
+from userio.ranges import Range  # noqa: E402
 
 __all__ = ["Model", "Field", "RangeCheck", "num", "integer", "vector", "fail", "parse", "Range"]
 
