@@ -10,7 +10,8 @@ TOML layout (every key optional; defaults are the paper's sensor, ``scenes/paper
     [environment] temperature_K
     [torque]      strain_per_Nm   (gauge strain ε per N·m; optional)
 
-Bad values raise ``bridge.errors.InputError`` naming ``file: section.key``.
+Validated by its schema (userio.schema.sensor): bad values raise InputError naming
+``file: section.key``.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from pathlib import Path
 from bridge import adc as _adc
 from bridge.errors import InputError
 from userio.files import read_toml
-from bridge.wheatstone import ARRANGEMENTS, effective_gauge_factor, sensitivity_factor
+from bridge.wheatstone import effective_gauge_factor, sensitivity_factor
 
 
 @dataclass(frozen=True)
@@ -111,135 +112,39 @@ _SECTIONS = {
             "data_rate_Hz", "noise_bandwidth_factor"),
     "environment": ("temperature_K",),
 }
-_SECTION_OF = {key: sec for sec, keys in _SECTIONS.items() for key in keys}
 
 
-def _field(name: str) -> str:
-    return f"{_SECTION_OF.get(name, '?')}.{name}"
-
-
-def _num(cfg, name, *, positive=False, nonneg=False, finite=True):
-    v = getattr(cfg, name)
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise InputError(f"{_field(name)}: must be a number, got {v!r}")
-    if finite and not math.isfinite(v):
-        raise InputError(f"{_field(name)}: must be finite, got {v}")
-    if positive and not v > 0:
-        raise InputError(f"{_field(name)}: must be > 0, got {v}")
-    if nonneg and not v >= 0:
-        raise InputError(f"{_field(name)}: must be >= 0, got {v}")
-    return v
-
-
-def _ranges():
-    """Physical range of each field, with its unit (userio.fields.Range)."""
-    from userio.fields import Range
-
-    return {
-        "gauge_factor": Range(0.1, 1000.0, ""), "gauge_resistance_ohm": Range(1.0, 1e7, "Ω", high="mΩ typed as Ω?"),
-        "lead_resistance_ohm": Range(0.0, 1e4, "Ω"),
-        "excitation_V": Range(1e-3, 100.0, "V", high="mV typed as V?"),
-        "gain": Range(1e-3, 1e6, "V/V", low="an amplifier attenuating more than 1000×",
-                      high="dB typed as V/V?"),
-        "noise_V_per_rtHz": Range(0.0, 1e-3, "V/√Hz", high="nV/√Hz typed as V/√Hz?"),
-        "corner_Hz": Range(0.0, 1e7, "Hz"), "offset_V": Range(-10.0, 10.0, "V", high="mV typed as V?",
-                                                             low="mV typed as V?"),
-        "flicker_low_Hz": Range(1e-9, 1e6, "Hz"), "v_ref_V": Range(0.01, 100.0, "V"),
-        "data_rate_Hz": Range(0.01, 1e9, "S/s"), "noise_bandwidth_factor": Range(1e-3, 10.0, ""),
-        "temperature_K": Range(1.0, 2000.0, "K", high="°C typed as K? (300 K is room temperature)"),
-    }
+def tables(cfg: SensorConfig) -> dict:
+    """The config as a sensor file's tables (userio.schema.sensor.SensorFile)."""
+    out = {sec: {k: getattr(cfg, k) for k in keys} for sec, keys in _SECTIONS.items()}
+    if cfg.enob_data_rate_Hz is None:
+        del out["adc"]["enob_data_rate_Hz"]
+    return out
 
 
 def validate(cfg: SensorConfig) -> None:
-    """Raise InputError naming the field for a physically impossible or inconsistent config
-    (every number also inside its physical range, ``_ranges``)."""
-    if cfg.arrangement not in ARRANGEMENTS:
-        raise InputError(f"bridge.arrangement: unknown {cfg.arrangement!r}; expected one of "
-                         f"{', '.join(ARRANGEMENTS)}")
-    for name in ("gauge_factor", "gauge_resistance_ohm", "excitation_V", "strain_limit", "gain",
-                 "v_ref_V", "enob", "data_rate_Hz", "noise_bandwidth_factor", "temperature_K",
-                 "flicker_low_Hz"):
-        _num(cfg, name, positive=True)
-    for name in ("lead_resistance_ohm", "noise_V_per_rtHz", "corner_Hz"):
-        _num(cfg, name, nonneg=True)
-    _num(cfg, "offset_V")
-    _num(cfg, "rated_strain", nonneg=True)
-    for name, rng in _ranges().items():
-        why = rng.problem(float(getattr(cfg, name)))
-        if why:
-            raise InputError(f"{_field(name)}: {why}")
-    nu = _num(cfg, "poisson_ratio")
-    if not -1.0 < nu < 0.5:
-        raise InputError(f"bridge.poisson_ratio: must lie in (−1, 0.5), got {nu}")
-    if isinstance(cfg.bits, bool) or not isinstance(cfg.bits, int) or not 2 <= cfg.bits <= 32:
-        raise InputError(f"adc.bits: must be an integer in 2..32, got {cfg.bits!r}")
-    if cfg.range_factor not in (1, 2, 1.0, 2.0):
-        raise InputError(f"adc.range_factor: must be 1 (±V_ref) or 2 (±2·V_ref), got "
-                         f"{cfg.range_factor!r}")
-    if cfg.enob_definition not in _adc.ENOB_DEFINITIONS:
-        raise InputError(f"adc.enob_definition: must be 'ti' or 'ieee', got {cfg.enob_definition!r}")
-    if cfg.enob > cfg.bits:
-        raise InputError(f"adc.enob: {cfg.enob} exceeds the ADC's {cfg.bits} bits")
-    if cfg.enob_data_rate_Hz is not None:
-        _num(cfg, "enob_data_rate_Hz", positive=True)
-    if cfg.strain_limit > 0.1:
-        raise InputError(f"bridge.strain_limit: {cfg.strain_limit} is beyond any foil gauge "
-                         "(typ. 0.03)")
-    if cfg.rated_strain > cfg.strain_limit:
-        raise InputError(f"bridge.rated_strain: {cfg.rated_strain} beyond the gauge range "
-                         f"±{cfg.strain_limit}")
-    if cfg.gauge_factor * cfg.rated_strain >= 1.0:
-        raise InputError("bridge.rated_strain: GF·ε ≥ 1 makes a gauge resistance non-positive")
-    # saturation at rated load: exact bridge output of the pattern, through the gain
-    from bridge.wheatstone import ratio_from_strain
-    v_rated = abs(float(ratio_from_strain(cfg.rated_strain, cfg.arrangement, cfg.gauge_factor,
-                                          cfg.gauge_resistance_ohm, cfg.lead_resistance_ohm,
-                                          cfg.poisson_ratio))) * cfg.excitation_V
-    v_adc = cfg.gain * (v_rated + abs(cfg.offset_V))
-    v_max = cfg.range_factor * cfg.v_ref_V
-    if v_adc > v_max:
-        raise InputError(f"amplifier.gain: rated bridge output {v_rated * 1e3:.4g} mV "
-                         f"(+offset) × gain {cfg.gain:g} = {v_adc:.4g} V saturates the ADC range "
-                         f"±{v_max:g} V")
+    """InputError naming the field (``section.key``) for a config the sensor schema refuses
+    (userio.schema.sensor: types, physical ranges, ENOB ≤ bits, no saturation at rated load)."""
+    from pydantic import ValidationError
+
+    from userio.schema.base import message
+    from userio.schema.sensor import SensorFile
+
+    try:
+        SensorFile.model_validate(tables(cfg))
+    except ValidationError as exc:
+        raise InputError(message(exc)) from None
 
 
 def sensor_config_from_dict(data: dict, source: str = "<dict>") -> tuple[SensorConfig, float | None]:
-    """(SensorConfig, strain_per_Nm or None) from a TOML-shaped dict; unknown keys are errors."""
-    if not isinstance(data, dict):
-        raise InputError(f"{source}: expected a table, got {type(data).__name__}")
-    kwargs = {}
-    strain_per_Nm = None
-    for sec, table in data.items():
-        if sec == "torque":
-            if not isinstance(table, dict):
-                raise InputError(f"{source}: [torque] must be a table")
-            extra = set(table) - {"strain_per_Nm"}
-            if extra:
-                raise InputError(f"{source}: torque.{sorted(extra)[0]}: unknown key")
-            if "strain_per_Nm" in table:
-                v = table["strain_per_Nm"]
-                if (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
-                        or v <= 0):
-                    raise InputError(f"{source}: torque.strain_per_Nm: must be a number > 0, "
-                                     f"got {v!r}")
-                strain_per_Nm = float(v)
-            continue
-        if sec not in _SECTIONS:
-            raise InputError(f"{source}: [{sec}]: unknown section; expected "
-                             f"{', '.join(list(_SECTIONS) + ['torque'])}")
-        if not isinstance(table, dict):
-            raise InputError(f"{source}: [{sec}] must be a table")
-        for key, value in table.items():
-            if key not in _SECTIONS[sec]:
-                raise InputError(f"{source}: {sec}.{key}: unknown key; expected one of "
-                                 f"{', '.join(_SECTIONS[sec])}")
-            if isinstance(value, int) and not isinstance(value, bool) and key != "bits":
-                value = float(value)
-            kwargs[key] = value
-    try:
-        return SensorConfig(**kwargs), strain_per_Nm
-    except InputError as exc:
-        raise InputError(f"{source}: {exc}") from None
+    """(SensorConfig, strain_per_Nm or None) from a sensor file's tables, validated by its
+    schema (userio.schema.sensor.SensorFile); InputError naming ``source`` and the field."""
+    from userio.schema import parse
+    from userio.schema.sensor import SensorFile
+
+    file = parse(SensorFile, data, source)
+    kwargs = {k: getattr(getattr(file, sec), k) for sec, keys in _SECTIONS.items() for k in keys}
+    return SensorConfig(**kwargs), file.torque.strain_per_Nm
 
 
 def load_sensor_config(path: str | os.PathLike) -> tuple[SensorConfig, float | None]:

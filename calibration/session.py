@@ -19,10 +19,10 @@ from pathlib import Path
 import numpy as np
 
 from calibration.errors import InputError
-from userio.fields import Range
+from userio.ranges import Range
 
 G_STANDARD_M_PER_S2 = 9.81
-# physical ranges of a static-loading session (userio.fields.Range: checked where read)
+# physical ranges of a static-loading session (userio.ranges.Range: checked where read)
 LEVER_ARM_RANGE_M = Range(0.0, 10.0, "m", lo_open=True,
                           high="a calibration lever is at most a few metres: mm typed as m?")
 MASS_RANGE_G = Range(0.0, 1e7, "g", high="ten tonnes on a calibration lever: kg typed as g, or mg?")

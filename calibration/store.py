@@ -166,86 +166,15 @@ def read_document(path, *, data_path=None) -> dict:
     return doc
 
 
-MODEL_COEFS = {"linear": ("slope", "offset"), "quadratic": ("slope", "offset", "quad"),
-               "hysteresis": ("slope", "offset", "hysteresis")}
-
-
 def check_meaning(doc: dict, path="<calibration>") -> None:
-    """Refuse a hash-valid document that does not make sense: unknown model, coefficients
-    missing or not finite, slope 0, lever arm not finite > 0, covariance missing, not square,
-    not symmetric or not positive semi-definite (eigenvalues ≥ −1e-9·max|λ|), bad samples; and
-    any field of the wrong type (a string where a number belongs, a number where a table does)."""
-    try:
-        _check_meaning(doc, path)
-    except (TypeError, ValueError, KeyError, AttributeError, IndexError) as exc:
-        if isinstance(exc, InputError):
-            raise
-        raise InputError(f"{path}: a field has the wrong type or shape ({type(exc).__name__}: "
-                         f"{str(exc).splitlines()[0] if str(exc) else ''}); not a calibration this "
-                         "version wrote") from None
+    """Refuse a hash-valid document that does not make sense (userio.schema.calibration:
+    unknown model, coefficients missing or not finite, slope 0, lever arm not in (0, 10] m,
+    covariance missing, not square, not symmetric or not positive semi-definite, bad samples,
+    any field of the wrong type)."""
+    from userio.schema import parse
+    from userio.schema.calibration import CalibrationFile
 
-
-def _number(doc_value, name: str, **kw) -> float:
-    """A JSON number (not a string, not a boolean), finite (userio.errors.finite rules)."""
-    from userio.errors import finite
-
-    if isinstance(doc_value, bool) or not isinstance(doc_value, (int, float)):
-        raise InputError(f"{name}: expected a number, got {doc_value!r}")
-    return finite(doc_value, name, **kw)
-
-
-def _check_meaning(doc: dict, path) -> None:
-    finite = _number
-
-    def field(name):
-        return f"{path}: field {name!r}"
-
-    model = doc.get("model")
-    if model not in MODEL_COEFS:
-        raise InputError(f"{field('model')}: unknown model {model!r} "
-                         f"(known: {', '.join(MODEL_COEFS)})")
-    names = MODEL_COEFS[model]
-    coefs = doc.get("coefficients")
-    if not isinstance(coefs, dict) or set(coefs) != set(names):
-        raise InputError(f"{field('coefficients')}: model {model!r} needs exactly {', '.join(names)}")
-    for n in names:
-        finite(coefs[n], f"{path}: field 'coefficients.{n}'")
-    if coefs["slope"] == 0:
-        raise InputError(f"{field('coefficients.slope')}: slope is 0; readings carry no load information")
-    if doc.get("lever_arm_m") is not None:
-        from calibration.session import LEVER_ARM_RANGE_M
-
-        finite(doc["lever_arm_m"], f"{path}: field 'lever_arm_m'", positive=True)
-        LEVER_ARM_RANGE_M.check(doc["lever_arm_m"], f"{path}: field 'lever_arm_m'")
-    for key in ("reading_unit", "sensor_id"):
-        if key in doc and not isinstance(doc[key], str):
-            raise InputError(f"{field(key)}: expected a string, got {doc[key]!r}")
-    cov = doc.get("covariance")
-    if not isinstance(cov, dict) or "matrix" not in cov or "names" not in cov:
-        raise InputError(f"{field('covariance')}: missing (need names and matrix); "
-                         "the torque uncertainty cannot be computed without it")
-    if not isinstance(cov["names"], list) or list(cov["names"]) != list(names):
-        raise InputError(f"{field('covariance.names')}: expected {list(names)}, got {cov['names']!r}")
-    try:
-        mat = np.asarray(cov["matrix"], float)
-    except (TypeError, ValueError):
-        raise InputError(f"{field('covariance.matrix')}: not a numeric matrix") from None
-    p = len(names)
-    if mat.shape != (p, p) or not np.all(np.isfinite(mat)):
-        raise InputError(f"{field('covariance.matrix')}: expected a finite {p}×{p} matrix")
-    if not np.allclose(mat, mat.T, rtol=1e-9, atol=0):
-        raise InputError(f"{field('covariance.matrix')}: not symmetric")
-    lam = np.linalg.eigvalsh(mat)
-    if lam.min() < -1e-9 * max(abs(lam).max(), 1e-300):
-        raise InputError(f"{field('covariance.matrix')}: not positive semi-definite "
-                         f"(eigenvalue {lam.min():.3g})")
-    try:
-        finite(doc["posterior"]["sigma"]["mean"], f"{path}: field 'posterior.sigma.mean'", nonneg=True)
-        vals = np.asarray(doc["samples"]["values"], float)
-    except (KeyError, TypeError, ValueError, InputError):
-        raise InputError(f"{field('samples')}: posterior samples or sigma missing or not numeric") from None
-    if vals.ndim != 2 or vals.shape[0] < 1 or vals.shape[1] != p + 1 or not np.all(np.isfinite(vals)):
-        raise InputError(f"{field('samples.values')}: expected finite draws of shape (S, {p + 1})")
+    parse(CalibrationFile, doc, path)
 
 
 def model_from_document(doc: dict, source: str = "<memory>"):

@@ -29,11 +29,6 @@ import numpy as np
 from estimator.errors import InputError
 
 PER_LINK = ("m", "mc_par", "mc_perp", "I_joint")
-IDENTIFICATION_KEYS = {"parameter_names", "parameters", "covariance", "nominal_parameters",
-                       "source_robot", "source_robot_sha256", "logs", "statistics", "unexcited",
-                       "created_utc", "command", "method", "notes"}
-
-
 def parameter_names(n_links: int) -> tuple[str, ...]:
     return ("base.m", "base.I") + tuple(f"link{i}.{p}" for i in range(1, n_links + 1)
                                         for p in PER_LINK)
@@ -234,80 +229,58 @@ def regressor_numpy(robot, q, v):
 
 
 # ----------------------------------------------------------------------------- robot TOML tables
-def read_uncertainty(table, where: str):
-    """[model_uncertainty]: ``relative`` (everything, COM as a fraction of the link length) and/or
-    ``mass_rel``, ``inertia_rel`` (relative), ``com_m`` (metres), each 1σ."""
+def read_uncertainty(table):
+    """[model_uncertainty] (a validated userio.schema.robot.ModelUncertaintyTable) → the
+    ModelUncertainty: ``relative`` fills what the file leaves out."""
     from estimator.model import ModelUncertainty
-    from userio.fields import Fields
 
-    f = Fields(where)
-    f.known(table, {"relative", "mass_rel", "inertia_rel", "com_m"}, "model_uncertainty")
-    if not table:
-        raise f.err("model_uncertainty", "empty table: give relative, or mass_rel, inertia_rel "
-                    "and com_m")
-    rel = f.number(table, "relative", "model_uncertainty", lo=0.0, hi=1.0) if "relative" in table else None
-    missing = [k for k in ("mass_rel", "inertia_rel", "com_m") if k not in table]
-    if rel is None and missing:
-        raise f.err(f"model_uncertainty.{missing[0]}", "missing field (or give relative for all)")
-    get = lambda k, d: f.number(table, k, "model_uncertainty", d, lo=0.0, hi=1.0)   # noqa: E731
-    return ModelUncertainty(mass_rel=get("mass_rel", rel), inertia_rel=get("inertia_rel", rel),
-                            com_m=get("com_m", None) if "com_m" in table else None, relative=rel)
+    rel = table.relative
+    pick = lambda v: rel if v is None else v            # noqa: E731
+    return ModelUncertainty(mass_rel=pick(table.mass_rel), inertia_rel=pick(table.inertia_rel),
+                            com_m=table.com_m, relative=rel)
 
 
 def read_identification(model, table, where: str) -> dict:
-    """[identification] of a RobotModel (the planar Robot, a URDF robot's UrdfModel): its parameter
-    names and values must be the model's (``parameter_names``, ``parameters()``), its covariance a
-    finite symmetric positive semi-definite (n_θ × n_θ) matrix."""
-    from userio.fields import Fields
-
-    f = Fields(where)
-    f.known(table, IDENTIFICATION_KEYS, "identification")
-    names = table.get("parameter_names")
+    """[identification] (a validated userio.schema.robot.IdentificationTable) checked against a
+    RobotModel (the planar Robot, a URDF robot's UrdfModel): its parameter names and values must be
+    the model's (``parameter_names``, ``parameters()``), its covariance (n_θ × n_θ) symmetric
+    positive semi-definite."""
+    err = lambda key, msg: InputError(f"{where}: identification.{key}: {msg}")   # noqa: E731
     want = list(model.parameter_names)
-    if names != want:
-        raise f.err("identification.parameter_names", f"expected {want} (this robot's "
-                    f"{len(want)} inertial parameters), got {names!r}")
+    if table.parameter_names != want:
+        raise err("parameter_names", f"expected {want} (this robot's {len(want)} inertial "
+                  f"parameters), got {table.parameter_names!r}")
     k = len(want)
-    theta = f.vector(table, "parameters", "identification", length=k)
+    theta = np.asarray(table.parameters, float)
+    if theta.size != k:
+        raise err("parameters", f"expected {k} numbers, got {theta.size}")
     ref = np.asarray(model.parameters(), float)
     scale = np.abs(ref) + 1e-12
     if np.any(np.abs(theta - ref) > 1e-6 * scale):
         j = int(np.argmax(np.abs(theta - ref) / scale))
-        raise f.err("identification.parameters", f"{want[j]} = {theta[j]:.9g} differs from the "
-                    f"file's inertial data ({ref[j]:.9g}): edited after identification? Identify again")
-    cov = table.get("covariance")
-    ok = isinstance(cov, list) and len(cov) == k and all(
-        isinstance(r, list) and len(r) == k and all(isinstance(x, (int, float)) and
-                                                    not isinstance(x, bool) for x in r) for r in cov)
-    if not ok:
-        raise f.err("identification.covariance", f"expected a {k} × {k} matrix of numbers")
-    C = np.asarray(cov, float)
-    if not np.all(np.isfinite(C)):
-        raise f.err("identification.covariance", "values must be finite")
+        raise err("parameters", f"{want[j]} = {theta[j]:.9g} differs from the file's inertial "
+                  f"data ({ref[j]:.9g}): edited after identification? Identify again")
+    if len(table.covariance) != k or any(len(r) != k for r in table.covariance):
+        raise err("covariance", f"expected a {k} × {k} matrix of numbers")
+    C = np.asarray(table.covariance, float)
     tol = 1e-9 * max(float(np.abs(C).max()), 1e-300)
     if np.abs(C - C.T).max() > tol or np.linalg.eigvalsh(0.5 * (C + C.T)).min() < -1e-6 * np.abs(C).max():
-        raise f.err("identification.covariance", "must be symmetric positive semi-definite")
-    out = dict(table)
+        raise err("covariance", "must be symmetric positive semi-definite")
+    out = {key: v for key, v in table.model_dump().items() if v is not None}
+    out["parameters"] = theta.tolist()
     out["covariance"] = 0.5 * (C + C.T)
     return out
 
 
-def read_tables(robot, data: dict, source: str, model=None):
-    """The robot (a dataclass with ``model_uncertainty`` and ``identification`` fields) with those
-    tables read and validated; the identification against ``model`` (default: the robot itself)."""
+def read_tables(robot, file, source: str, model=None):
+    """The robot (a dataclass with ``model_uncertainty`` and ``identification`` fields) with the
+    validated file's (``file``: userio.schema) tables; the identification checked against
+    ``model`` (default: the robot itself)."""
     from dataclasses import replace
 
-    unc = ident = None
-    if "model_uncertainty" in data:
-        t = data["model_uncertainty"]
-        if not isinstance(t, dict):
-            raise InputError(f"{source}: model_uncertainty: expected a table")
-        unc = read_uncertainty(t, source)
-    if "identification" in data:
-        t = data["identification"]
-        if not isinstance(t, dict):
-            raise InputError(f"{source}: identification: expected a table")
-        ident = read_identification(robot if model is None else model, t, source)
+    unc = None if file.model_uncertainty is None else read_uncertainty(file.model_uncertainty)
+    ident = None if file.identification is None else read_identification(
+        robot if model is None else model, file.identification, source)
     return replace(robot, model_uncertainty=unc, identification=ident)
 
 

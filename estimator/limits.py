@@ -1,4 +1,4 @@
-"""Physical ranges of the estimator's settings (userio.fields.Range), declared once.
+"""Physical ranges of the estimator's settings (userio.ranges.Range), declared once.
 
 Scene fields (torquebench.scenes: ``[estimator]``, ``[sensors]``, the prediction settings) carry
 these in their dataclass metadata and the command-line options of ``estimate`` and ``propagate``
@@ -6,7 +6,7 @@ check against the same objects, so a range is stated in one place with its unit 
 outside it usually means.
 """
 
-from userio.fields import Range
+from userio.ranges import Range
 
 # observer gain K: 1/K is the residual's time constant (0.1 s⁻¹: 10 s; 1e6 s⁻¹: 1 µs)
 GAIN_RANGE = Range(0.1, 1e6, "1/s", low="the residual would take longer than 10 s to follow a "

@@ -29,9 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from estimator.errors import InputError
-from userio.fields import Range, check_ranges
+from userio.ranges import Range, check_ranges
 
-# physical ranges of the sensor noise (1σ per sample), declared once (userio.fields.Range)
+# physical ranges of the sensor noise (1σ per sample), declared once (userio.ranges.Range)
 TORQUE_SIGMA_RANGE = Range(1e-9, 1e4, "N·m", low="below any real sensor's noise: the residual "
                            "covariance would be singular", high="N·mm typed as N·m?")
 FT_SIGMA_RANGE = Range(1e-9, 1e5, "N or N·m", low="below any real FT sensor's noise: the residual "
@@ -101,26 +101,20 @@ def noise_toml(noise: NoiseModel, who: str = "torquebench's simulator") -> str:
 
 
 def read_noise_declaration(log_path, n_links: int) -> NoiseModel | None:
-    """The NoiseModel declared in ``LOG.noise.toml`` beside the log, or None without one; every
-    error names the file and the field."""
-    from userio.fields import Fields
+    """The NoiseModel declared in ``LOG.noise.toml`` beside the log (userio.schema.logs.NoiseFile:
+    torque_sigma_Nm one value or one per link, ft_sigma three), or None without one."""
     from userio.files import read_toml
+    from userio.schema import parse
+    from userio.schema.logs import NoiseFile
 
     path = noise_side_file(log_path)
     if not path.exists():
         return None
-    data = read_toml(path)
-    f = Fields(path)
-    f.known(data, {"noise"}, "")
-    t = f.table(data, "noise", required=True)
-    f.known(t, {"torque_sigma_Nm", "ft_sigma", "velocity_sigma_rad_per_s", "encoder_counts"}, "noise")
-    tau = f.vector(t, "torque_sigma_Nm", "noise", positive=True)
-    if tau.size not in (1, n_links):
-        raise f.err("noise.torque_sigma_Nm", f"expected 1 or {n_links} values, got {tau.size}")
-    return NoiseModel(torque_sigma_Nm=tau, ft_sigma=f.vector(t, "ft_sigma", "noise", length=3, positive=True),
-                      velocity_sigma_rad_per_s=f.number(t, "velocity_sigma_rad_per_s", "noise", 0.0, nonneg=True),
-                      encoder_counts=f.integer(t, "encoder_counts", "noise", 0, lo=0),
-                      source=f"log declaration {path.name}")
+    t = parse(NoiseFile, read_toml(path), path, {"torque_sizes": (1, n_links), "ft_sizes": (3,)}).noise
+    return NoiseModel(torque_sigma_Nm=np.asarray(t.torque_sigma_Nm, float),
+                      ft_sigma=np.asarray(t.ft_sigma, float),
+                      velocity_sigma_rad_per_s=t.velocity_sigma_rad_per_s,
+                      encoder_counts=t.encoder_counts, source=f"log declaration {path.name}")
 
 
 def paper_leg_noise() -> NoiseModel:

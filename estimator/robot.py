@@ -14,13 +14,11 @@ file may declare ``[model_uncertainty]`` (how far the real robot may be from it)
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from estimator.errors import InputError
 from userio.files import read_toml
 
 
@@ -151,152 +149,26 @@ class Robot:
         return replace(self, floating=floating)
 
 
-def _physical_ranges():
-    """The physical range of each Robot field, with its unit (userio.fields.Range), keyed by the
-    field and naming the TOML key: checked once a description is read (``check_physical``)."""
-    from userio.fields import Range
-
-    return {
-        "lengths_m": ("link[{i}].length_m", Range(1e-3, 10.0, "m", low="µm? a link is longer than 1 mm",
-                                                  high="mm typed as m?")),
-        "masses_kg": ("link[{i}].mass_kg", Range(1e-4, 1e3, "kg", low="below 0.1 g", high="g typed as kg?")),
-        "inertias_kgm2": ("link[{i}].inertia_kgm2", Range(1e-10, 1e3, "kg·m²", high="g·mm² or kg·cm² mix-up?")),
-        "base_mass_kg": ("base_body.mass_kg", Range(1e-4, 1e4, "kg", high="g typed as kg?")),
-        "base_inertia_kgm2": ("base_body.inertia_kgm2", Range(1e-10, 1e4, "kg·m²")),
-        "gravity_m_per_s2": ("gravity_m_per_s2", Range(1.0, 30.0, "m/s²", low="with g ≈ 0 nothing "
-                                                       "weighs on the sensors the estimator reads "
-                                                       "(the Moon's is 1.6)", high="mm/s² typed as m/s²?")),
-        "base_stiffness": ("base_mount.stiffness", Range(0.0, 1e12, "N/m or N·m/rad")),
-        "base_damping": ("base_mount.damping", Range(0.0, 1e9, "N·s/m or N·m·s/rad")),
-    }
-
-
-def check_physical(robot: Robot, source: str = "robot") -> Robot:
-    """Every field of ``robot`` inside its physical range (InputError naming file and key)."""
-    for name, (key, rng) in _physical_ranges().items():
-        values = np.atleast_1d(np.asarray(getattr(robot, name), float))
-        for i, v in enumerate(values, start=1):
-            why = rng.problem(float(v))
-            if why:
-                raise InputError(f"{source}: {key.format(i=i)}: {why}")
-    return robot
-
-
-def _number(table: dict, key: str, where: str, *, positive=False, nonneg=False) -> float:
-    if key not in table:
-        raise InputError(f"{where}: missing field '{key}'")
-    value = table[key]
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise InputError(f"{where}.{key}: expected a finite number, got {value!r}")
-    if positive and value <= 0:
-        raise InputError(f"{where}.{key}: must be > 0, got {value}")
-    if nonneg and value < 0:
-        raise InputError(f"{where}.{key}: must be ≥ 0, got {value}")
-    return float(value)
-
-
-def _triple(table: dict, key: str, where: str) -> np.ndarray:
-    value = table.get(key, [0.0, 0.0, 0.0])
-    if (not isinstance(value, list) or len(value) != 3
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
-        raise InputError(f"{where}.{key}: expected three numbers [x, z, θ], got {value!r}")
-    arr = np.asarray(value, dtype=float)
-    if not np.all(np.isfinite(arr)) or np.any(arr < 0):
-        raise InputError(f"{where}.{key}: values must be finite and ≥ 0, got {value}")
-    return arr
-
-
-MAX_LINKS = 64                       # links of one planar chain (a leg has 2–4)
-TOP_KEYS = {"name", "base", "gravity_m_per_s2", "friction_coefficient", "link", "base_body",
-            "base_mount", "model_uncertainty", "identification"}
-LINK_KEYS = {"length_m", "com_m", "com_perp_m", "mass_kg", "inertia_kgm2"}
-BODY_KEYS = {"mass_kg", "inertia_kgm2"}
-MOUNT_KEYS = {"stiffness", "damping"}
-
-
-def _known(table: dict, allowed: set, where: str) -> None:
-    """Unknown key → InputError naming it, with the nearest valid key (userio.fields)."""
-    from userio.fields import nearest
-
-    extra = sorted(set(table) - allowed)
-    if extra:
-        raise InputError(f"{where}.{extra[0]}: unknown field{nearest(extra[0], allowed)} "
-                         f"(allowed: {', '.join(sorted(allowed))})")
-
-
-def _table(value, where: str) -> dict:
-    if not isinstance(value, dict):
-        raise InputError(f"{where}: expected a table, got {type(value).__name__}")
-    return value
-
-
 def robot_from_dict(data: dict, source: str = "robot") -> Robot:
-    """Validate a robot description (the TOML schema of ``robots/paper_leg.toml``): known keys
-    only, finite numbers, positive lengths/masses/inertias, COM on its link 0 ≤ r_i ≤ l_i,
-    gravity in [0, 100] m/s², friction coefficient in [0, 10]."""
-    _known(_table(data, source), TOP_KEYS, source)
-    base = data.get("base", "floating")
-    if base not in ("floating", "fixed"):
-        raise InputError(f"{source}: field 'base' must be \"floating\" or \"fixed\", got {base!r}")
-    links = data.get("link")
-    if not isinstance(links, list) or not links:
-        raise InputError(f"{source}: missing [[link]] tables (at least one link is needed)")
-    if len(links) > MAX_LINKS:
-        raise InputError(f"{source}: {len(links)} [[link]] tables, above the {MAX_LINKS} links of a "
-                         "planar chain this estimator handles")
-    rows = []
-    for i, link in enumerate(links, start=1):
-        where = f"{source}: link[{i}]"
-        _known(_table(link, where), LINK_KEYS, where)
-        length = _number(link, "length_m", where, positive=True)
-        com = _number(link, "com_m", where, nonneg=True)
-        if com > length:
-            raise InputError(f"{where}.com_m: centre of mass {com:g} m lies beyond the link's end "
-                             f"(length_m = {length:g}); need 0 ≤ com_m ≤ length_m")
-        perp = _number(link, "com_perp_m", where) if "com_perp_m" in link else 0.0
-        if abs(perp) > length:
-            raise InputError(f"{where}.com_perp_m: centre of mass {perp:g} m off the link axis, more "
-                             f"than the link's length ({length:g} m); need |com_perp_m| ≤ length_m")
-        rows.append((length, com, _number(link, "mass_kg", where, positive=True),
-                     _number(link, "inertia_kgm2", where, positive=True), perp))
-    lengths, coms, masses, inertias, perps = (np.array(c) for c in zip(*rows))
-    body = data.get("base_body")
-    if not isinstance(body, dict):
-        raise InputError(f"{source}: missing [base_body] table (mass_kg, inertia_kgm2)")
-    _known(body, BODY_KEYS, f"{source}: base_body")
-    mount = _table(data.get("base_mount", {}), f"{source}: base_mount")
-    _known(mount, MOUNT_KEYS, f"{source}: base_mount")
-    if "gravity_m_per_s2" in data and not 0 <= _number(data, "gravity_m_per_s2", source) <= 100:
-        raise InputError(f"{source}.gravity_m_per_s2: must lie in [0, 100] m/s², "
-                         f"got {data['gravity_m_per_s2']}")
-    if "friction_coefficient" in data and _number(data, "friction_coefficient", source) > 10:
-        raise InputError(f"{source}.friction_coefficient: must lie in [0, 10], "
-                         f"got {data['friction_coefficient']}")
+    """A robot description (``robots/paper_leg.toml``) validated by its schema
+    (userio.schema.robot.RobotFile: known keys, finite numbers in their physical ranges, each
+    centre of mass on its link) → Robot; InputError naming the file and field."""
+    from estimator import inertial
+    from userio.schema import parse
+    from userio.schema.robot import RobotFile
+
+    file = parse(RobotFile, data, source)
+    col = lambda key: np.array([getattr(link, key) for link in file.link], float)   # noqa: E731
     robot = Robot(
-        lengths_m=lengths, com_m=coms, masses_kg=masses, inertias_kgm2=inertias, com_perp_m=perps,
-        base_mass_kg=_number(body, "mass_kg", f"{source}: base_body", positive=True),
-        base_inertia_kgm2=_number(body, "inertia_kgm2", f"{source}: base_body", positive=True),
-        floating=(base == "floating"),
-        gravity_m_per_s2=_number(data, "gravity_m_per_s2", source, nonneg=True)
-        if "gravity_m_per_s2" in data else 9.81,
-        base_stiffness=_triple(mount, "stiffness", f"{source}: base_mount"),
-        base_damping=_triple(mount, "damping", f"{source}: base_mount"),
-        friction_coefficient=_number(data, "friction_coefficient", source, nonneg=True)
-        if "friction_coefficient" in data else 0.3,
-        name=_name(data, source),
-    )
-    if "model_uncertainty" in data or "identification" in data:
-        from estimator import inertial
-
-        robot = inertial.read_tables(robot, data, source)
-    return check_physical(robot, source)
-
-
-def _name(data: dict, source: str) -> str:
-    name = data.get("name", Path(source).stem)
-    if not isinstance(name, str):
-        raise InputError(f"{source}.name: expected a string, got {name!r}")
-    return name
+        lengths_m=col("length_m"), com_m=col("com_m"), masses_kg=col("mass_kg"),
+        inertias_kgm2=col("inertia_kgm2"), com_perp_m=col("com_perp_m"),
+        base_mass_kg=file.base_body.mass_kg, base_inertia_kgm2=file.base_body.inertia_kgm2,
+        floating=(file.base == "floating"), gravity_m_per_s2=file.gravity_m_per_s2,
+        base_stiffness=np.array(file.base_mount.stiffness, float),
+        base_damping=np.array(file.base_mount.damping, float),
+        friction_coefficient=file.friction_coefficient,
+        name=Path(source).stem if file.name is None else file.name)
+    return inertial.read_tables(robot, file, source)
 
 
 def load_robot(path: str | Path) -> Robot:

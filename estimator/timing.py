@@ -34,17 +34,17 @@ from pathlib import Path
 import numpy as np
 
 from estimator.errors import InputError
-from userio.fields import Range
+from userio.ranges import Range
 
 KINDS = ("instant", "mean", "delay")
 DELAY_RANGE = Range(0.0, 1.0, "s", high="a sensor filter's group delay is micro- to milliseconds: "
                     "ms or samples typed as seconds?")
 
 
-def parse(text, where: str) -> tuple[str, float]:
-    """'instant' | 'mean' | 'delay:SECONDS' → (kind, delay_s); InputError naming ``where``."""
+def spec(text) -> tuple[str, float]:
+    """'instant' | 'mean' | 'delay:SECONDS' → (kind, delay_s); ValueError saying what is wrong."""
     if not isinstance(text, str):
-        raise InputError(f"{where}: expected 'instant', 'mean' or 'delay:SECONDS', got {text!r}")
+        raise ValueError(f"expected 'instant', 'mean' or 'delay:SECONDS', got {text!r}")
     s = text.strip().lower()
     if s in ("instant", "mean"):
         return s, 0.0
@@ -54,16 +54,22 @@ def parse(text, where: str) -> tuple[str, float]:
         except ValueError:
             d = float("nan")
         if not (np.isfinite(d) and d >= 0):
-            raise InputError(f"{where}: group delay must be a finite number of seconds ≥ 0, "
-                             f"got {text!r}")
+            raise ValueError(f"group delay must be a finite number of seconds ≥ 0, got {text!r}")
         why = DELAY_RANGE.problem(d)
         if why:
-            raise InputError(f"{where}: group delay {why}")
+            raise ValueError(f"group delay {why}")
         return "delay", d
     hint = difflib.get_close_matches(s.split(":")[0], ["instant", "mean", "delay"], n=1)
     did = f" (did you mean '{hint[0]}'?)" if hint else ""
-    raise InputError(f"{where}: unknown timing {text!r}{did}; use 'instant', 'mean' or "
-                     f"'delay:SECONDS'")
+    raise ValueError(f"unknown timing {text!r}{did}; use 'instant', 'mean' or 'delay:SECONDS'")
+
+
+def parse(text, where: str) -> tuple[str, float]:
+    """:func:`spec` with InputError naming ``where`` (a --timing option)."""
+    try:
+        return spec(text)
+    except ValueError as exc:
+        raise InputError(f"{where}: {exc}") from None
 
 
 def channel_names(n_links: int) -> list[str]:
@@ -82,27 +88,19 @@ def side_file(log_path) -> Path:
     return p.with_name(p.stem + ".timing.toml")
 
 
-def read_side_table(log_path, names, what: str = "column names"):
-    """(path, the [timing] table) of a log's ``LOG.timing.toml``, its keys checked against
-    default, wrench, tau and ``names`` (the log's channels); None when the log has none."""
+def read_side_table(log_path, names):
+    """(path, {key: (kind, delay_s)}) of a log's ``LOG.timing.toml`` validated by its schema
+    (userio.schema.logs.TimingFile: keys default, wrench, tau or one of ``names``, the log's
+    channels); None when the log has none."""
     from userio.files import read_toml
+    from userio.schema import parse
+    from userio.schema.logs import TimingFile
 
     path = side_file(log_path)
     if not path.exists():
         return None
-    data = read_toml(path)
-    table = data.get("timing")
-    if not isinstance(table, dict) or set(data) - {"timing"}:
-        raise InputError(f"{path}: expected one table [timing] with keys default, wrench, tau or "
-                         f"{what}")
-    allowed = ["default", "wrench", "tau", *names]
-    for key in table:
-        if key not in allowed:
-            hint = difflib.get_close_matches(key, allowed, n=1)
-            did = f" (did you mean '{hint[0]}'?)" if hint else ""
-            raise InputError(f"{path}: timing.{key}: unknown channel{did}; use one of "
-                             f"{', '.join(allowed)}")
-    return path, table
+    file = parse(TimingFile, read_toml(path), path, {"channels": list(names)})
+    return path, file.timing
 
 
 def read_declaration(log_path, n_links: int):
@@ -111,13 +109,13 @@ def read_declaration(log_path, n_links: int):
     found = read_side_table(log_path, names)
     if found is None:
         return None
-    path, table = found
-    default = parse(table.get("default", "instant"), f"{path}: timing.default")
+    _, table = found
+    default = table.get("default", ("instant", 0.0))
     out = []
     for j, name in enumerate(names):
         group = "wrench" if j < 3 else "tau"
         key = name if name in table else group if group in table else None
-        out.append(parse(table[key], f"{path}: timing.{key}") if key else default)
+        out.append(table[key] if key else default)
     return out
 
 

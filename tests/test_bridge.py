@@ -242,7 +242,7 @@ def test_paper_toml_is_the_default_config():
     ("adc", "enob_definition", "snr", "adc.enob_definition"),
     ("adc", "range_factor", 3, "adc.range_factor"),
     ("adc", "data_rate_Hz", "fast", "adc.data_rate_Hz"),
-    ("adc", "colour", 1, "adc.colour: unknown key"),
+    ("adc", "colour", 1, "adc.colour: unknown field"),
     ("torque", "strain_per_Nm", -1.0, "torque.strain_per_Nm"),
 ])
 def test_bad_config_names_the_field(section, key, value, match):
@@ -256,7 +256,7 @@ def test_bad_toml_names_the_file(tmp_path):
     p.write_text("[adc\nbits = 24\n")
     with pytest.raises(InputError, match="bad.toml"):
         load_sensor_config(p)
-    with pytest.raises(InputError, match="unknown section"):
+    with pytest.raises(InputError, match="adcc: unknown field \\(did you mean 'adc'\\?\\)"):
         sensor_config_from_dict({"adcc": {}})
     with pytest.raises(InputError, match="unknown sensor parameter"):
         SensorConfig().replace(gian=2.0)

@@ -132,13 +132,19 @@ def test_open_stl_exit_2(capsys, tmp_path, no_meshing):
     ({"centre_mm": [100.0, 0.0, 2.2]}, "off the part (outside its bounding box, 60 × 60 × 2.2 mm: is the file's length unit right?)"),
     ({"centre_mm": [15.5, 0.0, 2.2], "normal": [1.0, 0.0, 0.0], "axis": [0.0, 1.0, 0.0]}, "90° from the surface normal"),
     ({"centre_mm": [15.5, 1.2, 2.2]}, "overhangs its face"),                  # too near the spoke's edge
-    ({"centre_mm": [float("nan"), 0.0, 2.2]}, "must be finite numbers"),
 ])
 def test_misplaced_gauge_exit_2_names_the_gauge(capsys, tmp_path, disc_stl, no_meshing, change, needle):
     p = _design(tmp_path, disc_stl, _paper_gauges(**change))
     code, out, err = _cli(capsys, p)
     assert code == 2 and out == "" and err.count("\n") == 1
     assert str(p) in err and "gauges: gauge g1 (arm 1)" in err and needle in err
+
+
+def test_gauge_centre_nan_is_refused_by_the_schema(capsys, tmp_path, disc_stl, no_meshing):
+    p = _design(tmp_path, disc_stl, _paper_gauges(centre_mm=[float("nan"), 0.0, 2.2]))
+    code, out, err = _cli(capsys, p)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert f"{p}: gauges.gauge[1].centre_mm[1]: expected a finite number, got nan" in err
 
 
 def test_gauge_larger_than_its_face_exit_2(capsys, tmp_path, disc_stl, no_meshing):

@@ -209,9 +209,9 @@ def _rehashed(work, mutate):
 
 @pytest.mark.parametrize("mutate, match", [
     (lambda d: d["coefficients"].__setitem__("slope", 0.0), "slope is 0"),
-    (lambda d: d.__setitem__("lever_arm_m", -0.2), "'lever_arm_m': must be > 0"),
-    (lambda d: d.__setitem__("model", "cubic"), "unknown model 'cubic'"),
-    (lambda d: d.pop("covariance"), "'covariance': missing"),
+    (lambda d: d.__setitem__("lever_arm_m", -0.2), "lever_arm_m: must be > 0"),
+    (lambda d: d.__setitem__("model", "cubic"), "model: must be 'linear', 'quadratic' or 'hysteresis', got 'cubic'"),
+    (lambda d: d.pop("covariance"), "covariance: missing field"),
     (lambda d: d["covariance"].__setitem__("matrix", [[1.0, 0.0], [0.0, -1.0]]),
      "not positive semi-definite"),
     (lambda d: d["covariance"].__setitem__("matrix", [[1.0, 0.5], [0.0, 1.0]]), "not symmetric"),
@@ -257,8 +257,8 @@ def test_apply_flags_saturated_adc_counts(work, capsys):
 
 # --------------------------------------------------------------------------- scene checks
 @pytest.mark.parametrize("edit, match", [
-    (lambda s: s.replace("rtol = 1e-6", "rtol = 1.0"), "integrator.rtol: must lie in"),
-    (lambda s: s.replace("atol = 1e-8", "atol = 0.5"), "integrator.atol: must lie in"),
+    (lambda s: s.replace("rtol = 1e-6", "rtol = 1.0"), "integrator.rtol: must be ≤ 0.01, got 1.0"),
+    (lambda s: s.replace("atol = 1e-8", "atol = 0.5"), "integrator.atol: must be ≤ 0.01, got 0.5"),
 ])
 def test_scene_tolerances_outside_sensible_range_exit_2(tmp_path, capsys, edit, match):
     scene = tmp_path / "s.toml"

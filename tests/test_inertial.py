@@ -146,10 +146,10 @@ def test_com_perp_in_the_robot_file(tmp_path):
 
 
 @pytest.mark.parametrize("table, message", [
-    ({"relative": 2.0}, "model_uncertainty.relative: must lie in [0, 1]"),
+    ({"relative": 2.0}, "model_uncertainty.relative: 2 is outside the physical range [0, 1]"),
     ({"mass_rel": 0.05}, "model_uncertainty.inertia_rel: missing field"),
     ({"realtive": 0.05}, "model_uncertainty.realtive: unknown field (did you mean 'relative'?)"),
-    ({}, "model_uncertainty: empty table"),
+    ({}, "model_uncertainty.mass_rel: missing field (or give relative for all)"),
 ])
 def test_bad_model_uncertainty_is_named(table, message):
     data = read_toml(PAPER_LEG_TOML)

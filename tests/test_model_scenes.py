@@ -56,7 +56,7 @@ def test_true_parameters_from_a_file(tmp_path):
 
 @pytest.mark.parametrize("table, message", [
     ('true_parameters = "paper_leg.toml"\nperturbation = 0.1', "robot.perturbation: give either"),
-    ("perturbation = 0.9", "robot.perturbation: must lie in [0, 0.5]"),
+    ("perturbation = 0.9", "robot.perturbation: must be ≤ 0.5, got 0.9"),
     ("perturbation_seed = 3", "robot.perturbation_seed: is the seed of a perturbation"),
     ('perturbaton = 0.1', "robot.perturbaton: unknown field (did you mean 'perturbation'?)"),
     ('true_parameters = "nope.toml"', "robot.true_parameters: file 'nope.toml' not found"),

@@ -1,8 +1,8 @@
 """Properties of the parsers (Hypothesis): for ANY input they return a value that obeys their
 contract or raise InputError (the CLI's one line, exit 2) — never another exception, never a
 value outside its declared range. Covered: the log reader (random CSV text and headers), TOML
-fields (numbers, integers, vectors with ranges), physical ranges (userio.fields.Range), the
-timing (instant|mean|delay:S), false-alarm-rate and --contact / --quiet-window option parsers."""
+fields through the schema layer (numbers, vectors with ranges, unknown keys), physical ranges
+(userio.ranges.Range), the timing (instant|mean|delay:S), false-alarm-rate and --contact / --quiet-window option parsers."""
 
 import math
 
@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 from userio.errors import InputError  # noqa: E402
-from userio.fields import Fields, Range  # noqa: E402
+from userio.ranges import Range  # noqa: E402
 
 PROPS = settings(max_examples=60, deadline=None, derandomize=True, database=None,
                  suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
@@ -38,31 +38,6 @@ def test_range_check_returns_a_finite_value_inside_or_raises(value, lo, width):
         assert str(exc).startswith("field:")
         return
     assert math.isfinite(v) and (lo is None or v >= lo) and (hi is None or v <= hi)
-
-
-@PROPS
-@given(value=numbers, positive=st.booleans(), lo=st.one_of(st.none(), st.floats(-10, 10)))
-def test_toml_number_fields_never_pass_nonsense(tmp_path, value, positive, lo):
-    f = Fields(tmp_path / "x.toml")
-    try:
-        v = f.number({"k": value}, "k", "table", positive=positive, lo=lo)
-    except InputError as exc:
-        assert "x.toml: table.k:" in str(exc)
-        return
-    assert isinstance(v, float) and math.isfinite(v)
-    assert not positive or v > 0
-    assert lo is None or v >= lo
-
-
-@PROPS
-@given(value=st.one_of(numbers, st.lists(numbers, max_size=4)), length=st.one_of(st.none(), st.integers(1, 3)))
-def test_toml_vector_fields_are_finite_and_sized(tmp_path, value, length):
-    f = Fields(tmp_path / "x.toml")
-    try:
-        v = f.vector({"k": value}, "k", "table", length=length, nonneg=True)
-    except InputError:
-        return
-    assert np.all(np.isfinite(v)) and np.all(v >= 0) and (length is None or v.size == length)
 
 
 @PROPS
@@ -176,3 +151,36 @@ def test_log_reader_on_binary_garbage(tmp_path, data):
         read_log(path)
     except InputError:
         pass
+
+
+# ----------------------------------------------------------------------------- the schema layer
+def _schema_model():
+    from userio.schema.base import Field, Model, num, vector
+
+    class Table(Model):
+        k: num(Range(-5.0, 5.0, "m"), gt=-3.0) = Field(1.0)
+        v: vector(2, Range(0.0, 1e3, "N"), ge=0) = Field((0.0, 0.0))
+
+    class File(Model):
+        table: Table = Field(Table())
+
+    return File
+
+
+@PROPS
+@given(value=numbers, key=st.sampled_from(["k", "v", "kk", "w"]))
+def test_schema_fields_never_pass_nonsense(value, key):
+    from userio.schema import parse
+
+    File = _schema_model()
+    try:
+        t = parse(File, {"table": {key: value}}, "x.toml").table
+    except InputError as exc:
+        msg = str(exc)
+        assert msg.startswith("x.toml: table.") and "\n" not in msg
+        if key in ("kk", "w"):
+            assert "unknown field" in msg
+        return
+    assert key in ("k", "v")
+    assert isinstance(t.k, float) and math.isfinite(t.k) and -3.0 < t.k <= 5.0
+    assert len(t.v) == 2 and all(math.isfinite(x) and 0 <= x <= 1e3 for x in t.v)

@@ -254,10 +254,11 @@ def test_declared_uncertainty_and_identification_tables(tmp_path, leg):
 
 
 @pytest.mark.parametrize("table, message", [
-    ("[model_uncertainty]\nrelative = 2.0\n", "model_uncertainty.relative: must lie in [0, 1]"),
+    ("[model_uncertainty]\nrelative = 2.0\n", "model_uncertainty.relative: 2 is outside the physical range [0, 1]"),
     ("[model_uncertainty]\nmass_rel = 0.05\n", "model_uncertainty.inertia_rel: missing field"),
     ("[model_uncertainty]\nrealtive = 0.05\n", "model_uncertainty.realtive: unknown field (did you mean 'relative'?)"),
-    ("[identification]\nparameter_names = [\"a\"]\n", "identification.parameter_names: expected ['base.m'"),
+    ("[identification]\nparameter_names = [\"a\"]\nparameters = [1.0]\ncovariance = [[1.0]]\n",
+     "identification.parameter_names: expected ['base.m'"),
     ("IDENT_EDITED", "identification.parameters: hip.m = 0.5 differs from the file's inertial data"),
     ("IDENT_BADCOV", "identification.covariance: must be symmetric positive semi-definite"),
 ])

@@ -103,7 +103,7 @@ def test_timing_and_noise_side_files(leg, tmp_path):
     back = read_noise(log, robot)
     assert np.allclose(back.ft_sigma, [0.1] * 3 + [0.01] * 3) and np.allclose(back.torque_sigma_Nm, 0.005)
     (tmp_path / "x.noise.toml").write_text("[noise]\ntorque_sigma_Nm = [0.005]\nft_sigma = [0.1, 0.1, 0.1, 0.01]\n")
-    with pytest.raises(InputError, match="FT sigma: expected 6 values"):
+    with pytest.raises(InputError, match="noise.ft_sigma: expected 2 or 6 values, got 4"):
         read_noise(log, robot)
 
 

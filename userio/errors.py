@@ -72,3 +72,11 @@ class CallbackInterrupt:
         if self.hit:
             self.hit = False
             raise KeyboardInterrupt
+
+
+def nearest(key: str, allowed) -> str:
+    """`` (did you mean 'x'?)`` for the closest allowed key, or ``""``."""
+    import difflib
+
+    close = difflib.get_close_matches(str(key), sorted(map(str, allowed)), n=1, cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""

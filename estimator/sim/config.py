@@ -12,7 +12,7 @@ import numpy as np
 
 from estimator.limits import ALPHA_RANGE, FORCE_RANGE, SAMPLE_RATE_RANGE
 from estimator.robot import Robot
-from userio.fields import Range, ranged
+from userio.ranges import Range, ranged
 
 TWO_PI = 2 * math.pi
 ANGLE_RANGE = Range(-TWO_PI, TWO_PI, "rad", low="degrees typed as rad?", high="degrees typed as rad?")

@@ -234,15 +234,15 @@ def read_timing(log_path, robot):
     from estimator import timing as tm
 
     names = timing_channels(robot)
-    found = tm.read_side_table(log_path, names, "channel names")
+    found = tm.read_side_table(log_path, names)
     if found is None:
         return None
     path, table = found
-    default = tm.parse(table.get("default", "instant"), f"{path}: timing.default")
+    default = table.get("default", ("instant", 0.0))
 
     def of(name, group):
         key = name if name in table else group if group in table else None
-        return tm.parse(table[key], f"{path}: timing.{key}") if key else default
+        return table[key] if key else default
 
     wr = [of(c, "wrench") for c in WRENCH]
     if len(set(wr)) > 1:
@@ -298,24 +298,20 @@ def make_noise(torque_sigma, ft_sigma, n_sensed: int, velocity_sigma=0.0, encode
 
 
 def read_noise(log_path, robot) -> SpatialNoise | None:
-    """``LOG.noise.toml`` beside a 3-D log (torque_sigma_Nm, ft_sigma (6 or 2),
-    velocity_sigma_rad_per_s, encoder_counts), or None."""
+    """``LOG.noise.toml`` beside a 3-D log (userio.schema.logs.NoiseFile: torque_sigma_Nm one
+    value or one per sensed joint, ft_sigma 6 or 2), or None."""
     from estimator.noise import noise_side_file
-    from userio.fields import Fields
     from userio.files import read_toml
+    from userio.schema import parse
+    from userio.schema.logs import NoiseFile
 
     path = noise_side_file(log_path)
     if not path.exists():
         return None
-    data = read_toml(path)
-    f = Fields(path)
-    f.known(data, {"noise"}, "")
-    t = f.table(data, "noise", required=True)
-    f.known(t, {"torque_sigma_Nm", "ft_sigma", "velocity_sigma_rad_per_s", "encoder_counts"}, "noise")
-    return make_noise(f.vector(t, "torque_sigma_Nm", "noise", positive=True),
-                      f.vector(t, "ft_sigma", "noise", positive=True), sum(robot.sensed),
-                      f.number(t, "velocity_sigma_rad_per_s", "noise", 0.0, nonneg=True),
-                      f.integer(t, "encoder_counts", "noise", 0, lo=0), f"log declaration {path.name}")
+    n = int(sum(robot.sensed))
+    t = parse(NoiseFile, read_toml(path), path, {"torque_sizes": (1, n), "ft_sizes": (6, 2)}).noise
+    return make_noise(t.torque_sigma_Nm, t.ft_sigma, n, t.velocity_sigma_rad_per_s,
+                      t.encoder_counts, f"log declaration {path.name}")
 
 
 def noise_text(noise: SpatialNoise) -> str:

@@ -248,89 +248,55 @@ def build_model(urdf_text: str, source: str, gravity: float = 9.81):
     return model
 
 
-TOP_KEYS = {"name", "urdf", "base", "torque_sensed", "ft_frame", "gravity_m_per_s2", "mount",
-            "collision", "model_uncertainty", "identification"}
-COLLISION_KEYS = {"link", "kind", "size", "xyz", "rpy", "mesh"}
-SIZES = {"box": 3, "cylinder": 2, "capsule": 2, "sphere": 1, "mesh": 3}
-
-
-def _collision_overrides(f, data, path: Path) -> dict:
-    """``[[collision]]`` tables: link → [Shape] replacing the URDF's solids of that link
-    (kind "none": no geometry, the link is then located on its segment)."""
+def _collision_overrides(items, path: Path) -> dict:
+    """``[[collision]]`` tables (validated, userio.schema.robot.Collision): link → [Shape]
+    replacing the URDF's solids of that link (kind "none": no geometry)."""
     out = {}
-    items = data.get("collision", [])
-    if not isinstance(items, list):
-        raise f.err("collision", "expected [[collision]] tables")
     for i, c in enumerate(items, start=1):
-        where = f"collision[{i}]"
-        if not isinstance(c, dict):
-            raise f.err(where, "expected a table")
-        f.known(c, COLLISION_KEYS, where)
-        link = f.string(c, "link", where)
-        kind = f.choice(c, "kind", where, tuple(SIZES) + ("none",), None)
-        shapes = out.setdefault(link, [])
-        if kind == "none":
+        shapes = out.setdefault(c.link, [])
+        if c.kind == "none":
             continue
-        size = tuple(f.vector(c, "size", where, SIZES[kind], [1.0, 1.0, 1.0] if kind == "mesh" else None,
-                              positive=True))
-        R = rpy_matrix(f.vector(c, "rpy", where, 3, [0.0, 0.0, 0.0]))
-        xyz = f.vector(c, "xyz", where, 3, [0.0, 0.0, 0.0])
+        size = tuple(c.size) if c.size is not None else (1.0, 1.0, 1.0)
         mesh = None
-        if kind == "mesh":
-            mesh = path.parent / f.string(c, "mesh", where)
+        if c.kind == "mesh":
+            mesh = path.parent / c.mesh
             if not mesh.is_file():
-                raise f.err(f"{where}.mesh", f"file {mesh} not found")
+                raise InputError(f"{path}: collision[{i}].mesh: file {mesh} not found")
             mesh = str(mesh)
-        shapes.append(Shape(kind, size, R, xyz, mesh))
+        shapes.append(Shape(c.kind, size, rpy_matrix(np.asarray(c.rpy, float)),
+                            np.asarray(c.xyz, float), mesh))
     return out
-MOUNT_KEYS = {"pose_xyz", "pose_rpy", "stiffness", "damping"}
 
 
 def load_spatial_robot(path) -> SpatialRobot:
-    """A robot declaration TOML (naming a URDF) or a bare ``.urdf`` with the defaults."""
+    """A robot declaration TOML (naming a URDF; userio.schema.robot.SpatialRobotFile) or a bare
+    ``.urdf`` with the defaults."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such file")
     if path.suffix.lower() == ".urdf":
         return robot_from_urdf(path)
-    from userio.fields import Fields
     from userio.files import read_toml
+    from userio.schema import parse
+    from userio.schema.robot import SpatialRobotFile
 
-    data = read_toml(path)
-    f = Fields(path)
-    f.known(data, TOP_KEYS, "")
-    urdf_rel = f.string(data, "urdf", "")
-    urdf = (path.parent / urdf_rel) if not Path(urdf_rel).is_absolute() else Path(urdf_rel)
+    file = parse(SpatialRobotFile, read_toml(path), path)
+    urdf = (path.parent / file.urdf) if not Path(file.urdf).is_absolute() else Path(file.urdf)
     if not urdf.is_file():
         raise InputError(f"{path}: urdf: file {urdf} not found")
-    base = f.choice(data, "base", "", ("floating", "fixed"), "floating")
-    mount = f.table(data, "mount", "")
-    f.known(mount, MOUNT_KEYS, "mount")
-    sensed = data.get("torque_sensed")
-    if sensed is not None and (not isinstance(sensed, list) or not all(isinstance(s, str) for s in sensed)):
-        raise InputError(f"{path}: torque_sensed: expected a list of joint names, got {sensed!r}")
+    m = file.mount
     robot = robot_from_urdf(
-        urdf, name=f.string(data, "name", "", path.stem), floating=base == "floating",
-        sensed_names=sensed, ft_frame=data.get("ft_frame"),
-        gravity=f.number(data, "gravity_m_per_s2", "", 9.81, lo=0.0, hi=100.0),
-        mount_xyz=f.vector(mount, "pose_xyz", "mount", 3, [0.0, 0.0, 0.0]),
-        mount_rpy=f.vector(mount, "pose_rpy", "mount", 3, [0.0, 0.0, 0.0]),
-        stiffness=f.vector(mount, "stiffness", "mount", 6, [2e4] * 3 + [800.0] * 3, nonneg=True),
-        damping=f.vector(mount, "damping", "mount", 6, [150.0] * 3 + [4.0] * 3, nonneg=True),
-        declaration=str(path), collision=_collision_overrides(f, data, path))
-    return read_tables(robot, data, str(path))
-
-
-def read_tables(robot: SpatialRobot, data: dict, source: str) -> SpatialRobot:
-    """The robot with its [model_uncertainty] and [identification] tables read through the planar
-    file's validators (estimator.inertial): the identification must name this URDF's parameters
-    (``UrdfModel.parameter_names``) with its inertial values."""
-    if "model_uncertainty" not in data and "identification" not in data:
+        urdf, name=file.name or path.stem, floating=file.base == "floating",
+        sensed_names=file.torque_sensed, ft_frame=file.ft_frame, gravity=file.gravity_m_per_s2,
+        mount_xyz=np.asarray(m.pose_xyz, float), mount_rpy=np.asarray(m.pose_rpy, float),
+        stiffness=np.asarray(m.stiffness, float), damping=np.asarray(m.damping, float),
+        declaration=str(path), collision=_collision_overrides(file.collision, path))
+    if file.model_uncertainty is None and file.identification is None:
         return robot
     from estimator import inertial
     from estimator.spatial.model import UrdfModel
 
-    return inertial.read_tables(robot, data, source, model=UrdfModel(robot))
+    return inertial.read_tables(robot, file, str(path), model=UrdfModel(robot))
 
 
 def robot_from_urdf(urdf_path, *, name=None, floating=True, sensed_names=None, ft_frame=None,
@@ -352,7 +318,7 @@ def robot_from_urdf(urdf_path, *, name=None, floating=True, sensed_names=None, f
     where = declaration or source
     for link, solids in (collision or {}).items():          # the declaration's overrides
         if link not in shapes:
-            from userio.fields import nearest
+            from userio.errors import nearest
             raise InputError(f"{where}: collision: no link '{link}' in {source}{nearest(link, list(shapes))}")
         shapes[link] = solids
     if sensed_names is None:
@@ -360,14 +326,14 @@ def robot_from_urdf(urdf_path, *, name=None, floating=True, sensed_names=None, f
     else:
         for s in sensed_names:
             if s not in joints:
-                from userio.fields import nearest
+                from userio.errors import nearest
                 raise InputError(f"{where}: torque_sensed: joint '{s}' is not a movable joint of "
                                  f"{source}{nearest(s, joints)} (joints: {', '.join(joints)})")
         sensed = tuple(j in sensed_names for j in joints)
     base_link = root_link(root)
     ft = ft_frame or base_link
     if not model.existFrame(ft):
-        from userio.fields import nearest
+        from userio.errors import nearest
         names = [fr.name for fr in model.frames if fr.name not in ("universe", "root_joint")]
         raise InputError(f"{where}: ft_frame: no frame '{ft}' in {source}{nearest(ft, names)}")
     fr = model.frames[model.getFrameId(ft)]

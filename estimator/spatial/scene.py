@@ -31,9 +31,6 @@ class SpatialScene:
     path: Path
 
 
-TOP = {"name", "description", "robot", "base", "duration_s", "controller", "poke", "sensors", "integrator"}
-
-
 def is_spatial_scene(path) -> bool:
     """A scene whose robot is a URDF (directly, or through a declaration naming one)."""
     from estimator.spatial.robot import is_spatial_robot_file
@@ -87,95 +84,79 @@ def _apply_overrides(data: dict, overrides: dict | None, path) -> dict:
 
 
 def load_spatial_scene(path, overrides: dict | None = None) -> SpatialScene:
+    """A 3-D scene validated by its schema (userio.schema.spatial_scene.SpatialSceneFile); its
+    vectors sized by the robot's joints and its pokes placed on the robot's link surfaces."""
     from estimator.spatial.geometry import body_surfaces
     from estimator.spatial.logs import make_noise
     from estimator.spatial.robot import load_spatial_robot, robot_from_urdf
     from estimator.spatial.sim import Poke, SimSpec
     from estimator.spatial.tree import body_poses, tree_from_model
-    from userio.fields import Fields
+    from userio.errors import nearest
     from userio.files import read_toml
+    from userio.schema import parse
+    from userio.schema.spatial_scene import SpatialSceneFile
 
     path = Path(path)
-    data = _apply_overrides(read_toml(path), overrides, path)
-    f = Fields(path)
-    f.known(data, TOP, "")
-    rob = data.get("robot")
-    if isinstance(rob, dict):
-        f.known(rob, {"urdf"}, "robot")
-        urdf = _resolve(path, f.string(rob, "urdf", "robot"))
-        if urdf is None:
-            raise f.err("robot.urdf", f"file {rob['urdf']!r} not found beside the scene")
-        robot = robot_from_urdf(urdf)
-    else:
-        p = _resolve(path, f.string(data, "robot", ""))
+    d = parse(SpatialSceneFile, _apply_overrides(read_toml(path), overrides, path), path)
+    err = lambda key, msg: InputError(f"{path}: {key}: {msg}")        # noqa: E731
+    if isinstance(d.robot, str):
+        p = _resolve(path, d.robot)
         if p is None:
-            raise f.err("robot", f"file {data['robot']!r} not found beside the scene or in robots/")
+            raise err("robot", f"file {d.robot!r} not found beside the scene or in robots/")
         robot = load_spatial_robot(p)
-    if "base" in data:
-        robot = robot.with_base(f.choice(data, "base", "", ("floating", "fixed"), "floating") == "floating")
+    else:
+        urdf = _resolve(path, d.robot.urdf)
+        if urdf is None:
+            raise err("robot.urdf", f"file {d.robot.urdf!r} not found beside the scene")
+        robot = robot_from_urdf(urdf)
+    if d.base is not None:
+        robot = robot.with_base(d.base == "floating")
     n = robot.n_joints
-    ctl = f.table(data, "controller", "")
-    f.known(ctl, {"q0_rad", "kp", "kd", "amplitude_rad", "frequency_Hz"}, "controller")
-    sens = f.table(data, "sensors", "")
-    f.known(sens, {"sample_rate_Hz", "torque_noise_Nm", "ft_noise", "seed"}, "sensors")
-    integ = f.table(data, "integrator", "")
-    f.known(integ, {"substeps"}, "integrator")
-    q0 = f.vector(ctl, "q0_rad", "controller", n, [0.0] * n)
+    ctl = d.controller
+
+    def per_joint(key):
+        v = getattr(ctl, key)
+        if v is not None and len(v) != n:
+            raise err(f"controller.{key}", f"expected {n} numbers (one per joint), got {len(v)}")
+        return np.zeros(n) if v is None else np.asarray(v, float)
+
+    q0, amplitude = per_joint("q0_rad"), per_joint("amplitude_rad")
     tree = tree_from_model(robot.model)
     surfaces = body_surfaces(robot, tree)
     rest = robot.rest_q()
     rest[7:] = q0
     R_bodies = body_poses(tree, rest[None])[0][0]
     pokes = []
-    for i, pk in enumerate(data.get("poke", []) or []):
-        where = f"poke[{i + 1}]"
-        if not isinstance(pk, dict):
-            raise f.err(where, "expected a table")
-        f.known(pk, {"link", "point_m", "along", "around_rad", "force_N", "magnitude_N", "t_on_s",
-                     "t_off_s", "ramp_s"}, where)
-        link = f.string(pk, "link", where)
+    for i, pk in enumerate(d.poke, start=1):
+        link = pk.link
         owner = [s for s in surfaces if link == s.name or link in [n_ for n_, _ in s.solids]]
         if not owner:
-            from userio.fields import nearest
-
             names = sorted({s.name for s in surfaces} | {n_ for s in surfaces for n_, _ in s.solids})
-            raise f.err(f"{where}.link", f"no link '{link}' in {robot.source}{nearest(link, names)}")
+            raise err(f"poke[{i}].link", f"no link '{link}' in {robot.source}{nearest(link, names)}")
         surf = owner[0]
         fr = robot.model.frames[robot.model.getFrameId(link)]
         R_lb, p_lb = np.array(fr.placement.rotation), np.array(fr.placement.translation)
-        if "point_m" in pk:
-            p_link = f.vector(pk, "point_m", where, 3)
-            normal_body = None
+        if pk.point_m is not None:
+            p_link, normal_body = np.asarray(pk.point_m, float), None
         else:
-            p_body, normal_body = surface_point(surf, link, f.number(pk, "along", where, 0.5, lo=0.0, hi=1.0),
-                                                f.number(pk, "around_rad", where, 0.0))
+            p_body, normal_body = surface_point(surf, link, pk.along, pk.around_rad)
             p_link = R_lb.T @ (p_body - p_lb)
-        if "force_N" in pk:
-            F = f.vector(pk, "force_N", where, 3)
+        if pk.force_N is not None:
+            F = np.asarray(pk.force_N, float)
         else:
-            if normal_body is None:
-                raise f.err(f"{where}.magnitude_N", "with point_m give force_N (world), or use along/around_rad")
-            mag = f.number(pk, "magnitude_N", where, positive=True)
-            F = -mag * (R_bodies[surf.body] @ normal_body)         # into the surface at q0
-        t_on = f.number(pk, "t_on_s", where, nonneg=True)
-        t_off = f.number(pk, "t_off_s", where, positive=True)
-        if t_off <= t_on:
-            raise f.err(f"{where}.t_off_s", f"must be after t_on_s = {t_on:g} s")
-        pokes.append(Poke(link, p_link, F, t_on, t_off, f.number(pk, "ramp_s", where, 0.0, nonneg=True)))
+            F = -pk.magnitude_N * (R_bodies[surf.body] @ normal_body)   # into the surface at q0
+        pokes.append(Poke(link, p_link, F, pk.t_on_s, pk.t_off_s, pk.ramp_s))
+    sens = d.sensors
     noise = None
-    if "torque_noise_Nm" in sens or "ft_noise" in sens:
-        noise = make_noise(f.number(sens, "torque_noise_Nm", "sensors", 0.005, positive=True),
-                           f.vector(sens, "ft_noise", "sensors", None, [0.1, 0.01], positive=True),
+    if sens.torque_noise_Nm is not None or sens.ft_noise is not None:
+        noise = make_noise(0.005 if sens.torque_noise_Nm is None else sens.torque_noise_Nm,
+                           [0.1, 0.01] if sens.ft_noise is None else sens.ft_noise,
                            int(sum(robot.sensed)), source=f"{path}: sensors")
-    spec = SimSpec(duration_s=f.number(data, "duration_s", "", 1.0, positive=True, hi=3600.0),
-                   sample_rate_Hz=f.number(sens, "sample_rate_Hz", "sensors", 1000.0, positive=True, hi=1e5),
-                   substeps=f.integer(integ, "substeps", "integrator", 10, lo=1, hi=1000),
-                   q0_rad=q0, kp=f.number(ctl, "kp", "controller", 60.0, nonneg=True),
-                   kd=f.number(ctl, "kd", "controller", 1.5, nonneg=True),
-                   amplitude_rad=f.vector(ctl, "amplitude_rad", "controller", n, [0.0] * n),
-                   frequency_Hz=f.number(ctl, "frequency_Hz", "controller", 1.0, nonneg=True),
-                   pokes=pokes, noise=noise, seed=f.integer(sens, "seed", "sensors", 0, lo=0))
-    return SpatialScene(name=f.string(data, "name", "", path.stem), robot=robot, spec=spec, path=path)
+    spec = SimSpec(duration_s=d.duration_s, sample_rate_Hz=sens.sample_rate_Hz,
+                   substeps=d.integrator.substeps, q0_rad=q0, kp=ctl.kp, kd=ctl.kd,
+                   amplitude_rad=amplitude, frequency_Hz=ctl.frequency_Hz, pokes=pokes, noise=noise,
+                   seed=sens.seed)
+    return SpatialScene(name=d.name or path.stem, robot=robot, spec=spec, path=path)
 
 
 def surface_point(surface, link, along, around):

@@ -24,7 +24,7 @@ MAX_AVERAGING_S = 3600.0     # a reading averaged over more than an hour is a dr
 
 
 def _strain_range():
-    from userio.fields import Range
+    from userio.ranges import Range
 
     return Range(1e-9, 1e-1, "1/(N·m)", low="a sensor this stiff reads nothing: µε typed as ε?",
                  high="beyond any gauge's strain range at 1 N·m")
@@ -42,7 +42,7 @@ def run(args) -> int:
 
     from userio.errors import finite
 
-    from userio.fields import Range
+    from userio.ranges import Range
 
     STRAIN_PER_NM = _strain_range()
     if args.strain_per_Nm is not None:
