@@ -88,7 +88,7 @@ class LogReader:
         from pathlib import Path
 
         from estimator.plausibility import Checker
-        from estimator.timing import read_declaration
+        from estimator.log_declarations import read_declaration
 
         from userio.files import check_input
 

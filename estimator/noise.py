@@ -100,23 +100,6 @@ def noise_toml(noise: NoiseModel, who: str = "torquebench's simulator") -> str:
     ]) + "\n"
 
 
-def read_noise_declaration(log_path, n_links: int) -> NoiseModel | None:
-    """The NoiseModel declared in ``LOG.noise.toml`` beside the log (userio.schema.logs.NoiseFile:
-    torque_sigma_Nm one value or one per link, ft_sigma three), or None without one."""
-    from userio.files import read_toml
-    from userio.schema import parse
-    from userio.schema.logs import NoiseFile
-
-    path = noise_side_file(log_path)
-    if not path.exists():
-        return None
-    t = parse(NoiseFile, read_toml(path), path, {"torque_sizes": (1, n_links), "ft_sizes": (3,)}).noise
-    return NoiseModel(torque_sigma_Nm=np.asarray(t.torque_sigma_Nm, float),
-                      ft_sigma=np.asarray(t.ft_sigma, float),
-                      velocity_sigma_rad_per_s=t.velocity_sigma_rad_per_s,
-                      encoder_counts=t.encoder_counts, source=f"log declaration {path.name}")
-
-
 def paper_leg_noise() -> NoiseModel:
     """The paper leg's sensors: FT σ = 0.1 N, 0.1 N, 0.01 N·m; joint torque σ 0.005 N·m."""
     return NoiseModel(torque_sigma_Nm=[0.005], ft_sigma=[0.1, 0.1, 0.01],

@@ -88,37 +88,6 @@ def side_file(log_path) -> Path:
     return p.with_name(p.stem + ".timing.toml")
 
 
-def read_side_table(log_path, names):
-    """(path, {key: (kind, delay_s)}) of a log's ``LOG.timing.toml`` validated by its schema
-    (userio.schema.logs.TimingFile: keys default, wrench, tau or one of ``names``, the log's
-    channels); None when the log has none."""
-    from userio.files import read_toml
-    from userio.schema import parse
-    from userio.schema.logs import TimingFile
-
-    path = side_file(log_path)
-    if not path.exists():
-        return None
-    file = parse(TimingFile, read_toml(path), path, {"channels": list(names)})
-    return path, file.timing
-
-
-def read_declaration(log_path, n_links: int):
-    """Per-channel [(kind, delay_s)] from the side file, or None when there is none."""
-    names = channel_names(n_links)
-    found = read_side_table(log_path, names)
-    if found is None:
-        return None
-    _, table = found
-    default = table.get("default", ("instant", 0.0))
-    out = []
-    for j, name in enumerate(names):
-        group = "wrench" if j < 3 else "tau"
-        key = name if name in table else group if group in table else None
-        out.append(table[key] if key else default)
-    return out
-
-
 def describe(spec) -> str:
     """'mean' when every channel agrees, else 'Fx=mean, …'."""
     if spec is None:

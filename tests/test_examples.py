@@ -31,7 +31,7 @@ def _tb(*argv, cwd=ROOT):
 
 def _declared_sigma(log: Path, columns: list[str]) -> dict[str, float]:
     """Column → the 1σ noise the log's declaration (LOG.noise.toml) gives it."""
-    from estimator.noise import read_noise_declaration
+    from estimator.log_declarations import read_noise_declaration
 
     taus = [c for c in columns if c.startswith("tau")]
     noise = read_noise_declaration(log, len(taus))

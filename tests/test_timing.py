@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from estimator import observer as O
-from estimator import timing
+from estimator import log_declarations, timing
 from estimator.errors import InputError
 from estimator.robot import paper_leg
 from estimator.synthetic import inverse_dynamics_log
@@ -100,16 +100,16 @@ def test_streaming_mean_equals_offline(fine):
 def test_side_file_declaration_and_bad_values(tmp_path):
     log = tmp_path / "run.csv"
     side = tmp_path / "run.timing.toml"
-    assert timing.read_declaration(log, 2) is None
+    assert log_declarations.read_declaration(log, 2) is None
     side.write_text('[timing]\ndefault = "instant"\nwrench = "mean"\ntau2 = "delay:0.0005"\n')
-    spec = timing.read_declaration(log, 2)
+    spec = log_declarations.read_declaration(log, 2)
     assert spec == [("mean", 0.0)] * 3 + [("instant", 0.0), ("delay", 0.0005)]
     assert "Fx=mean" in timing.describe(spec)
     side.write_text('[timing]\nwrenhc = "mean"\n')
     with pytest.raises(InputError, match="did you mean 'wrench'"):
-        timing.read_declaration(log, 2)
+        log_declarations.read_declaration(log, 2)
     side.write_text('[timing]\ntau = "delay:-1"\n')
     with pytest.raises(InputError, match="timing.tau"):
-        timing.read_declaration(log, 2)
+        log_declarations.read_declaration(log, 2)
     with pytest.raises(InputError, match="--timing"):
         timing.uniform("meen", 2)

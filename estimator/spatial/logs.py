@@ -231,10 +231,10 @@ def read_timing(log_path, robot):
     """``LOG.timing.toml`` (keys default, wrench, tau or channel names) → per observer row
     [(kind, delay_s)] (six base rows, then the joints; unsensed joints 'instant'), or None.
     The six wrench channels must share one timing: the sensor → base transform mixes them."""
-    from estimator import timing as tm
+    from estimator.log_declarations import read_side_table
 
     names = timing_channels(robot)
-    found = tm.read_side_table(log_path, names)
+    found = read_side_table(log_path, names)
     if found is None:
         return None
     path, table = found

@@ -246,7 +246,7 @@ def _run(args, start) -> int:
     robot = load_robot(args.robot or PAPER_LEG_TOML)
     noise, quiet, rate = _detector_options(args, robot.n_links)
     if noise is None and quiet is None:           # LOG.noise.toml beside the log, if any
-        from estimator.noise import read_noise_declaration
+        from estimator.log_declarations import read_noise_declaration
         noise = read_noise_declaration(args.log, robot.n_links)
     timing = None
     if args.timing is not None:

@@ -62,7 +62,8 @@ def add_arguments(parser) -> None:
 
 def _noise(args, log_path, n_links):
     """(NoiseModel, source) for one log: options, else LOG.noise.toml, else the paper leg's."""
-    from estimator.noise import NoiseModel, paper_leg_noise, read_noise_declaration
+    from estimator.log_declarations import read_noise_declaration
+    from estimator.noise import NoiseModel, paper_leg_noise
     from torquebench.commands.estimate import _floats
 
     given = [args.torque_sigma, args.ft_sigma, args.velocity_sigma]
