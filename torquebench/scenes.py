@@ -472,8 +472,6 @@ def _static(f: _Fields, data: dict, robot: Robot, name: str, kind: str) -> Stati
                        grid_shape=shape)
 
 
-OUTPUTS = ("sensitivity", "noise_budget", "flexure", "calibration", "estimates",
-           "localization_error", "predicted_error", "report")
 SESSION_KEYS = {"masses_g", "lever_arm_m", "repeats", "n_avg", "seed"}
 MAX_SESSION_SAMPLES = 2e7            # ADC codes a simulated calibration session draws (160 MB)
 
@@ -558,6 +556,9 @@ def _chain_spec(f: _Fields, data: dict, kind: str) -> ChainSpec:
     want = out.get("want", [])
     if not isinstance(want, list) or not all(isinstance(w, str) for w in want):
         raise f.err("outputs.want", f"expected a list of output names, got {want!r}")
+    from torquebench.stages.registry import scene_outputs
+
+    OUTPUTS = scene_outputs()                 # what the stage declarations let a scene ask for
     for w in want:
         if w not in OUTPUTS:
             raise f.err("outputs.want", f"unknown output {w!r}{_nearest(w, OUTPUTS)} "
