@@ -98,3 +98,17 @@ def test_every_shipped_stage_is_declared_once_with_documented_scene_fields():
     for s in stages:                                                 # producers come first
         for n in s.inputs_declared:
             assert order.index(registry.by_gives()[n].name) < order.index(s.name)
+
+
+def test_a_scene_report_plans_only_what_its_chosen_views_show():
+    """`want = ["report"]` computes only the artifacts of the views drawn (and what those need):
+    the bridge view of end_to_end needs the chain (and its FEM), never the simulation or the
+    calibration fit; no view chosen, nothing but the summary."""
+    scene = load_scene(ROOT / "scenes" / "end_to_end.toml", {"outputs.want": ["report"],
+                                                              "outputs.reports": ["bridge"]})
+    runs = {s.stage.name for s in plan(scene, None, None) if s.action == "run"}
+    assert runs == {"flexure_fem", "sensor_chain", "report"}
+    report = next(s for s in plan(scene, None, None) if s.stage.name == "report")
+    assert "views: bridge +" in report.reason
+    bare = load_scene(ROOT / "scenes" / "end_to_end.toml", {"outputs.want": ["report"]})
+    assert {s.stage.name for s in plan(bare, None, None) if s.action == "run"} == {"report"}

@@ -12,6 +12,7 @@ module of its group, found by torquebench.stages.registry (a module here that de
 
 and the machinery that reads only the declarations: planner.py (plan, execute), cachekey.py (the
 key: canonical inputs, upstream keys, code), codedeps.py (a stage's code, derived from the import
-graph), registry.py; plus the shared scoring.py and noise.py. Kept import-light: nothing here is
-imported by importing the package (a stage's derived code stays its own).
+graph), registry.py; plus the shared scoring.py, noise.py and summary.py (a run's results as JSON).
+Kept import-light: nothing here is imported by importing the package (a stage's derived code
+stays its own).
 """

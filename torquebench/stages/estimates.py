@@ -134,7 +134,9 @@ STAGES = (
           scene_output=True),
     Stage("predicted_error", "predicted_error", "Monte Carlo localization error for this sensor and posture",
           run_predicted_error, needs=("chain", "calibration?", "truth?"),
-          reads=("estimator", "poke", "robot", "sensors"), params=_estimator_params,
+          reads=("estimator", "poke", "robot", "sensors"),
+          params=lambda scene, seed: {**_estimator_params(scene, seed),   # + the FT noise, rate
+                                      "sensors": canon(scene.sim.sensors if scene.sim else None)},
           feasible=lambda scene: _no_poke(scene, "the prediction needs the scene's contact (a simulated poke)"),
           scene_output=True),
 )
