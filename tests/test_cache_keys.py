@@ -173,3 +173,19 @@ def test_scene_values_key_exactly_not_by_their_printed_form():
     assert repr(long_a) == repr(long_b)
     assert P.canon(long_a) != P.canon(long_b)
     assert P.canon(robot) == P.canon(replace(robot))   # equal values, equal keys
+
+
+def test_the_fast_import_reader_finds_every_import_a_full_parse_finds():
+    """codedeps reads only the import statements' text; on every project file it must find each
+    import statement the full ``ast`` walk (module and function level) finds."""
+    import ast
+
+    for pkg in ("userio", "bridge", "flexure", "calibration", "estimator", "torquebench"):
+        for f in (ROOT / pkg).rglob("*.py"):
+            text = f.read_text()
+            full = {ast.dump(n) for n in codedeps._import_statements(ast.parse(text).body)}
+            fast = {ast.dump(n) for n in codedeps._import_nodes(text, str(f))}
+            assert full <= fast, (f, full - fast)
+    tricky = "import os; import sys\ndef f():\n    from bridge import \\\n        chain\n"
+    assert {type(n).__name__ for n in codedeps._import_nodes(tricky, "x.py")} == {"Import", "ImportFrom"}
+    assert len(codedeps._import_nodes(tricky, "x.py")) == 3
