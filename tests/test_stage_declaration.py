@@ -112,3 +112,21 @@ def test_a_scene_report_plans_only_what_its_chosen_views_show():
     assert "views: bridge +" in report.reason
     bare = load_scene(ROOT / "scenes" / "end_to_end.toml", {"outputs.want": ["report"]})
     assert {s.stage.name for s in plan(bare, None, None) if s.action == "run"} == {"report"}
+
+
+def test_the_stage_graph_and_the_reproduction_report_are_in_no_import_cycle():
+    """Not even through imports inside functions: the report reads the stage graph's results, the
+    stages never import a report builder."""
+    import sys
+
+    sys.path.insert(0, str(ROOT / "tests"))
+    from test_import_graph import cycles, import_graph
+
+    top, inner = import_graph()
+    both = {m: top[m] | inner[m] for m in top}
+    assert "torquebench.stages.planner" in inner["torquebench.reports.reproduction"]
+    for c in cycles(both):
+        assert not any(m.startswith("torquebench.stages") or m in ("torquebench.reports.reproduction",
+                                                                   "torquebench.pipeline") for m in c), c
+    assert not any(m.startswith("torquebench.reports") for s in ("torquebench.stages.paper",
+                   "torquebench.stages.planner") for m in top[s] | inner[s])
