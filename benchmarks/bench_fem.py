@@ -7,7 +7,7 @@ Run from the repo root:  python benchmarks/bench_fem.py [--quick] [--skip-skfem]
 2. Scale (in a subprocess, for a clean peak memory): a 329k-DOF P2 annular disc end to end
    (mesh → assemble → rigid coupling + fixed rim → AMG-CG → strains), DOFs, time, peak RSS.
 3. Error against run time, P1/P2 × mesh × solver (torquebench/reports/fem.py → reports/).
-4. The paper's disc (scenes/paper_disc.toml) at the fine size, ≥ 300k P2 DOFs, in a subprocess:
+4. The paper's disc (designs/paper_disc.toml) at the fine size, ≥ 300k P2 DOFs, in a subprocess:
    the whole design analysis (swept mesh → assembly → six load cases with one p-multigrid
    set-up → gauges, stress, cross-talk), time per stage and per load case, peak RSS.
 5. (--only three) The paper disc, the thick disc (5 mm, 0.5 mm gauges, no fillets) and that disc as
@@ -226,7 +226,7 @@ def paper_disc_run(size: str = "fine") -> dict:
     from flexure.analysis import analyze
     from flexure.design import load_design
 
-    design = load_design(ROOT / "scenes" / "paper_disc.toml")
+    design = load_design(ROOT / "designs" / "paper_disc.toml")
     t0 = time.perf_counter()
     res, _ = analyze(design, size)
     total = time.perf_counter() - t0
@@ -311,7 +311,7 @@ def main(argv=None) -> int:
         if r is None:
             return 1
         n_cases = len(r["iterations"]) if isinstance(r["iterations"], list) else 1
-        print(f"[4] paper disc (scenes/paper_disc.toml, fine): {r['dofs']:,} DOFs P2 ({r['elements']:,} tets, "
+        print(f"[4] paper disc (designs/paper_disc.toml, fine): {r['dofs']:,} DOFs P2 ({r['elements']:,} tets, "
               f"{r['layers']} layers): mesh {r['mesh_s']:.1f} s, assemble {r['assemble_s']:.1f} s, "
               f"{n_cases} load cases {r['solve_s']:.1f} s ({r['solve_s'] / n_cases:.1f} s each, iterations "
               f"{r['iterations']}, residual {r['residual']:.1e}); whole analysis {r['total_s']:.1f} s; "
@@ -343,10 +343,10 @@ MIN_DOFS = 300_000
 def thick_disc_text() -> str:
     """The issue's thick disc: the paper disc at 5 mm, no fillets, 0.5 × 0.5 mm gauges (as
     tests/test_fem_thick_disc.py builds it)."""
-    t = (ROOT / "scenes" / "paper_disc.toml").read_text()
+    t = (ROOT / "designs" / "paper_disc.toml").read_text()
     for a, b in (("thickness_mm = 2.2 ", "thickness_mm = 5.0 "), ("fillet_radius_mm = 1.5 ", "fillet_radius_mm = 0.0 "),
                  ("grid_length_mm = 1.5", "grid_length_mm = 0.5"), ("grid_width_mm = 1.5", "grid_width_mm = 0.5"),
-                 ('sensor = "paper_sensor.toml"', f'sensor = "{ROOT / "scenes" / "paper_sensor.toml"}"')):
+                 ('sensor = "../sensors/paper_sensor.toml"', f'sensor = "{ROOT / "sensors" / "paper_sensor.toml"}"')):
         t = t.replace(a, b)
     return t
 
@@ -370,7 +370,7 @@ def three_designs(work: Path) -> dict:
         '[geometry]\nkind = "stl"\nfile = "thick.stl"\n[gauges]\ngrid_length_mm = 0.5\n'
         f'grid_width_mm = 0.5\n{gauges}[loads]\nrated_torque_Nm = 2.0\nload_radius_max_mm = 4.004\n'
         'fixed_radius_min_mm = 29.97\n[mesh]\nsize = "coarse"\n')
-    return {"paper_disc": load_design(ROOT / "scenes" / "paper_disc.toml"), "thick_disc": thick,
+    return {"paper_disc": load_design(ROOT / "designs" / "paper_disc.toml"), "thick_disc": thick,
             "stl_part": load_design(work / "stl.toml")}
 
 

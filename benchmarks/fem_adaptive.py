@@ -27,7 +27,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data" / "fem_reference"
 OUT = DATA / "adaptive"
-DESIGNS = {"paper_disc": ROOT / "scenes" / "paper_disc.toml", "reentrant": DATA / "reentrant.toml",
+DESIGNS = {"paper_disc": ROOT / "designs" / "paper_disc.toml", "reentrant": DATA / "reentrant.toml",
            "step_part": DATA / "step_part.toml", "thick_disc": DATA / "thick_disc.toml",
            "thick_disc_stl": DATA / "thick_disc_stl.toml"}
 UNSEEN = ROOT / "tests" / "data" / "fem_unseen"

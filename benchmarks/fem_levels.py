@@ -31,7 +31,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data" / "fem_reference"
-DESIGNS = {"paper_disc": ROOT / "scenes" / "paper_disc.toml", "reentrant": DATA / "reentrant.toml",
+DESIGNS = {"paper_disc": ROOT / "designs" / "paper_disc.toml", "reentrant": DATA / "reentrant.toml",
            "step_part": DATA / "step_part.toml", "thick_disc": DATA / "thick_disc.toml",
            "thick_disc_stl": DATA / "thick_disc_stl.toml"}
 FINE = tuple(2.0 ** (-k / 4) for k in range(-2, 6))

@@ -1,6 +1,6 @@
 """Sensor configuration (bridge + amplifier + ADC), from TOML or a dict, validated.
 
-TOML layout (every key optional; defaults are the paper's sensor, ``scenes/paper_sensor.toml``)::
+TOML layout (every key optional; defaults are the paper's sensor, ``sensors/paper_sensor.toml``)::
 
     [bridge]      arrangement, gauge_factor, gauge_resistance_ohm, lead_resistance_ohm,
                   excitation_V, poisson_ratio, strain_limit, rated_strain

@@ -3,7 +3,7 @@
 
 Lengths in the file are in millimetres (keys end in ``_mm``), converted to metres here.
 Tables: ``[geometry]`` (kind = "spoke_disc" | "stl" | "step"), ``[material]``, ``[gauges]``, ``[loads]``,
-``[bridge]``, ``[mesh]``. See scenes/paper_disc.toml for an example.
+``[bridge]``, ``[mesh]``. See designs/paper_disc.toml for every key with its meaning.
 """
 
 from __future__ import annotations

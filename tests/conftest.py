@@ -295,7 +295,7 @@ def warm_scene(path: str, outputs=SHARED_STAGES):
 def e2e_stages():
     """scenes/end_to_end.toml's FEM (the paper disc, three P2 levels), calibration fit and
     simulation in the run's stage cache, computed once for all workers. Every pipeline run with
-    the default cache ($TORQUEBENCH_CACHE: `demo --flexure scenes/paper_disc.toml`, `run
+    the default cache ($TORQUEBENCH_CACHE: `demo --flexure designs/paper_disc.toml`, `run
     scenes/end_to_end.toml`, in-process or as a subprocess) then reads them instead of re-solving."""
     return warm_scene(E2E_SCENE)
 

@@ -63,7 +63,7 @@ def test_a_scenes_width_is_its_sensor_files(tmp_path):
     from torquebench.scenes import load_scene
 
     sensor = tmp_path / "s.toml"
-    sensor.write_text((ROOT / "scenes" / "paper_sensor.toml").read_text().replace("bits = 24", "bits = 20"))
+    sensor.write_text((ROOT / "sensors" / "paper_sensor.toml").read_text().replace("bits = 24", "bits = 20"))
     text = (ROOT / "scenes" / "paper_floating_link2.toml").read_text()
     (tmp_path / "a.toml").write_text(text)
     (tmp_path / "b.toml").write_text(text + f'\n[sensor]\nfile = "{sensor}"\n')

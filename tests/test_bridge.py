@@ -219,7 +219,7 @@ def test_adc_noise_scales_with_data_rate():
 
 # ---------------------------------------------------------------- configuration
 def test_paper_toml_is_the_default_config():
-    cfg, spn = load_sensor_config(ROOT / "scenes" / "paper_sensor.toml")
+    cfg, spn = load_sensor_config(ROOT / "sensors" / "paper_sensor.toml")
     assert cfg == SensorConfig()
     from bridge.chain import PAPER_STRAIN_PER_NM
     assert spn == pytest.approx(PAPER_STRAIN_PER_NM, rel=1e-15)

@@ -86,7 +86,7 @@ def test_curved_elements_do_not_make_stress_spikes(monkeypatch):
 
     from flexure import gmsh_mesh
 
-    design = load_design(DATA.parents[2] / "scenes" / "paper_disc.toml")
+    design = load_design(DATA.parents[2] / "designs" / "paper_disc.toml")
     curved = [analyze(design, h_factor=h)[0]["max_von_mises_Pa"] for h in (2.0 ** 0.5, 1.0)]
 
     def straight_only(*args):

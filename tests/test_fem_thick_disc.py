@@ -14,10 +14,10 @@ DATA = Path(__file__).resolve().parent / "data" / "fem_reference"
 
 
 def _thick_text() -> str:
-    t = (SCENES / "paper_disc.toml").read_text()
+    t = (SCENES.parent / "designs" / "paper_disc.toml").read_text()
     for a, b in (("thickness_mm = 2.2 ", "thickness_mm = 5.0 "), ("fillet_radius_mm = 1.5 ", "fillet_radius_mm = 0.0 "),
                  ("grid_length_mm = 1.5", "grid_length_mm = 0.5"), ("grid_width_mm = 1.5", "grid_width_mm = 0.5"),
-                 ('sensor = "paper_sensor.toml"', f'sensor = "{SCENES / "paper_sensor.toml"}"')):
+                 ('sensor = "../sensors/paper_sensor.toml"', f'sensor = "{SCENES.parent / "sensors" / "paper_sensor.toml"}"')):
         assert a in t
         t = t.replace(a, b)
     return t

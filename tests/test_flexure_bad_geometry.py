@@ -48,7 +48,7 @@ def _design(tmp_path: Path, stl: str, gauges: list[dict], grid_mm=(1.5, 1.5)) ->
 
 
 def _paper_gauges(**change) -> list[dict]:
-    d = load_design(SCENES / "paper_disc.toml")
+    d = load_design(SCENES.parent / "designs" / "paper_disc.toml")
     out = [{"centre_mm": [float(x) * 1e3 for x in g.centre_m], "axis": [float(x) for x in g.axis], "arm": g.arm}
            for g in d.gauges]
     out[0].update(change)
@@ -57,7 +57,7 @@ def _paper_gauges(**change) -> list[dict]:
 
 @pytest.fixture()
 def disc_stl(tmp_path):
-    d = load_design(SCENES / "paper_disc.toml")
+    d = load_design(SCENES.parent / "designs" / "paper_disc.toml")
     _export(spoke_disc_surface(d.disc, 3), tmp_path / "disc.stl")
     return "disc.stl"
 
@@ -79,7 +79,7 @@ def _boxes(*boxes):
 
 def test_valid_surface_and_gauges_pass_the_checks():
     """Positive control: the shipped disc and its four gauges raise nothing."""
-    d = load_design(SCENES / "paper_disc.toml")
+    d = load_design(SCENES.parent / "designs" / "paper_disc.toml")
     s = spoke_disc_surface(d.disc, 3)
     check_solid(s.points, s.faces, "disc")
     check_gauges(s.points, s.faces, d.gauges, "disc")
@@ -115,7 +115,7 @@ def test_zero_thickness_fin_exit_2(capsys, tmp_path, no_meshing):
 def test_open_stl_exit_2(capsys, tmp_path, no_meshing):
     import trimesh
 
-    d = load_design(SCENES / "paper_disc.toml")
+    d = load_design(SCENES.parent / "designs" / "paper_disc.toml")
     s = spoke_disc_surface(d.disc, 3)
     tm = trimesh.Trimesh(s.points * 1e3, s.faces, process=False)
     tm.update_faces(tm.triangles_center[:, 2] < 2.2 - 1e-6)       # the whole top face gone
@@ -157,7 +157,7 @@ def test_gauge_larger_than_its_face_exit_2(capsys, tmp_path, disc_stl, no_meshin
 def test_parametric_design_with_a_gauge_off_the_part(tmp_path, no_meshing):
     from flexure.analysis import analyze
 
-    text = (SCENES / "paper_disc.toml").read_text().replace('sensor = "paper_sensor.toml"', "")
+    text = (SCENES.parent / "designs" / "paper_disc.toml").read_text().replace('sensor = "../sensors/paper_sensor.toml"', "")
     text = text.replace('layout = "shear_45"', 'layout = "explicit"')
     gauges = "".join(f"[[gauges.gauge]]\ncentre_mm = {g['centre_mm']}\naxis = {g['axis']}\narm = {g['arm']}\n"
                      for g in _paper_gauges(centre_mm=[40.0, 0.0, 2.2]))

@@ -173,7 +173,7 @@ def test_demo_from_the_flexure_design(capsys, tmp_path):
 
     from torquebench.io import shipped
 
-    code = main(["demo", "--flexure", str(shipped("scenes", "paper_disc.toml")), "--out-dir", str(tmp_path), "--json"])
+    code = main(["demo", "--flexure", str(shipped("designs", "paper_disc.toml")), "--out-dir", str(tmp_path), "--json"])
     data = json.loads(capsys.readouterr().out)
     assert code == 0
     fx = data["flexure"]
@@ -194,9 +194,9 @@ def test_absurd_thickness_refused_before_meshing_with_the_cost(capsys, tmp_path,
     the physical range is refused by the range, naming the key."""
     from torquebench.io import shipped
 
-    src = shipped("scenes", "paper_disc.toml")
+    src = shipped("designs", "paper_disc.toml")
     text = src.read_text().replace("thickness_mm = 2.2 ", f"thickness_mm = {thickness_mm} ")
-    text = text.replace('sensor = "paper_sensor.toml"', f'sensor = "{src.parent / "paper_sensor.toml"}"')
+    text = text.replace('sensor = "../sensors/paper_sensor.toml"', f'sensor = "{src.parents[1] / "sensors" / "paper_sensor.toml"}"')
     p = tmp_path / "absurd.toml"
     p.write_text(text)
     code, out, err = _run(capsys, str(p), "--json")

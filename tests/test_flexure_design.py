@@ -14,9 +14,9 @@ from flexure.fem import stiffness_matrix
 from flexure.geometry import SpokeDisc, check_watertight, load_stl, profile, spoke_disc_surface
 from torquebench.io import shipped
 
-PAPER_DISC = shipped("scenes", "paper_disc.toml")
+PAPER_DISC = shipped("designs", "paper_disc.toml")
 
-BEAM_CHECK = shipped("scenes", "beam_check.toml")
+BEAM_CHECK = shipped("designs", "beam_check.toml")
 
 
 def _analyzed(path):

@@ -49,7 +49,7 @@ def _stl_design(tmp_path: Path, scale: float, unit_line: str, offset_mm=(0.0, 0.
     (metres → file units), moved by ``offset_mm``, its four gauges explicit (moved with it)."""
     import trimesh
 
-    d = load_design(ROOT / "scenes" / "paper_disc.toml")
+    d = load_design(ROOT / "designs" / "paper_disc.toml")
     s = spoke_disc_surface(d.disc, 3)
     name = f"disc_{scale:g}.stl"
     shift_m = np.asarray(offset_mm) * 1e-3

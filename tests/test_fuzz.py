@@ -63,7 +63,7 @@ def workdir(factory) -> Path:
     shutil.copy(DATA / "paper_link1_cal.json", d / "cal.json")
     shutil.copy(DATA / "paper_link1_readings.csv", d / "r.csv")
     shutil.copy(SCENES / "paper_fixed_link1.toml", d / "scene.toml")
-    shutil.copy(SCENES / "paper_sensor.toml", d / "sensor.toml")
+    shutil.copy(SCENES.parent / "sensors" / "paper_sensor.toml", d / "sensor.toml")
     shutil.copy(ROBOT, d / "robot.toml")
     (d / "prev.csv").write_text("an earlier output\n")
     return d

@@ -18,7 +18,7 @@ from torquebench import cli
 from torquebench.cli import build_parser, main
 
 ROOT = Path(__file__).resolve().parents[1]
-SHIPPED = ("robots", "scenes", "calibration", "flexure", "bridge", "estimator", "examples")
+SHIPPED = ("robots", "scenes", "designs", "sensors", "calibration", "flexure", "bridge", "estimator", "examples")
 INPUT_SUFFIXES = (".csv", ".toml", ".json")
 # examples cheap enough to run in the suite (the rest are parsed and their inputs checked)
 RUN = ("bridge", "estimate", "simulate", "apply", "report --list")

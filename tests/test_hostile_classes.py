@@ -405,8 +405,8 @@ def test_apply_names_a_unit_mismatch(tmp_path, capsys):
 
 
 def test_flexure_material_in_pa_and_absurd_geometry_are_refused(tmp_path, capsys):
-    base = (SCENES / "paper_disc.toml").read_text().replace(
-        'sensor = "paper_sensor.toml"', f'sensor = "{SCENES / "paper_sensor.toml"}"')
+    base = (SCENES.parent / "designs" / "paper_disc.toml").read_text().replace(
+        'sensor = "../sensors/paper_sensor.toml"', f'sensor = "{SCENES.parent / "sensors" / "paper_sensor.toml"}"')
     for edit, needles in ((('preset = "6061-T6"', 'preset = "6061-T6"\nE_GPa = 7.1e10'), ("E_GPa", "GPa")),
                           (("thickness_mm = 2.2", "thickness_mm = 4e200"), ("thickness_mm", "mm")),
                           (('preset = "6061-T6"', 'preset = "6061-T6"\nnu = 0.49999'), ("material.nu",))):
@@ -436,13 +436,13 @@ def test_a_thin_disc_is_refused_before_meshing_naming_the_wall(tmp_path):
     from flexure.design import load_design, preflight
     from userio.errors import InputError
 
-    text = (SCENES / "paper_disc.toml").read_text().replace("thickness_mm = 2.2", "thickness_mm = 0.15")
-    text = text.replace('sensor = "paper_sensor.toml"', f'sensor = "{SCENES / "paper_sensor.toml"}"')
+    text = (SCENES.parent / "designs" / "paper_disc.toml").read_text().replace("thickness_mm = 2.2", "thickness_mm = 0.15")
+    text = text.replace('sensor = "../sensors/paper_sensor.toml"', f'sensor = "{SCENES.parent / "sensors" / "paper_sensor.toml"}"')
     (tmp_path / "thin.toml").write_text(text)
     d = load_design(tmp_path / "thin.toml")
     with pytest.raises(InputError, match="thickness_mm = 0.15 mm.*--max-elements"):
         preflight(d, levels=3)
-    assert preflight(load_design(SCENES / "paper_disc.toml"), levels=3)["elements_estimate"] < 1e5
+    assert preflight(load_design(SCENES.parent / "designs" / "paper_disc.toml"), levels=3)["elements_estimate"] < 1e5
 
 
 def test_calibrate_sizes_rows_and_walkers_before_allocating(tmp_path, capsys):

@@ -123,8 +123,8 @@ def function_level_cycles() -> list[list[str]]:
 
 def test_the_graph_sees_the_projects_imports():
     top, inner = import_graph()
-    assert "torquebench.scene_views" in top["torquebench.pipeline"]          # module level
-    assert "estimator.estimate" in inner["torquebench.pipeline"]             # inside a stage
+    assert "torquebench.scene_views" in top["torquebench.stages.report"]     # module level
+    assert "estimator.estimate" in inner["torquebench.stages.estimates"]    # inside a stage
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 

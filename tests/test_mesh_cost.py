@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.mark.slow
 @pytest.mark.parametrize("design, h_factor", [
-    ("scenes/paper_disc.toml", 1.0),
+    ("designs/paper_disc.toml", 1.0),
     ("tests/data/fem_reference/thick_disc.toml", 0.5),           # 5 mm thick, 0.15 mm at the gauges
     ("tests/data/fem_reference/thick_disc_stl.toml", 1.0),
     ("tests/data/fem_reference/step_part.toml", 0.5),

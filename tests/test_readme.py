@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SHIPPED = ("robots", "scenes", "calibration", "flexure", "bridge", "estimator", "examples")
+SHIPPED = ("robots", "scenes", "designs", "sensors", "calibration", "flexure", "bridge", "estimator", "examples")
 
 
 def readme_commands() -> list[str]:

@@ -110,7 +110,7 @@ def test_a_scene_with_its_own_sensor_gets_only_views_of_its_own_results(tmp_path
     from bridge.config import load_sensor_config
 
     sensor = tmp_path / "my_sensor.toml"
-    sensor.write_text((ROOT / "scenes" / "paper_sensor.toml").read_text()
+    sensor.write_text((ROOT / "sensors" / "paper_sensor.toml").read_text()
                       .replace("bits = 24", "bits = 20").replace("enob = 16.0", "enob = 14.5")
                       .replace("data_rate_Hz = 4000.0", "data_rate_Hz = 1000.0"))
     out = tmp_path / "out"
@@ -124,7 +124,7 @@ def test_a_scene_with_its_own_sensor_gets_only_views_of_its_own_results(tmp_path
     summary = (out / "rep_scene.md").read_text()
     assert f"torque noise σ_τ: {chain.noise_std_Nm:.4g} N·m" in summary
     assert "20 bits, 1000 S/s, ENOB 14.5" in summary and "my_sensor.toml" in summary
-    paper = SensorChain(load_sensor_config(ROOT / "scenes" / "paper_sensor.toml")[0], 5e-5)
+    paper = SensorChain(load_sensor_config(ROOT / "sensors" / "paper_sensor.toml")[0], 5e-5)
     assert f"{paper.noise_std_Nm:.4g} N·m" not in summary
 
 

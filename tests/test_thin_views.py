@@ -90,22 +90,31 @@ def test_propagate_is_the_error_map_stage_and_is_cached(cache_dir, capsys):
     assert acts["sensor_chain"] == "skip" and acts["error_map"] == "run"
 
 
-def test_reproduce_scores_equal_the_reproduction_modules_own_run(cache_dir):
-    from torquebench.commands.reproduce import reproduction_results
+def test_reproduce_scores_are_the_stage_graphs_and_equal_a_direct_simulation(cache_dir):
+    """The reproduction asks the stage graph for each scene's paper_scores (one assembly, shared
+    by `reproduce` and the report builder); its scores equal those of the simulator run directly
+    with the scene's noisy sensors (an independent path: noise drawn inside the simulation, not by
+    sensor_log afterwards) and of the static holds computed directly."""
+    from estimator.sim import simulate
     from torquebench.reports import reproduction as rr
+    from torquebench.stages.paper import evaluate_dynamic, evaluate_static
 
     names = ["paper_fixed_link2", "paper_static_loading"]
-    ours = reproduction_results(names, stiffness=False)
-    ref = rr.run_reproduction(names, progress=False, stiffness=False)
-    a, b = ours["dynamic"]["paper_fixed_link2"], ref["dynamic"]["paper_fixed_link2"]
+    ours = rr.results(names, stiffness=False, progress=False, cache=Cache(cache_dir))
+    scene = load_scene(SCENES / "paper_fixed_link2.toml")
+    ref = evaluate_dynamic(scene, simulate(scene.sim))
+    a, b = ours["dynamic"]["paper_fixed_link2"], ref
     for m in ("dynamic", "paper", "dynamic + filter"):
         assert a["methods"][m]["collision_phase"] == b["methods"][m]["collision_phase"]
-    a, b = ours["static"]["paper_static_loading"], ref["static"]["paper_static_loading"]
+    a = ours["static"]["paper_static_loading"]
+    b = evaluate_static(load_scene(SCENES / "paper_static_loading.toml"))
     assert np.array_equal(a["location_error_m"], b["location_error_m"], equal_nan=True)
     # a second run reads every scene's scores from the stage cache
-    scene = load_scene(SCENES / "paper_fixed_link2.toml")
     steps = {s.stage.name: s.action for s in P.plan(scene, ["paper_scores"], Cache(cache_dir))}
     assert steps["paper_scores"] == "cached" and steps["sensor_log"] == "cached"
+    static = load_scene(SCENES / "paper_static_loading.toml")
+    steps = {s.stage.name: s.action for s in P.plan(static, ["paper_scores"], Cache(cache_dir))}
+    assert steps["paper_scores"] == "cached" and steps["static_holds"] == "cached"
 
 
 def test_simulate_refuses_a_scene_that_reads_a_recorded_log(tmp_path, cache_dir, capsys):

@@ -22,7 +22,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 TUTORIALS = ROOT / "docs" / "tutorials"
-INPUTS = ("examples", "scenes", "robots", "calibration/data")
+INPUTS = ("examples", "scenes", "designs", "sensors", "robots", "calibration/data")
 BLOCK = re.compile(r"(?:<!--\s*skip:(?P<skip>[^>]*)-->\s*\n)?```(?P<lang>bash|python)[^\n]*\n(?P<code>.*?)^```",
                    flags=re.S | re.M)
 

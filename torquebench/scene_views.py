@@ -5,7 +5,7 @@ compute is not drawn.
 
 A view is one declaration (``View``): its name (the area a scene lists in ``[outputs] reports``),
 the artifact it shows, what it is, and its function. Adding a view is adding one entry to VIEWS.
-The planner (torquebench.pipeline.report_areas) reads ``needs``; ``--explain`` lists the views it
+The report stage (torquebench.stages.report.report_areas) reads ``needs``; ``--explain`` lists the views it
 draws and why the others are not drawn.
 
 The residual plot keeps units apart: the detection statistic on its own axis (the whitened

@@ -46,7 +46,7 @@ def run_point(scene_path: str, overrides: dict, outputs, cache_dir) -> dict:
     """One point → {"point", "result"} or {"point", "error"} (never raises)."""
     from torquebench import pipeline as P
     from torquebench.cache import Cache
-    from torquebench.commands.run import summarize
+    from torquebench.stages.summary import summarize
     from torquebench.scenes import load_scene
 
     from torquebench.outputs import run_plan

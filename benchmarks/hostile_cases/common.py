@@ -35,9 +35,9 @@ def build_fixture(root: Path) -> Path:
     scene = scene.replace("duration_s = 1.5", "duration_s = 0.3")
     scene = scene.replace("t_on_s = 0.5", "t_on_s = 0.1").replace("t_off_s = 1.0", "t_off_s = 0.2")
     (fx / "scene.toml").write_text(scene)
-    shutil.copy(REPO / "scenes" / "paper_sensor.toml", fx / "sensor.toml")
-    design = (REPO / "scenes" / "paper_disc.toml").read_text().replace(
-        'sensor = "paper_sensor.toml"', 'sensor = "sensor.toml"')
+    shutil.copy(REPO / "sensors" / "paper_sensor.toml", fx / "sensor.toml")
+    design = (REPO / "designs" / "paper_disc.toml").read_text().replace(
+        'sensor = "../sensors/paper_sensor.toml"', 'sensor = "sensor.toml"')
     (fx / "design.toml").write_text(design)
     shutil.copy(REPO / "calibration" / "data" / "paper_link1_session.csv", fx / "session.csv")
     shutil.copy(REPO / "calibration" / "data" / "paper_link1_cal.json", fx / "cal.json")

@@ -5,13 +5,13 @@ from __future__ import annotations
 HELP = "noise budget and minimum detectable strain/torque of a bridge + ADC (paper's by default)"
 EXAMPLES = """\
 torquebench bridge
-torquebench bridge scenes/paper_sensor.toml --averaging 4 --json
+torquebench bridge sensors/paper_sensor.toml --averaging 4 --json
 """
 
 
 def add_arguments(parser) -> None:
     parser.add_argument("config", nargs="?", default=None, metavar="CONFIG.toml",
-                        help="sensor TOML (default: scenes/paper_sensor.toml)")
+                        help="sensor TOML (default: sensors/paper_sensor.toml)")
     parser.add_argument("--strain-per-Nm", type=float, default=None, dest="strain_per_Nm",
                         help="gauge strain per N·m of joint torque, 1/(N·m) (default: the file's [torque] strain_per_Nm)")
     parser.add_argument("--bandwidth-Hz", type=float, default=None, dest="bandwidth_Hz",
@@ -53,7 +53,7 @@ def run(args) -> int:
         Range(1e-6, 1e9, "Hz").check(args.bandwidth_Hz, "--bandwidth-Hz")
     if args.averaging < 1:
         raise InputError(f"--averaging: must be ≥ 1, got {args.averaging}")
-    path = args.config or shipped("scenes", "paper_sensor.toml")
+    path = args.config or shipped("sensors", "paper_sensor.toml")
     cfg, spn = load_sensor_config(path)
     span_s = args.averaging / cfg.data_rate_Hz
     if span_s > MAX_AVERAGING_S:

@@ -17,7 +17,7 @@ from pathlib import Path
 HELP = "run the workbench end to end on the paper's leg (no hardware, no input)"
 EXAMPLES = """\
 torquebench demo
-torquebench demo --out-dir out/demo2 --seed 3 --flexure scenes/paper_disc.toml
+torquebench demo --out-dir out/demo2 --seed 3 --flexure designs/paper_disc.toml
 """
 SCENE = "paper_floating_link2"
 
@@ -35,7 +35,7 @@ def add_arguments(parser) -> None:
                              "`torquebench run` of its scene give the same numbers)")
     parser.add_argument("--flexure", type=Path, default=None, metavar="DESIGN.toml",
                         help="take the torque sensor's strain per N·m from this flexure's FEM "
-                             "(e.g. scenes/paper_disc.toml) instead of the paper's calibration")
+                             "(e.g. designs/paper_disc.toml) instead of the paper's calibration")
 
 
 def run(args) -> int:

@@ -21,7 +21,7 @@ from torquebench.formatting import pm as _pm
 HELP = "flexure FEM: sensitivity (mV/V per N·m), stiffness, stress, cross-talk, min torque; sweeps"
 EXAMPLES = """\
 torquebench flexure
-torquebench flexure scenes/paper_disc.toml --size medium --png out/disc_strain.png --json
+torquebench flexure designs/paper_disc.toml --size medium --png out/disc_strain.png --json
 torquebench flexure --sweep spoke_width_mm=3,3.5,4 --order 2 --png out/spoke_sweep.png
 torquebench flexure tests/data/fem_reference/step_part.toml --error-method adaptive --rtol 0.01
 """
@@ -31,7 +31,7 @@ HEADLINE = ("sensitivity_mV_per_V_per_Nm", "torsional_stiffness_Nm_per_rad", "ma
 
 def add_arguments(parser) -> None:
     parser.add_argument("design", nargs="?", type=Path, default=None, metavar="DESIGN.toml",
-                        help="flexure design TOML (docs/conventions.md; default: the shipped scenes/paper_disc.toml)")
+                        help="flexure design TOML (docs/conventions.md; default: the shipped designs/paper_disc.toml)")
     parser.add_argument("--size", choices=("coarse", "medium", "fine"), default=None,
                         help="mesh size: coarse, medium or fine (default: the file's [mesh] size)")
     parser.add_argument("--order", type=int, choices=(1, 2), default=None,
@@ -148,7 +148,7 @@ def run(args) -> int:
 
     from userio.files import check_input
 
-    path = check_input(args.design or shipped("scenes", "paper_disc.toml"), what="flexure design TOML")
+    path = check_input(args.design or shipped("designs", "paper_disc.toml"), what="flexure design TOML")
     design = load_design(path)
     plan = _check_outputs(args, path, design)
     params = parse_sweep(args.sweep)

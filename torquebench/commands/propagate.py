@@ -1,7 +1,7 @@
 """`torquebench propagate`: what contact-localization error will this sensor design give on the leg?
 
 A view over the stage graph (torquebench.pipeline: sensor_chain → error_map): the options make a
-scene. A sensor configuration (bridge/ADC, ``scenes/paper_sensor.toml``) and a
+scene. A sensor configuration (bridge/ADC, ``sensors/paper_sensor.toml``) and a
 strain per N·m (given, or from the bridge default) give the joint-torque noise σ_τ; a calibration
 file gives the slope uncertainty (a systematic gain error); the FT sensor noise is Table II's.
 ``estimator.uncertainty`` then propagates them through the localizer over a grid of postures
@@ -59,7 +59,7 @@ def add_arguments(parser) -> None:
                         "(a .urdf or a declaration naming one): the 3-D error map over its link surfaces")
     parser.add_argument("--posture", default=None, metavar="RAD,RAD,...",
                         help="URDF robots: joint angles of the 3-D error map, rad (default: all 0)")
-    parser.add_argument("--sensor", type=Path, help="sensor TOML (default: scenes/paper_sensor.toml)")
+    parser.add_argument("--sensor", type=Path, help="sensor TOML (default: sensors/paper_sensor.toml)")
     parser.add_argument("--strain-per-Nm", type=float, dest="strain_per_Nm",
                         help="gauge strain per N·m of joint torque, 1/(N·m) (default: the sensor file's, or the paper's)")
     parser.add_argument("--torque-noise-Nm", type=float, dest="torque_noise_Nm",

@@ -1,11 +1,11 @@
 """`torquebench reproduce`: run the paper's scenes and write reports/paper_reproduction.md.
 
-A view over the stage graph (torquebench.pipeline): each scene's ``paper_scores`` stage (fed by
-simulation → sensor_log for a dynamic scene), cached; torquebench.reports.reproduction writes."""
+A view over the stage graph: each scene's ``paper_scores`` stage (fed by simulation → sensor_log
+for a dynamic scene, static_holds for a static one), cached, asked by
+torquebench.reports.reproduction.results, which also writes the report."""
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 from torquebench.errors import InputError
@@ -31,34 +31,6 @@ def add_arguments(parser) -> None:
                         help="a reduced stiffness table (one scene, BDF and RK4, 0.2 s)")
     parser.add_argument("--force", action="store_true",
                         help="replace report files in --out-dir that `reproduce` did not write there")
-
-
-def reproduction_results(names, *, quick=False, stiffness=True) -> dict:
-    """Each paper scene asks the stage graph for its ``paper_scores`` (dynamic: simulation →
-    sensor_log → scores; static: the holds and their scores), cached; then the integrator ×
-    scene stiffness table (a study of the integrators, not a scene)."""
-    import time
-
-    from tqdm import tqdm
-
-    from torquebench import pipeline as P
-    from torquebench.cache import Cache
-    from torquebench.reports import reproduction as rr
-    from torquebench.scenes import load_scene, scene_path
-
-    cache = Cache()
-    results = {"dynamic": {}, "static": {}, "timing_s": {}}
-    for name in tqdm(names, desc="reproduce", file=sys.stderr, leave=False):
-        start = time.perf_counter()
-        scene = load_scene(scene_path(name))
-        arts, _ = P.execute(scene, ["paper_scores"], cache)
-        results["dynamic" if scene.sim is not None else "static"][scene.name] = arts["paper_scores"]
-        results["timing_s"][scene.name] = time.perf_counter() - start
-    if stiffness:
-        start = time.perf_counter()
-        results["stiffness"] = rr.stiffness_table(quick=quick, progress=True)
-        results["timing_s"]["stiffness_table"] = time.perf_counter() - start
-    return results
 
 
 def run(args) -> int:
@@ -95,7 +67,7 @@ def _reproduce(args, names, out_dir) -> int:
     from torquebench.io import print_json
     from torquebench.reports import reproduction as rr
 
-    results = reproduction_results(names, quick=args.quick, stiffness=not args.no_stiffness)
+    results = rr.results(names, quick=args.quick, stiffness=not args.no_stiffness)
     paths = rr.write(results, Path(out_dir))
     summary = rr.summary(results)
     summary["written"] = [str(p) for p in paths]

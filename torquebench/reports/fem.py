@@ -153,7 +153,7 @@ def build(out_dir: Path) -> list[Path]:
 
 
 # ------------------------------------------------------------------ error against run time (flexure designs)
-#: the two geometries of the error-vs-run-time section: (scene file, overrides)
+#: the two geometries of the error-vs-run-time section: (design file in designs/, overrides)
 FEM_GEOMETRIES = {
     "paper disc": ("paper_disc.toml", {}),
     "thick disc, 0.5 mm gauges": ("paper_disc.toml", {"thickness_mm": 5.0, "fillet_radius_mm": 0.0,
@@ -219,9 +219,9 @@ def fem_levels(quick: bool = False, progress: bool = True, on_row=None, meshers=
                                     file=sys.stderr, disable=not progress, leave=False):
         scene, overrides = FEM_GEOMETRIES[g]
         if mesher == OUTSIDE:
-            row = _scikit_fem_row(load_design(REPO_ROOT / "scenes" / scene, overrides), f)
+            row = _scikit_fem_row(load_design(REPO_ROOT / "designs" / scene, overrides), f)
         else:
-            design = load_design(REPO_ROOT / "scenes" / scene, {**overrides, "mesh.mesher": mesher})
+            design = load_design(REPO_ROOT / "designs" / scene, {**overrides, "mesh.mesher": mesher})
             res, _ = analyze(design, order=order, h_factor=f)
             row = {"dofs": int(res["dofs"]), "time_s": float(res["total_s"]), "warnings": list(res["warnings"]),
                    **{k: float(res[k]) for k in FEM_FIGURES}}
@@ -319,7 +319,7 @@ def fem_section(rows: list[dict], out_dir: Path, quick: bool = False) -> tuple[l
                 f"f = {', '.join(f'{f:.3g}' for f in tet)}; its error against the gmsh reference includes "
                 "the polygon's geometry error, which no mesh refinement removes)" if tet else "") + ". "
              "Wall time = the whole analysis a user waits for "
-             "(meshing, assembly, the six load cases, gauge read-out). Geometries: `scenes/paper_disc.toml` "
+             "(meshing, assembly, the six load cases, gauge read-out). Geometries: `designs/paper_disc.toml` "
              "(2.2 mm, fillets, 1.5 mm gauges) and the same disc 5 mm thick without fillets with 0.5 mm "
              "gauges (`tests/test_fem_thick_disc.py`)."
              + (f" Outside point of comparison: scikit-fem P2 (`benchmarks/fem_reference.py`: scikit-fem's own "

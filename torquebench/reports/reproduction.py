@@ -1,6 +1,10 @@
 """The paper's experiments (§IV–V) reproduced: Tables III, IV, V, the posture sweep, Fig. 4, and
 the integrator × scene stiffness table. ``build(out_dir)`` writes reports/paper_reproduction.md.
 
+A report of results: each paper scene's scores are its ``paper_scores`` stage
+(torquebench.stages.paper, cached), asked of the stage graph by ``results``, the one assembly
+that ``torquebench reproduce`` and ``build`` share; this module writes tables and figures.
+
 Definitions used throughout:
 - collision phase: the samples with t ∈ [t_on + 5/K, t_off) of the true poke (K the observer gain:
   after 5 time constants the residual has converged to within e⁻⁵ ≈ 0.7 % of the step). The full
@@ -20,6 +24,9 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+
+from torquebench.stages.paper import (FILTER_SAMPLES, causal_mean,  # noqa: F401  (the scores)
+                                      evaluate_dynamic, evaluate_static, filtered_point)
 
 PAPER_TABLE_III = {  # mean/STD of Fx, Fz, |F| (N), px, pz, |p| (m)
     "paper_floating_link1": {"mean": [-0.033, 0.051, 0.162, -0.001, 0.000, 0.005],
@@ -41,9 +48,6 @@ DYNAMIC_SCENES = ["paper_floating_link1", "paper_floating_link2", "paper_fixed_l
 STATIC_SCENES = ["paper_static_loading", "paper_posture_sweep"]
 ALL_SCENES = DYNAMIC_SCENES + STATIC_SCENES
 COLS = ["Fx", "Fz", "|F|", "px", "pz", "|p|"]
-FILTER_SAMPLES = 25
-TARE_S = 0.3          # no-load hold before static loads: the estimator's noise floors come from it
-
 
 
 def _save_png(fig, path) -> None:
@@ -58,170 +62,6 @@ def _progress(iterable, desc, enabled):
         return iterable
     from tqdm import tqdm
     return tqdm(iterable, desc=desc, file=sys.stderr, leave=False)
-
-
-def causal_mean(x: np.ndarray, n: int) -> np.ndarray:
-    """Moving average of the last n finite samples' values (NaNs skipped), per column."""
-    x = np.asarray(x, float)
-    good = np.isfinite(x)
-    v = np.where(good, x, 0.0)
-    cs = np.cumsum(np.concatenate([np.zeros((1,) + x.shape[1:]), v]), axis=0)
-    cn = np.cumsum(np.concatenate([np.zeros((1,) + x.shape[1:]), good]), axis=0)
-    idx = np.arange(1, len(x) + 1)
-    lo = np.maximum(idx - n, 0)
-    s, c = cs[idx] - cs[lo], cn[idx] - cn[lo]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(c > 0, s / np.maximum(c, 1), np.nan)
-
-
-def filtered_point(robot, q, est, n):
-    """p from the causal n-sample mean of α (a body coordinate) at the CURRENT posture, per link."""
-    from estimator import dynamics as dyn
-
-    full = robot.with_base(True)
-    a = np.where(est.contact, est.alpha, np.nan)
-    af = causal_mean(a[:, None], n)[:, 0]
-    p = np.full((len(a), 2), np.nan)
-    for c in range(1, robot.n_links + 1):
-        rows = est.contact & (est.link == c) & np.isfinite(af)
-        if rows.any():
-            p[rows] = dyn.contact_point(full, q[rows], c, af[rows])
-    return p
-
-
-def _errors(est_F, est_p, truth):
-    """Per-sample signed errors (T, 6): Fx, Fz, |ΔF|, px, pz, |Δp|."""
-    dF = est_F - np.column_stack([truth["Fx"], truth["Fz"]])
-    dp = est_p - np.column_stack([truth["px"], truth["pz"]])
-    return np.column_stack([dF, np.hypot(*dF.T), dp, np.hypot(*dp.T)])
-
-
-def _stats(err, mask):
-    e = err[mask]
-    e = e[np.all(np.isfinite(e), axis=1)]
-    if len(e) == 0:
-        return {"mean": [float("nan")] * 6, "std": [float("nan")] * 6, "n": 0}
-    return {"mean": e.mean(0).tolist(), "std": e.std(0).tolist(), "n": int(len(e))}
-
-
-def evaluate_dynamic(scene, res, *, with_traces=True, chain=None) -> dict:
-    """Estimate a simulated dynamic scene with both methods (+ filtered dynamic) and score them.
-    The detector knows the log's sensor noise (pipeline.scene_noise_model, readings="log";
-    ``chain``: the scene's sensor chain for a bridge torque model, else built from the scene)."""
-    from estimator.estimate import estimate
-    from torquebench.pipeline import collision_phase_mask, scene_noise_model
-    from userio.errors import InputError
-
-    cfg = scene.sim
-    K = scene.estimator.gain_per_s
-    robot = cfg.robot.with_base(cfg.base == "floating")
-    truth, t = res.truth, res.t
-    on = truth["link"] > 0
-    phase = collision_phase_mask(t, cfg.pokes, K)      # the one definition (torquebench.pipeline)
-    quiet = ~on & (t > 0.2)
-    for p in cfg.pokes:   # the observer's decay after a poke ends is not a false positive
-        quiet &= ~((t >= p.t_off_s) & (t < p.t_off_s + p.ramp_s + 5.0 / K))
-    out = {"scene": scene.name, "collision_phase_s": [float(t[phase][0]) if phase.any() else None,
-                                                      float(t[phase][-1]) if phase.any() else None],
-           "methods": {}, "sim": res.stats}
-    traces = {"t": t, "F_true": np.hypot(truth["Fx"], truth["Fz"]), "alpha_true": truth["alpha"],
-              "link_true": truth["link"]}
-    try:
-        noise = scene_noise_model(scene, chain, readings="log")
-    except InputError:
-        if scene.estimator.threshold is None:
-            raise
-        noise = None                      # the scene's own ε: the paper rule, as before
-    for method in ("paper", "dynamic"):
-        start = time.perf_counter()
-        est = estimate(robot, res.log, method=method, gain_per_s=K, threshold=scene.estimator.threshold,
-                       noise=noise, false_alarm_rate=scene.estimator.false_alarm_rate)
-        run_s = time.perf_counter() - start
-        F = np.column_stack([est.Fx, est.Fz])
-        p = np.column_stack([est.px, est.pz])
-        variants = {method: (F, p)}
-        if method == "dynamic":
-            Ff = np.where(est.contact[:, None], causal_mean(np.where(est.contact[:, None], F, np.nan),
-                                                            FILTER_SAMPLES), np.nan)
-            pf = filtered_point(cfg.robot, res.log.q, est, FILTER_SAMPLES)
-            variants["dynamic + filter"] = (Ff, pf)
-            traces["residual"] = est.residual
-            traces["rnorm"] = est.rnorm
-        for name, (FF, pp) in variants.items():
-            err = _errors(FF, pp, truth)
-            out["methods"][name] = {
-                "collision_phase": _stats(err, phase & est.contact),
-                "true_contact_window": _stats(err, on & est.contact),
-                "detected_in_phase": float(est.contact[phase].mean()) if phase.any() else float("nan"),
-                "flagged_in_phase": float(np.mean(~np.isfinite(pp[phase, 0]))) if phase.any() else float("nan"),
-                "link_correct_in_phase": float(np.mean(est.link[phase] == truth["link"][phase]))
-                if phase.any() else float("nan"),
-                "false_positive_rate": float(est.contact[quiet].mean()) if quiet.any() else 0.0,
-                "estimate_time_s": run_s}
-            traces[f"F_{name}"] = np.hypot(*FF.T)
-            a = est.alpha.copy() if name == method else np.full(len(t), np.nan)
-            traces[f"alpha_{name}"] = a
-    if with_traces:
-        out["traces"] = traces
-    return out
-
-
-def evaluate_static(scene) -> dict:
-    """Static holds (Table IV or the sweep): per-point mean estimate over the window, errors, flags."""
-    from estimator.estimate import estimate
-    from estimator.sim.static import static_hold_log
-    from estimator.localization import REASONS
-
-    st = scene.static
-    pts = st.points
-    start = time.perf_counter()
-    log, truth, idx = static_hold_log(st.robot, np.array([p.q_rad for p in pts]),
-                                      np.array([p.link for p in pts]), np.array([p.alpha for p in pts]),
-                                      np.array([p.force_N for p in pts]), st.sensors, st.hold_s,
-                                      tare_s=TARE_S)
-    sim_s = time.perf_counter() - start
-    start = time.perf_counter()
-    est = estimate(st.robot, log, method=scene.estimator.method, gain_per_s=scene.estimator.gain_per_s,
-                   threshold=scene.estimator.threshold)
-    est_s = time.perf_counter() - start
-    per = int(round(st.hold_s * st.sensors.sample_rate_Hz))
-    win = int(round(st.window_s * st.sensors.sample_rate_Hz))
-    P = len(pts)
-    sel = (np.arange(per) >= per - win)
-    loaded = idx >= 0
-    W = lambda x: np.asarray(x, float)[loaded].reshape(P, per)[:, sel]   # noqa: E731
-    F_true = np.array([p.force_N for p in pts])
-    pt = np.column_stack([W(truth["px"])[:, 0], W(truth["pz"])[:, 0]])
-    ok = W(est.contact) > 0.5
-    ok &= W(est.reason) == REASONS.index("ok")
-    flagged = ok.mean(1) < 0.5
-    def wmean(x):
-        x = np.where(ok, W(x), np.nan)
-        with np.errstate(invalid="ignore"):
-            return np.nanmean(np.where(np.isfinite(x), x, np.nan), axis=1) if True else None
-    import warnings
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        Fm = np.column_stack([wmean(est.Fx), wmean(est.Fz)])
-        pm = np.column_stack([wmean(est.px), wmean(est.pz)])
-    loc_err = np.hypot(*(pm - pt).T)
-    force_err = np.hypot(*(Fm - F_true).T)
-    # per-sample errors (for RMS): all window samples with a well-conditioned answer
-    ps = np.stack([W(est.px), W(est.pz)], -1) - pt[:, None, :]
-    fs = np.stack([W(est.Fx), W(est.Fz)], -1) - F_true[:, None, :]
-    loc_s = np.where(ok, np.linalg.norm(ps, axis=-1), np.nan)
-    force_s = np.where(ok, np.linalg.norm(fs, axis=-1), np.nan)
-    # condition: 1/|sin∠(F, link)|, median over the window (NaN where undetermined)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        cond = np.nanmedian(W(est.condition), axis=1)
-        reasons = [REASONS[int(np.bincount(r).argmax())] for r in W(est.reason).astype(int)]
-    return {"scene": scene.name, "points": P, "labels": [p.label for p in pts],
-            "q": np.array([p.q_rad for p in pts]), "link": np.array([p.link for p in pts]),
-            "alpha": np.array([p.alpha for p in pts]), "location_error_m": loc_err,
-            "force_error_N": force_err, "flagged": flagged, "reason": reasons, "condition": cond,
-            "loc_samples": loc_s, "force_samples": force_s, "grid_shape": st.grid_shape,
-            "simulate_s": sim_s, "estimate_s": est_s, "samples": len(log.t)}
 
 
 def table_iv(res) -> list[dict]:
@@ -324,27 +164,27 @@ def stiffness_table(quick=False, progress=True) -> list[dict]:
 
 
 # ----------------------------------------------------------------------------- driver
-def run_reproduction(names=None, *, progress=True, quick=False, stiffness=True) -> dict:
-    """Run the chosen shipped scenes (default all) and the stiffness table."""
-    from estimator.sim import simulate
+def results(names=None, *, quick=False, stiffness=True, progress=True, cache=None) -> dict:
+    """Each paper scene's ``paper_scores`` from the stage graph (dynamic: simulation → sensor_log
+    → scores; static: the holds → scores), cached; then the integrator × scene stiffness table
+    (a study of the integrators, not a scene)."""
+    from torquebench.cache import Cache
     from torquebench.scenes import load_scene, scene_path
+    from torquebench.stages.planner import execute
 
-    names = list(names or ALL_SCENES)
-    results = {"dynamic": {}, "static": {}, "timing_s": {}}
-    for name in _progress(names, "reproduce", progress):
+    cache = Cache() if cache is None else cache
+    out = {"dynamic": {}, "static": {}, "timing_s": {}}
+    for name in _progress(list(names or ALL_SCENES), "reproduce", progress):
         start = time.perf_counter()
         scene = load_scene(scene_path(name))
-        if scene.sim is not None:
-            res = simulate(scene.sim)
-            results["dynamic"][scene.name] = evaluate_dynamic(scene, res)
-        else:
-            results["static"][scene.name] = evaluate_static(scene)
-        results["timing_s"][scene.name] = time.perf_counter() - start
+        arts, _ = execute(scene, ["paper_scores"], cache)
+        out["dynamic" if scene.sim is not None else "static"][scene.name] = arts["paper_scores"]
+        out["timing_s"][scene.name] = time.perf_counter() - start
     if stiffness:
         start = time.perf_counter()
-        results["stiffness"] = stiffness_table(quick=quick, progress=progress)
-        results["timing_s"]["stiffness_table"] = time.perf_counter() - start
-    return results
+        out["stiffness"] = stiffness_table(quick=quick, progress=progress)
+        out["timing_s"]["stiffness_table"] = time.perf_counter() - start
+    return out
 
 
 def summary(results) -> dict:
@@ -627,5 +467,6 @@ def write(results, out_dir: Path) -> list[Path]:
 
 
 def build(out_dir: Path) -> list[Path]:
-    """Run every paper scene and the stiffness table; write paper_reproduction.md + PNGs."""
-    return write(run_reproduction(progress=True), out_dir)
+    """Every paper scene's scores (the stage graph) and the stiffness table; write
+    paper_reproduction.md + PNGs."""
+    return write(results(progress=True), out_dir)

@@ -1,4 +1,4 @@
-"""A flexure design (``scenes/paper_disc.toml``): geometry, material, gauges, loads, bridge, mesh.
+"""A flexure design (``designs/paper_disc.toml``): geometry, material, gauges, loads, bridge, mesh.
 
 Lengths in the file are in millimetres (keys end in ``_mm``); flexure.design converts them to SI.
 A parametric spoke disc's keys default to flexure.geometry.SpokeDisc's values; an STL or STEP

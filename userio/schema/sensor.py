@@ -1,4 +1,4 @@
-"""A sensor file (``scenes/paper_sensor.toml``): bridge → amplifier → ADC, and strain per N·m.
+"""A sensor file (``sensors/paper_sensor.toml``): bridge → amplifier → ADC, and strain per N·m.
 
 Every key is optional; the defaults are the paper's sensor (bridge.config.SensorConfig).
 """
