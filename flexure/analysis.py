@@ -178,6 +178,7 @@ def _solve_cases(design: Design, mesh, K, load_nodes, fixed_nodes, ref: np.ndarr
     coupling "rigid": the bore nodes move as a rigid body (multipoint constraint), Θ its rotation;
     "distributed": the statically equivalent linear traction on the bore faces, Θ its
     work-conjugate mean rotation J⁻¹∫ r × u dA (bc.wrench_traction, bc.mean_rotation)."""
+    from flexure import slivers
     from flexure import solve as fsolve
     from flexure.bc import Problem, mean_rotation, wrench_traction
 
@@ -267,6 +268,7 @@ def analyze_mesh(design: Design, mres, mesh_s: float = 0.0, progress: bool = Fal
     solve_s = time.perf_counter() - t0
     say(f"solved {len(CASES)} load cases ({info['solver']}, {solve_s:.1f} s, residual {info['residual_norm']:.1e})")
     warnings, metrics = fsolve.conditioning_warnings(mesh, design.material)
+    warnings = slivers.annotate(warnings, mesh, mres.report)     # any below 10°, explained
     if info.get("condition_estimate", 0.0) > fsolve.COND_LIMIT:
         warnings.append("ill_conditioned")
     if not np.isfinite(info["residual_norm"]) or info["residual_norm"] > fsolve.RESIDUAL_LIMIT:
