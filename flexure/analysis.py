@@ -178,7 +178,6 @@ def _solve_cases(design: Design, mesh, K, load_nodes, fixed_nodes, ref: np.ndarr
     coupling "rigid": the bore nodes move as a rigid body (multipoint constraint), Θ its rotation;
     "distributed": the statically equivalent linear traction on the bore faces, Θ its
     work-conjugate mean rotation J⁻¹∫ r × u dA (bc.wrench_traction, bc.mean_rotation)."""
-    from flexure import slivers
     from flexure import solve as fsolve
     from flexure.bc import Problem, mean_rotation, wrench_traction
 
@@ -245,6 +244,7 @@ def analyze_mesh(design: Design, mres, mesh_s: float = 0.0, progress: bool = Fal
     default RTOL), the gauges, the figures → (results dict, Fields)."""
     from bridge.budget import min_detectable_strain
     from bridge.wheatstone import output_ratio
+    from flexure import slivers
     from flexure import solve as fsolve
     from flexure.fem import stiffness_matrix
 
