@@ -228,6 +228,7 @@ class EpisodeStage:
             method = method.replace("steady samples", "samples (none steady: the interval is shorter than "
                                     "the observer's rise)")
         for k in sigma:
+            f[f"{k}_error_per_sample"] = sigma[k]                  # the per-sample 1σ it came from
             f[f"{k}_error_method"] = method if f.get(f"{k}_error_estimate") is not None else row.get(
                 f"{k}_error_method")
         return f

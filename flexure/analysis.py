@@ -107,8 +107,8 @@ def _check_gauges(design: Design, surface) -> None:
     from flexure.load_check import check_loads
     from flexure.surface_check import check_gauges
 
-    check_loads(design, surface)
     check_gauges(surface.points, surface.faces, design.gauges, f"{design.path}: gauges")
+    check_loads(design, surface)
 
 
 def _selections(design: Design, mesh):
