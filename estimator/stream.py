@@ -437,7 +437,9 @@ class EstimatorStream:
                                        R_propagated=np.stack([g @ g.T for _, _, g in reps]))
         if self.episode_stage is not None:
             for i, row in enumerate(rows):
-                row.update(self.episode_stage.fields(row["link"], row["well_conditioned_fraction"] > 0))
+                # the mean force's 1σ from the per-sample one (noise averages down; a model term does not)
+                row.update(self.episode_stage.fields(row["link"], row["well_conditioned_fraction"] > 0,
+                                                     row if model_sd is None else None))
                 if model_sd is not None:
                     add_model_error(row, model_sd[i])
         self.intervals.extend(rows)

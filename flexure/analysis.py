@@ -102,10 +102,13 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
 
 
 def _check_gauges(design: Design, surface) -> None:
-    """Every gauge grid on a face of the solid, before meshing (InputError naming the gauge)."""
+    """Every gauge grid on a face of the solid, and the hold and load radii against the part,
+    before meshing (InputError naming the gauge or the design file's key)."""
+    from flexure.load_check import check_loads
     from flexure.surface_check import check_gauges
 
     check_gauges(surface.points, surface.faces, design.gauges, f"{design.path}: gauges")
+    check_loads(design, surface)
 
 
 def _selections(design: Design, mesh):
@@ -241,6 +244,7 @@ def analyze_mesh(design: Design, mres, mesh_s: float = 0.0, progress: bool = Fal
     default RTOL), the gauges, the figures → (results dict, Fields)."""
     from bridge.budget import min_detectable_strain
     from bridge.wheatstone import output_ratio
+    from flexure import slivers
     from flexure import solve as fsolve
     from flexure.fem import stiffness_matrix
 
@@ -264,6 +268,7 @@ def analyze_mesh(design: Design, mres, mesh_s: float = 0.0, progress: bool = Fal
     solve_s = time.perf_counter() - t0
     say(f"solved {len(CASES)} load cases ({info['solver']}, {solve_s:.1f} s, residual {info['residual_norm']:.1e})")
     warnings, metrics = fsolve.conditioning_warnings(mesh, design.material)
+    warnings = slivers.annotate(warnings, mesh, mres.report)     # any below 10°, explained
     if info.get("condition_estimate", 0.0) > fsolve.COND_LIMIT:
         warnings.append("ill_conditioned")
     if not np.isfinite(info["residual_norm"]) or info["residual_norm"] > fsolve.RESIDUAL_LIMIT:
@@ -468,11 +473,14 @@ def sweep_table(rows: list[dict], keys: list[str]) -> str:
     return "\n".join(lines)
 
 
-def sweep_plot(rows: list[dict], keys: list[str], out_png) -> None:
-    """Trade-off plot: sensitivity vs stiffness, colour = safety factor, labels = parameters."""
+def sweep_figure(rows: list[dict], keys: list[str]):
+    """The trade-off figure of a sweep: sensitivity vs stiffness, colour = safety factor, labels =
+    parameters; tick labels that never overlap (flexure.plot_ticks). → matplotlib Figure."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from flexure.plot_ticks import readable_log_ticks
 
     ok = [r for r in rows if not r.get("error")]
     fig, ax = plt.subplots(figsize=(7, 5))
@@ -487,17 +495,28 @@ def sweep_plot(rows: list[dict], keys: list[str], out_png) -> None:
                         xytext=(4, 4), fontsize=7)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        readable_log_ticks(ax.xaxis, x)
+        readable_log_ticks(ax.yaxis, y)
     ax.set_xlabel("torsional stiffness (N·m/rad)")
     ax.set_ylabel("sensitivity (mV/V per N·m)")
     ax.set_title("flexure sweep: " + " × ".join(keys) + " (labels)")
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
+    return fig
+
+
+def sweep_plot(rows: list[dict], keys: list[str], out_png) -> None:
+    """``sweep_figure`` written to ``out_png`` (atomic)."""
+    import matplotlib.pyplot as plt
+
     from userio.files import atomic_write
+
+    fig = sweep_figure(rows, keys)
     try:
         atomic_write(out_png, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     finally:
         plt.close(fig)
 
 
-__all__ = ["analyze", "build_mesh", "sweep", "sweep_warnings", "parse_sweep", "sweep_table", "sweep_plot",
+__all__ = ["analyze", "build_mesh", "sweep", "sweep_warnings", "parse_sweep", "sweep_table", "sweep_plot", "sweep_figure",
            "load_design"]

@@ -178,6 +178,9 @@ def _attach(res: dict, levels: list[dict], order: int) -> dict:
         orders[key] = None if math.isnan(p) else float(p)
     res["discretization_levels"] = levels
     res["discretization_observed_order"] = orders
+    from flexure.slivers import widen
+
+    widen(res, levels, FIGURES)          # slivers at a level: ± at least the levels' spread
     return res
 
 
@@ -186,7 +189,8 @@ def level_record(design, res: dict, h_factor: float) -> dict:
     narrowest gauge grid side (``usable_levels``) and the FIGURES."""
     side = min(min(g.length_m, g.width_m) for g in design.gauges)
     return {"h_factor": float(h_factor), "dofs": int(res["dofs"]), "total_s": res["total_s"],
-            "gauge_elements": float(side / res["mesh"]["h_gauge_m"]), **{k: res[k] for k in FIGURES}}
+            "gauge_elements": float(side / res["mesh"]["h_gauge_m"]), **{k: res[k] for k in FIGURES},
+            "n_slivers_10deg": int(res["mesh"].get("n_slivers_10deg", 0))}
 
 
 def relative_error(res: dict, key: str) -> float:

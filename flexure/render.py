@@ -11,7 +11,6 @@ pyvista is imported inside the functions, never at module import time.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -214,8 +213,9 @@ def render_png(fields, path, field: str = "strain", title: str | None = None, wa
     if field not in FIELDS:
         raise InputError(f"render: unknown field {field!r}; allowed: {', '.join(sorted(FIELDS))}")
     path = _check_target(path, ".png")
-    if not os.environ.get("DISPLAY"):      # no X server: go straight to EGL (no X warning on stderr)
-        os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+    from userio.offscreen import prefer_headless
+
+    prefer_headless()                      # no reachable X server: EGL (no X warning on stderr)
     try:
         import pyvista as pv
     except (ImportError, OSError) as exc:

@@ -26,3 +26,43 @@ def test_list_prints_description_and_run_time():
     text = subprocess.run([sys.executable, "-m", "torquebench", "report", "--list"],
                           capture_output=True, text=True, timeout=120).stdout
     assert text.count("run time:") == len(rows)
+
+
+def test_every_build_of_the_shipped_reports_records_each_areas_time(tmp_path, monkeypatch):
+    """`report` building into the repository's reports/ records each built area's time and date
+    in build_times.json (what `--list` shows), keeping the areas it did not build."""
+    import argparse
+    import sys as _sys
+    import types
+
+    import torquebench.io as tio
+    from torquebench.commands import report
+
+    (tmp_path / "reports").mkdir()
+    (tmp_path / "reports" / report.TIMES_FILE).write_text(json.dumps({"old": {"s": 3.0, "date": "2026-01-01"}}))
+    monkeypatch.setattr(tio, "REPO_ROOT", tmp_path)
+    for name in ("fake_a", "fake_b"):
+        mod = types.ModuleType(f"fakereports.{name}")
+
+        def build(out_dir, _n=name):
+            p = out_dir / f"{_n}.md"
+            p.write_text(f"# {_n}\n\n**Headline:** {_n} built in a test run here\n")
+            return [p]
+
+        mod.build = build
+        monkeypatch.setitem(_sys.modules, f"fakereports.{name}", mod)
+    areas = {"fake_a": "fakereports.fake_a", "fake_b": "fakereports.fake_b"}
+    args = argparse.Namespace(json=True)
+    assert report._build(args, areas, ["fake_a", "fake_b"], tmp_path / "reports") == 0
+    times = report.recorded_times(tmp_path / "reports")
+    assert set(times) == {"old", "fake_a", "fake_b"} and times["old"]["s"] == 3.0
+    assert all(times[a]["s"] >= 0 and len(times[a]["date"]) == 10 for a in ("fake_a", "fake_b"))
+
+
+def test_shipped_build_times_name_only_real_areas():
+    from torquebench.commands.report import recorded_times
+    from torquebench.io import REPO_ROOT
+
+    times = recorded_times(REPO_ROOT / "reports")
+    assert times and set(times) <= set(builders())
+    assert all(v["s"] > 0 for v in times.values())

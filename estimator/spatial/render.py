@@ -12,6 +12,9 @@ from estimator.spatial.tree import body_poses
 
 
 def _plotter():
+    from userio.offscreen import prefer_headless
+
+    prefer_headless()                      # no reachable X server: EGL (no X warning on stderr)
     import pyvista as pv
 
     pv.OFF_SCREEN = True

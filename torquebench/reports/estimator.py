@@ -46,6 +46,7 @@ def _leg_poke(out_dir: Path, lines: list[str]) -> list[Path]:
     on = (log.t >= 0.5) & (log.t < 0.9)
     rows = []
     ests = {}
+    worst = {}                                         # method → (max F error N, max point error m)
     estimate(robot, log, method="dynamic")            # warm-up: imports, caches
     for method in ("dynamic", "paper"):
         start = time.perf_counter()
@@ -56,8 +57,13 @@ def _leg_poke(out_dir: Path, lines: list[str]) -> list[Path]:
         f_err = np.nanmax(np.hypot(est.Fx[on] - F_true[0], est.Fz[on] - F_true[1]))
         p_err = np.nanmax(np.hypot(est.px[on] - truth.px[on], est.pz[on] - truth.pz[on]))
         iv = est.intervals()[0]
+        worst[method] = (f_err, p_err)
         rows.append(f"| {method} | {iv['t_start_s']:.3f}–{iv['t_end_s']:.3f} | {iv['link']} | "
                     f"{a_err:.1e} | {f_err:.1e} | {1e3 * p_err:.3f} | {1e3 * elapsed:.0f} |")
+    (fd, pd_), (fp, pp) = worst["dynamic"], worst["paper"]
+    lines[2:2] = [f"**Headline:** on an independent MuJoCo log (3 N on link 2), the `dynamic` localization "
+                  f"places the contact within {1e3 * pd_:.3g} mm and the force within {fd:.2g} N of the truth "
+                  f"once the observer has converged (the paper's method: {1e3 * pp:.3g} mm, {fp:.2g} N)", ""]
     lines += ["", "## leg_poke.csv (independent MuJoCo log, 3 N on link 2 at α = 0.4, 0.4–0.9 s)", "",
               "Errors are maxima over t ∈ [0.5, 0.9) s (after the observer has converged, 10/K).", "",
               "| method | detected interval (s) | link | max abs α error | max F error (N) | max point error (mm) | run time (ms) |",
