@@ -76,7 +76,7 @@ def quiet_window_covariance(robot, chunks, window, gain_per_s, period_s, discret
     t0, t1 = window
     K = observer.gains(robot, gain_per_s)
     n = K.size
-    run = observer.ObserverRun(robot, K, float(period_s), discretization, timing)
+    run = observer.ObserverRun.planar(robot, K, float(period_s), discretization, timing)
     term = None
     if model_cov is not None:                     # Φ from the log's start, kept on the window
         from estimator.model_error import ModelTerm

@@ -401,15 +401,21 @@ def first_order(a, b, drive, out, start: int, stop: int) -> bool:
 
 
 class ObserverRun:
-    """The observer over a log fed in chunks: ``feed(log, final)`` → the finalized rows as a dict
-    (t, q, dq, tau (T, n), r (T, n)); rows a group delay still needs the future of are held back
-    (``lookahead_rows``) until the next chunk or ``final``."""
+    """The observer over a log fed in chunks, for any model: ``feed(t, q, dq, tau, final)`` → the
+    finalized rows as a dict (t, q, dq, tau (T, n), rT (n, T)); rows a group delay still needs the
+    future of are held back (``lookahead_rows``) until the next chunk or ``final``. ``terms(q, dq,
+    tau)`` → (P, u), each (T, n): the model's momentum and the rest of the momentum balance."""
 
-    def __init__(self, robot, K, dt, method, timing):
-        self.robot, self.K, self.dt, self.method, self.timing = robot, K, dt, method, timing
+    def __init__(self, terms, K, dt, method, timing):
+        self.terms, self.K, self.dt, self.method, self.timing = terms, K, dt, method, timing
         self.ahead = lookahead_rows(timing, dt)
         self.prev = None                 # (t, P, u, τ, r) of the last finalized row (link-major rows)
         self.pending = None              # held-back raw rows: (t, q, dq, τ)
+
+    @classmethod
+    def planar(cls, robot, K, dt, method, timing):
+        """On a planar chain (``momentum_terms``)."""
+        return cls(lambda q, dq, tau: momentum_terms(robot, q, dq, tau), K, dt, method, timing)
 
     def feed(self, t, q, dq, tau, final: bool = False):
         if self.pending is not None:
@@ -421,7 +427,7 @@ class ObserverRun:
         if T == 0 or T - keep == 0:
             self.pending = (t, q, dq, tau) if T else None
             return None
-        P, u = momentum_terms(self.robot, q, dq, tau)
+        P, u = self.terms(q, dq, tau)
         PT, uT, tauT = P.T, u.T, tau.T
         if self.prev is not None:
             t0, P0, u0, tau0, r0 = self.prev
@@ -431,7 +437,7 @@ class ObserverRun:
         else:
             tw, r0 = t, np.zeros(self.K.size)
         rT = residual_window(tw, np.ascontiguousarray(PT), np.ascontiguousarray(uT),
-                                      tauT, self.K, self.dt, self.method, self.timing, r0)
+                             np.ascontiguousarray(tauT), self.K, self.dt, self.method, self.timing, r0)
         off = 1 if self.prev is not None else 0
         m = T - keep                                            # rows finalized now
         last = off + m - 1

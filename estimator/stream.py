@@ -93,7 +93,7 @@ class EstimatorStream:
         self.isolation_floor = isolation_floor
         self.stats_samples = int(stats_samples)
         self.timing = timing
-        self.obs = observer.ObserverRun(robot, self.K, self.dt, discretization, timing)
+        self.obs = observer.ObserverRun.planar(robot, self.K, self.dt, discretization, timing)
         self.state = DetectorState()
         self.info = {"timing": timing_mod.describe(timing), "timing_source": timing_source}
         self.R = self.Linv = None

@@ -29,46 +29,19 @@ def gains(model, gain_per_s) -> np.ndarray:
     return K
 
 
-class ObserverRun:
-    """The offline observer over chunks: ``feed(t, q, v, tau_meas)`` → r (T, nv) of the rows
-    finalized now (a group delay holds ``lookahead_rows`` back until the next chunk / final)."""
+class ObserverRun(obs.ObserverRun):
+    """The offline observer over chunks on a UrdfModel (estimator.observer.ObserverRun):
+    ``feed(t, q, v, tau_meas)`` → dict with r (T, nv) of the rows finalized now."""
 
     def __init__(self, model, gain_per_s, dt_s: float, method: str = "exact", timing=None):
-        self.model, self.K, self.dt, self.method, self.timing = model, gains(model, gain_per_s), dt_s, method, timing
-        self.ahead = obs.lookahead_rows(timing, dt_s)
-        self.prev = None
-        self.pending = None
+        super().__init__(model.momentum_terms, gains(model, gain_per_s), dt_s, method, timing)
+        self.model = model
 
     def feed(self, t, q, v, tau, final: bool = False):
-        if self.pending is not None:
-            pt, pq, pv, ptau = self.pending
-            t, q, v, tau = np.r_[pt, t], np.vstack([pq, q]), np.vstack([pv, v]), np.vstack([ptau, tau])
-            self.pending = None
-        T = len(t)
-        keep = 0 if final else min(self.ahead, T)
-        if T == 0 or T == keep:
-            self.pending = (t, q, v, tau) if T else None
+        out = super().feed(t, q, v, tau, final)
+        if out is None:
             return None
-        P, u = self.model.momentum_terms(q, v, tau)
-        PT, uT, tauT = P.T, u.T, tau.T
-        if self.prev is not None:
-            t0, P0, u0, tau0, r0 = self.prev
-            tw = np.r_[t0, t]
-            PT, uT, tauT = (np.concatenate([x0[:, None], x], axis=1) for x0, x in
-                            ((P0, PT), (u0, uT), (tau0, tauT)))
-        else:
-            tw, r0 = t, np.zeros(self.K.size)
-        rT = obs.residual_window(tw, np.ascontiguousarray(PT), np.ascontiguousarray(uT),
-                                 np.ascontiguousarray(tauT), self.K, self.dt, self.method,
-                                 self.timing, r0)
-        off = 1 if self.prev is not None else 0
-        m = T - keep
-        last = off + m - 1
-        self.prev = (tw[last], PT[:, last].copy(), uT[:, last].copy(), tauT[:, last].copy(),
-                     rT[:, last].copy())
-        if keep:
-            self.pending = (t[m:], q[m:], v[m:], tau[m:])
-        return {"t": t[:m], "q": q[:m], "v": v[:m], "tau": tau[:m], "r": rT[:, off:off + m].T}
+        return {"t": out["t"], "q": out["q"], "v": out["dq"], "tau": out["tau"], "r": out["rT"].T}
 
 
 def residual(model, t, q, v, tau, gain_per_s=100.0, method="exact", timing=None, dt_s=None):
