@@ -68,7 +68,7 @@ def calibration_payload(fit, session, *, provenance: dict | None = None,
                      "p16": float(qs[0]), "p50": float(qs[1]), "p84": float(qs[2])}
     ex = fit.exact
     exq = ex.quantiles()
-    import calibration
+
     return _clean({
         "schema": SCHEMA, "schema_version": SCHEMA_VERSION,
         "sensor_id": session.sensor_id, "model": fit.model,
@@ -100,7 +100,7 @@ def calibration_payload(fit, session, *, provenance: dict | None = None,
                  "meta": session.meta},
         "provenance": {"created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                        "emcee": emcee.__version__, "numpy": np.__version__,
-                       "package": calibration.__name__, **(provenance or {})},
+                       "package": __package__, **(provenance or {})},
     })
 
 

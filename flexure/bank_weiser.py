@@ -78,7 +78,7 @@ def local_errors(mesh: Mesh, material, u: np.ndarray, constrained: np.ndarray, t
     """Element-local surplus coefficients of the error (edges (m,6,3) in each element's own edge
     orientation, faces (m,4,3)) of the P2 displacement u (n,3); ``traction``: an optional
     (face mask (m,4) bool, t(x) (…,3) → (…,3)) of loaded free faces."""
-    from flexure.dwr import _surplus_basis, tet_rule_degree5
+    from flexure.surplus import surplus_basis, tet_rule_degree5
     from flexure.fem import tet_shape
 
     u = np.asarray(u, float).reshape(-1, 3)
@@ -89,7 +89,7 @@ def local_errors(mesh: Mesh, material, u: np.ndarray, constrained: np.ndarray, t
     xi_f, wq_f, T = _face_rule()
     nq = len(wq_f)
     _, dN_f = tet_shape(2, xi_f)
-    Bf = _surplus_basis(xi_f)[0].reshape(4, nq, 10)
+    Bf = surplus_basis(xi_f)[0].reshape(4, nq, 10)
     # outward area vectors of the flat faces, and each face's sorted-vertex permutation
     X4 = mesh.points[t4]
     fv = X4[:, TET_FACES]                                                       # (m,4,3,3)
@@ -137,7 +137,7 @@ def local_errors(mesh: Mesh, material, u: np.ndarray, constrained: np.ndarray, t
     # pass 2: element matrices, −a_K(u_h, φ), solve
     xi, wq = tet_rule_degree5()
     _, dN2 = tet_shape(2, xi)
-    _, dBs = _surplus_basis(xi)
+    _, dBs = surplus_basis(xi)
     keep = np.ones((m, 10), bool)
     keep[:, :6] = ~constrained[t[:, 4:]]
     keep[:, 6:] = ~constrained[t[:, TET_FACES_P2]].all(axis=2)

@@ -30,25 +30,7 @@ import numpy as np
 
 from flexure.mesh import TET_EDGES, TET_FACES, Mesh
 from flexure.refine import edge_codes
-
-
-def tet_rule_degree5():
-    """Walkington's 14-point rule, exact to degree 5 on the reference tetrahedron (volume 1/6),
-    positive weights: two 4-point orbits (a, a, a, 1 − 3a) and one 6-point orbit (b, b, ½ − b, ½ − b).
-    → (points ξ (14,3), weights (14,))."""
-    pts, wts = [], []
-    for a, w in ((0.0927352503108912, 0.01224884051939366), (0.3108859192633006, 0.01878132095300264)):
-        L = np.full((4, 4), a)
-        np.fill_diagonal(L, 1.0 - 3.0 * a)
-        pts.append(L)
-        wts.append(np.full(4, w))
-    b, w = 0.0455037041256496, 0.007091003462846911
-    L = np.array([[b, b, .5 - b, .5 - b], [b, .5 - b, b, .5 - b], [b, .5 - b, .5 - b, b],
-                  [.5 - b, b, b, .5 - b], [.5 - b, b, .5 - b, b], [.5 - b, .5 - b, b, b]])
-    pts.append(L)
-    wts.append(np.full(6, w))
-    L = np.vstack(pts)
-    return np.ascontiguousarray(L[:, 1:]), np.concatenate(wts)
+from flexure.surplus import surplus_basis, tet_rule_degree5
 
 
 def _straight_grad_L(X4: np.ndarray):
@@ -191,22 +173,6 @@ def surplus_coefficients(mesh: Mesh, D3: np.ndarray, constrained: np.ndarray):
     return continuous_surplus(mesh, *cubic_surplus(mesh, D3), constrained)
 
 
-def _surplus_basis(xi: np.ndarray):
-    """Edge cubics L_p L_q (L_p − L_q) (6) and face bubbles (4, face f opposite vertex f) and their
-    reference gradients at points ξ (q,3): → (B (q,10), dB (q,10,3))."""
-    L = np.column_stack([1.0 - xi.sum(axis=1), xi])
-    dL = np.array([[-1.0, -1.0, -1.0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
-    p, qq = TET_EDGES[:, 0], TET_EDGES[:, 1]
-    Lp, Lq = L[:, p], L[:, qq]
-    B = np.hstack([Lp * Lq * (Lp - Lq), L[:, TET_FACES[:, 0]] * L[:, TET_FACES[:, 1]] * L[:, TET_FACES[:, 2]]])
-    dE = ((Lq * (Lp - Lq) + Lp * Lq)[:, :, None] * dL[p][None]
-          + (Lp * (Lp - Lq) - Lp * Lq)[:, :, None] * dL[qq][None])
-    a, b, c = TET_FACES[:, 0], TET_FACES[:, 1], TET_FACES[:, 2]
-    dF = ((L[:, b] * L[:, c])[:, :, None] * dL[a][None] + (L[:, a] * L[:, c])[:, :, None] * dL[b][None]
-          + (L[:, a] * L[:, b])[:, :, None] * dL[c][None])
-    return B, np.concatenate([dE, dF], axis=1)
-
-
 def energy_indicators(mesh: Mesh, material, V: np.ndarray, ce: np.ndarray, cf: np.ndarray,
                       chunk: int = 6000) -> np.ndarray:
     """−a(v_c, w ψ_a) at every vertex a, (n, c), for the fields V (n, 3, c) and one weight w given
@@ -217,7 +183,7 @@ def energy_indicators(mesh: Mesh, material, V: np.ndarray, ce: np.ndarray, cf: n
 
     xi, wq = tet_rule_degree5()
     _, dN2 = tet_shape(2, xi)
-    Bs, dBs = _surplus_basis(xi)
+    Bs, dBs = surplus_basis(xi)
     L = np.column_stack([1.0 - xi.sum(axis=1), xi])                        # ψ_a (q,4)
     dL = np.array([[-1.0, -1.0, -1.0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
     lam, mu = material.lame_lambda_Pa, material.shear_modulus_Pa
@@ -260,7 +226,7 @@ def gauge_indicators(mesh: Mesh, gauges, ce: np.ndarray, cf: np.ndarray) -> np.n
         _, dN2 = tet_shape(2, xi)                                            # (k,10,3)
         J = np.einsum("kai,kaj->kij", mesh.points[mesh.tets[elems]], dN2)
         Jinv = np.linalg.inv(J)                                              # (k,j,i)
-        B, dB = _surplus_basis(xi)                                           # one point per row
+        B, dB = surplus_basis(xi)                                           # one point per row
         coef = np.concatenate([ce[elems], cf[elems]], axis=1)                # (k,10,3)
         w = np.einsum("kb,kbi->ki", B, coef)
         gw = np.einsum("kbm,kmj,kbi->kij", dB, Jinv, coef)                   # ∂w_i/∂x_j
@@ -345,7 +311,7 @@ def moment_traction_indicators(mesh: Mesh, faces: np.ndarray, ref, ce: np.ndarra
     lam = np.zeros((len(faces), len(st), 4))
     for j in range(3):
         lam[np.arange(len(faces)), :, pos[:, j]] = Lface[None, :, j]
-    B, _ = _surplus_basis(lam[:, :, 1:].reshape(-1, 3))
+    B, _ = surplus_basis(lam[:, :, 1:].reshape(-1, 3))
     coef = np.concatenate([ce[owner], cf[owner]], axis=1)                   # (k,10,3)
     w = np.einsum("kqb,kbi->kqi", B.reshape(len(faces), len(st), 10), coef)
     t = np.cross(omega, x - xc)

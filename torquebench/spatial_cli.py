@@ -11,13 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from torquebench.errors import InputError
-
-
-def _floats(text, where):
-    try:
-        return [float(v) for v in str(text).split(",")]
-    except ValueError:
-        raise InputError(f"{where}: expected comma-separated numbers, got {text!r}") from None
+from torquebench.options import floats as _floats
 
 
 PLANAR_ONLY = (("method", "dynamic", "--method paper"), ("stance_foot", False, "--stance-foot"),
@@ -52,7 +46,7 @@ def estimate(args) -> int:
         noise = read_noise(args.log, robot)
     rate = parse_rate(args.false_alarm_rate, "--false-alarm-rate")
     from estimator.model_error import resolve
-    from torquebench.commands.estimate import model_uncertainty_option
+    from torquebench.options import model_uncertainty_option
 
     given = model_uncertainty_option(getattr(args, "model_uncertainty", None))
     if args.threshold is not None:

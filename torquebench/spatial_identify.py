@@ -50,7 +50,8 @@ def identify(args) -> int:
     from estimator.spatial.robot import load_spatial_robot
     from estimator.spatial.write import declaration_toml, urdf_with_parameters
     from estimator.timing import describe as describe_timing
-    from torquebench.commands.identify import _sha256, fit_prior
+    from torquebench.options import fit_prior
+    from userio.outputs import sha256_of
     from torquebench.io import print_json
     from torquebench.outputs import prepare_file
     from userio.files import read_toml, write_text_atomic
@@ -77,7 +78,7 @@ def identify(args) -> int:
                              f"balance cannot bridge the gap; cut the log there and pass the parts "
                              f"as separate logs")
         if args.torque_sigma is not None or args.ft_sigma is not None or args.velocity_sigma is not None:
-            from torquebench.spatial_cli import _floats
+            from torquebench.options import floats as _floats
 
             noise = make_noise(_floats(args.torque_sigma or "0.005", "--torque-sigma"),
                                _floats(args.ft_sigma or "0.1,0.01", "--ft-sigma"), n_sensed,
@@ -94,7 +95,7 @@ def identify(args) -> int:
         e = ident.window_equations(model, log.t, log.q, log.v, log.tau_meas(model), rn, timing,
                                    args.window, source=str(path))
         eqs.append(_keep_rows(e, rows))
-        logs_info.append({"path": str(path), "sha256": _sha256(Path(path)), "samples": int(len(log.t)),
+        logs_info.append({"path": str(path), "sha256": sha256_of(Path(path)), "samples": int(len(log.t)),
                           "noise": noise.describe(), "timing": describe_timing(timing)})
     result = ident.identify(model, eqs, model.parameter_covariance(prior))
     for info in logs_info:
@@ -107,7 +108,7 @@ def identify(args) -> int:
                        "identification.py), prior at the nominal file's values",
              "created_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
              "command": " ".join(["torquebench", "identify", *sys.argv[2:]]),
-             "source_robot": str(robot_path), "source_robot_sha256": _sha256(robot_path),
+             "source_robot": str(robot_path), "source_robot_sha256": sha256_of(robot_path),
              "parameter_names": list(result.names), "parameters": result.theta,
              "nominal_parameters": result.nominal, "unexcited": result.unexcited,
              "covariance": result.covariance, "statistics": stats, "logs": logs_info}

@@ -56,7 +56,7 @@ def _run(config: SimConfig, cap: int, wall_cap_s: float = float("inf")):
     """Integrate the probe; _Budget when it needs more than ``cap`` rhs evaluations or more than
     ``wall_cap_s`` of wall time (an implicit method's Newton and LU work between evaluations is
     not counted in the evaluations: the clock bounds it too)."""
-    from estimator.sim.core import _adaptive, _rk4, sample_times
+    from estimator.sim.integrate import _adaptive, _rk4, sample_times
     from estimator.sim.model import Plant
 
     plant = Plant(config)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from torquebench.options import floats as _floats, model_uncertainty_option
+
 HELP = "estimate contacts (link, α, force, point) sample by sample from a sensor log CSV"
 EXAMPLES = """\
 torquebench estimate examples/leg_poke/leg_poke.csv
@@ -127,18 +129,6 @@ def add_arguments(parser) -> None:
                              "(default: %(default)s)")
 
 
-def _floats(text, where, count=None):
-    from torquebench.errors import InputError
-
-    try:
-        values = [float(v) for v in str(text).split(",")]
-    except ValueError:
-        raise InputError(f"{where}: expected comma-separated numbers, got {text!r}") from None
-    if count is not None and len(values) != count:
-        raise InputError(f"{where}: expected {count} values, got {len(values)}")
-    return values
-
-
 def _detector_options(args, n_links):
     """(NoiseModel or None, quiet window or None, (rate, unit)) from the options."""
     from estimator.noise import NoiseModel, paper_leg_noise, parse_rate
@@ -166,21 +156,6 @@ def _detector_options(args, n_links):
     src = "--torque-sigma/--ft-sigma/--velocity-sigma/--encoder-counts"
     return NoiseModel(torque_sigma_Nm=tau, ft_sigma=ft, velocity_sigma_rad_per_s=vel,
                       encoder_counts=enc, source=src), quiet, rate
-
-
-def model_uncertainty_option(text):
-    """--model-uncertainty REL | none → ModelUncertainty, False, or None (not given)."""
-    from estimator.model import ModelUncertainty
-    from torquebench.errors import InputError
-
-    if text is None:
-        return None
-    if str(text).strip().lower() == "none":
-        return False
-    rel = _floats(text, "--model-uncertainty", 1)[0]
-    if not (math.isfinite(rel) and 0 < rel <= 1):
-        raise InputError(f"--model-uncertainty: expected a relative 1σ in (0, 1] or 'none', got {text!r}")
-    return ModelUncertainty.uniform(rel)
 
 
 def _peak_memory_MB() -> float:

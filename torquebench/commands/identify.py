@@ -9,13 +9,14 @@ import math
 from pathlib import Path
 
 from torquebench.errors import InputError
+from torquebench.options import DEFAULT_PRIOR, fit_prior
+from userio.outputs import sha256_of
 
 HELP = "identify a robot's inertial parameters from contact-free logs; write an identified robot TOML"
 EXAMPLES = """\
 torquebench identify examples/identification/excitation.csv --robot robots/paper_leg.toml --out out/leg_identified.toml
 torquebench identify examples/identification/excitation.csv --out out/leg_id.toml --prior 0.2 --json
 """
-DEFAULT_PRIOR = 0.3
 
 
 def _window(text: str) -> float:
@@ -64,7 +65,7 @@ def _noise(args, log_path, n_links):
     """(NoiseModel, source) for one log: options, else LOG.noise.toml, else the paper leg's."""
     from estimator.log_declarations import read_noise_declaration
     from estimator.noise import NoiseModel, paper_leg_noise
-    from torquebench.commands.estimate import _floats
+    from torquebench.options import floats as _floats
 
     given = [args.torque_sigma, args.ft_sigma, args.velocity_sigma]
     declared = read_noise_declaration(log_path, n_links)
@@ -99,33 +100,6 @@ def _read(args, path: Path, robot):
     return log
 
 
-def _sha256(path: Path) -> str:
-    import hashlib
-
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
-def fit_prior(prior_option, robot, robot_path):
-    """(ModelUncertainty, source) the fit's prior: ``--prior REL``, else the robot file's
-    [model_uncertainty], else DEFAULT_PRIOR; every σ must be > 0."""
-    from estimator.model import ModelUncertainty
-
-    if prior_option is not None:
-        if not (math.isfinite(prior_option) and 0 < prior_option <= 1):
-            raise InputError(f"--prior: must be in (0, 1], got {prior_option}")
-        prior, source = ModelUncertainty.uniform(prior_option), "--prior"
-    elif robot.model_uncertainty is not None:
-        prior, source = robot.model_uncertainty, f"{robot_path}: [model_uncertainty]"
-    else:
-        prior, source = ModelUncertainty.uniform(DEFAULT_PRIOR), "default"
-    if prior.mass_rel <= 0 or prior.inertia_rel <= 0 or (prior.com_m is not None and prior.com_m <= 0) \
-            or (prior.com_m is None and not (prior.relative or 0) > 0):
-        raise InputError(f"prior ({source}): every σ must be > 0 to serve as the fit's prior")
-    return prior, source
 
 
 def run(args) -> int:
@@ -161,7 +135,7 @@ def run(args) -> int:
             timing = uniform(args.timing, robot.n_links, "--timing")
         eqs.append(ident.window_equations(robot, log.t, log.q, log.dq, log.tau_meas, noise, timing,
                                           args.window, source=str(path)))
-        logs_info.append({"path": str(path), "sha256": _sha256(path), "samples": int(len(log.t)),
+        logs_info.append({"path": str(path), "sha256": sha256_of(path), "samples": int(len(log.t)),
                           "noise": noise.describe(),
                           "timing": describe_timing(timing)})
     result = ident.identify(robot, eqs, robot.parameter_covariance(prior))
@@ -179,7 +153,7 @@ def run(args) -> int:
                        "identification.py), prior at the nominal file's values",
              "created_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
              "command": " ".join(["torquebench", "identify", *sys.argv[2:]]),
-             "source_robot": str(robot_path), "source_robot_sha256": _sha256(Path(robot_path)),
+             "source_robot": str(robot_path), "source_robot_sha256": sha256_of(Path(robot_path)),
              "parameter_names": list(result.names), "parameters": identified.parameters(),
              "nominal_parameters": result.nominal, "unexcited": result.unexcited,
              "covariance": result.covariance, "statistics": stats, "logs": logs_info}

@@ -109,7 +109,7 @@ def provenance_from_args(args) -> dict:
 
 def _model_uncertainty(text):
     """--model-uncertainty REL | none → REL, 0.0 (none) or None (the robot file's)."""
-    from torquebench.commands.estimate import model_uncertainty_option
+    from torquebench.options import model_uncertainty_option
 
     mu = model_uncertainty_option(text)
     return None if mu is None else (0.0 if mu is False else mu.relative)
