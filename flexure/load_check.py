@@ -57,6 +57,12 @@ def check_loads(design, surface) -> None:
     selects no surface of the part (module docstring). ``surface``: a geometry.Surface (m)."""
     r_min, r_max = axis_distance_range(surface.points, surface.faces)
     tol = TOL * max(float(np.ptp(surface.points, axis=0).max()), 1e-9)
+    lo, hi = surface.points[:, :2].min(axis=0), surface.points[:, :2].max(axis=0)
+    if np.any(lo > tol) or np.any(hi < -tol):           # the axis misses the part's footprint
+        centre = np.round((lo + hi) / 2 * 1e3, 3).tolist()
+        raise InputError(f"{design.path}: geometry.file: the part does not surround the torque axis "
+                         f"(the file's z axis through its origin): its bounding box is centred at "
+                         f"x, y = {centre} mm; draw the part around the axis of the torque it carries")
     if design.fixed != "rim_bolts" and design.fixed_radius_min_m > r_max + tol:
         key = _key(design, "fixed_radius_min_mm", "geometry.outer_radius_mm")
         raise InputError(f"{design.path}: {key} holds the part where r ≥ "
