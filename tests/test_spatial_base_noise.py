@@ -129,3 +129,19 @@ def test_covariance_and_false_alarms_with_base_noise(leg):
     assert abs(out["with"][1] - 0.01) < 4 * np.sqrt(0.01 * 0.99 / N) + 0.002   # binomial (the
     # samples are correlated by the filter: the margin allows for it)
     assert out["without"][0] > 0.1
+
+
+def test_noise_side_file_carries_the_base_noise(leg, tmp_path):
+    from estimator.spatial.logs import noise_text, read_noise
+    from userio.errors import InputError
+
+    noise = make_noise(0.005, [0.1, 0.01], 3, base_orientation_sigma=[1e-3, 2e-3, 3e-3],
+                       base_velocity_sigma=2e-4, base_rate_sigma=0.01)
+    log = tmp_path / "leg.csv"
+    log.write_text("t\n")
+    (tmp_path / "leg.noise.toml").write_text(noise_text(noise))
+    back = read_noise(log, leg.robot)
+    assert np.allclose(back.base_sigma, noise.base_sigma)
+    (tmp_path / "leg.noise.toml").write_text(noise_text(noise).replace("[0.01, 0.01, 0.01]", "[0.01, -1]"))
+    with pytest.raises(InputError, match="base_rate_sigma_rad_per_s"):
+        read_noise(log, leg.robot)

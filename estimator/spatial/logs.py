@@ -338,7 +338,8 @@ def read_noise(log_path, robot) -> SpatialNoise | None:
     n = int(sum(robot.sensed))
     t = parse(NoiseFile, read_toml(path), path, {"torque_sizes": (1, n), "ft_sizes": (6, 2)}).noise
     return make_noise(t.torque_sigma_Nm, t.ft_sigma, n, t.velocity_sigma_rad_per_s,
-                      t.encoder_counts, f"log declaration {path.name}")
+                      t.encoder_counts, f"log declaration {path.name}", t.base_orientation_sigma_rad,
+                      t.base_velocity_sigma_m_per_s, t.base_rate_sigma_rad_per_s)
 
 
 def noise_text(noise: SpatialNoise) -> str:
@@ -350,4 +351,7 @@ def noise_text(noise: SpatialNoise) -> str:
         f"ft_sigma = {vec(noise.ft_sigma)}   # Fx, Fy, Fz [N], Mx, My, Mz [N·m], sensor frame",
         f"velocity_sigma_rad_per_s = {noise.velocity_sigma_rad_per_s:.10g}",
         f"encoder_counts = {int(noise.encoder_counts)}",
-    ]) + "\n"
+    ] + ([f"base_orientation_sigma_rad = {vec(noise.base_orientation_sigma_rad)}   # base frame",
+          f"base_velocity_sigma_m_per_s = {vec(noise.base_velocity_sigma_m_per_s)}   # ṗ, world",
+          f"base_rate_sigma_rad_per_s = {vec(noise.base_rate_sigma_rad_per_s)}   # ω, base frame"]
+         if np.any(noise.base_sigma > 0) else [])) + "\n"
