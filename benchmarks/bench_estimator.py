@@ -308,7 +308,8 @@ def bench_end_to_end(n_samples: int = 2_000_000, ten_million: bool = False) -> d
         for name, src, dst, extra in (
                 ("csv", csv, tmp / "est.csv", []), ("parquet", parquet, tmp / "est.parquet", []),
                 ("csv_to_parquet", csv, tmp / "est2.parquet", []), ("csv_no_out", csv, None, []),
-                ("csv_model", csv, tmp / "est4.csv", ["--model-uncertainty", "0.05"])):
+                ("csv_model", csv, tmp / "est4.csv", ["--model-uncertainty", "0.05"]),
+                ("parquet_model", parquet, tmp / "est4.parquet", ["--model-uncertainty", "0.05"])):
             argv = ["estimate", str(src), "--json", *extra] + \
                 ([] if dst is None else ["--out", str(dst), "--force"])
             buf = io.StringIO()
@@ -322,6 +323,9 @@ def bench_end_to_end(n_samples: int = 2_000_000, ten_million: bool = False) -> d
             out[f"{name}_samples_per_s"] = n_samples / wall
             out[f"{name}_samples_per_cpu_s"] = n_samples / cpu
         out["ratio_csv_model_to_csv"] = out["csv_model_s"] / out["csv_s"]
+        out["ratio_parquet_model_to_parquet_cpu"] = out["parquet_model_cpu_s"] / out["parquet_cpu_s"]
+        out["ratio_csv_model_to_pyarrow_anchor_cpu"] = out["csv_model_cpu_s"] / out["anchor_pyarrow_read_csv_cpu_s"]
+        out["load_average_1min"] = os.getloadavg()[0]
         out["ratio_csv_to_pandas_anchor"] = out["csv_s"] / out["anchor_pandas_read_csv_s"]
         out["ratio_csv_to_pyarrow_anchor"] = out["csv_s"] / out["anchor_pyarrow_read_csv_s"]
         for name, src, dst in (("csv", csv, tmp / "est3.csv"), ("parquet", parquet, tmp / "est3.parquet")):
@@ -358,11 +362,16 @@ def main(argv=None) -> dict:
               f"9 significant digits), in process (target >= 500,000 samples/s):")
         for key, label in (("csv", "CSV -> CSV"), ("parquet", "Parquet -> Parquet"),
                            ("csv_to_parquet", "CSV -> Parquet"), ("csv_no_out", "CSV, no --out"),
-                           ("csv_model", "CSV -> CSV, model term")):
+                           ("csv_model", "CSV -> CSV, model term"),
+                           ("parquet_model", "Parquet -> Parquet, model term")):
             print(f"  {label:20s} {e[key + '_s']:6.2f} s = {e[key + '_samples_per_s']:>10,.0f} samples/s wall; "
                   f"CPU {e[key + '_cpu_s']:.2f} s = {e[key + '_samples_per_cpu_s']:,.0f} samples per CPU-second")
         print(f"  the model-error term (--model-uncertainty 0.05: R_k = R_noise + Φ_k Σ_θ Φ_kᵀ per "
-              f"sample) costs {e['ratio_csv_model_to_csv']:.2f}x the plain CSV -> CSV run")
+              f"sample) costs {e['ratio_csv_model_to_csv']:.2f}x the plain CSV -> CSV run (wall), "
+              f"{e['ratio_parquet_model_to_parquet_cpu']:.2f}x the plain Parquet -> Parquet run (CPU); "
+              f"CSV -> CSV with it / the pyarrow CSV reader alone = "
+              f"{e['ratio_csv_model_to_pyarrow_anchor_cpu']:.2f}x CPU; load average {e['load_average_1min']:.1f} "
+              f"(2 cores)")
         print(f"  anchors, the same CSV read alone: pandas.read_csv {e['anchor_pandas_read_csv_s']:.2f} s "
               f"(CPU {e['anchor_pandas_read_csv_cpu_s']:.2f} s), pyarrow.csv.read_csv "
               f"{e['anchor_pyarrow_read_csv_s']:.2f} s (CPU {e['anchor_pyarrow_read_csv_cpu_s']:.2f} s); "

@@ -85,7 +85,7 @@ def test_ill_scaled_fits_reach_a_consistent_optimum(leg, seed):
     grad = 2 * H @ (theta - theta_f)
     q = lambda t: (t - theta_f) @ H @ (t - theta_f)                            # noqa: E731
     tol = 1e-8 * q(theta0)
-    sizes = si.body_sizes(leg.robot, leg.tree)
+    sizes = leg.body_sizes_m
     wide = ModelUncertainty(mass_rel=0.3, inertia_rel=0.5, com_m=0.02)
     others = si.draw(theta, sizes, wide, rng, 400)
     others = [o for o in others if not leg.consistency_problems(o)]

@@ -137,8 +137,6 @@ def test_no_module_level_import_cycle():
 # Cycles closed only by an import inside a function when this test was extended (a new one fails;
 # one that is fixed is simply no longer found and should be dropped from this list).
 KNOWN_FUNCTION_LEVEL_CYCLES = [
-    ["estimator.spatial.geometry", "estimator.spatial.inertial", "estimator.spatial.model",
-     "estimator.spatial.robot"],
     ["flexure.cad", "flexure.gmsh_mesh", "flexure.meshing"],
 ]
 

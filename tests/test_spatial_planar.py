@@ -1,7 +1,8 @@
 """The paper leg written as a URDF (robots/paper_leg_urdf.toml: joints about −y) reproduces the
 planar estimator on a planar log (examples/leg_poke: an independent MuJoCo run of the paper
-leg) converted to the 3-D contract: the residual rows, the whitened statistic and, with the
-planar method's unweighted fit, the contact link, point and force — to round-off."""
+leg) converted to the 3-D contract: the residual rows, the whitened statistic (with the release
+test's tail subtraction), the contact flags and, on the observer restarted at each onset, the
+contact link, point and force — to round-off."""
 
 from __future__ import annotations
 
@@ -47,10 +48,9 @@ def both():
     planar_log = read_log("examples/leg_poke/leg_poke.csv", paper_leg())
     model = UrdfModel(load_spatial_robot("robots/paper_leg_urdf.toml"))
     log3 = to_3d(planar_log)
-    # the planar estimator's release test and onset restart are not in the 3-D one yet: compared
-    # without them (both fits weighted by the noise, as the planar dynamic method is)
-    planar = estimate(paper_leg(), planar_log, noise=paper_leg_noise(), release_test=False,
-                      onset_restart=False)
+    # both with their release test and onset restart (estimator.release, estimator.onset), both
+    # fits weighted by the noise, as the planar dynamic method is
+    planar = estimate(paper_leg(), planar_log, noise=paper_leg_noise())
     noise = make_noise(0.005, [0.1, 0.1, 0.1, 0.01, 0.01, 0.01], 2)
     spatial = estimate_log(model, [log3], planar_log.period_s, noise=noise, weighting="whitened")
     return planar, spatial, model
@@ -69,6 +69,13 @@ def test_residual_rows_match(both):
 def test_whitened_statistic_matches(both):
     planar, spatial, _ = both
     assert np.allclose(spatial.frame.rnorm.to_numpy(), planar.rnorm, rtol=1e-7, atol=1e-9)
+
+
+def test_contact_flags_match(both):
+    """The same onsets and the same releases (the release test's CUSUM on the same drive)."""
+    planar, spatial, _ = both
+    assert (spatial.frame.contact.to_numpy().astype(bool) == planar.contact).all()
+    assert spatial.info["release_test"].startswith("CUSUM")
 
 
 def test_localization_matches_planar(both):

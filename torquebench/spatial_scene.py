@@ -4,7 +4,8 @@ URDF robot, estimate, compare with the truth, and predict the error at the poked
 Results have the planar stage graph's keys where they mean the same thing (``measured`` /
 ``predicted`` → ``dynamic`` → ``position_error_rms_m`` / ``position_rms_m``, ``sensor`` →
 ``torque_noise_std_Nm``), so ``sweep`` and ``compare`` tabulate 3-D scenes as they do planar
-ones. No stage cache: a 3-D point is simulated each time.
+ones. The work is done by the stages of torquebench.stages.spatial (planned, cached and explained
+as the planar ones); this module measures and predicts, and assembles their results.
 """
 
 from __future__ import annotations
@@ -65,24 +66,43 @@ def predicted(scene, model, noise) -> dict:
                                             "posture), mean over the pokes"}
 
 
-def run_scene(path, overrides: dict | None = None, seed: int | None = None) -> dict:
-    from estimator.spatial.model import UrdfModel
-    from estimator.spatial.noise import default_noise
-    from estimator.spatial.pipeline import estimate_log
+def run_scene_stages(path, overrides: dict | None = None, seed: int | None = None, cache=None,
+                     force: bool = False, outputs=None) -> tuple[dict, list]:
+    """(results, [(stage, action, seconds)]): the scene through the stage graph
+    (torquebench.stages.spatial; ``cache`` a torquebench.cache.Cache or None), its results
+    assembled as ``run --json`` and ``sweep`` read them."""
     from estimator.spatial.scene import load_spatial_scene
-    from estimator.spatial.sim import simulate
+    from torquebench.stages.planner import execute
 
     t0 = time.perf_counter()
     scene = load_spatial_scene(path, overrides)
     if seed is not None:
         scene.spec.seed = int(seed)
-    model = UrdfModel(scene.robot)
-    log, truth, noise = simulate(scene.robot, scene.spec)
-    est = estimate_log(model, [log], 1.0 / scene.spec.sample_rate_Hz, noise=noise)
-    noise = noise or default_noise(model)
-    return {"scene": scene.name, "robot": scene.robot.name,
-            "sensor": {"torque_noise_std_Nm": float(noise.torque_sigma_Nm[0]),
-                       "ft_noise": noise.ft_sigma.tolist()},
-            "measured": {"dynamic": evaluate(est, truth)},
-            "predicted": {"dynamic": predicted(scene, model, noise)},
-            "intervals": est.intervals, "run_time_s": time.perf_counter() - t0}
+    arts, timing = execute(scene, outputs, cache, seed, force)
+    return results(scene, arts, time.perf_counter() - t0), timing
+
+
+def results(scene, arts: dict, run_time_s: float) -> dict:
+    """The 3-D stages' artifacts as one result (what was computed of it)."""
+    noise = scene.spec.noise
+    if noise is None:
+        from estimator.spatial.model import UrdfModel
+        from estimator.spatial.noise import default_noise
+
+        noise = default_noise(UrdfModel(scene.robot))
+    out = {"scene": scene.name, "robot": scene.robot.name,
+           "sensor": {"torque_noise_std_Nm": float(noise.torque_sigma_Nm[0]),
+                      "ft_noise": noise.ft_sigma.tolist()}}
+    if "spatial_localization_error" in arts:
+        out["measured"] = {"dynamic": arts["spatial_localization_error"]}
+    if "spatial_predicted_error" in arts:
+        out["predicted"] = {"dynamic": arts["spatial_predicted_error"]}
+    if "spatial_estimates" in arts:
+        out["intervals"] = arts["spatial_estimates"].intervals
+    out["run_time_s"] = run_time_s
+    return out
+
+
+def run_scene(path, overrides: dict | None = None, seed: int | None = None, cache=None) -> dict:
+    """Simulate, estimate, compare and predict (``run_scene_stages``), the results only."""
+    return run_scene_stages(path, overrides, seed, cache)[0]

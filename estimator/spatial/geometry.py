@@ -334,3 +334,12 @@ def surface_point(surface: BodySurface, link: str | None, along: float, around_r
     else:
         raise InputError(f"poke: link '{link}': give the point (point_m) on a mesh explicitly")
     return shape.rotation @ local + shape.origin, shape.rotation @ n
+
+
+def body_sizes(robot, tree) -> np.ndarray:
+    """ℓ per body (m): the length of its segment (estimator.spatial.geometry: body origin to the
+    farthest child joint or fixed child frame, else twice the centre of mass), at least
+    √(tr I_c / m) (√2 × the RMS distance of its mass from the centre of mass: a ball's radius)."""
+    seg = np.array([np.linalg.norm(s.segment[1] - s.segment[0]) for s in body_surfaces(robot, tree)])
+    gyr = np.sqrt(np.trace(tree.Ic, axis1=1, axis2=2) / np.maximum(tree.mass, 1e-300))
+    return np.maximum(seg, gyr)

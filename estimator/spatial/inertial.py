@@ -21,7 +21,7 @@ strictly consistent). e₁(m Σ_c) = ½ e₁(m I_c) is left out; the I_c group i
 group (λ_i = d_j + d_k) and kept so that each violated condition has its own named margin.
 
 Declared uncertainty (``ModelUncertainty``), independent per body: the mass (relative), the centre
-of mass c (σ in metres on each body axis, or ``relative`` × the body's size ℓ, ``body_sizes``),
+of mass c (σ in metres on each body axis, or ``relative`` × the body's size ℓ, ``estimator.spatial.geometry.body_sizes``),
 and the distribution of the mass about c, strained: x − c → (1 + ε)(x − c) with ε a random
 symmetric strain, isotropic (diagonal σ = ``inertia_rel``/2, off-diagonal σ = ``inertia_rel``/(2√2),
 so no frame is preferred), i.e. Σ_c → (1 + ε) Σ_c (1 + ε). Along the principal axes the second
@@ -200,12 +200,12 @@ def draw(theta, sizes_m, unc, rng, n: int | None = None) -> np.ndarray:
     return out[0] if n is None else out
 
 
-def body_sizes(robot, tree) -> np.ndarray:
-    """ℓ per body (m): the length of its segment (estimator.spatial.geometry: body origin to the
-    farthest child joint or fixed child frame, else twice the centre of mass), at least
-    √(tr I_c / m) (√2 × the RMS distance of its mass from the centre of mass: a ball's radius)."""
-    from estimator.spatial.geometry import body_surfaces
+def parameters_of(pin_model) -> np.ndarray:
+    """θ of a pinocchio model: its bodies' dynamic parameters (PARAMS order), body after body."""
+    return np.concatenate([np.asarray(pin_model.inertias[j].toDynamicParameters())
+                           for j in range(1, pin_model.njoints)])
 
-    seg = np.array([np.linalg.norm(s.segment[1] - s.segment[0]) for s in body_surfaces(robot, tree)])
-    gyr = np.sqrt(np.trace(tree.Ic, axis1=1, axis2=2) / np.maximum(tree.mass, 1e-300))
-    return np.maximum(seg, gyr)
+
+def parameter_names(body_names) -> tuple:
+    """``BODY.m``, ``BODY.mc_x``, … per body (PARAMS order)."""
+    return tuple(f"{b}.{p}" for b in body_names for p in PARAMS)

@@ -262,23 +262,42 @@ def timing_text(robot) -> str:
 @dataclass(frozen=True)
 class SpatialNoise:
     """White noise of a 3-D log's sensors, 1σ per sample: joint torques (one per sensed joint),
-    the FT wrench [Fx, Fy, Fz N, Mx, My, Mz N·m] (sensor frame), joint rates, encoders."""
+    the FT wrench [Fx, Fy, Fz N, Mx, My, Mz N·m] (sensor frame), joint rates, encoders, and the
+    measured base state (floating base): orientation (a rotation vector δθ in the base frame,
+    R_meas = R exp([δθ]×)), ṗ (world) and ω (base frame), three values each. The base position
+    is not a channel: nothing the observer computes depends on it (positions are relative to p)."""
 
     torque_sigma_Nm: np.ndarray
     ft_sigma: np.ndarray
     velocity_sigma_rad_per_s: float = 0.0
     encoder_counts: int = 0
     source: str = "option"
+    base_orientation_sigma_rad: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    base_velocity_sigma_m_per_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    base_rate_sigma_rad_per_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def base_sigma(self) -> np.ndarray:
+        """[δθ (3) rad, δṗ (3) m/s, δω (3) rad/s]: the base-state channels' σ."""
+        return np.r_[self.base_orientation_sigma_rad, self.base_velocity_sigma_m_per_s,
+                     self.base_rate_sigma_rad_per_s]
 
     def describe(self) -> str:
+        base = ""
+        if np.any(self.base_sigma > 0):
+            base = (f", base σ: orientation {np.round(self.base_orientation_sigma_rad, 6).tolist()} rad, "
+                    f"ṗ {np.round(self.base_velocity_sigma_m_per_s, 6).tolist()} m/s, "
+                    f"ω {np.round(self.base_rate_sigma_rad_per_s, 6).tolist()} rad/s")
         return (f"{self.source}: τ σ {np.round(self.torque_sigma_Nm, 6).tolist()} N·m, FT σ "
                 f"{np.round(self.ft_sigma, 6).tolist()}, q̇ σ {self.velocity_sigma_rad_per_s:g} rad/s, "
-                f"encoder {self.encoder_counts} counts/rev")
+                f"encoder {self.encoder_counts} counts/rev{base}")
 
 
 def make_noise(torque_sigma, ft_sigma, n_sensed: int, velocity_sigma=0.0, encoder_counts=0,
-               source="option") -> SpatialNoise:
-    """Validated noise: τ σ one value or one per sensed joint; FT σ 6 values or 2 (force, moment)."""
+               source="option", base_orientation_sigma=0.0, base_velocity_sigma=0.0,
+               base_rate_sigma=0.0) -> SpatialNoise:
+    """Validated noise: τ σ one value or one per sensed joint; FT σ 6 values or 2 (force, moment);
+    the base state's σ (rad, m/s, rad/s) one value or three each (SpatialNoise)."""
     tau = np.atleast_1d(np.asarray(torque_sigma, float))
     ft = np.atleast_1d(np.asarray(ft_sigma, float))
     if ft.size == 2:
@@ -293,8 +312,16 @@ def make_noise(torque_sigma, ft_sigma, n_sensed: int, velocity_sigma=0.0, encode
             raise InputError(f"{source}: {name}: every σ must be finite and > 0, got {arr.tolist()}")
     if not (np.isfinite(velocity_sigma) and velocity_sigma >= 0):
         raise InputError(f"{source}: velocity sigma must be finite and ≥ 0")
+    base = []
+    for name, val in (("base orientation sigma", base_orientation_sigma),
+                      ("base velocity sigma", base_velocity_sigma), ("base rate sigma", base_rate_sigma)):
+        arr = np.atleast_1d(np.asarray(val, float))
+        if arr.size not in (1, 3) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
+            raise InputError(f"{source}: {name}: expected 1 or 3 values, each finite and ≥ 0, "
+                             f"got {arr.tolist()}")
+        base.append(np.broadcast_to(arr, (3,)).copy())
     return SpatialNoise(np.broadcast_to(tau, (n_sensed,)).copy(), ft, float(velocity_sigma),
-                        int(encoder_counts), source)
+                        int(encoder_counts), source, *base)
 
 
 def read_noise(log_path, robot) -> SpatialNoise | None:
@@ -311,7 +338,8 @@ def read_noise(log_path, robot) -> SpatialNoise | None:
     n = int(sum(robot.sensed))
     t = parse(NoiseFile, read_toml(path), path, {"torque_sizes": (1, n), "ft_sizes": (6, 2)}).noise
     return make_noise(t.torque_sigma_Nm, t.ft_sigma, n, t.velocity_sigma_rad_per_s,
-                      t.encoder_counts, f"log declaration {path.name}")
+                      t.encoder_counts, f"log declaration {path.name}", t.base_orientation_sigma_rad,
+                      t.base_velocity_sigma_m_per_s, t.base_rate_sigma_rad_per_s)
 
 
 def noise_text(noise: SpatialNoise) -> str:
@@ -323,4 +351,7 @@ def noise_text(noise: SpatialNoise) -> str:
         f"ft_sigma = {vec(noise.ft_sigma)}   # Fx, Fy, Fz [N], Mx, My, Mz [N·m], sensor frame",
         f"velocity_sigma_rad_per_s = {noise.velocity_sigma_rad_per_s:.10g}",
         f"encoder_counts = {int(noise.encoder_counts)}",
-    ]) + "\n"
+    ] + ([f"base_orientation_sigma_rad = {vec(noise.base_orientation_sigma_rad)}   # base frame",
+          f"base_velocity_sigma_m_per_s = {vec(noise.base_velocity_sigma_m_per_s)}   # ṗ, world",
+          f"base_rate_sigma_rad_per_s = {vec(noise.base_rate_sigma_rad_per_s)}   # ω, base frame"]
+         if np.any(noise.base_sigma > 0) else [])) + "\n"

@@ -95,7 +95,7 @@ class UrdfModel:
         self.sensed_joints = tuple(robot.sensed)
         self.n_v = 6 + len(self.joint_names)
         self.n_q = self.n_v + 1                 # q = [p, quaternion, joints]
-        self.parameter_names = tuple(f"{b}.{p}" for b in self.tree.body_names for p in PARAMS)
+        self.parameter_names = spatial_inertial.parameter_names(self.tree.body_names)
         self._ft = robot.ft_placement()
         self._sizes = None
 
@@ -114,9 +114,7 @@ class UrdfModel:
 
     # ------------------------------------------------------------------ parameters
     def parameters(self) -> np.ndarray:
-        model = self.robot.model
-        return np.concatenate([np.asarray(model.inertias[j].toDynamicParameters())
-                               for j in range(1, model.njoints)])
+        return spatial_inertial.parameters_of(self.robot.model)
 
     def with_parameters(self, theta) -> "UrdfModel":
         import pinocchio as pin
@@ -207,7 +205,9 @@ class UrdfModel:
     def body_sizes_m(self) -> np.ndarray:
         """ℓ per body: what a ``relative`` centre-of-mass uncertainty is relative to."""
         if self._sizes is None:
-            self._sizes = spatial_inertial.body_sizes(self.robot, self.tree)
+            from estimator.spatial.geometry import body_sizes
+
+            self._sizes = body_sizes(self.robot, self.tree)
         return self._sizes
 
     def parameter_covariance(self, uncertainty) -> np.ndarray:

@@ -7,6 +7,16 @@ R_k the no-contact covariance of the residual at the posture (estimator.spatial.
 false-alarm rate). Localization (estimator.spatial.localize) on the flagged samples with the
 same whitening, at the posture q(t − lag) (the residual lags τ_ext by about 1/K,
 ``observer.lag_s``); the point found in the body frame is reported at the current posture.
+
+Episodes, as on the planar chain: a contact ends within a sample or two by the release test
+(estimator.release: a CUSUM of the released/held likelihood ratio on the observer's drive,
+weighted by the drive's long-run covariance Ω⁻¹ of ``noise.residual_moments``; the chi-square test
+then reads the residual minus the released contact's decaying tail, so a new contact right after
+shows at once), and the localization reads the observer restarted at each contact's onset
+(estimator.onset: r̃_k = r_k − exp(−K(t_k − t_s)) r_s; the onset step's trapezoid error and the
+previous contact's tail are dropped). Both work on the world-frame rows with one covariance per
+``cov_stride_s`` block; with the model-uncertainty term the release test is off (it whitens by
+sensor noise alone) and a contact ends when the statistic falls under the threshold.
 """
 
 from __future__ import annotations
@@ -16,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from estimator import observer as obs
+from estimator import onset, release
 from estimator.noise import per_sample_rate
 from estimator.spatial import localize as loc
 from estimator.spatial import noise as snoise
@@ -50,12 +61,14 @@ class SpatialStream:
                  false_alarm_rate=(1.0, "h"), lag_compensation: bool = True,
                  cov_stride_s: float = 0.01, min_force_N: float = 0.05, max_condition: float = 20.0,
                  position_tol_m: float = 0.005, threshold: float | None = None,
-                 weighting: str = "whitened", model_cov=None, model_source: str = ""):
+                 weighting: str = "whitened", model_cov=None, model_source: str = "",
+                 release_test: bool = True, onset_restart: bool = True):
         """``weighting``: the localizer's least squares on the residual whitened by its
         no-contact covariance ("whitened", default), or unweighted ("identity": the planar
         dynamic method's fit, with its ambiguity rule 2·√tr R on the residual norm).
         ``model_cov``: Σ_θ of the file's inertial parameters (``model.model_covariance``); the
-        no-contact covariance is then R_k = R_noise + Φ_k Σ_θ Φ_kᵀ (estimator.model_error)."""
+        no-contact covariance is then R_k = R_noise + Φ_k Σ_θ Φ_kᵀ (estimator.model_error).
+        ``release_test`` / ``onset_restart``: the episode machinery of the module doc."""
         from estimator.errors import InputError
 
         if weighting not in ("whitened", "identity"):
@@ -84,7 +97,7 @@ class SpatialStream:
         self.min_force_N, self.max_condition, self.position_tol_m = min_force_N, max_condition, position_tol_m
         self.parts, self.residuals = [], []
         self._floor = None
-        self._cur = None                 # (block index, L⁻¹) of the block the last chunk ended in
+        self._cur = None                 # (block index, L⁻¹, R, Ω⁻¹) of the block the last chunk ended in
         # Without joint-rate or encoder noise the covariance depends on the posture only through
         # the base orientation, which turns the world force rows: R(q) = D R₀ Dᵀ with
         # D = diag(R_wb, I) (the six wrench channels share one timing and the force rows one
@@ -100,8 +113,21 @@ class SpatialStream:
             self.info["model_uncertainty_source"] = model_source
         else:
             self.info["model_uncertainty_source"] = model_source or "none"
+        self.release = None
+        self.restart = onset.RestartState() if onset_restart else None
+        if threshold is None and release_test and self.model_term is None:
+            self.release = release.ReleaseState()
+            self.h_release = float(np.log(1.0 / self.alpha))
+            self.info.update(release_test="CUSUM of the released/held log-likelihood ratio on the "
+                                          "observer's drive (estimator.release)",
+                             release_threshold=self.h_release)
+        elif release_test:
+            self.info["release_test"] = ("off: the model-uncertainty term is in the statistic"
+                                         if threshold is None else "off: --threshold")
+        self.info["onset_restart"] = bool(onset_restart)
         if (self.noise.velocity_sigma_rad_per_s == 0 and self.noise.encoder_counts == 0
-                and np.all(K == K[0]) and self.model_term is None):
+                and not np.any(self.noise.base_sigma > 0)
+                and np.all(K == K[0]) and self.model_term is None and self.release is None):
             q0 = model.robot.rest_q()
             q0[3:7] = [0.0, 0.0, 0.0, 1.0]
             R0 = snoise.residual_covariance(model, q0[None], np.zeros((1, model.n_v)), self.noise,
@@ -123,7 +149,7 @@ class SpatialStream:
                      "lag_compensation_s": self.lag,
                      "identifiability": loc.identifiability(model, self.surfaces)})
 
-    def _whiteners(self, q, v, g0):
+    def _whiteners(self, q, v, g0, tau=None):
         """(L⁻¹ per block (B, nu, nu), block of each sample (T,)): one covariance per stride
         block (block index (g0 + i) // stride) at the block's first sample; a block that began
         in the previous chunk keeps its L⁻¹ (the numbers do not depend on the chunk sizes)."""
@@ -134,10 +160,15 @@ class SpatialStream:
         new = first[1:] if carried else first
         Linv = np.empty((len(first), len(self.rows), len(self.rows)))
         self._Rn = np.empty_like(Linv)                 # the noise covariances (model term: R_noise)
+        self._Wb = np.empty_like(Linv)                 # Ω⁻¹: the release test's weights
         if new.size:
-            R = snoise.residual_covariance(self.model, q[new], v[new], self.noise, self.gain,
-                                           self.dt, self.timing)
+            wrench = None               # base-state noise: linearized at the measured wrench
+            if tau is not None and np.any(self.noise.base_sigma > 0):
+                wrench = self.model.ft_from_base_rows(q[new], tau[new, :6])
+            R, Om = snoise.residual_moments(self.model, q[new], v[new], self.noise, self.gain,
+                                            self.dt, self.timing, wrench)
             self._Rn[1 if carried else 0:] = R
+            self._Wb[1 if carried else 0:] = np.linalg.inv(Om)
             Linv[1 if carried else 0:] = np.linalg.inv(np.linalg.cholesky(R))
             if self._floor is None:
                 self._floor = max(self.min_force_N, 5.0 * float(np.sqrt(np.max(np.diagonal(R[0])[:3]))))
@@ -145,8 +176,8 @@ class SpatialStream:
                 self.info["residual_sigma"] = np.sqrt(np.diagonal(R[0])).tolist()
                 self._amb = 2.0 * float(np.sqrt(np.trace(R[0])))
         if carried:
-            Linv[0], self._Rn[0] = self._cur[1], self._cur[2]
-        self._cur = (int(blocks[-1]), Linv[-1].copy(), self._Rn[-1].copy())
+            Linv[0], self._Rn[0], self._Wb[0] = self._cur[1], self._cur[2], self._cur[3]
+        self._cur = (int(blocks[-1]), Linv[-1].copy(), self._Rn[-1].copy(), self._Wb[-1].copy())
         return Linv, np.searchsorted(first, np.arange(T), side="right") - 1
 
     def _process(self, rows):
@@ -161,12 +192,18 @@ class SpatialStream:
             rb[:, :3] = quat_rotate(q[:, 3:7], r[:, :3], inverse=True)     # Dᵀ r
             stat = whitened_statistic(rb, self.rows, self._L0[None], np.zeros(T, np.int64))
         else:
-            Lb, block = self._whiteners(q, v, self.g)
-            if self.model_term is None:
+            Lb, block = self._whiteners(q, v, self.g, rows.get("tau"))
+            if self.release is not None:         # chi-square with the release test
+                contact, stat, _ = release.detect(
+                    t, np.ascontiguousarray(r[:, self.rows]), self.K[self.rows], Lb, self._Wb,
+                    block, self.h, self.h_release, self.release)
+            elif self.model_term is None:
                 stat = whitened_statistic(r, self.rows, Lb, block)
             else:
                 stat, Gu = self._model_statistic(t, q, v, r, block)
-        if self.threshold is None:
+        if self.release is not None:
+            rnorm = np.sqrt(stat)
+        elif self.threshold is None:
             contact, rnorm = stat > self.h, np.sqrt(stat)
         else:
             rnorm = np.linalg.norm(r[:, self.rows], axis=1)
@@ -180,6 +217,9 @@ class SpatialStream:
                 q_loc[:, k] = np.interp(x, pt, pq[:, k])
             keep = int(np.ceil(1.02 * self.lag / self.dt)) + 2
             self.past = (pt[-keep:], pq[-keep:])
+        r_obs = r
+        if self.restart is not None:          # localize on the observer restarted at the onset
+            r, _ = onset.restart(t, r, contact, self.K, self.restart)
         sel = np.flatnonzero(contact)
         link = np.full(T, "", dtype=object)
         pw = np.full((T, 3), np.nan)
@@ -214,7 +254,7 @@ class SpatialStream:
             link[sel] = res.link
             reason[sel] = np.asarray(loc.REASONS, dtype=object)[res.reason]
         self.g += T
-        self.residuals.append(r)
+        self.residuals.append(r_obs)
         self.parts.append(pd.DataFrame({"t": t, "contact": contact.astype(int),
                                         "link": pd.Categorical(link, categories=self._link_names),
                                         "px": pw[:, 0], "py": pw[:, 1], "pz": pw[:, 2],

@@ -293,10 +293,16 @@ def load_spatial_robot(path) -> SpatialRobot:
         declaration=str(path), collision=_collision_overrides(file.collision, path))
     if file.model_uncertainty is None and file.identification is None:
         return robot
-    from estimator import inertial
-    from estimator.spatial.model import UrdfModel
+    from types import SimpleNamespace
 
-    return inertial.read_tables(robot, file, str(path), model=UrdfModel(robot))
+    from estimator import inertial
+    from estimator.spatial import inertial as spatial_inertial
+    from estimator.spatial.tree import tree_from_model
+
+    names = spatial_inertial.parameter_names(tree_from_model(robot.model, str(urdf)).body_names)
+    theta = spatial_inertial.parameters_of(robot.model)     # what UrdfModel(robot) states
+    view = SimpleNamespace(parameter_names=names, parameters=lambda: theta)
+    return inertial.read_tables(robot, file, str(path), model=view)
 
 
 def robot_from_urdf(urdf_path, *, name=None, floating=True, sensed_names=None, ft_frame=None,

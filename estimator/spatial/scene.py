@@ -29,6 +29,7 @@ class SpatialScene:
     robot: object
     spec: object
     path: Path
+    robot_kind = "spatial"          # the stage graph plans the 3-D stages for it (torquebench.stages)
 
 
 def is_spatial_scene(path) -> bool:

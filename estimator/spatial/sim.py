@@ -250,7 +250,8 @@ def _quat_R(quat):
 
 def simulate(robot: SpatialRobot, spec: SimSpec):
     """(SpatialLog, truth DataFrame, noise or None). The log's torques are zero on unsensed joints
-    (no column is written for them); noise is drawn with ``spec.noise`` and ``spec.seed``."""
+    (no column is written for them); noise is drawn with ``spec.noise`` and ``spec.seed`` (the
+    base state's last: orientation R exp([δθ]×), ṗ and ω; the truth is the noise-free state)."""
     import pandas as pd
 
     q, v, tau, wrench, truth, dt = _Sim(robot, spec).run()
@@ -264,6 +265,13 @@ def simulate(robot: SpatialRobot, spec: SimSpec):
         wrench = wrench + rng.normal(size=(T, 6)) * spec.noise.ft_sigma
         if spec.noise.velocity_sigma_rad_per_s > 0:
             v[:, 6:] += rng.normal(size=(T, robot.n_joints)) * spec.noise.velocity_sigma_rad_per_s
+        sig_b = spec.noise.base_sigma
+        if robot.floating and np.any(sig_b > 0):      # the measured base state (SpatialNoise)
+            from estimator.spatial.noise import quat_times_exp
+
+            e = rng.normal(size=(T, 9)) * sig_b
+            q[:, 3:7] = quat_times_exp(q[:, 3:7], e[:, :3])
+            v[:, :6] += e[:, 3:]
     log = SpatialLog(t=t, q=q, v=v, tau_Nm=tau, wrench=wrench, floating=robot.floating,
                      source="simulation")
     log.period_s = dt

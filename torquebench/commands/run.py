@@ -20,8 +20,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("scene", type=Path, help="scene TOML (e.g. scenes/end_to_end.toml)")
     parser.add_argument("--only", nargs="+", metavar="OUTPUT", default=None,
                         help="outputs to compute (localization_error, predicted_error, calibration, "
-                             "sensitivity, noise_budget, flexure, estimates, report) (default: the "
-                             "scene's [outputs] want)")
+                             "sensitivity, noise_budget, flexure, estimates, report; a 3-D scene: "
+                             "spatial_log, spatial_estimates, spatial_localization_error, "
+                             "spatial_predicted_error) (default: the scene's [outputs] want)")
     parser.add_argument("--explain", action="store_true", help="print the plan; run nothing")
     parser.add_argument("--force", action="store_true", help="ignore cached results")
     parser.add_argument("--overwrite", action="store_true",
@@ -92,23 +93,49 @@ def run(args) -> int:
 
 
 def _run_3d(args) -> int:
-    """A 3-D scene: simulate, estimate, measured against the truth, predicted at the pokes."""
-    from torquebench.errors import InputError
+    """A 3-D scene through its stages (torquebench.stages.spatial): simulate, estimate, measured
+    against the truth, predicted at the pokes."""
+    from torquebench.cache import Cache
     from torquebench.io import print_json
     from torquebench.scenes import scene_path
-    from torquebench.spatial_scene import run_scene
+    from torquebench.spatial_scene import run_scene_stages
 
-    if args.explain or args.only:
-        raise InputError("--explain/--only: a 3-D scene runs whole (simulate → estimate → compare)")
-    out = run_scene(scene_path(str(args.scene)), seed=args.seed)
+    path = scene_path(str(args.scene))
+    cache = Cache(args.cache_dir)
+    if args.explain:
+        from estimator.spatial.scene import load_spatial_scene
+        from torquebench import pipeline as P
+
+        scene = load_spatial_scene(path)
+        steps = P.plan(scene, args.only, cache, args.seed, args.force)
+        rows = [{"stage": s.stage.name, "action": s.action, "reason": s.reason, "gives": s.stage.gives,
+                 "needs": list(s.stage.needs), "reads": list(s.stage.reads)} for s in steps]
+        if args.json:
+            print_json({"scene": scene.name, "stages": rows})
+        else:
+            for r in rows:
+                print(f"{r['stage']:20s} {r['action']:7s} {r['reason']}")
+        return 0
+    out, timing = run_scene_stages(path, seed=args.seed, cache=cache, force=args.force,
+                                   outputs=args.only)
+    out["stages"] = [{"stage": n, "action": a, "time_s": t} for n, a, t in timing]
     if args.json:
         print_json(out)
         return 0
-    me, pr = out["measured"]["dynamic"], out["predicted"]["dynamic"]
+    for n, a, t in timing:
+        print(f"  {n:20s} {a:7s} {t:7.2f} s", file=sys.stderr)
     f = (lambda v: f"{v * 1e3:.3f} mm" if v is not None else "—")   # noqa: E731
-    print(f"{out['scene']} ({out['robot']}, URDF): {me['contact_samples']} contact samples, link right on "
-          f"{100 * (me['isolation_fraction'] or 0):.1f} %, position RMS {f(me['position_error_rms_m'])} "
-          f"(median {f(me['position_error_median_m'])}); predicted {f(pr['position_rms_m'])}; "
-          f"false alarms {100 * (me['false_alarm_fraction'] or 0):.3f} % of {me['contact_free_samples']} "
-          f"contact-free samples; {out['run_time_s']:.1f} s")
+    head = f"{out['scene']} ({out['robot']}, URDF)"
+    if "measured" in out:
+        me = out["measured"]["dynamic"]
+        head += (f": {me['contact_samples']} contact samples, link right on "
+                 f"{100 * (me['isolation_fraction'] or 0):.1f} %, position RMS "
+                 f"{f(me['position_error_rms_m'])} (median {f(me['position_error_median_m'])})")
+    if "predicted" in out:
+        head += f"; predicted {f(out['predicted']['dynamic']['position_rms_m'])}"
+    if "measured" in out:
+        me = out["measured"]["dynamic"]
+        head += (f"; false alarms {100 * (me['false_alarm_fraction'] or 0):.3f} % of "
+                 f"{me['contact_free_samples']} contact-free samples")
+    print(f"{head}; {out['run_time_s']:.1f} s")
     return 0

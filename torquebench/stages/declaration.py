@@ -44,6 +44,8 @@ class Stage:
     aliases                            other output names that ask for ``gives`` (a scene's [outputs]
                                        want and ``--only`` take them)
     scene_output                       a scene's [outputs] want may name ``gives`` itself
+    robot                              the scenes it is planned for: "planar" (a robot TOML chain)
+                                       or "spatial" (a URDF robot, estimator.spatial)
     """
     name: str
     gives: str
@@ -61,6 +63,7 @@ class Stage:
     cached: bool = True
     aliases: tuple = ()
     scene_output: bool = False
+    robot: str = "planar"
 
     @property
     def inputs_declared(self) -> tuple[str, ...]:

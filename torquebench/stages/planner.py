@@ -19,6 +19,18 @@ from torquebench.stages.declaration import Stage
 from userio.errors import InputError
 
 DEFAULT_OUTPUTS = ("localization_error", "predicted_error")
+SPATIAL_OUTPUTS = ("spatial_localization_error", "spatial_predicted_error")
+
+
+def scene_robot(scene) -> str:
+    """"spatial" for a 3-D scene (a URDF robot), else "planar": the stages planned for it."""
+    return getattr(scene, "robot_kind", "planar")
+
+
+def scene_stages(scene) -> tuple:
+    """The stages a scene of this kind may run (``Stage.robot``), in execution order."""
+    kind = scene_robot(scene)
+    return tuple(s for s in registry.stages() if s.robot == kind)
 
 
 @dataclass
@@ -44,22 +56,28 @@ def given(scene, art: str) -> str | None:
 
 def default_outputs(scene) -> tuple:
     """What a scene without [outputs] want computes, by its kind."""
+    if scene_robot(scene) == "spatial":
+        return SPATIAL_OUTPUTS
     return DEFAULT_OUTPUTS if scene.sim is not None else ("estimates",) if scene.chain.log_file \
         else ("error_map",) if scene.prediction is not None \
         else ("sensitivity",)          # a static scene: the sensor model only (run by `reproduce`)
 
 
 def scene_seed(scene) -> int:
+    if scene_robot(scene) == "spatial":
+        return int(scene.spec.seed)
     s = scene.sim.sensors.seed if scene.sim is not None else 0
     return int(s)
 
 
 def plan(scene, outputs=None, cache=None, seed=None, force=False) -> list[Step]:
     """Steps in execution order, built backwards from ``outputs``."""
-    stages = registry.stages()
+    stages = scene_stages(scene)
     producer = {s.gives: s for s in stages}
-    alias = registry.aliases()
-    wants = [alias.get(o, o) for o in (outputs or scene.chain.outputs or default_outputs(scene))]
+    alias = {a: s.gives for s in stages for a in s.aliases}
+    chain = getattr(scene, "chain", None)
+    wants = [alias.get(o, o) for o in (outputs or (chain.outputs if chain is not None else None)
+                                       or default_outputs(scene))]
     for w in wants:
         if w not in producer:
             raise InputError(f"{scene.path}: outputs: unknown output {w!r}")

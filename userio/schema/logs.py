@@ -12,6 +12,7 @@ from pydantic import AfterValidator, ValidationInfo, field_validator, model_vali
 from estimator.noise import (ENCODER_COUNTS_RANGE, FT_SIGMA_RANGE, TORQUE_SIGMA_RANGE,
                              VELOCITY_SIGMA_RANGE)
 from userio.errors import nearest
+from userio.ranges import Range
 from userio.schema.base import Field, Model, fail, integer, num, vector
 
 
@@ -47,6 +48,10 @@ class TimingFile(Model):
         return table
 
 
+BASE_ANGLE_SIGMA_RANGE = Range(0.0, 0.5, "rad", high="degrees typed as radians?")
+BASE_SPEED_SIGMA_RANGE = Range(0.0, 10.0, "m/s", high="mm/s typed as m/s?")
+
+
 class NoiseTable(Model):
     """``[noise]``: white sensor noise, 1σ per sample."""
 
@@ -59,6 +64,13 @@ class NoiseTable(Model):
         0.0, description="joint-rate noise")
     encoder_counts: integer(ENCODER_COUNTS_RANGE, ge=0) = Field(
         0, description="encoder counts per revolution (0: no quantization)")
+    base_orientation_sigma_rad: vector(None, BASE_ANGLE_SIGMA_RANGE, ge=0) = Field(
+        [0.0], description="3-D floating base: orientation noise, a rotation vector in the base "
+                           "frame (one value or three)")
+    base_velocity_sigma_m_per_s: vector(None, BASE_SPEED_SIGMA_RANGE, ge=0) = Field(
+        [0.0], description="3-D floating base: noise of ṗ (world; one value or three)")
+    base_rate_sigma_rad_per_s: vector(None, VELOCITY_SIGMA_RANGE, ge=0) = Field(
+        [0.0], description="3-D floating base: noise of ω (base frame; one value or three)")
 
     @model_validator(mode="after")
     def _sizes(self, info: ValidationInfo):
