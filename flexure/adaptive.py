@@ -10,6 +10,15 @@ DORFLER of the sum of the goals' indicators, each goal weighted by 1/(rtol |J|) 
 yet converged) and bisect them (closure keeps the mesh conforming; new boundary nodes go onto the
 true surface).
 
+Geometry and boundary conditions, the same problem on every level. The first mesh's boundary
+vertices (an STL's: gmsh puts them off the facets) and boundary mid-edge nodes are put on the true
+surface (isoparametric P2; refine.snap), new boundary nodes too at every refinement; boundary edges
+whose P2 curve is still off the surface by δ > GEOMETRY_SHARE · rtol · R (R the edge's radius of
+curvature) are marked as well, a geometric error the residuals do not see. The load and fixed
+node sets are chosen once, by the radius bands on the first mesh, and handed down by prolongating
+their indicators (``_nested_selections``): re-selecting by the bands on every level would move
+the edge of the Dirichlet set as it is refined.
+
 Estimate. The raw DWR estimate η_ℓ (weight w ≈ u − I_h u from Bank–Weiser local problems driven
 by the element residuals and traction jumps, flexure.bank_weiser) is an estimate, not a bound: its
 effectivity κ = η/E (E = J − J_ℓ the true error) depends on the part. The nested sequence measures
@@ -57,6 +66,8 @@ SAFETY = 1.5
 #: CG tolerance of the last mesh's six load cases (cross-talk, stress): the goal solves' 1e-6 gives
 #: goal values within 1e-9 of 1e-8's (flexure.goals.GOAL_RTOL)
 FINAL_RTOL = 3e-7       # below solve.RESIDUAL_LIMIT (1e-6), which flags a solve as not converged
+#: the geometry criterion's share of --rtol (δ/R of a boundary edge, ``_geometry_marks``)
+GEOMETRY_SHARE = 0.1
 KAPPA_MIN = 0.25
 MIN_DROP = 0.25
 MIN_LEVELS = 2
@@ -139,7 +150,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
     """Adaptive analysis (module docstring) → (results as ``analysis.analyze`` gives them on the
     final mesh, with ``<figure>_error_estimate``/``_error_method``, the levels and what stopped
     the refinement; Fields). ``initial_h_factor``: the first mesh's coarsening of the size field."""
-    from flexure.analysis import analyze_mesh, build_mesh
+    from flexure.analysis import _selections, analyze_mesh, build_mesh
     from flexure.goals import indicators, solve_goals
     from flexure.meshing import MeshResult, mesh_report
     from flexure.mesh import quality
@@ -161,13 +172,14 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
         mres = build_mesh(design, size, 2, initial_h_factor, max_elements,
                           curvature_h_factor=CURVATURE_SHARE * initial_h_factor)
         tm, projector = geometry(design, mres)
-        snapped = snap(tm, projector) if projector is not None else {}
+        snapped = snap(tm, projector, getattr(projector, "snap_vertices", False)) if projector is not None else {}
+        bands = _band_indicator(tm.mesh, _selections(design, tm.mesh))
         mesh_s = time.perf_counter() - t0
         bar.set_description(f"flexure: mesh {tm.mesh.n_dofs} dofs ({mesh_s:.0f} s)")
         for lv in range(MAX_LEVELS):
             mesh = tm.mesh
             tl = time.perf_counter()
-            sol = solve_goals(design, mesh, x0, ref0)
+            sol = solve_goals(design, mesh, x0, ref0, selections=_nested_selections(mesh, bands))
             vals = goal_values(design, sol)
             td = time.perf_counter()
             eta_v = indicators(design, mesh, sol)
@@ -181,6 +193,9 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
                    "safety_factor": _safety_factor(design, mesh, sol.U[:, :, 0]),
                    "cg_iterations": sol.info.get("iterations"), "solve_s": sol.info["total_s"], "dwr_s": dwr_s,
                    "min_dihedral_deg": float(quality(mesh)["min_dihedral_deg"]), "pending_nodes": int(len(tm.pending[0]))}
+            tg = time.perf_counter()
+            geo_marked, rec["geometry"] = _geometry_marks(tm, projector, rtol)
+            rec["geometry"]["s"] = time.perf_counter() - tg
             rec.update(_estimates(rec, hist[-1] if hist else None, kappas, design))
             hist.append(rec)
             rel = _relative(rec)
@@ -209,9 +224,9 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
                                   + [r > rtol for r in rel["arms"]])
             w = weights * np.where(open_goals, 1.0, 1e-3)
             tr = time.perf_counter()
-            marked = _mark(mesh, eta_v, w, DORFLER)
+            marked = np.union1d(_mark(mesh, eta_v, w, DORFLER), geo_marked)
             ref0 = sol.q[-6:] if design.coupling == "rigid" else None
-            tm, (x0,), rinfo = bisect(tm, marked, [sol.U], rounds=ROUNDS, projector=projector)
+            tm, (x0, bands), rinfo = bisect(tm, marked, [sol.U, bands], rounds=ROUNDS, projector=projector)
             sol = None                                       # free the old level's matrix and hierarchy
             rec["refine_s"] = time.perf_counter() - tr
             rec["marked"] = int(len(marked))
@@ -226,11 +241,47 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
     x0_final = np.zeros((sol.q.shape[0], 6))
     x0_final[:, 0] = sol.q[:, 0]
     res, fields = analyze_mesh(design, fin, mesh_s, progress=False, x0=x0_final, K=sol.K, solver=sol.solver,
-                               rtol=FINAL_RTOL)
+                               rtol=FINAL_RTOL, selections=_nested_selections(mesh, bands))
     _attach(res, hist, design, rtol, stopped, max_dofs, max_memory_gb)
     res["mesh"]["initial_snap"] = snapped
     res["total_s"] = float(time.perf_counter() - t_start)
     return res, fields
+
+
+def _band_indicator(mesh, selections) -> np.ndarray:
+    """(n, 2) indicators (1 on the node set, 0 off it) of the first mesh's load and fixed sets."""
+    ind = np.zeros((mesh.n_nodes, 2))
+    for col, nodes in enumerate(selections):
+        ind[nodes, col] = 1.0
+    return ind
+
+
+def _nested_selections(mesh, ind: np.ndarray):
+    """(load, fixed) of a refined mesh: the boundary nodes where the first mesh's set indicators,
+    prolongated by the parents' P2 shape functions (refine.bisect), are 1. A node on an edge or a
+    face whose P2 nodes all carry the set gets exactly 1 (the P2 trace of a constant); any other
+    node less or more: so the sets cover the same part of the boundary on every level, where
+    re-selecting by the radius bands would grow them as the band's edge is refined (a Dirichlet
+    set, hence a problem, that changes with the mesh)."""
+    bnd = np.zeros(mesh.n_nodes, bool)
+    bnd[mesh.boundary_nodes()] = True
+    on = (np.abs(ind - 1.0) < 1e-9) & bnd[:, None]
+    return np.flatnonzero(on[:, 0]), np.flatnonzero(on[:, 1])
+
+
+def _geometry_marks(tm, projector, rtol: float):
+    """The geometry criterion: elements with a boundary edge whose isoparametric P2 curve is off the
+    true surface by δ > GEOMETRY_SHARE · rtol · R (R its radius of curvature from the sagitta:
+    refinement.boundary_geometry_error); a boundary moved by δ over a feature of size R changes
+    the goals by about δ/R, an error the residuals cannot see. → (elements, summary)"""
+    from flexure.refine import boundary_geometry_error
+
+    if projector is None:
+        return np.zeros(0, np.int64), {"max_rel": 0.0, "max_m": 0.0, "marked": 0}
+    e, dist, R = boundary_geometry_error(tm, projector)
+    rel = dist / np.maximum(R, 1e-300)
+    bad = np.unique(e[rel > GEOMETRY_SHARE * rtol])
+    return bad, {"max_rel": float(rel.max(initial=0.0)), "max_m": float(dist.max(initial=0.0)), "marked": int(len(bad))}
 
 
 def _safety_factor(design, mesh, u_unit) -> float:

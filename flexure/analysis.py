@@ -237,11 +237,12 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
 
 
 def analyze_mesh(design: Design, mres, mesh_s: float = 0.0, progress: bool = False, x0=None, K=None,
-                 solver=None, rtol: float | None = None):
+                 solver=None, rtol: float | None = None, selections=None):
     """``analyze`` on a given mesh (``mres``: meshing.MeshResult; ``mesh_s`` its meshing time):
     the six load cases (``x0``: an initial guess of the solver, (n_q, 6); ``K`` the stiffness matrix
     and ``solver`` a prepared solver of the system, if already made; ``rtol`` the CG tolerance,
-    default RTOL), the gauges, the figures → (results dict, Fields)."""
+    default RTOL; ``selections`` the (load, fixed) node sets if not the design's radius bands on this
+    mesh, e.g. flexure.adaptive's nested ones), the gauges, the figures → (results dict, Fields)."""
     from bridge.budget import min_detectable_strain
     from bridge.wheatstone import output_ratio
     from flexure import slivers
@@ -254,7 +255,7 @@ def analyze_mesh(design: Design, mres, mesh_s: float = 0.0, progress: bool = Fal
 
     t_all = time.perf_counter() - mesh_s
     mesh = mres.mesh
-    load_nodes, fixed_nodes = _selections(design, mesh)
+    load_nodes, fixed_nodes = _selections(design, mesh) if selections is None else selections
     t_mid = 0.5 * (mesh.points[:, 2].min() + mesh.points[:, 2].max())
     ref = np.array([0.0, 0.0, t_mid])
     t0 = time.perf_counter()

@@ -40,9 +40,11 @@ class GoalSolution:
     solver: object = None       # the last level's remaining load cases reuse them
 
 
-def solve_goals(design, mesh, x0_fields=None, x0_ref=None, rtol: float | None = None) -> GoalSolution:
+def solve_goals(design, mesh, x0_fields=None, x0_ref=None, rtol: float | None = None,
+                selections=None) -> GoalSolution:
     """Assemble and solve the torque case with the gauges' duals on ``mesh``; ``x0_fields``
-    (n, 3, 1 + g) and ``x0_ref`` (the reference dofs (6, 1 + g)) give the CG's initial guess."""
+    (n, 3, 1 + g) and ``x0_ref`` (the reference dofs (6, 1 + g)) give the CG's initial guess;
+    ``selections`` the (load, fixed) node sets (default: the design's radius bands on ``mesh``)."""
     from flexure import solve as fsolve
     from flexure.analysis import SMOOTHED_COARSE, _selections
     from flexure.bc import Problem, wrench_traction
@@ -50,7 +52,7 @@ def solve_goals(design, mesh, x0_fields=None, x0_ref=None, rtol: float | None = 
     from flexure.gauges import functionals, read_footprint
 
     t0 = time.perf_counter()
-    load, fixed = _selections(design, mesh)
+    load, fixed = _selections(design, mesh) if selections is None else selections
     problem = Problem(mesh, design.material).fix(fixed)
     ref = np.array([0.0, 0.0, 0.5 * (mesh.points[:, 2].min() + mesh.points[:, 2].max())])
     K = stiffness_matrix(mesh, design.material)

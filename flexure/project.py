@@ -50,6 +50,9 @@ def classify(mesh: Mesh, triangles: np.ndarray, tri_tag: np.ndarray, lines: np.n
 class CadProjector:
     """Closest points on the entities of an OpenCASCADE model built by ``build(gmsh)`` (mm)."""
 
+    #: gmsh meshes an exact CAD solid with its vertices on it: only mid nodes need projecting
+    snap_vertices = False
+
     def __init__(self, build):
         self.build = build
 
@@ -77,7 +80,11 @@ class CadProjector:
 class StlProjector:
     """Closest points on a closed triangulation (``geometry.Surface``): candidates from a KD-tree of
     points sampled on every triangle (no farther apart than ``spacing`` × the median edge), then the
-    exact point–triangle distance to each candidate."""
+    exact point–triangle distance to each candidate. gmsh re-parametrises an STL's patches and puts
+    the mesh's vertices on its own surfaces, off the facets (a 3 mm bore's at r = 2.954 mm), so the
+    vertices are projected too (``snap_vertices``)."""
+
+    snap_vertices = True
 
     def __init__(self, surface, spacing: float = 0.5, candidates: int = 24):
         from scipy.spatial import cKDTree

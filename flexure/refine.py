@@ -124,13 +124,69 @@ def _strongest(nodes, dims, tags):
     return nodes[last], dims[last], tags[last]
 
 
-def snap(tm: TaggedMesh, projector) -> dict:
+def vertex_targets(tm: TaggedMesh):
+    """Every vertex on a tagged surface face (dim 2, the face's tag; one per vertex)."""
+    from flexure.mesh import TET_FACES
+
+    e, f = np.nonzero(tm.face_tag > 0)
+    nodes = tm.mesh.tets[e[:, None], TET_FACES[f]].astype(np.int64)           # (k,3)
+    tags = np.repeat(tm.face_tag[e, f], 3)
+    return _strongest(nodes.ravel(), np.full(nodes.size, 2, np.int64), tags)
+
+
+def snap(tm: TaggedMesh, projector, vertices: bool = False) -> dict:
     """Project every mid-edge node on a tagged curve or surface (in place; isoparametric P2 on the
-    true geometry where no element folds); the rest become ``pending``."""
+    true geometry where no element folds); the rest become ``pending``. ``vertices``: the boundary
+    vertices first (a mesher that places them off the true surface, e.g. gmsh's re-parametrised
+    STL patches), the mid nodes of the edges they end then re-centred between their ends."""
+    info_v = {}
+    if vertices:
+        nodes, dims, tags = vertex_targets(tm)
+        info_v = project_nodes(tm.mesh, nodes, dims, tags, projector)
+        moved = np.zeros(tm.mesh.n_nodes, bool)
+        moved[nodes] = True
+        t = tm.mesh.tets
+        for j, (a, b) in enumerate(TET_EDGES.tolist()):
+            sel = moved[t[:, a]] | moved[t[:, b]]
+            tm.mesh.points[t[sel, 4 + j]] = 0.5 * (tm.mesh.points[t[sel, a]] + tm.mesh.points[t[sel, b]])
+        tm.mesh._cache.clear()
     nodes, dims, tags = mid_node_targets(tm)
     info = project_nodes(tm.mesh, nodes, dims, tags, projector)
     tm.pending = info.pop("pending")
+    if vertices:
+        pv = info_v.pop("pending")
+        tm.pending = tuple(np.concatenate([a, b]) for a, b in zip(pv, tm.pending))
+        info.update({f"vertices_{k}": v for k, v in info_v.items()})
     return info
+
+
+def boundary_geometry_error(tm: TaggedMesh, projector):
+    """Geometric error of the isoparametric P2 boundary, per boundary edge (a mid node on a tagged
+    curve or surface): δ = the larger distance of its two quarter points x(¼), x(¾) (the P2 edge
+    map, x(¼) = 3/8 x_a − 1/8 x_b + 3/4 x_m) from their projection onto the true geometry, and the
+    edge's radius of curvature R = max(L²/(8 s), L) from its sagitta s = |x_m − (x_a + x_b)/2| (chord L).
+    → (elements (k,), δ (k,) m, R (k,) m), one row per element edge on the boundary."""
+    dims, tags = _edge_targets(tm.face_tag, tm.edge_tag)
+    e, j = np.nonzero(dims > 0)
+    if len(e) == 0:
+        z = np.zeros(0)
+        return np.zeros(0, np.int64), z, z
+    P = tm.mesh.points
+    t = tm.mesh.tets
+    xa, xb, xm = P[t[e, TET_EDGES[j, 0]]], P[t[e, TET_EDGES[j, 1]]], P[t[e, 4 + j]]
+    q1 = 0.375 * xa - 0.125 * xb + 0.75 * xm
+    q3 = 0.375 * xb - 0.125 * xa + 0.75 * xm
+    _, first, inv = np.unique(t[e, 4 + j], return_index=True, return_inverse=True)   # each edge once
+    d, g = dims[e, j][first], tags[e, j][first]
+    Q = np.vstack([q1[first], q3[first]])
+    proj = projector.project(Q, np.concatenate([d, d]), np.concatenate([g, g]))
+    dist = np.linalg.norm(proj - Q, axis=1).reshape(2, -1).max(axis=0)[inv.ravel()]
+    L2 = np.einsum("ki,ki->k", xb - xa, xb - xa)
+    s = np.linalg.norm(xm - 0.5 * (xa + xb), axis=1)
+    # an edge cannot resolve a radius below its own length (a mid node left off a sharp edge's
+    # surfaces, or one across it, would give any R): R ≥ L
+    R = np.where(s > 0, np.maximum(L2 / np.maximum(8.0 * s, 1e-300), np.sqrt(L2)), np.inf)
+    return e, dist, R
 
 
 def _p2_weights(bary: np.ndarray) -> np.ndarray:
@@ -284,7 +340,37 @@ def bisect(tm: TaggedMesh, elements, fields=(), rounds: int = 1, projector=None,
                                          zip(tm.pending, (moved_nodes, moved_dim, moved_tag))])
         info.update(project_nodes(out.mesh, nodes, dims, tags, projector))
         out.pending = info.pop("pending")
+    if projector is not None:
+        info["straightened"] = straighten_invalid(out)
     return out, fields, info
+
+
+def straighten_invalid(tm: TaggedMesh, min_scaled: float = 0.05, rounds: int = 8) -> int:
+    """Make every element valid again (in place): a child samples its curved parent's map at new
+    nodes, where the parent's det J (checked only at its quadrature points and nodes) can be ≤ 0.
+    The mid nodes of an element whose det J falls below ``min_scaled`` × its straight det are put
+    back on their straight midpoints (a straight element with a positive det is valid), their
+    neighbours re-checked; the boundary ones join ``pending`` (retried at the next refinement).
+    → how many mid nodes were straightened."""
+    mesh = tm.mesh
+    t = mesh.tets
+    check = np.arange(len(t))
+    moved = np.zeros(mesh.n_nodes, bool)
+    for _ in range(rounds):
+        bad = check[~element_valid(mesh, check, min_scaled)]
+        if len(bad) == 0:
+            break
+        for j, (a, b) in enumerate(TET_EDGES.tolist()):
+            mid = t[bad, 4 + j]
+            mesh.points[mid] = 0.5 * (mesh.points[t[bad, a]] + mesh.points[t[bad, b]])
+            moved[mid] = True
+        check = np.flatnonzero(moved[t[:, 4:]].any(axis=1))
+    mesh._cache.clear()
+    if moved.any():
+        nodes, dims, tags = mid_node_targets(tm)
+        sel = moved[nodes]
+        tm.pending = _strongest(*[np.concatenate([p, q[sel]]) for p, q in zip(tm.pending, (nodes, dims, tags))])
+    return int(moved.sum())
 
 
 #: a projected node may not leave an element with det J below this fraction of its straight det at a
@@ -310,10 +396,15 @@ def project_nodes(mesh: Mesh, nodes, dims, tags, projector, min_scaled_jacobian:
     beta = np.ones(len(nodes))
     where = np.full(mesh.n_nodes, -1, np.int64)
     where[nodes] = np.arange(len(nodes))
+    touched = np.flatnonzero((where[mesh.tets] >= 0).any(axis=1))
+    before = _straight_det(mesh.points[mesh.tets[touched, :4]])
     for k in range(tries + 1):
         mesh.points[nodes] = old + beta[:, None] * (new - old)
-        touched = np.flatnonzero((where[mesh.tets] >= 0).any(axis=1))
-        bad = touched[~element_valid(mesh, touched, min_scaled_jacobian)]
+        # valid, and not flattened: a move of vertices may not take a straight det below MIN_VOLUME_SHARE of
+        # its value before (four vertices put on one flat facet make a tet of zero volume)
+        ok = element_valid(mesh, touched, min_scaled_jacobian)
+        ok &= _straight_det(mesh.points[mesh.tets[touched, :4]]) >= MIN_VOLUME_SHARE * before
+        bad = touched[~ok]
         if len(bad) == 0:
             break
         back = where[np.unique(mesh.tets[bad])]
@@ -325,6 +416,15 @@ def project_nodes(mesh: Mesh, nodes, dims, tags, projector, min_scaled_jacobian:
             "projection_partial": int(((beta > 0) & left).sum()),
             "max_projection_m": float(step.max()) if len(step) else 0.0,
             "pending": (nodes[left], dims[left], tags[left])}
+
+
+#: the smallest share of its straight volume a vertex move may leave an element (project_nodes)
+MIN_VOLUME_SHARE = 0.2
+
+
+def _straight_det(X4: np.ndarray) -> np.ndarray:
+    """det of the straight map (k,) of elements with vertices X4 (k,4,3)."""
+    return np.linalg.det(np.stack([X4[:, 1] - X4[:, 0], X4[:, 2] - X4[:, 0], X4[:, 3] - X4[:, 0]], axis=2))
 
 
 def element_valid(mesh: Mesh, elements: np.ndarray, min_scaled: float = 0.05) -> np.ndarray:
