@@ -347,3 +347,28 @@ def private_stage_cache(tmp_path, e2e_stages):
     d = tmp_path / "stage-cache"
     shutil.copytree(e2e_stages.dir, d, ignore=shutil.ignore_patterns("locks"))
     return Cache(d)
+
+
+@pytest.fixture
+def cli_inprocess(capsys, monkeypatch):
+    """``torquebench ARGS`` as the CLI's ``main`` in this process → CompletedProcess (returncode,
+    stdout, stderr), ``cwd`` the directory it runs in (default: unchanged). For tests of what a
+    command answers (exit code, one-line error, files written or kept): the same as a subprocess
+    without an interpreter start-up and import per call (≈ 0.5–1 CPU-s each). A subprocess stays
+    where the process is what is tested (usage text, --version, examples run as typed, signals,
+    pipes, what a fresh interpreter imports)."""
+    import subprocess
+
+    from torquebench.cli import main
+
+    def call(*argv, cwd=None):
+        if cwd is not None:
+            monkeypatch.chdir(cwd)
+        capsys.readouterr()
+        try:
+            code = main([str(a) for a in argv])
+        except SystemExit as e:                    # argparse's usage errors
+            code = e.code
+        out = capsys.readouterr()
+        return subprocess.CompletedProcess(argv, code, out.out, out.err)
+    return call

@@ -16,18 +16,9 @@ DATA = REPO_ROOT / "calibration" / "data" / "paper_link1_session.csv"
 
 
 @pytest.fixture
-def run(capsys):
-    """The CLI's main in-process (what these tests check is the commands' contract, not the
-    process: one interpreter start-up and import less per call) → (returncode, stdout, stderr)."""
-    def call(*argv):
-        capsys.readouterr()
-        try:
-            code = main(list(argv))
-        except SystemExit as e:                    # argparse's usage errors
-            code = e.code
-        out = capsys.readouterr()
-        return subprocess.CompletedProcess(argv, code, out.out, out.err)
-    return call
+def run(cli_inprocess):
+    """The CLI's main in-process: these check the commands' contract, not the process."""
+    return cli_inprocess
 
 
 def test_calibrate_json_versioning_force_and_apply(tmp_path, run):

@@ -30,19 +30,11 @@ def _tb(*argv, cwd=ROOT, **kw):
 
 
 @pytest.fixture
-def tb(capsys):
+def tb(cli_inprocess):
     """``main`` in-process for the tests of a command's contract (exit code, one-line error,
-    files kept): the same as ``_tb`` without an interpreter start-up and import per call; ``_tb``
-    stays where the process is what is tested (usage, --version, examples as typed, broken pipe)."""
-    def call(*argv):
-        capsys.readouterr()
-        try:
-            code = main(list(map(str, argv)))
-        except SystemExit as e:                    # argparse's usage errors
-            code = e.code
-        out = capsys.readouterr()
-        return subprocess.CompletedProcess(argv, code, out.out, out.err)
-    return call
+    files kept); ``_tb`` stays where the process is what is tested (usage, --version, examples as
+    typed, broken pipe)."""
+    return cli_inprocess
 
 
 def _subparsers() -> dict:

@@ -119,22 +119,11 @@ def _bare_scene():
 
 
 @pytest.fixture
-def _cli(capsys, monkeypatch):
-    """``torquebench ARGS`` from the repository root, in-process (these check what `run` answers,
-    not the process: an interpreter start-up and import less each) → (returncode, stdout, stderr)."""
-    from torquebench.cli import main
-
+def _cli(cli_inprocess, monkeypatch):
+    """``torquebench ARGS`` in-process from the repository root: these check what `run` answers,
+    not the process."""
     monkeypatch.chdir(ROOT)
-
-    def call(*args):
-        capsys.readouterr()
-        try:
-            code = main(list(args))
-        except SystemExit as e:                    # argparse's usage errors
-            code = e.code
-        out = capsys.readouterr()
-        return subprocess.CompletedProcess(args, code, out.out, out.err)
-    return call
+    return cli_inprocess
 
 
 SCENES = sorted(p.name for p in (ROOT / "scenes").glob("*.toml"))    # scenes/ holds only scenes
