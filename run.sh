@@ -72,6 +72,12 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
     quiet_pip install -e ".[test]" || exit 1
     # the compiled loops (numba: estimator, CUSUM calibration, FEM multi-RHS solve) are compiled once here
     "$VENV/bin/python" -c "from estimator import warmup; from flexure import multirhs; warmup.warm(); multirhs.warm()" >/dev/null 2>&1 || true
+    # and the per-sample bound, release and 3-D loops, on the shipped logs (their real inputs)
+    warm=$(mktemp -d)
+    MPLBACKEND=Agg "$VENV/bin/torquebench" estimate examples/sim/paper_fixed_link2.csv --out "$warm/a.csv" >/dev/null 2>&1 || true
+    MPLBACKEND=Agg "$VENV/bin/torquebench" estimate examples/spatial/leg_pokes.csv --robot robots/quadruped_leg.toml \
+        --out "$warm/b.csv" >/dev/null 2>&1 || true
+    rm -rf "$warm"
     touch "$stamp"
     say "ready: $VENV/bin/torquebench ($("$VENV/bin/torquebench" --version 2>/dev/null || echo installed));" \
         "run 'source $VENV/bin/activate' to put it on PATH, or keep using 'bash run.sh COMMAND'"

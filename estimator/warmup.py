@@ -1,6 +1,8 @@
 """Compile the estimator's numba loops once, so that the first estimate, log read or CUSUM
 calibration does not pay the compilation (numba writes the machine code to its cache beside each
-module). ``run.sh`` calls ``warm()`` when it installs the project; no module imports this one.
+module). ``run.sh`` calls ``warm()`` when it installs the project (and then runs one planar and one
+3-D estimate of the shipped logs, which compile the bound, release and spatial loops on their
+real inputs); no module imports this one.
 """
 
 from __future__ import annotations
@@ -39,7 +41,24 @@ def warm() -> bool:
     plausibility.plausibility_rows(t, np.zeros((3, 5)), np.zeros((3, 5)), 3, 2, 6.3,
                                    (-1.0, np.zeros(2), np.zeros(2)), np.zeros(3))
     cusum_calibration.warm()
+    _warm_episode(robot)
     return True
+
+
+def _warm_episode(robot) -> None:
+    """The episode localizer's loop (estimator.episode.binned_terms) on two samples, with writable
+    and with read-only noise blocks (a noise model read back from the stage cache is read-only:
+    numba compiles each case apart)."""
+    from estimator import episode
+
+    T, n = 2, robot.n_links + 3
+    x, W, S = np.zeros((T, n)), np.tile(np.eye(n), (1, 1, 1)), np.zeros((1, n, n))
+    for writable in (True, False):
+        S0, S1 = S.copy(), S.copy()
+        S0.setflags(write=writable)
+        S1.setflags(write=writable)
+        episode.binned_terms(robot, x, x, x, np.ones(T, np.int64), W, S0, S1, np.zeros(T, np.int64),
+                             np.ones(T, bool), np.zeros(T, np.int64), 1, None)
 
 
 def _warm_model(robot) -> None:

@@ -40,9 +40,9 @@ def warm() -> bool:
     A = sp.identity(6, format="csr") * 2.0
     Dinv = np.tile(np.eye(3) / 2.0, (2, 1, 1))
     for k in range(1, KMAX + 1):
-        X = np.zeros((6, k))
-        spmm(A, X)
-        block_gauss_seidel(A, Dinv, X, np.ones((6, k)), True)
+        spmm(A, np.zeros((6, k)))
+        for order in "CF":                # pcg's X is C-ordered, a caller's may be Fortran-ordered
+            block_gauss_seidel(A, Dinv, np.zeros((6, k), order=order), np.ones((6, k)), True)
     return True
 
 

@@ -46,6 +46,9 @@ _OWN_CACHE = "_TORQUEBENCH_TEST_CACHE_OWNER"
 def pytest_addoption(parser):
     parser.addoption("--all", action="store_true", dest="run_all",
                      help="run the slow tests too (convergence studies, end-to-end runs); CI does")
+    parser.addoption("--cpu-top", type=int, default=0, metavar="N",
+                     help="list the N test files and N tests that took the most CPU seconds "
+                          "(the test's own CPU plus the shared fixtures it set up; summed over workers)")
 
 
 def _budget() -> float:
@@ -116,6 +119,8 @@ def pytest_terminal_summary(terminalreporter, config):
     if top and top[0][1] >= 1.0:
         terminalreporter.write_line("shared fixtures and numba compiling, CPU s summed over workers, charged to no test: "
                                     + ", ".join(f"{k} {v:.1f}" for k, v in top))
+    if config.getoption("cpu_top", 0):
+        _cpu_top(terminalreporter, config.getoption("cpu_top"))
 
 
 # ---------------------------------------------------------------- the CPU budget guard
@@ -187,6 +192,9 @@ def pytest_runtest_makereport(item, call):
     outcome = yield
     report = outcome.get_result()
     _record_shared(report, item)
+    if call.when == "call" and item is _Meter.item:
+        own = _cpu_s() - _Meter.start - _Meter.shared - (_Meter.jit - _Meter.jit_start)
+        report.user_properties.append(("own_cpu_s", own))
     budget = _budget()
     if (call.when != "call" or budget <= 0 or not report.passed or item is not _Meter.item
             or item.get_closest_marker("slow") or item.config.getoption("run_all")):
@@ -218,6 +226,8 @@ def _record_shared(report, item):
 
 
 _SHARED_SEEN: dict = {}
+#: {nodeid: CPU s of the test itself + the shared fixtures (and compiling) set up for it}
+_TEST_CPU: dict = {}
 
 
 def pytest_runtest_logreport(report):
@@ -225,6 +235,26 @@ def pytest_runtest_logreport(report):
         if name == "shared_fixture_cpu_s":
             for k, v in value.items():
                 _SHARED_SEEN[k] = _SHARED_SEEN.get(k, 0.0) + v
+            _TEST_CPU[report.nodeid] = _TEST_CPU.get(report.nodeid, 0.0) + sum(value.values())
+        elif name == "own_cpu_s":
+            _TEST_CPU[report.nodeid] = _TEST_CPU.get(report.nodeid, 0.0) + value
+
+
+def _cpu_top(terminalreporter, n: int) -> None:
+    """The ``--cpu-top N`` listing: the files and the tests that cost the most CPU seconds."""
+    per_file: dict = {}
+    for nodeid, s in _TEST_CPU.items():
+        f = nodeid.split("::", 1)[0]
+        per_file[f] = per_file.get(f, 0.0) + s
+    w = terminalreporter.write_line
+    w(f"CPU s of all tests: {sum(_TEST_CPU.values()):.1f} over {len(_TEST_CPU)} tests "
+      "(own + shared fixtures + numba compiling; summed over workers)")
+    w(f"the {n} costliest files, CPU s:")
+    for f, s in sorted(per_file.items(), key=lambda kv: -kv[1])[:n]:
+        w(f"  {s:7.1f}  {f}")
+    w(f"the {n} costliest tests, CPU s:")
+    for t, s in sorted(_TEST_CPU.items(), key=lambda kv: -kv[1])[:n]:
+        w(f"  {s:7.1f}  {t}")
 
 
 # ---------------------------------------------------------------- shared expensive results
@@ -317,3 +347,28 @@ def private_stage_cache(tmp_path, e2e_stages):
     d = tmp_path / "stage-cache"
     shutil.copytree(e2e_stages.dir, d, ignore=shutil.ignore_patterns("locks"))
     return Cache(d)
+
+
+@pytest.fixture
+def cli_inprocess(capsys, monkeypatch):
+    """``torquebench ARGS`` as the CLI's ``main`` in this process → CompletedProcess (returncode,
+    stdout, stderr), ``cwd`` the directory it runs in (default: unchanged). For tests of what a
+    command answers (exit code, one-line error, files written or kept): the same as a subprocess
+    without an interpreter start-up and import per call (≈ 0.5–1 CPU-s each). A subprocess stays
+    where the process is what is tested (usage text, --version, examples run as typed, signals,
+    pipes, what a fresh interpreter imports)."""
+    import subprocess
+
+    from torquebench.cli import main
+
+    def call(*argv, cwd=None):
+        if cwd is not None:
+            monkeypatch.chdir(cwd)
+        capsys.readouterr()
+        try:
+            code = main([str(a) for a in argv])
+        except SystemExit as e:                    # argparse's usage errors
+            code = e.code
+        out = capsys.readouterr()
+        return subprocess.CompletedProcess(argv, code, out.out, out.err)
+    return call

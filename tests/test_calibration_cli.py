@@ -15,14 +15,15 @@ from torquebench.io import REPO_ROOT
 DATA = REPO_ROOT / "calibration" / "data" / "paper_link1_session.csv"
 
 
-def _run(*argv, cwd=None):
-    return subprocess.run([sys.executable, "-m", "torquebench", *argv], capture_output=True,
-                          text=True, cwd=cwd, timeout=120)
+@pytest.fixture
+def run(cli_inprocess):
+    """The CLI's main in-process: these check the commands' contract, not the process."""
+    return cli_inprocess
 
 
-def test_calibrate_json_versioning_force_and_apply(tmp_path):
+def test_calibrate_json_versioning_force_and_apply(tmp_path, run):
     out = tmp_path / "cal.json"
-    p = _run("calibrate", str(DATA), "--out", str(out), "--json")
+    p = run("calibrate", str(DATA), "--out", str(out), "--json")
     assert p.returncode == 0, p.stderr
     res = json.loads(p.stdout)
     for key in ("slope_mV_per_g", "offset_mV", "slope_mV_per_g_error_estimate",
@@ -37,22 +38,22 @@ def test_calibrate_json_versioning_force_and_apply(tmp_path):
     assert res["sensitivity_mV_per_Nm"] == pytest.approx(res["slope_mV_per_g"] / (1e-3 * 9.81 * 0.205))
     assert {p.split("/")[-1] for p in res["report"]} == {"cal.md", "cal_corner.png", "cal_residuals.png"}
     before = out.read_bytes()
-    p2 = _run("calibrate", str(DATA), "--out", str(out), "--json", "--no-report", "--seed", "1")
+    p2 = run("calibrate", str(DATA), "--out", str(out), "--json", "--no-report", "--seed", "1")
     res2 = json.loads(p2.stdout)
     assert p2.returncode == 0 and res2["versioned"] and res2["written"].endswith("cal.v2.json")
     assert out.read_bytes() == before
-    p3 = _run("calibrate", str(DATA), "--out", str(out), "--json", "--no-report", "--force")
+    p3 = run("calibrate", str(DATA), "--out", str(out), "--json", "--no-report", "--force")
     assert p3.returncode == 0 and json.loads(p3.stdout)["written"] == str(out)
 
     readings = tmp_path / "r.csv"
     readings.write_text("reading\n5.0069\n16.5069\n")
-    p4 = _run("apply", str(out), str(readings), "--json", "--data", str(DATA))
+    p4 = run("apply", str(out), str(readings), "--json", "--data", str(DATA))
     assert p4.returncode == 0, p4.stderr
     r = json.loads(p4.stdout)
     assert np.allclose(r["torque_Nm"], [0, 1000 * 9.81e-3 * 0.205], atol=4 * max(r["torque_std_Nm"]))
-    p5 = _run("apply", str(out), str(readings), "--out", str(tmp_path / "t.csv"))
+    p5 = run("apply", str(out), str(readings), "--out", str(tmp_path / "t.csv"))
     assert p5.returncode == 0 and "torque_std_Nm" in (tmp_path / "t.csv").read_text()
-    p6 = _run("apply", str(out), str(readings), "--out", str(tmp_path / "t.csv"))
+    p6 = run("apply", str(out), str(readings), "--out", str(tmp_path / "t.csv"))
     assert p6.returncode == 2 and "exists" in p6.stderr
 
 
@@ -61,23 +62,23 @@ def test_calibrate_json_versioning_force_and_apply(tmp_path):
     (None, ["--max-steps", "120"], "unconverged"),
     (None, ["--model", "hysteresis"], "needs both 'load' and 'unload'"),
 ])
-def test_calibrate_user_errors_exit_2_one_line(tmp_path, content, args, match):
+def test_calibrate_user_errors_exit_2_one_line(tmp_path, content, args, match, run):
     data = DATA
     if content is not None:
         data = tmp_path / "bad.csv"
         data.write_text(content)
-    p = _run("calibrate", str(data), "--out", str(tmp_path / "c.json"), *args)
+    p = run("calibrate", str(data), "--out", str(tmp_path / "c.json"), *args)
     assert p.returncode == 2 and p.stdout == ""
     assert len(p.stderr.strip().splitlines()) == 1 and match in p.stderr, p.stderr
     assert not (tmp_path / "c.json").exists()
 
 
-def test_apply_rejects_tampered_calibration(tmp_path):
+def test_apply_rejects_tampered_calibration(tmp_path, run):
     cal = tmp_path / "c.json"
-    assert _run("calibrate", str(DATA), "--out", str(cal), "--no-report").returncode == 0
+    assert run("calibrate", str(DATA), "--out", str(cal), "--no-report").returncode == 0
     cal.write_text(cal.read_text().replace('"model": "linear"', '"model": "quadratic"'))
     (tmp_path / "r.csv").write_text("reading\n6\n")
-    p = _run("apply", str(cal), str(tmp_path / "r.csv"))
+    p = run("apply", str(cal), str(tmp_path / "r.csv"))
     assert p.returncode == 2 and "content hash mismatch" in p.stderr
 
 
@@ -113,22 +114,22 @@ def test_acquire_guided_writes_a_loadable_session(device, tmp_path, capsys, monk
     assert np.all(np.abs(s.reading - 12345) < 5)
 
 
-def test_acquire_bad_port_exit_2(tmp_path):
-    p = _run("acquire", "--port", str(tmp_path / "nope"), "--out", str(tmp_path / "x.raw"))
+def test_acquire_bad_port_exit_2(tmp_path, run):
+    p = run("acquire", "--port", str(tmp_path / "nope"), "--out", str(tmp_path / "x.raw"))
     assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1 and "--port" in p.stderr
 
 
-def test_apply_bad_reading_names_the_file_line(tmp_path):
+def test_apply_bad_reading_names_the_file_line(tmp_path, run):
     cal = REPO_ROOT / "calibration" / "data" / "paper_link1_cal.json"
     (tmp_path / "r.csv").write_text("# reading_unit=mV\nreading\n6\nseven\n")
-    p = _run("apply", str(cal), str(tmp_path / "r.csv"))
+    p = run("apply", str(cal), str(tmp_path / "r.csv"))
     assert p.returncode == 2 and "line 4: column 'reading': 'seven'" in p.stderr, p.stderr
 
 
-def test_apply_without_out_prints_a_summary_not_the_table():
+def test_apply_without_out_prints_a_summary_not_the_table(run):
     """Its help says: without --out, a summary only (the per-reading table is --out or --json)."""
     cal = REPO_ROOT / "calibration" / "data" / "paper_link1_cal.json"
-    p = _run("apply", str(cal), str(REPO_ROOT / "calibration" / "data" / "paper_link1_readings.csv"))
+    p = run("apply", str(cal), str(REPO_ROOT / "calibration" / "data" / "paper_link1_readings.csv"))
     assert p.returncode == 0, p.stderr
     lines = p.stdout.strip().splitlines()
     assert len(lines) <= 4 and lines[0].startswith("11 readings") and "N·m" in lines[1]

@@ -4,20 +4,16 @@ predicted and simulated localization error, in the JSON and the plot."""
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_compare_two_strains_end_to_end(tmp_path):
+def test_compare_two_strains_end_to_end(tmp_path, cli_inprocess, monkeypatch):
     png = tmp_path / "cmp.png"
-    env = {**os.environ, "TORQUEBENCH_CACHE": str(tmp_path / "cache")}
-    r = subprocess.run([sys.executable, "-m", "torquebench", "compare", "scenes/end_to_end.toml",
-                        "--vary", "flexure=5e-5,5e-4", "--png", str(png), "--json"],
-                       capture_output=True, text=True, cwd=ROOT, env=env)
+    monkeypatch.setenv("TORQUEBENCH_CACHE", str(tmp_path / "cache"))
+    r = cli_inprocess("compare", "scenes/end_to_end.toml", "--vary", "flexure=5e-5,5e-4", "--png", png,
+                      "--json", cwd=ROOT)
     assert r.returncode == 0, r.stderr
     lo, hi = json.loads(r.stdout)["rows"]
     assert hi["torque_noise_std_Nm"] < 0.2 * lo["torque_noise_std_Nm"]

@@ -5,6 +5,7 @@ and `estimate` finds the applied contact in it. examples/leg_poke/: the independ
 (a fresh clone needs nothing beside it). Nothing here refers outside the repository.
 """
 
+import io
 import json
 import subprocess
 import sys
@@ -91,40 +92,56 @@ def test_shipped_noise_declaration_is_what_the_simulator_writes(simulated):
     assert (tmp_path / "log.noise.toml").read_text() == (SIM / f"{scene}.noise.toml").read_text()
 
 
-@pytest.mark.parametrize("scene", SCENES)
-def test_declared_noise_keeps_contact_free_samples_quiet(scene, tmp_path):
+def _estimate(log: Path):
+    """`torquebench estimate LOG --out EST --json` → (exit code, stderr, stdout, EST's text)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        out = Path(d) / f"{log.stem}.est.csv"
+        proc = _tb("estimate", log, "--out", out, "--json")
+        return proc.returncode, proc.stderr, proc.stdout, out.read_text() if out.is_file() else ""
+
+
+@pytest.fixture(scope="module", params=SCENES)
+def estimated(request):
+    """The shipped log of a scene estimated once per run by the CLI, with its noise declaration
+    (shared by the workers and by the two tests below): (scene, exit code, stderr, stdout, CSV)."""
+    log = SIM / f"{request.param}.csv"
+    return (request.param, *shared_result("estimate-" + request.param, lambda: _estimate(log),
+                                          str(log), str(SIM / f"{request.param}.noise.toml")))
+
+
+def test_declared_noise_keeps_contact_free_samples_quiet(estimated, tmp_path):
     """With the log's noise declaration the chi-square detector at 1/h flags under 1 % of the
     contact-free samples (the fixed-base log keeps 6: its unlogged stiff mount settles in the
     first 6 ms); the same log estimated as if its sensors were the default paper leg's
     (τ σ 0.005 N·m against the 0.0133 the bridge chain drew) flags more than 3 %."""
+    scene = estimated[0]
     truth = pd.read_csv(SIM / f"{scene}.truth.csv")
     t_on, t_off = truth.t[truth.link > 0].iloc[[0, -1]]
     free = ((truth.t < t_on) | (truth.t > t_off + 0.1)).to_numpy()
 
-    def flagged(log):
-        out = tmp_path / f"{log.stem}.est.csv"
-        proc = _tb("estimate", log, "--out", out, "--json")
-        assert proc.returncode == 0, proc.stderr
-        return pd.read_csv(out).contact.to_numpy(bool)[free].mean(), json.loads(proc.stdout)
+    def flagged(code, err, out, csv):
+        assert code == 0, err
+        return pd.read_csv(io.StringIO(csv)).contact.to_numpy(bool)[free].mean(), json.loads(out)
 
-    declared, summary = flagged(SIM / f"{scene}.csv")
+    declared, summary = flagged(*estimated[1:])
     assert "log declaration" in summary["residual_noise_source"]
     bare = tmp_path / "bare.csv"                       # the same log without its noise declaration
     bare.write_bytes((SIM / f"{scene}.csv").read_bytes())
-    default, summary = flagged(bare)
+    default, summary = flagged(*_estimate(bare))
     assert "default noise" in summary["residual_noise_source"]
     print(f"{scene}: contact-free flagged {declared:.2%} declared, {default:.2%} default")
     assert declared < 0.01 < 0.03 < default, (declared, default)
 
 
-@pytest.mark.parametrize("scene", SCENES)
-def test_estimate_finds_the_true_contact_in_the_shipped_log(scene):
+def test_estimate_finds_the_true_contact_in_the_shipped_log(estimated):
+    scene, code, err, out, _ = estimated
     truth = pd.read_csv(SIM / f"{scene}.truth.csv")
     touching = truth[truth.link > 0]
     link, alpha = int(touching.link.iloc[0]), float(touching.alpha.iloc[0])
-    proc = _tb("estimate", SIM / f"{scene}.csv", "--json")
-    assert proc.returncode == 0, proc.stderr
-    longest = max(json.loads(proc.stdout)["intervals"], key=lambda iv: iv["samples"])
+    assert code == 0, err
+    longest = max(json.loads(out)["intervals"], key=lambda iv: iv["samples"])
     assert longest["link"] == link
     assert abs(longest["alpha"] - alpha) < 0.05
     assert abs(longest["t_start_s"] - touching.t.iloc[0]) < 0.02

@@ -19,10 +19,11 @@ PAPER_DISC = shipped("designs", "paper_disc.toml")
 BEAM_CHECK = shipped("designs", "beam_check.toml")
 
 
-def _analyzed(path):
-    """``analyze`` of a design file (mesh + six load cases), keeping the mesh for other loads."""
+def _analyzed(path, h_factor: float = 1.0):
+    """``analyze`` of a design file (mesh with its element sizes × ``h_factor``, six load cases),
+    keeping the mesh for other loads."""
     design = load_design(path)
-    mres = build_mesh(design)
+    mres = build_mesh(design, h_factor=h_factor)
     return (design, *analyze_mesh(design, mres), mres)
 
 
@@ -38,9 +39,16 @@ def paper(paper_mesh):
     return paper_mesh[:3]
 
 
+#: the beam check's elements twice the design's size: 50k P2 dofs instead of 107k, 11 CPU-s instead
+#: of 24; its strain ratio to the beam model moves from 1.017 to 1.022, its stiffness ratio from
+#: 0.700 to 0.702 (measured 2026-11-26), both well inside the test's physical bounds
+THIN_H_FACTOR = 2.0
+
+
 @pytest.fixture(scope="module")
 def thin():
-    return shared_result("beam_check", lambda: _analyzed(BEAM_CHECK), BEAM_CHECK)[:3]
+    return shared_result("beam_check", lambda: _analyzed(BEAM_CHECK, THIN_H_FACTOR), BEAM_CHECK,
+                         THIN_H_FACTOR)[:3]
 
 
 # ------------------------------------------------------------------ design files
@@ -192,12 +200,12 @@ def test_distributed_hub_load_is_softer_and_energy_consistent(paper_mesh):
     from dataclasses import replace
 
     design, rigid, _, mres = paper_mesh
-    res, fields = analyze_mesh(replace(design, coupling="distributed"), mres)
+    K = stiffness_matrix(mres.mesh, design.material)         # assembled once: the solve and the check
+    res, fields = analyze_mesh(replace(design, coupling="distributed"), mres, K=K)
     assert res["warnings"] == []
     assert res["torsional_stiffness_Nm_per_rad"] < rigid["torsional_stiffness_Nm_per_rad"]
     assert res["torsional_stiffness_Nm_per_rad"] > 0.9 * rigid["torsional_stiffness_Nm_per_rad"]
     assert res["gauge_strain_per_Nm"] == pytest.approx(rigid["gauge_strain_per_Nm"], rel=0.02)
-    K = stiffness_matrix(fields.mesh, design.material)
     u = fields.u_rated_m.ravel()
     T = res["rated_torque_Nm"]
     assert 0.5 * u @ (K @ u) == pytest.approx(T ** 2 / (2 * res["torsional_stiffness_Nm_per_rad"]), rel=1e-6)

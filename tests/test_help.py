@@ -29,6 +29,14 @@ def _tb(*argv, cwd=ROOT, **kw):
                           capture_output=True, text=True, timeout=300, **kw)
 
 
+@pytest.fixture
+def tb(cli_inprocess):
+    """``main`` in-process for the tests of a command's contract (exit code, one-line error,
+    files kept); ``_tb`` stays where the process is what is tested (usage, --version, examples as
+    typed, broken pipe)."""
+    return cli_inprocess
+
+
 def _subparsers() -> dict:
     action = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     return action.choices
@@ -112,37 +120,37 @@ def test_cheap_help_examples_run(name, example, tmp_path):
 LOG = ROOT / "examples" / "sim" / "paper_fixed_link2.csv"
 
 
-def test_out_creates_missing_directories_and_keeps_existing_files(tmp_path):
+def test_out_creates_missing_directories_and_keeps_existing_files(tmp_path, tb):
     out = tmp_path / "a" / "b" / "est.csv"
-    assert _tb("estimate", LOG, "--out", out).returncode == 0 and out.is_file()
+    assert tb("estimate", LOG, "--out", out).returncode == 0 and out.is_file()
     out.write_text("mine")
-    proc = _tb("estimate", LOG, "--out", out)
+    proc = tb("estimate", LOG, "--out", out)
     assert proc.returncode == 2 and "--force" in proc.stderr and len(proc.stderr.splitlines()) == 1
     assert out.read_text() == "mine"
-    assert _tb("estimate", LOG, "--out", out, "--force").returncode == 0
+    assert tb("estimate", LOG, "--out", out, "--force").returncode == 0
     assert out.read_text().startswith("t,contact")
 
 
-def test_simulate_keeps_an_existing_truth_file(tmp_path):
+def test_simulate_keeps_an_existing_truth_file(tmp_path, tb):
     (tmp_path / "log.truth.csv").write_text("mine")
-    proc = _tb("simulate", ROOT / "scenes" / "paper_fixed_link2.toml", "--out", tmp_path / "log.csv",
+    proc = tb("simulate", ROOT / "scenes" / "paper_fixed_link2.toml", "--out", tmp_path / "log.csv",
                "--duration", "0.05")
     assert proc.returncode == 2 and "exists" in proc.stderr
     assert (tmp_path / "log.truth.csv").read_text() == "mine" and not (tmp_path / "log.csv").exists()
 
 
-def test_out_dir_is_created_by_report(tmp_path):
+def test_out_dir_is_created_by_report(tmp_path, tb):
     target = tmp_path / "new" / "reports"
-    proc = _tb("report", "--only", "bridge", "--out-dir", target)
+    proc = tb("report", "--only", "bridge", "--out-dir", target)
     assert proc.returncode == 0, proc.stderr
     assert (target / "bridge.md").is_file()
     index = (target / "README.md").read_text()
     assert "[Bridge" in index and "Regenerate: `torquebench report --only bridge`" in index
 
 
-def test_out_dir_that_is_a_file_is_a_user_error(tmp_path):
+def test_out_dir_that_is_a_file_is_a_user_error(tmp_path, tb):
     (tmp_path / "f").write_text("x")
-    proc = _tb("report", "--only", "bridge", "--out-dir", tmp_path / "f")
+    proc = tb("report", "--only", "bridge", "--out-dir", tmp_path / "f")
     assert proc.returncode == 2 and "not a directory" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
 
@@ -179,10 +187,10 @@ def test_debug_shows_the_traceback_of_a_bug(monkeypatch):
         main(["--debug", "bridge"])
 
 
-def test_undecodable_input_is_a_user_error(tmp_path):
+def test_undecodable_input_is_a_user_error(tmp_path, tb):
     bad = tmp_path / "log.csv"
     bad.write_bytes(b"\xff\xfe\x00\x01t,q1\n\x9f\x00")
-    proc = _tb("estimate", bad)
+    proc = tb("estimate", bad)
     assert proc.returncode == 2 and proc.stdout == ""
     assert len(proc.stderr.strip().splitlines()) == 1 and "Traceback" not in proc.stderr
 
@@ -223,8 +231,8 @@ def test_broken_pipe_is_quiet():
     assert proc.stderr == ""
 
 
-def test_demo_says_what_each_file_is(tmp_path):
-    proc = _tb("demo", "--out-dir", tmp_path / "d", "--json")
+def test_demo_says_what_each_file_is(tmp_path, tb):
+    proc = tb("demo", "--out-dir", tmp_path / "d", "--json")
     assert proc.returncode == 0, proc.stderr
     files = json.loads(proc.stdout)["files"]
     assert sorted(Path(p).name for p in files) == ["estimate_dynamic.csv", "estimate_paper.csv",

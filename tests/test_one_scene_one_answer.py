@@ -5,26 +5,22 @@ against 0.81 mm for the same scene)."""
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _cli(args, env):
-    proc = subprocess.run([sys.executable, "-m", "torquebench", *args, "--json"], cwd=ROOT,
-                          capture_output=True, text=True, env=env)
-    assert proc.returncode == 0, proc.stderr
-    return json.loads(proc.stdout)
+def test_demo_and_run_of_its_scene_agree(tmp_path, cli_inprocess, monkeypatch):
+    monkeypatch.setenv("TORQUEBENCH_CACHE", str(tmp_path / "cache"))     # one cache for both
+    monkeypatch.setenv("MPLBACKEND", "Agg")
 
+    def cli(args):
+        proc = cli_inprocess(*args, "--json", cwd=ROOT)
+        assert proc.returncode == 0, proc.stderr
+        return json.loads(proc.stdout)
 
-def test_demo_and_run_of_its_scene_agree(tmp_path):
-    env = {**os.environ, "TORQUEBENCH_CACHE": str(tmp_path / "cache"), "MPLBACKEND": "Agg"}
-    demo = _cli(["demo", "--out-dir", str(tmp_path / "demo")], env)
-    run = _cli(["run", str(ROOT / "scenes" / f"{demo['scene']}.toml"), "--only",
-                "localization_error"], env)
+    demo = cli(["demo", "--out-dir", str(tmp_path / "demo")])
+    run = cli(["run", str(ROOT / "scenes" / f"{demo['scene']}.toml"), "--only", "localization_error"])
     for method in ("dynamic", "paper"):
         for key in ("position_error_rms_m", "position_error_mean_m", "force_error_mean_N",
                     "scored_samples"):

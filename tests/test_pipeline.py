@@ -118,16 +118,19 @@ def _bare_scene():
                                                                 strain_per_Nm=5e-5))
 
 
-def _cli(*args, env=None):
-    return subprocess.run([sys.executable, "-m", "torquebench", *args], capture_output=True,
-                          text=True, cwd=ROOT, env=env)
+@pytest.fixture
+def _cli(cli_inprocess, monkeypatch):
+    """``torquebench ARGS`` in-process from the repository root: these check what `run` answers,
+    not the process."""
+    monkeypatch.chdir(ROOT)
+    return cli_inprocess
 
 
 SCENES = sorted(p.name for p in (ROOT / "scenes").glob("*.toml"))    # scenes/ holds only scenes
 
 
 @pytest.mark.parametrize("scene", SCENES)
-def test_explain_on_every_shipped_scene(scene, tmp_path):
+def test_explain_on_every_shipped_scene(scene, tmp_path, _cli):
     r = _cli("run", f"scenes/{scene}", "--explain", "--json", "--cache-dir", str(tmp_path))
     assert r.returncode == 0, r.stderr
     stages = json.loads(r.stdout)["stages"]
@@ -141,7 +144,7 @@ def test_explain_on_every_shipped_scene(scene, tmp_path):
     ("[outputs]\nwant = [\"localisation_error\"]\n", "did you mean 'localization_error'"),
     ("[calibration]\nfile = \"nope.json\"\n", "calibration.file: file 'nope.json' not found"),
 ])
-def test_bad_scene_input_exits_2_with_one_line(tmp_path, extra, message):
+def test_bad_scene_input_exits_2_with_one_line(tmp_path, extra, message, _cli):
     text = (ROOT / "scenes" / "paper_floating_link2.toml").read_text() + "\n" + extra
     p = tmp_path / "bad.toml"
     p.write_text(text.replace('robot = "paper_leg.toml"', 'robot = "paper_leg.toml"'))
@@ -149,7 +152,7 @@ def test_bad_scene_input_exits_2_with_one_line(tmp_path, extra, message):
     assert r.returncode == 2 and message in r.stderr and r.stderr.count("\n") == 1, r.stderr
 
 
-def test_output_nothing_can_produce_is_refused(tmp_path):
+def test_output_nothing_can_produce_is_refused(tmp_path, _cli):
     r = _cli("run", "scenes/paper_floating_link2.toml", "--only", "calibration", "--explain")
     assert r.returncode == 2 and "nothing in the scene can produce 'calibration'" in r.stderr
 
@@ -203,7 +206,7 @@ def test_log_only_scene_imports_no_heavy_packages(tmp_path, cache):
     ('counts_columns = ["c1", "c2"]\n', "calibration.file"),                 # counts vs an mV calibration
     ('counts_columns = ["c1", "c2"]\nreading_unit = "counts"\n', "calibration.file"),
 ])
-def test_stored_calibration_reading_unit_must_match_the_counts_columns(tmp_path, source, field):
+def test_stored_calibration_reading_unit_must_match_the_counts_columns(tmp_path, source, field, _cli):
     (tmp_path / "log.csv").write_text("t,q1,q2,dq1,dq2,tau1,tau2,Fx,Fz,My,c1,c2\n")
     (tmp_path / "scene.toml").write_text(
         f'robot = "paper_leg.toml"\n[calibration]\nfile = "{CAL_MV}"\n'
@@ -214,7 +217,7 @@ def test_stored_calibration_reading_unit_must_match_the_counts_columns(tmp_path,
     assert "source.counts_columns hold 'counts' (source.reading_unit)" in r.stderr
 
 
-def test_simulated_session_reads_counts_so_mV_columns_are_refused(tmp_path):
+def test_simulated_session_reads_counts_so_mV_columns_are_refused(tmp_path, _cli):
     (tmp_path / "log.csv").write_text("t,q1,q2,dq1,dq2,tau1,tau2,Fx,Fz,My,c1,c2\n")
     (tmp_path / "scene.toml").write_text(
         'robot = "paper_leg.toml"\n[calibration]\nmasses_g = [10, 100, 1000]\n'

@@ -3,8 +3,6 @@
 sensor chain by more than 2× is warned about."""
 
 import json
-import subprocess
-import sys
 from types import SimpleNamespace
 
 import numpy as np
@@ -14,13 +12,12 @@ from torquebench.io import REPO_ROOT
 CAL = REPO_ROOT / "calibration" / "data" / "paper_link1_cal.json"
 
 
-def test_sigma_tau_is_the_calibrations_reading_noise(tmp_path):
+def test_sigma_tau_is_the_calibrations_reading_noise(tmp_path, cli_inprocess):
     doc = json.loads(CAL.read_text())
     expected = (doc["posterior"]["sigma"]["mean"] / abs(doc["coefficients"]["slope"])
                 * 1e-3 * 9.81 * doc["lever_arm_m"])          # calibration.session: g = 9.81
-    proc = subprocess.run([sys.executable, "-m", "torquebench", "propagate", "--calibration", str(CAL),
-                           "--grid", "2", "--draws", "20", "--json"], capture_output=True, text=True,
-                          cwd=tmp_path, timeout=300)
+    proc = cli_inprocess("propagate", "--calibration", CAL, "--grid", "2", "--draws", "20", "--json",
+                         cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)
     assert abs(out["torque_noise_std_Nm"] - expected) < 1e-9 * expected
@@ -40,8 +37,7 @@ def test_a_calibration_far_from_the_chain_is_warned_about():
     assert len(warnings) == 1 and "16× the sensor chain's" in warnings[0]
 
 
-def test_posture_is_refused_for_a_planar_robot(tmp_path):
+def test_posture_is_refused_for_a_planar_robot(tmp_path, cli_inprocess):
     """--posture is the URDF map's; a planar robot's map is a grid, so the option is refused, not ignored."""
-    proc = subprocess.run([sys.executable, "-m", "torquebench", "propagate", "--posture", "0.1,0.2"],
-                          capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    proc = cli_inprocess("propagate", "--posture", "0.1,0.2", cwd=tmp_path)
     assert proc.returncode == 2 and "--posture: for URDF robots" in proc.stderr

@@ -34,9 +34,11 @@ def _scene(tmp_path, outputs: str) -> Path:
     return p
 
 
-def _cli(*args, cwd=ROOT):
-    return subprocess.run([sys.executable, "-m", "torquebench", *args], capture_output=True, text=True,
-                          cwd=cwd, env=None)
+@pytest.fixture
+def _cli(cli_inprocess):
+    """``torquebench ARGS`` in-process (from ``cwd``, default the repository root): these check
+    what the command answers, not the process; an interpreter start-up and import less per call."""
+    return lambda *args, cwd=ROOT: cli_inprocess(*args, cwd=cwd)
 
 
 def _report_row(r):
@@ -44,7 +46,7 @@ def _report_row(r):
     return next(s for s in json.loads(r.stdout)["stages"] if s["stage"] == "report")
 
 
-def test_explain_lists_only_the_views_whose_inputs_the_scene_has(tmp_path):
+def test_explain_lists_only_the_views_whose_inputs_the_scene_has(tmp_path, _cli):
     scene = _scene(tmp_path, f'want = ["sensitivity", "report"]\ndir = "{tmp_path / "out"}"\n')
     row = _report_row(_cli("run", str(scene), "--explain", "--json", "--cache-dir", str(tmp_path / "c")))
     assert row["action"] == "run"
@@ -56,7 +58,7 @@ def test_explain_lists_only_the_views_whose_inputs_the_scene_has(tmp_path):
     assert not (tmp_path / "out").exists()          # --explain runs nothing
 
 
-def test_default_directory_is_out_scene_name_never_the_shipped_reports(tmp_path):
+def test_default_directory_is_out_scene_name_never_the_shipped_reports(tmp_path, _cli):
     scene = _scene(tmp_path, 'want = ["sensitivity", "report"]\n')
     row = _report_row(_cli("run", str(scene), "--explain", "--json", "--cache-dir", str(tmp_path / "c")))
     assert "into out/rep_scene" in row["reason"]
@@ -69,7 +71,7 @@ def test_default_directory_is_out_scene_name_never_the_shipped_reports(tmp_path)
     assert f"into {(ROOT / 'reports').resolve()}" in row["reason"]
 
 
-def test_a_listed_report_the_scene_cannot_feed_and_report_keys_without_report_are_refused(tmp_path):
+def test_a_listed_report_the_scene_cannot_feed_and_report_keys_without_report_are_refused(tmp_path, _cli):
     for outputs, field, text in [
         ('want = ["report"]\nreports = ["calibration"]\n', "outputs.reports",
          "'calibration' needs calibration"),
@@ -82,7 +84,7 @@ def test_a_listed_report_the_scene_cannot_feed_and_report_keys_without_report_ar
         assert f"{field}:" in r.stderr and text in r.stderr, r.stderr
 
 
-def test_report_stage_writes_the_chosen_view_and_the_summary_into_the_scene_directory(tmp_path):
+def test_report_stage_writes_the_chosen_view_and_the_summary_into_the_scene_directory(tmp_path, _cli):
     shipped = ROOT / "reports" / "bridge.md"
     before = shipped.stat().st_mtime_ns
     out = tmp_path / "out"
@@ -102,7 +104,7 @@ def _own_files(d: Path) -> set[str]:
     return {p.name for p in d.iterdir() if not p.name.startswith(".")}
 
 
-def test_a_scene_with_its_own_sensor_gets_only_views_of_its_own_results(tmp_path):
+def test_a_scene_with_its_own_sensor_gets_only_views_of_its_own_results(tmp_path, _cli):
     """Every file in the scene's report folder is derived from this scene: its own sensor (a
     20-bit ADC at 1 kS/s, not the paper's), no shipped report (bridge.md / bridge.png of the paper's
     sensor, the leg-poke plot of examples/), and the summary's figures are this sensor's."""
@@ -178,7 +180,7 @@ def test_residual_plot_keeps_units_on_separate_axes():
 
 
 @pytest.mark.slow
-def test_a_dynamic_scenes_report_holds_its_estimate_residual_and_scores_only(tmp_path):
+def test_a_dynamic_scenes_report_holds_its_estimate_residual_and_scores_only(tmp_path, _cli):
     """A short floating-leg scene with want = ["report"]: the folder holds the views of its sensor
     chain, estimate and residual (no shipped report, no leg-poke plot of examples/)."""
     text = (ROOT / "scenes" / "paper_floating_link2.toml").read_text()

@@ -61,12 +61,14 @@ def test_bad_scene_fields_name_file_and_field(tmp_path, text, field):
     assert str(path) in str(exc.value) and field in str(exc.value)
 
 
-def _cli(*args, cwd=ROOT):
-    return subprocess.run([sys.executable, "-m", "torquebench", *args], capture_output=True,
-                          text=True, cwd=cwd)
+@pytest.fixture
+def _cli(cli_inprocess):
+    """``torquebench ARGS`` in-process (from ``cwd``, default the repository root): these check
+    what the command answers, not the process; an interpreter start-up and import less per call."""
+    return lambda *args, cwd=ROOT: cli_inprocess(*args, cwd=cwd)
 
 
-def test_simulate_cli_writes_log_and_truth(tmp_path):
+def test_simulate_cli_writes_log_and_truth(tmp_path, _cli):
     out = tmp_path / "leg.csv"
     proc = _cli("simulate", "scenes/paper_fixed_link2.toml", "--out", str(out), "--duration", "0.6",
                 "--json")
@@ -85,7 +87,7 @@ def test_simulate_cli_writes_log_and_truth(tmp_path):
     assert summary["noise"] == str(tmp_path / "leg.noise.toml")
 
 
-def test_simulate_cli_reads_back_through_the_estimator(tmp_path):
+def test_simulate_cli_reads_back_through_the_estimator(tmp_path, _cli):
     from estimator.log_reader import read_log
     from estimator.robot import paper_leg
 
@@ -95,7 +97,7 @@ def test_simulate_cli_reads_back_through_the_estimator(tmp_path):
     assert log.floating and log.q.shape == (301, 5)
 
 
-def test_simulate_cli_refuses_bad_input(tmp_path):
+def test_simulate_cli_refuses_bad_input(tmp_path, _cli):
     scene = tmp_path / "s.toml"
     scene.write_text((ROOT / "scenes" / "paper_fixed_link1.toml").read_text())
     before = scene.read_text()
@@ -112,7 +114,7 @@ def test_simulate_cli_refuses_bad_input(tmp_path):
     assert proc.returncode == 2 and "missing.toml" in proc.stderr
 
 
-def test_noise_free_simulation_declares_no_noise(tmp_path):
+def test_noise_free_simulation_declares_no_noise(tmp_path, _cli):
     """A scene whose sensors draw no noise has nothing to whiten with: no LOG.noise.toml, and an
     old one beside --out --force is not left behind to describe the new log."""
     root = Path(__file__).resolve().parents[1]

@@ -18,11 +18,14 @@ LOG = "examples/spatial/leg_pokes.csv"
 ROBOT = "robots/quadruped_leg.toml"
 
 
-def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "torquebench", *args], capture_output=True, text=True)
+@pytest.fixture
+def _cli(cli_inprocess):
+    """``torquebench ARGS`` in-process (from ``cwd``, default unchanged): these check
+    what the command answers, not the process; an interpreter start-up and import less per call."""
+    return lambda *args, cwd=None: cli_inprocess(*args, cwd=cwd)
 
 
-def test_estimate_example_log_locates_both_pokes(tmp_path):
+def test_estimate_example_log_locates_both_pokes(tmp_path, _cli):
     out = tmp_path / "est.csv"
     res = _cli("estimate", LOG, "--robot", ROBOT, "--out", str(out), "--json")
     assert res.returncode == 0, res.stderr
@@ -43,7 +46,7 @@ def test_estimate_example_log_locates_both_pokes(tmp_path):
     assert ident["shank"]["sensed_joints_moving_it"] == ["hip_abd", "hip_flex", "knee"]
 
 
-def test_bad_input_exits_2_naming_file_and_element(tmp_path):
+def test_bad_input_exits_2_naming_file_and_element(tmp_path, _cli):
     bad = tmp_path / "bad.urdf"
     bad.write_text("<robot name='x'><link name='a'>")
     res = _cli("estimate", LOG, "--robot", str(bad))
@@ -63,7 +66,7 @@ def test_bad_input_exits_2_naming_file_and_element(tmp_path):
 
 
 @pytest.mark.slow
-def test_simulate_3d_scene(tmp_path):
+def test_simulate_3d_scene(tmp_path, _cli):
     out = tmp_path / "leg.csv"
     res = _cli("simulate", "scenes/spatial/quadruped_leg_pokes.toml", "--out", str(out), "--duration", "0.4", "--json")
     assert res.returncode == 0, res.stderr
@@ -83,7 +86,7 @@ def _short_scene(tmp_path):
 
 
 @pytest.mark.slow
-def test_run_and_sweep_on_a_3d_scene(tmp_path):
+def test_run_and_sweep_on_a_3d_scene(tmp_path, _cli):
     """run: measured against the truth and predicted at the pokes; sweep/compare tabulate 3-D
     points with the planar keys (a noisier torque sensor: larger predicted error)."""
     scene = _short_scene(tmp_path)

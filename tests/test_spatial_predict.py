@@ -4,8 +4,6 @@ propagate command's map and the pictures."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -66,16 +64,14 @@ def test_first_order_map_matches_monte_carlo(leg):
             assert abs(mc / m.error_m[v] - 1) < 0.2
 
 
-def test_propagate_3d_map_and_picture(tmp_path):
+def test_propagate_3d_map_and_picture(tmp_path, cli_inprocess):
     png = tmp_path / "map.png"
-    res = subprocess.run([sys.executable, "-m", "torquebench", "propagate", "--robot",
-                          "robots/quadruped_leg.toml", "--posture", "0.2,0.6,-1.2", "--force", "5",
-                          "--grid", "2", "--png", str(png), "--json"], capture_output=True, text=True)
+    res = cli_inprocess("propagate", "--robot", "robots/quadruped_leg.toml", "--posture", "0.2,0.6,-1.2",
+                        "--force", "5", "--grid", "2", "--png", png, "--json")
     assert res.returncode == 0, res.stderr
     out = json.loads(res.stdout)
     assert set(out["links"]) == {"base", "hip", "thigh", "shank", "foot"}
     assert 1e-4 < out["links"]["shank"]["position_rms_median_m"] < 5e-3
     assert png.stat().st_size > 10000
-    res = subprocess.run([sys.executable, "-m", "torquebench", "propagate", "--robot",
-                          "robots/quadruped_leg.toml", "--posture", "0.2,0.6"], capture_output=True, text=True)
+    res = cli_inprocess("propagate", "--robot", "robots/quadruped_leg.toml", "--posture", "0.2,0.6")
     assert res.returncode == 2 and "--posture: expected 3 joint values" in res.stderr
