@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.errors import InputError
+from userio.errors import InputError
 from userio.ranges import Range
 
 G_STANDARD_M_PER_S2 = 9.81

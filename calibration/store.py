@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.errors import InputError
+from userio.errors import InputError
 
 SCHEMA = "torquebench.calibration"
 SCHEMA_VERSION = 1

@@ -5,7 +5,7 @@ import re
 import numpy as np
 import pytest
 
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.robot import PAPER_LEG_TOML, load_robot, paper_leg, robot_from_dict
 from torquebench.io import read_toml
 

@@ -23,7 +23,10 @@ import sys
 
 import torquebench
 import torquebench.commands
-from torquebench.errors import USER_ERRORS
+from userio.errors import InputError
+
+#: the user errors the CLI turns into exit code 2 and one line on stderr
+USER_ERRORS = (InputError, FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError)
 
 DESCRIPTION = ("torquebench: design a strain-gauge joint torque sensor (flexure FEM, bridge and ADC),\n"
                "calibrate it, and estimate contacts on a robot leg with a momentum observer.")

@@ -9,7 +9,7 @@ Three kinds of scene:
 - ``kind = "posture_sweep"``: a grid of postures × contact points × one force, same static model.
 
 Validated by the scene schema (userio.schema.scene; every field in docs/inputs.md); every error
-is a torquebench.errors.InputError naming the file and the field.
+is a userio.errors.InputError naming the file and the field.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from estimator.robot import Robot, load_robot
 from estimator.sim.config import Controller, Ground, Poke, Sensors, SimConfig
 from estimator.limits import ALPHA_RANGE, FORCE_RANGE, GAIN_RANGE, SAMPLE_RATE_RANGE, THRESHOLD_RANGE
 from estimator.noise import FT_SIGMA_RANGE, TORQUE_SIGMA_RANGE
-from torquebench.errors import InputError
+from userio.errors import InputError
 from torquebench.io import REPO_ROOT
 from userio.errors import nearest
 from userio.ranges import Range, ranged

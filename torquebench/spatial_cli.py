@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from torquebench.errors import InputError
+from userio.errors import InputError
 from torquebench.options import floats as _floats
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from torquebench.errors import InputError
+from userio.errors import InputError
 
 
 class _RowNoise:

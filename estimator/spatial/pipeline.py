@@ -56,7 +56,7 @@ class SpatialStream:
         dynamic method's fit, with its ambiguity rule 2·√tr R on the residual norm).
         ``model_cov``: Σ_θ of the file's inertial parameters (``model.model_covariance``); the
         no-contact covariance is then R_k = R_noise + Φ_k Σ_θ Φ_kᵀ (estimator.model_error)."""
-        from estimator.errors import InputError
+        from userio.errors import InputError
 
         if weighting not in ("whitened", "identity"):
             raise InputError(f"weighting: use 'whitened' or 'identity', got {weighting!r}")

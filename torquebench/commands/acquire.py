@@ -49,7 +49,7 @@ def add_arguments(parser) -> None:
 
 def run(args) -> int:
     from calibration.acquire import RawCapture
-    from calibration.errors import InputError
+    from userio.errors import InputError
     from calibration.frames import MAX_CHANNELS
 
     from userio.errors import finite
@@ -99,7 +99,7 @@ def run(args) -> int:
 def _acquire(args, masses) -> int:
     import numpy as np
 
-    from calibration.errors import InputError
+    from userio.errors import InputError
     from calibration.acquire import RawCapture, Reader, capture, guided_session, open_port, session_csv
     from calibration.frames import FrameParser
     from torquebench.io import print_json

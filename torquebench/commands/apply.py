@@ -43,7 +43,7 @@ def _apply(args, plan) -> int:
     import pandas as pd
 
     import calibration
-    from calibration.errors import InputError
+    from userio.errors import InputError
     from torquebench.io import print_json, write_text_atomic
 
     from calibration.session import MAX_SESSION_BYTES, _parse_meta
@@ -155,7 +155,7 @@ def _check_magnitude(vals, model, args) -> None:
     rather than answered with NaN (outside the calibrated range) for every reading."""
     import numpy as np
 
-    from calibration.errors import InputError
+    from userio.errors import InputError
 
     if model.mass_range_g is None or vals.size == 0:
         return

@@ -118,7 +118,7 @@ def _plan(args, out: Path, replace: bool = False):
 
 
 def run(args) -> int:
-    from calibration.errors import InputError
+    from userio.errors import InputError
     from calibration.session import LEVER_ARM_RANGE_M, MASS_RANGE_G
 
     from userio.errors import finite, seed
@@ -142,7 +142,7 @@ def run(args) -> int:
 
 
 def _calibrate(args, written: Path) -> int:
-    from calibration.errors import InputError
+    from userio.errors import InputError
     from calibration.fit import fit_session
     from calibration.session import read_session
     from calibration.store import calibration_payload, encode

@@ -15,7 +15,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from torquebench.errors import InputError
+from userio.errors import InputError
 from torquebench.formatting import pm as _pm
 
 HELP = "flexure FEM: sensitivity (mV/V per N·m), stiffness, stress, cross-talk, min torque; sweeps"

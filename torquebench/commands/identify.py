@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from torquebench.errors import InputError
+from userio.errors import InputError
 from torquebench.options import DEFAULT_PRIOR, fit_prior
 from userio.outputs import sha256_of
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from torquebench.errors import InputError
+from userio.errors import InputError
 
 HELP = "propagate sensor noise and calibration uncertainty into contact-localization error"
 EXAMPLES = """\

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 import torquebench.reports
-from torquebench.errors import InputError
+from userio.errors import InputError
 
 HELP = "regenerate the Markdown + PNG reports in reports/ (all areas, or --only AREA)"
 EXAMPLES = """\

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from torquebench.errors import InputError
+from userio.errors import InputError
 
 HELP = "reproduce the paper's Tables III-V, the posture sweep and Fig. 4 (writes ./reproduction/paper_reproduction.md)"
 EXAMPLES = """\

@@ -93,7 +93,7 @@ def run(args) -> int:
 
 def _run_3d(args) -> int:
     """A 3-D scene: simulate, estimate, measured against the truth, predicted at the pokes."""
-    from torquebench.errors import InputError
+    from userio.errors import InputError
     from torquebench.io import print_json
     from torquebench.scenes import scene_path
     from torquebench.spatial_scene import run_scene

@@ -130,7 +130,7 @@ def stiffness_cases(quick: bool = False):
 
 
 def stiffness_table(quick=False, progress=True) -> list[dict]:
-    from estimator.errors import InputError
+    from userio.errors import InputError
     from estimator.estimate import estimate
     from estimator.sim import simulate
 
