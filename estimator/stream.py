@@ -475,7 +475,7 @@ class EstimatorStream:
         if rows is not None:
             self.queue.append(self._stage1(rows))
         out = self._drain(True)
-        self.episodes.close_all()
+        self.episodes.finish()
         if self.episode_stage is not None:
             self.episode_stage.finish()
         self._close_episodes()
