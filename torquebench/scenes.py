@@ -409,13 +409,14 @@ def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
     """Read a scene file, validated by its schema (userio.schema.scene.SceneFile; ``overrides``:
     dotted keys set before validation), then built against its robot and the files it names."""
     from userio.schema import parse
-    from userio.schema.scene import SceneFile
+    from torquebench.stages.registry import scene_outputs
+    from userio.schema.scene import WANTABLE, SceneFile
 
     path = Path(path)
     data = read_toml(path)                         # a regular file: not found, a directory or a device say so
     for key, value in (overrides or {}).items():
         set_key(data, key, value, path)
-    d = parse(SceneFile, data, path)
+    d = parse(SceneFile, data, path, context={WANTABLE: scene_outputs()})   # what the stages offer
     ref = d.robot if not isinstance(d.robot, str) else None
     robot, rfile = _robot_file(path, d.robot if ref is None else ref.file, "robot")
     name = path.stem if d.name is None else d.name
