@@ -116,7 +116,8 @@ def save(payload: dict, path, *, force: bool = False) -> Path:
 
     Existing ``path`` and not ``force`` → the file is kept and ``NAME.vK.json`` is written.
     """
-    from userio.files import next_version_path, write_bytes_atomic
+    from userio.files import write_bytes_atomic
+    from userio.outputs import free_version
 
     data = encode(payload)
     path = Path(path)
@@ -129,7 +130,7 @@ def save(payload: dict, path, *, force: bool = False) -> Path:
         except InputError:
             if not target.exists():
                 raise
-            target = next_version_path(path)
+            target = free_version(path)
     raise InputError(f"{path}: could not find a free version name")
 
 

@@ -139,8 +139,10 @@ def _main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.error("a command is required (see torquebench --help)")
     where = f"torquebench {args.command}"
+    from userio import outputs
+
     try:
-        with _warnings_as_lines():
+        with _warnings_as_lines(), outputs.required():     # every write through the command's plan
             return int(args._run(args) or 0)
     except KeyboardInterrupt as exc:
         return _interrupted(where, str(exc))

@@ -83,7 +83,7 @@ def run(args) -> int:
         from calibration.session import MASS_RANGE_G
         for m in masses:
             MASS_RANGE_G.check(m, "--guided")
-    from torquebench.outputs import Outputs
+    from userio.outputs import Outputs
 
     plan = Outputs(force=args.force)
     if "://" not in str(args.port):
@@ -148,7 +148,7 @@ def _acquire(args, masses) -> int:
         spath = args.session or raw_path.with_suffix(".csv")
         files.append((spath, session_csv(rows, sensor_id=args.sensor_id,
                                          lever_arm_m=args.lever_arm_m, source=str(raw_path))))
-    write_files_atomic(files, overwrite=args.force)      # decoded CSV + session: all or none
+    write_files_atomic(files)            # decoded CSV + session, all or none (the plan decides)
     written += [str(p) for p, _ in files]
     st = reader.parser.stats.as_dict()
     steps, warnings = load_steps(rows or [], args.tolerance_counts)

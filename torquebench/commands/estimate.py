@@ -178,7 +178,7 @@ def _peak_memory_MB() -> float:
 def run(args) -> int:
     import time
 
-    from torquebench.outputs import Outputs
+    from userio.outputs import Outputs
 
     start = time.perf_counter()
 

@@ -174,7 +174,7 @@ def run(args) -> int:
                          f"{args.max_localizations:.3g}; reduce them or raise the limit")
     if args.png and robot.n_links != 2:
         raise InputError("--png: the heat map is drawn for two-link robots only")
-    from torquebench.outputs import Outputs
+    from userio.outputs import Outputs
 
     plan = Outputs(force_flag=None)              # --force is the contact force here: never replace
     for label, p in (("--robot", args.robot), ("--sensor", args.sensor), ("--calibration", args.calibration)):
@@ -281,7 +281,7 @@ def _heat_map(path: Path, maps: dict, axes, bmaps: dict | None = None) -> None:
     import matplotlib.pyplot as plt
     from matplotlib.colors import LogNorm
 
-    from torquebench.io import atomic_path
+    from userio.files import atomic_path
 
     have_b = bool(bmaps) and "bound_per_sample_m" in bmaps
     rows = 2 if have_b else 1
