@@ -164,7 +164,19 @@ def read_document(path, *, data_path=None) -> dict:
                              "calibration was fitted to (hash mismatch)")
     doc["content_sha256"] = stored
     check_meaning(doc, path)
+    diag = doc.get("diagnostics")
+    if not isinstance(diag, dict) or diag.get("converged") is not True:
+        import warnings
+
+        what = "missing" if not isinstance(diag, dict) else f"converged = {diag.get('converged')!r}"
+        warnings.warn(f"{path}: field 'diagnostics': {what}: the fit's convergence is not recorded "
+                      "(calibrate stores converged fits only); its ± may not hold", CalibrationWarning,
+                      stacklevel=2)
     return doc
+
+
+class CalibrationWarning(UserWarning):
+    """A calibration file that reads but whose fit cannot be vouched for (no convergence record)."""
 
 
 def check_meaning(doc: dict, path="<calibration>") -> None:

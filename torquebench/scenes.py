@@ -263,6 +263,14 @@ def _dynamic(path: Path, d, robot: Robot, name: str) -> SimConfig:
     pokes = []
     for i, p in enumerate(d.poke, start=1):
         _link(path, f"poke[{i}].link", p.link, n)
+        if p.t_off_s is not None and p.t_off_s > d.duration_s:
+            import warnings
+
+            from estimator.plausibility import PlausibilityWarning
+
+            warnings.warn(f"{path}: poke[{i}].t_off_s = {p.t_off_s:g} s is after the end of the simulation "
+                          f"(duration_s = {d.duration_s:g} s): the poke acts to the end (leave t_off_s "
+                          "out for that; a time in ms?)", PlausibilityWarning, stacklevel=2)
         if p.mass_kg is not None:
             mag, direction = p.mass_kg * G_M_PER_S2, -math.pi / 2
         else:

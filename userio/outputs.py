@@ -148,19 +148,32 @@ def os_error(exc: OSError, path=None, doing: str = "write") -> InputError:
     return InputError(f"{where}: cannot {doing}: {cause}")
 
 
-def check_room(directory: Path, label: str) -> None:
-    """Refuse, before the work, a directory on a read-only or full file system."""
+def room_problem(directory: Path) -> str | None:
+    """Why files cannot be created in ``directory`` (or, when it is missing, in its nearest
+    existing parent): a read-only or full file system, no permission; None when they can."""
+    directory = Path(directory)
+    while not directory.exists() and directory != directory.parent:
+        directory = directory.parent
     try:
         vfs = os.statvfs(directory)
     except OSError:
-        return
+        return None
     if vfs.f_flag & os.ST_RDONLY:
-        raise InputError(f"{label}: {directory} is on a read-only file system; choose another place")
+        return f"{directory} is on a read-only file system"
     if vfs.f_bavail * vfs.f_frsize < MIN_FREE_BYTES:
-        raise InputError(f"{label}: the file system of {directory} is full "
-                         f"({vfs.f_bavail * vfs.f_frsize} bytes free); free some space or write elsewhere")
+        return f"the file system of {directory} is full ({vfs.f_bavail * vfs.f_frsize} bytes free)"
     if not os.access(directory, os.W_OK | os.X_OK):
-        raise InputError(f"{label}: {directory}: permission denied (cannot create files there)")
+        return f"{directory}: permission denied (cannot create files there)"
+    return None
+
+
+def check_room(directory: Path, label: str) -> None:
+    """Refuse, before the work, a directory on a read-only or full file system."""
+    why = room_problem(directory)
+    if why is not None:
+        hint = ("choose another place" if "read-only" in why else "free some space or write elsewhere"
+                if "full" in why else "")
+        raise InputError(f"{label}: {why}" + (f"; {hint}" if hint else ""))
 
 
 def make_dir(directory: Path, label: str) -> None:

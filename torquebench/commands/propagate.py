@@ -120,8 +120,12 @@ def scene_from_args(args, robot, link, alpha, magnitude, direction):
     calibration file as the chain's inputs, and the posture-grid settings."""
     from torquebench.scenes import ChainSpec, PredictionSpec, prediction_scene
 
-    if args.sensor is not None and not Path(args.sensor).is_file():
-        raise InputError(f"--sensor: {args.sensor}: file not found")
+    from userio.files import check_input
+
+    for label, path, what in (("--sensor", args.sensor, "sensor TOML file"),
+                              ("--calibration", args.calibration, "calibration JSON file")):
+        if path is not None:              # a regular file of a sane size: not a directory or a device
+            check_input(path, label, what=what)
     chain = ChainSpec(strain_per_Nm=args.strain_per_Nm, sensor_file=args.sensor,
                       calibration_file=args.calibration)
     pred = PredictionSpec(link=link, alpha=alpha, magnitude_N=magnitude, direction_rad=direction,
