@@ -109,7 +109,8 @@ def _build(args, areas, chosen, out_dir) -> int:
     written, timings = {}, {}
     for area in chosen:
         start = time.perf_counter()
-        print(f"report: building {area} ...", file=sys.stderr)
+        if sys.stderr.isatty():          # progress for a person watching; a pipe gets only the result
+            print(f"report: building {area} ...", file=sys.stderr)
         paths = importlib.import_module(areas[area]).build(out_dir)
         timings[f"{area}_s"] = time.perf_counter() - start
         written[area] = [str(p) for p in paths]
