@@ -15,6 +15,7 @@ link, where the estimator refuses); in the JSON under ``bounds`` and in the ``--
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -122,10 +123,10 @@ def scene_from_args(args, robot, link, alpha, magnitude, direction):
 
     from userio.files import check_input
 
-    for label, path, what in (("--sensor", args.sensor, "sensor TOML file"),
-                              ("--calibration", args.calibration, "calibration JSON file")):
-        if path is not None:              # a regular file of a sane size: not a directory or a device
-            check_input(path, label, what=what)
+    if args.sensor is not None:           # a regular file of a sane size: not a directory or a device
+        check_input(args.sensor, "--sensor", what="sensor TOML file")
+    if args.calibration is not None and os.path.lexists(args.calibration):   # read only when needed
+        check_input(args.calibration, "--calibration", what="calibration JSON file")
     chain = ChainSpec(strain_per_Nm=args.strain_per_Nm, sensor_file=args.sensor,
                       calibration_file=args.calibration)
     pred = PredictionSpec(link=link, alpha=alpha, magnitude_N=magnitude, direction_rad=direction,
@@ -144,8 +145,16 @@ def run(args) -> int:
     _finite_args(args)
     from estimator.spatial.robot import is_spatial_robot_file
     if args.robot is not None and is_spatial_robot_file(args.robot):   # a URDF robot: the 3-D map
+        from estimator.spatial.robot import load_spatial_robot
         from torquebench.spatial_cli import propagate as propagate_3d
-        return propagate_3d(args)
+        from userio.outputs import Outputs
+
+        plan = Outputs(force_flag=None)          # --force is the contact force here: never replace
+        plan.input("--robot", args.robot)
+        plan.input("the robot's URDF", load_spatial_robot(args.robot).urdf_path)
+        plan.file("--png", args.png)
+        with plan.active():                      # checked now; the picture obeys it
+            return propagate_3d(args)
     from estimator.robot import load_robot, paper_leg
     from torquebench import pipeline as P
     from torquebench.cache import Cache
