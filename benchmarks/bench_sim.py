@@ -135,7 +135,7 @@ def write_report(rtf, sweep, evt):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from torquebench.io import write_text_atomic
+    from userio.files import write_text_atomic
 
     out = ROOT / "reports"
     fig, ax = plt.subplots(figsize=(6.5, 4.5))

@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from bridge.errors import InputError
+from userio.errors import InputError
 
 ENOB_DEFINITIONS = ("ti", "ieee")
 _DB_PER_BIT = 20.0 * math.log10(2.0)         # 6.0206 dB

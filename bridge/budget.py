@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 from bridge import adc as _adc
 from bridge.config import SensorConfig
-from bridge.errors import InputError
+from userio.errors import InputError
 from bridge.wheatstone import output_resistance_ohm, sensitivity_factor
 
 BOLTZMANN_J_PER_K = 1.380649e-23

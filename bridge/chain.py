@@ -30,8 +30,13 @@ import numpy as np
 from bridge import adc as _adc
 from bridge.budget import noise_budget
 from bridge.config import SensorConfig
-from bridge.errors import ADCSaturationWarning, InputError, StrainRangeWarning
-from bridge.wheatstone import effective_gauge_factor, strain_from_ratio
+from bridge.wheatstone import BridgeWarning, StrainRangeWarning, effective_gauge_factor, strain_from_ratio
+from userio.errors import InputError
+
+
+class ADCSaturationWarning(BridgeWarning):
+    """Samples clipped at the ADC's rails; their torque is returned as NaN, never as a number."""
+
 
 PAPER_SLOPE_mV_PER_g = 0.0115        # eq. 12
 PAPER_LEVER_ARM_m = 0.205            # assumed: masses at the end of link 1 (l_1, Table I)

@@ -23,7 +23,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 
 from bridge import adc as _adc
-from bridge.errors import InputError
+from userio.errors import InputError
 from userio.files import read_toml
 from bridge.wheatstone import effective_gauge_factor, sensitivity_factor
 

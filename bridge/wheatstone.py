@@ -36,7 +36,20 @@ import warnings
 
 import numpy as np
 
-from bridge.errors import BridgeInverseWarning, InputError, StrainRangeWarning
+from userio.errors import InputError
+
+
+class BridgeWarning(UserWarning):
+    """Base class of the bridge package's warnings (filter them with this class)."""
+
+
+class StrainRangeWarning(BridgeWarning):
+    """A gauge strain beyond the gauge's rated range (±3 % by default): results are extrapolated."""
+
+
+class BridgeInverseWarning(BridgeWarning):
+    """A bridge ratio outside the arrangement's physical range (inverse singular): NaN returned."""
+
 
 #: arrangement → (number of gauges k, arm index (0..3) of each gauge)
 ARRANGEMENTS: dict[str, tuple[int, tuple[int, ...]]] = {

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.errors import InputError
+from userio.errors import InputError
 from calibration.frames import FrameParser
 
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from calibration.errors import InputError
+from userio.errors import InputError
 from calibration.posterior import (PARAM_NAMES, ExactPosterior, check_identifiable,
                                    design_matrix, exact_posterior)
 from calibration.session import Session

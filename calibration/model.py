@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from calibration.errors import InputError
+from userio.errors import InputError
 from calibration.session import G_STANDARD_M_PER_S2
 
 

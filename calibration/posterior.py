@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.errors import InputError
+from userio.errors import InputError
 
 MODELS = ("linear", "quadratic", "hysteresis")
 PARAM_NAMES = {

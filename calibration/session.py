@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.errors import InputError
+from userio.errors import InputError
 from userio.ranges import Range
 
 G_STANDARD_M_PER_S2 = 9.81
 # physical ranges of a static-loading session (userio.ranges.Range: checked where read)
-LEVER_ARM_RANGE_M = Range(0.0, 10.0, "m", lo_open=True,
+LEVER_ARM_RANGE_M = Range(1e-3, 10.0, "m", low="a calibration lever is at least a millimetre long",
                           high="a calibration lever is at most a few metres: mm typed as m?")
 MASS_RANGE_G = Range(0.0, 1e7, "g", high="ten tonnes on a calibration lever: kg typed as g, or mg?")
 READING_LIMIT = 1e12                 # |reading| above this is no ADC code or voltage (counts ≤ 2³², mV ≤ 1e5)

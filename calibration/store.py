@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.errors import InputError
+from userio.errors import InputError
 
 SCHEMA = "torquebench.calibration"
 SCHEMA_VERSION = 1
@@ -116,7 +116,8 @@ def save(payload: dict, path, *, force: bool = False) -> Path:
 
     Existing ``path`` and not ``force`` → the file is kept and ``NAME.vK.json`` is written.
     """
-    from userio.files import next_version_path, write_bytes_atomic
+    from userio.files import write_bytes_atomic
+    from userio.outputs import free_version
 
     data = encode(payload)
     path = Path(path)
@@ -129,7 +130,7 @@ def save(payload: dict, path, *, force: bool = False) -> Path:
         except InputError:
             if not target.exists():
                 raise
-            target = next_version_path(path)
+            target = free_version(path)
     raise InputError(f"{path}: could not find a free version name")
 
 
@@ -163,7 +164,19 @@ def read_document(path, *, data_path=None) -> dict:
                              "calibration was fitted to (hash mismatch)")
     doc["content_sha256"] = stored
     check_meaning(doc, path)
+    diag = doc.get("diagnostics")
+    if not isinstance(diag, dict) or diag.get("converged") is not True:
+        import warnings
+
+        what = "missing" if not isinstance(diag, dict) else f"converged = {diag.get('converged')!r}"
+        warnings.warn(f"{path}: field 'diagnostics': {what}: the fit's convergence is not recorded "
+                      "(calibrate stores converged fits only); its ± may not hold", CalibrationWarning,
+                      stacklevel=2)
     return doc
+
+
+class CalibrationWarning(UserWarning):
+    """A calibration file that reads but whose fit cannot be vouched for (no convergence record)."""
 
 
 def check_meaning(doc: dict, path="<calibration>") -> None:

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimator import dynamics as dyn
-from estimator.errors import InputError
+from userio.errors import InputError
 
 
 @dataclass

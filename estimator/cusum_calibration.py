@@ -33,7 +33,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.sequential import DEFAULT_DRIFT, cusum
 
 CAL_SAMPLES = 2_000_000       # free-run Monte Carlo samples of the calibration

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimator.errors import InputError
+from userio.errors import InputError
 
 
 def detect(rnorm: np.ndarray, threshold: float = 0.06, debounce: int = 0) -> np.ndarray:

@@ -32,7 +32,7 @@ from estimator import noise as noise_mod
 from estimator import timing as timing_mod
 from estimator.contact_estimate import ContactEstimate
 from estimator.detection import chi2_isf, whitened_sumsq
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.log import SensorLog
 from estimator.robot import Robot
 from estimator.stream import DEFAULT_FALSE_ALARM_RATE, METHODS, STATS_SAMPLES, EstimatorStream

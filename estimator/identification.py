@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimator.errors import InputError
+from userio.errors import InputError
 
 OUTLIER_PROBABILITY = 1e-6      # per window, χ²_n: a window beyond this is not noise
 MAX_EXCLUDED_FRACTION = 0.25    # more than this excluded from a log: refused

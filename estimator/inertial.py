@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from estimator.errors import InputError
+from userio.errors import InputError
 
 PER_LINK = ("m", "mc_par", "mc_perp", "I_joint")
 def parameter_names(n_links: int) -> tuple[str, ...]:

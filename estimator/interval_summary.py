@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from estimator import localization as loc_mod
+from estimator.interval_runs import IntervalRuns
 
 ERROR_METHOD = ("first-order propagation of the residual's no-contact covariance through the "
                 "least-squares localization at one sample of the episode (the kept sample 2^j − 1 "
@@ -66,8 +67,9 @@ def add_model_error(row: dict, model: dict):
             row["error_over_bound"] = row["position_m_error_estimate"] / row["position_bound_m"]
 
 
-class EpisodeAccumulator:
-    """Contact intervals merged across chunk boundaries from running sums (bounded memory).
+class EpisodeAccumulator(IntervalRuns):
+    """Contact intervals merged across chunk boundaries from running sums (bounded memory; the
+    intervals of estimator.interval_runs).
 
     Per interval: the most frequent link, and over its samples on that link with a finite α the
     means of α, p, over those with a finite F the mean F (sums in sample order), the
@@ -75,11 +77,6 @@ class EpisodeAccumulator:
     the samples 2^j − 1 after the start (O(log L) rows)."""
 
     KEYS = ("alpha", "px", "pz", "Fx", "Fz")
-
-    def __init__(self, n_links: int):
-        self.nb = n_links + 1
-        self.open = None
-        self.closed = []                 # finished episodes waiting for their error estimate
 
     def _new(self, g, t):
         return {"g0": g, "t0": t, "t1": t, "n": 0, "counts": np.zeros(self.nb),
@@ -89,44 +86,19 @@ class EpisodeAccumulator:
     def feed(self, g0, t, contact, link, alpha, Fx, Fz, px, pz, q_loc, rT, G=None, breaks=None):
         """``G`` (T, n, c): the model term's factor per sample (None without one); ``breaks`` (T,)
         bool: a new interval starts at this contact sample (a slide)."""
-        c = contact.astype(np.int8)
-        if breaks is not None and len(c) and breaks[0] and self.open is not None:
-            self.closed.append(self.open)
-            self.open = None
-        prev = 1 if self.open is not None else 0
-        edges = np.diff(np.concatenate([[prev], c, [0]]))
-        starts = np.flatnonzero(edges == 1)
-        stops = np.flatnonzero(edges == -1)
-        if prev:
-            starts = np.r_[0, starts]
-        if breaks is not None:
-            cut = np.flatnonzero(np.asarray(breaks, bool) & contact.astype(bool))
-            cut = cut[cut > 0]
-            starts = np.sort(np.r_[starts, cut])
-            stops = np.sort(np.r_[stops, cut])
+        starts, stops, continued, sid = self.runs(contact, breaks)
         if not starts.size:
             return
-        # segment id per sample (valid where contact): index of the start at or before it
-        sid = np.searchsorted(starts, np.arange(len(c)), side="right") - 1
-        on = np.flatnonzero(c)
-        S = len(starts)
-        key = sid[on] * self.nb + link[on]
-        size = S * self.nb
-        counts = np.bincount(key, minlength=size).reshape(S, self.nb)
-        good = np.isfinite(alpha[on])
-        same = np.isfinite(Fx[on])
-        gcount = np.bincount(key[good], minlength=size).reshape(S, self.nb)
-        scount = np.bincount(key[same], minlength=size).reshape(S, self.nb)
-        sums = {}
-        for k, x, m in (("alpha", alpha, good), ("px", px, good), ("pz", pz, good),
-                        ("Fx", Fx, same), ("Fz", Fz, same)):
-            sums[k] = np.bincount(key[m], weights=x[on][m], minlength=size).reshape(S, self.nb)
-        for i in range(S):
-            a, b = int(starts[i]), int(stops[i])
-            if i == 0 and prev:
-                ep = self.open
-            else:
-                ep = self._new(g0 + a, float(t[a]))
+        on = np.flatnonzero(np.asarray(contact, bool))
+        good = on[np.isfinite(alpha[on])]                # α, p: the well-conditioned samples
+        same = on[np.isfinite(Fx[on])]                   # F: the samples with a force
+        key = sid * self.nb + np.asarray(link, int)
+        counts, gcount, scount, *sums = self.binned(key, len(starts), [
+            (on, None), (good, None), (same, None), (good, alpha), (good, px), (good, pz),
+            (same, Fx), (same, Fz)])
+        sums = dict(zip(("alpha", "px", "pz", "Fx", "Fz"), sums))
+
+        def add(ep, i, a, b):
             off0 = g0 + a - ep["g0"]
             j = 1
             while j - 1 < off0 + (b - a):        # keep samples at offsets 2^j − 1
@@ -143,16 +115,8 @@ class EpisodeAccumulator:
             ep["same"] += scount[i]
             for k in self.KEYS:
                 ep["sums"][k] += sums[k][i]
-            if b < len(c):
-                self.closed.append(ep)
-                self.open = None
-            else:
-                self.open = ep
 
-    def close_all(self):
-        if self.open is not None:
-            self.closed.append(self.open)
-            self.open = None
+        self.extend(starts, stops, continued, len(contact), lambda a: self._new(g0 + a, float(t[a])), add)
 
     @staticmethod
     def summary(ep) -> dict:

@@ -16,6 +16,7 @@ import numpy as np
 
 from estimator import bounds, episode, onset
 from estimator.episode_tracker import EpisodeTracker
+from estimator.interval_runs import IntervalRuns
 
 EPISODE_METHOD = ("maximum likelihood over the episode's samples (one contact point, the force "
                   "free per sample, the observer's drive whitened by its long-run covariance), "
@@ -32,7 +33,7 @@ FORCE_METHOD = ("mean over the interval's steady samples (from {rise:.3g} s = {n
                 "covariance (a bound, exact for white sensor noise)")
 
 
-class SteadyForce:
+class SteadyForce(IntervalRuns):
     """An interval's mean force from its steady samples, in bounded memory across chunks.
 
     The localization reads the observer restarted at the run's first flagged sample s
@@ -50,18 +51,17 @@ class SteadyForce:
     sensor noise), and never above n² σ_k² (fully correlated): σ(F̄) = σ_k min(√(ρ n), n) / Σ c_k.
 
     (an interval without steady samples, shorter than the rise, uses all its samples the same way).
-    Intervals are the contact runs split at ``breaks`` (slides), closed in the order the interval
-    accumulator of estimator.interval_summary closes them. K: the slowest row's gain (the correction is
+    Intervals are the contact runs split at ``breaks`` (slides): estimator.interval_runs, the
+    base it shares with the interval accumulator of estimator.interval_summary (same intervals,
+    closed in the same order). K: the slowest row's gain (the correction is
     exact when all rows share K, as the default observer's)."""
 
     KEYS = ("Fx", "Fz", "c", "n", "Fx_all", "Fz_all", "c_all", "n_all")
 
     def __init__(self, n_links: int, gain_per_s):
-        self.nb = n_links + 1
+        super().__init__(n_links)
         self.K = float(np.min(gain_per_s))
         self.rise_s = RISE_TIME_CONSTANTS / self.K
-        self.open = None
-        self.closed = []
 
     def _new(self):
         return np.zeros((len(self.KEYS) + 1, self.nb))      # the last row: ρ (max over the interval)
@@ -69,50 +69,27 @@ class SteadyForce:
     def feed(self, contact, link, force, since_s, breaks=None, rho: float = 1.0):
         """One part's samples: flags, per-sample link and force (T, 2), time since the restart
         (s), the tracker's ``breaks`` and ρ = λ_max(R⁻¹Ω) of the part's noise blocks."""
-        c = np.asarray(contact, bool).astype(np.int8)
-        if breaks is not None and len(c) and breaks[0] and self.open is not None:
-            self.closed.append(self.open)
-            self.open = None
-        prev = 1 if self.open is not None else 0
-        edges = np.diff(np.concatenate([[prev], c, [0]]))
-        starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-        if prev:
-            starts = np.r_[0, starts]
-        if breaks is not None:
-            cut = np.flatnonzero(np.asarray(breaks, bool) & c.astype(bool))
-            cut = cut[cut > 0]
-            starts, stops = np.sort(np.r_[starts, cut]), np.sort(np.r_[stops, cut])
+        starts, stops, continued, sid = self.runs(contact, breaks)
         if not starts.size:
             return
-        sid = np.searchsorted(starts, np.arange(len(c)), side="right") - 1
+        c = np.asarray(contact, bool)
         F = np.asarray(force, float)
         since = np.asarray(since_s, float)
-        use = c.astype(bool) & np.all(np.isfinite(F), axis=1) & np.isfinite(since)
+        use = c & np.all(np.isfinite(F), axis=1) & np.isfinite(since)
         rise = np.where(use, -np.expm1(-self.K * np.where(use, since, 0.0)), 0.0)    # c_k = 1 − e^(−K t)
         steady = use & (since >= self.rise_s - 1e-12)
         key = sid * self.nb + np.asarray(link, int)
-        size = len(starts) * self.nb
-        sums = np.zeros((len(self.KEYS), len(starts), self.nb))
-        for i, (w, vals) in enumerate(((steady, F[:, 0]), (steady, F[:, 1]), (steady, rise),
-                                       (steady, np.ones(len(c))), (use, F[:, 0]), (use, F[:, 1]),
-                                       (use, rise), (use, np.ones(len(c))))):
-            m = np.flatnonzero(w)
-            sums[i] = np.bincount(key[m], weights=vals[m], minlength=size).reshape(len(starts), self.nb)
-        for i in range(len(starts)):
-            a, b = int(starts[i]), int(stops[i])
-            ep = self.open if (i == 0 and prev) else self._new()
+        ones = np.ones(len(c))
+        st, us = np.flatnonzero(steady), np.flatnonzero(use)
+        sums = np.array(self.binned(key, len(starts), [
+            (st, F[:, 0]), (st, F[:, 1]), (st, rise), (st, ones),
+            (us, F[:, 0]), (us, F[:, 1]), (us, rise), (us, ones)]))
+
+        def add(ep, i, a, b):
             ep[:-1] += sums[:, i]
             ep[-1] = max(ep[-1, 0], rho)
-            if b < len(c):
-                self.closed.append(ep)
-                self.open = None
-            else:
-                self.open = ep
 
-    def finish(self):
-        if self.open is not None:
-            self.closed.append(self.open)
-            self.open = None
+        self.extend(starts, stops, continued, len(c), lambda a: self._new(), add)
 
     def mean(self, link: int, sigma_per_sample: dict | None = None) -> dict:
         """The next closed interval's rise-corrected mean force on ``link`` (Fx_N, Fz_N; NaN

@@ -34,7 +34,7 @@ import numpy as np
 
 from estimator import compiled, localization_loops
 from estimator import dynamics as dyn
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.robot import Robot
 
 REASONS = ("ok", "no_contact", "small_force", "parallel_to_link", "ambiguous_link",

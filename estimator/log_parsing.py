@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimator.errors import InputError
+from userio.errors import InputError
 
 
 def file_line(row_index: int) -> int:

@@ -17,7 +17,7 @@ import numpy as np
 
 from estimator import compiled
 from estimator import log_parsing as parsing
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.log import log_columns, SensorLog
 from estimator.log_parsing import file_line
 

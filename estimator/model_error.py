@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from estimator import observer
-from estimator.errors import InputError
+from userio.errors import InputError
 
 
 def covariance_sqrt(cov: np.ndarray, rtol: float = 1e-12):

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from estimator.errors import InputError
+from userio.errors import InputError
 from userio.ranges import Range, check_ranges
 
 # physical ranges of the sensor noise (1σ per sample), declared once (userio.ranges.Range)

@@ -33,7 +33,7 @@ import numpy as np
 from estimator import compiled
 from estimator import dynamics as dyn
 from estimator import timing as timing_mod
-from estimator.errors import InputError
+from userio.errors import InputError
 
 if TYPE_CHECKING:                  # annotations only: robot.py's methods call this module
     from estimator.robot import Robot

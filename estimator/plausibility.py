@@ -61,13 +61,14 @@ def velocity_scale(t: np.ndarray, q: np.ndarray, dq: np.ndarray) -> tuple[float,
 def _plausibility_py(t, q, dq, base, n, max_angle, has_last, t0, q0, d0, sums):
     """Checker.rows in one pass: the first (k, j) with |q_j| > max_angle (joint angles) or
     (−1, −1); else the sums Σ fd·mid, Σ mid·mid, Σ fd·fd over the steps of [last] + rows
-    (fd = Δq/Δt, mid = ½(q̇_k + q̇_{k+1}), coordinates from ``base`` on) added to ``sums``."""
+    (fd = Δq/Δt, mid = ½(q̇_k + q̇_{k+1}), coordinates from ``base`` on) added to ``sums`` (2, 3):
+    row 0 the base's coordinates (columns 0–2), row 1 the joints'."""
     T, C = q.shape
     for k in range(T):
         for j in range(n):
             if abs(q[k, 3 + j]) > max_angle:
                 return k, j
-    s0, s1, s2 = 0.0, 0.0, 0.0
+    acc = np.zeros((2, 3))
     for k in range(-1 if has_last else 0, T - 1):
         ta = t0 if k < 0 else t[k]
         h = t[k + 1] - ta
@@ -76,12 +77,13 @@ def _plausibility_py(t, q, dq, base, n, max_angle, has_last, t0, q0, d0, sums):
             da = d0[j - base] if k < 0 else dq[k, j]
             fd = (q[k + 1, j] - qa) / h
             mid = (dq[k + 1, j] + da) * 0.5
-            s0 += fd * mid
-            s1 += mid * mid
-            s2 += fd * fd
-    sums[0] += s0
-    sums[1] += s1
-    sums[2] += s2
+            g = 0 if j < 3 else 1
+            acc[g, 0] += fd * mid
+            acc[g, 1] += mid * mid
+            acc[g, 2] += fd * fd
+    for g in range(2):
+        for i in range(3):
+            sums[g, i] += acc[g, i]
     return -1, -1
 
 
@@ -108,7 +110,7 @@ class Checker:
 
     def __init__(self, source: str, floating: bool, n_links: int):
         self.src, self.base, self.n = source, 0 if floating else 3, n_links
-        self.sums = np.zeros(3)            # Σ fd·mid, Σ mid·mid, Σ fd·fd
+        self.sums = np.zeros((2, 3))       # Σ fd·mid, Σ mid·mid, Σ fd·fd of the base's, the joints' columns
         self.steps = 0
         self._last = None                  # (t, q, dq) of the previous chunk's last row
 
@@ -136,8 +138,11 @@ class Checker:
             fd /= np.diff(t)[:, None]
             mid = dd[1:] + dd[:-1]
             mid *= 0.5
-            self.sums += [float(np.einsum("ij,ij->", fd, mid)), float(np.einsum("ij,ij->", mid, mid)),
-                          float(np.einsum("ij,ij->", fd, fd))]
+            nb = 3 - self.base                       # the base's columns among qq (0 or 3)
+            for g, cols in ((0, slice(0, nb)), (1, slice(nb, None))):
+                f, m = fd[:, cols], mid[:, cols]
+                self.sums[g] += [float(np.einsum("ij,ij->", f, m)), float(np.einsum("ij,ij->", m, m)),
+                                 float(np.einsum("ij,ij->", f, f))]
             self.steps += len(t) - 1
         self._last = (t[-1], qq[-1:].copy(), dd[-1:].copy())
 
@@ -153,23 +158,28 @@ class Checker:
             raise InputError(f"{self.src}: column 't': sampling period {dt:.4g} s is outside the "
                              f"plausible 10 µs–1 s{hint}; the log's time must be in seconds")
 
-    def scale(self) -> tuple[float, float]:
-        """(s, r) as ``velocity_scale`` over every step seen."""
-        fm, mm, ff = self.sums
+    def scale(self, group: int | None = None) -> tuple[float, float]:
+        """(s, r) as ``velocity_scale`` over every step seen: of the base's (``group`` 0) or the
+        joints' (1) coordinates, or of all of them (None)."""
+        fm, mm, ff = self.sums.sum(axis=0) if group is None else self.sums[group]
         if self.steps < 2 or mm == 0 or ff == 0:
             return float("nan"), float("nan")
         return fm / mm, fm / math.sqrt(mm * ff)
 
     def finish(self, warn: bool = True) -> list[str]:
+        """The velocity scale per group (base, joints): one group in other units (joint rates in
+        deg/s beside a base in m/s) is not hidden by the other's agreement."""
         found = []
-        s, r = self.scale()
-        if math.isfinite(s) and r >= MIN_CORRELATION:
+        for group, what in ((0, "base velocities"), (1, "joint velocities")):
+            s, r = self.scale(group)
+            if not (math.isfinite(s) and r >= MIN_CORRELATION):
+                continue
             if not 0.1 <= s <= 10:
-                raise InputError(f"{self.src}: velocities disagree with the angle differences by a "
+                raise InputError(f"{self.src}: {what} disagree with the angle differences by a "
                                  f"factor {s:.4g} (Δq/Δt vs logged q̇, correlation {r:.2f}): "
                                  f"{_unit_hint(s)}; the log must be in s, rad, rad/s")
             if not 0.5 <= s <= 2:
-                found.append(f"{self.src}: velocities disagree with the angle differences by a "
+                found.append(f"{self.src}: {what} disagree with the angle differences by a "
                              f"factor {s:.3g} (correlation {r:.2f}); check the velocity filter and units")
         if warn:
             for msg in found:

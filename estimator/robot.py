@@ -168,7 +168,28 @@ def robot_from_dict(data: dict, source: str = "robot") -> Robot:
         base_damping=np.array(file.base_mount.damping, float),
         friction_coefficient=file.friction_coefficient,
         name=Path(source).stem if file.name is None else file.name)
+    _warn_mass_units(robot.masses_kg, source)
     return inertial.read_tables(robot, file, source)
+
+
+#: links of one chain whose masses differ by this factor or more: one of them in another unit
+MASS_RATIO_UNITS = 1000.0
+
+
+def _warn_mass_units(masses_kg, source: str) -> None:
+    """Warn (estimator.plausibility.PlausibilityWarning) when the heaviest link weighs ≥ 1000×
+    the lightest: the factor of a mass typed in g among masses in kg (each value alone lies in
+    its range, so the schema cannot see it)."""
+    m = np.asarray(masses_kg, float)
+    if len(m) < 2 or not np.all(m > 0) or m.max() < MASS_RATIO_UNITS * m.min():
+        return
+    import warnings
+
+    from estimator.plausibility import PlausibilityWarning
+
+    hi, lo = int(np.argmax(m)), int(np.argmin(m))
+    warnings.warn(f"{source}: link[{hi + 1}].mass_kg = {m[hi]:g} is {m[hi] / m[lo]:.0f}× link[{lo + 1}]'s "
+                  f"({m[lo]:g} kg): one of them in g?", PlausibilityWarning, stacklevel=3)
 
 
 def load_robot(path: str | Path) -> Robot:

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimator.errors import InputError
+from userio.errors import InputError
 
 QUANTUM = 2.0 ** -20          # fixed-point step of the CUSUM, in χ² units
 DEFAULT_DRIFT = 1.0           # δ in units of n (the reference shift: s above 2n on average)

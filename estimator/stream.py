@@ -20,7 +20,7 @@ from estimator import observer, onset, release, sequential
 from estimator import timing as timing_mod
 from estimator.contact_estimate import ContactEstimate
 from estimator.detection import DetectorState, chi2_isf, debounce_chunk, sumsq_rows, whitened_sumsq
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.interval_summary import EpisodeAccumulator, add_model_error, episode_errors
 
 METHODS = ("dynamic", "paper")
@@ -475,7 +475,7 @@ class EstimatorStream:
         if rows is not None:
             self.queue.append(self._stage1(rows))
         out = self._drain(True)
-        self.episodes.close_all()
+        self.episodes.finish()
         if self.episode_stage is not None:
             self.episode_stage.finish()
         self._close_episodes()

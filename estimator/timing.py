@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from estimator.errors import InputError
+from userio.errors import InputError
 from userio.ranges import Range
 
 KINDS = ("instant", "mean", "delay")

@@ -37,7 +37,7 @@ import numpy as np
 
 from estimator import dynamics as dyn
 from estimator import localization as loc
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.observer import coefficients
 from estimator.robot import Robot
 from estimator.sim.static import static_readings

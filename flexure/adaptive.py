@@ -47,7 +47,7 @@ import time
 
 import numpy as np
 
-from flexure.errors import InputError
+from userio.errors import InputError
 
 DEFAULT_RTOL = 0.02
 #: the first mesh: the design's size function × this, its curved faces resolved as at

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexure.design import Design, load_design
-from flexure.errors import InputError
+from userio.errors import InputError
 from flexure.gauges import bridge_strains, read_footprint
 from flexure.mesh import TET_EDGES
 from flexure.post import element_nodal_strains, nodal_average, stress_from_strain, von_mises

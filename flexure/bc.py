@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from flexure.errors import InputError
+from userio.errors import InputError
 from flexure.fem import TRI_QUAD, rigid_body_modes, tri_shape
 from flexure.mesh import Mesh
 

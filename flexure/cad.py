@@ -15,7 +15,7 @@ import numpy as np
 from userio.errors import CallbackInterrupt
 
 
-from flexure.errors import InputError
+from userio.errors import InputError
 from flexure.geometry import Surface, check_watertight
 
 _INTERRUPT = CallbackInterrupt()     # Ctrl-C inside gmsh's size callback → KeyboardInterrupt after it

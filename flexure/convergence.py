@@ -55,7 +55,7 @@ import sys
 
 import numpy as np
 
-from flexure.errors import InputError
+from userio.errors import InputError
 
 #: figure → nominal convergence order per element order k: a strain reading ~ h^k; the stiffness
 #: (an energy) ~ h^(2λ) whatever k, λ ≈ 0.5 the singular exponent at the edges where a clamped or

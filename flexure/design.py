@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flexure.errors import InputError
+from userio.errors import InputError
 from userio.files import read_toml
 from flexure.gauges import Gauge
 from flexure.geometry import SpokeDisc

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from flexure.errors import InputError
+from userio.errors import InputError
 from flexure.mesh import TET_EDGES, Mesh
 
 # 4-point, degree-2 rule on the reference tetrahedron (volume 1/6), barycentric (a,b,b,b) perms.

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexure.errors import InputError
+from userio.errors import InputError
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flexure.errors import InputError
+from userio.errors import InputError
 
 
 @dataclass(frozen=True)

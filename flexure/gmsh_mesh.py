@@ -34,7 +34,7 @@ import numpy as np
 
 from userio.errors import CallbackInterrupt
 
-from flexure.errors import InputError
+from userio.errors import InputError
 from flexure.meshing import edge_size
 
 MM = 1e3                        # metres → gmsh units (mm)

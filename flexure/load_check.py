@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexure.errors import InputError
+from userio.errors import InputError
 
 #: relative tolerance on the radii (of the part's largest extent), as the node selection's
 TOL = 1e-6

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from flexure.errors import InputError
+from userio.errors import InputError
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexure.errors import InputError
+from userio.errors import InputError
 
 #: local vertex pairs of the six edges, in VTK / tetgen order (local nodes 4..9).
 TET_EDGES = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]], dtype=np.int64)

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexure.errors import InputError
+from userio.errors import InputError
 from flexure.geometry import Surface, check_watertight
 
 #: h_far as a multiple of thickness, h_gauge as a multiple of the gauge grid's smaller side. At

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexure.errors import InputError
+from userio.errors import InputError
 from flexure.fem import TET_QUAD, physical_gradients, tet_shape
 from flexure.mesh import Mesh
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flexure.errors import InputError
+from userio.errors import InputError
 from userio.files import atomic_write
 
 #: boundary_condition point-data codes.

@@ -29,7 +29,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from flexure.errors import InputError
+from userio.errors import InputError
 from flexure.fem import stiffness_matrix
 from flexure.mesh import SLIVER_DIHEDRAL_DEG, element_shape_metrics
 

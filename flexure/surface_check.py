@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexure.errors import InputError
+from userio.errors import InputError
 
 #: a wall thinner than this fraction of the part's largest extent is a zero-thickness feature
 THIN_FRACTION = 1e-3

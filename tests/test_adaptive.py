@@ -127,7 +127,7 @@ def test_levels_are_the_default_and_adaptive_is_opt_in(tmp_path, monkeypatch):
     """analyze_design: no method → the levels (adaptive's effectivity is not yet established on
     unseen parts, reports/fem_adaptive.md); "adaptive" → flexure.adaptive; anything else → InputError."""
     from flexure import convergence
-    from flexure.errors import InputError
+    from userio.errors import InputError
 
     d = annulus(tmp_path, sections=24)
     calls = []

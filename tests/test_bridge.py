@@ -12,7 +12,8 @@ from bridge import adc
 from bridge.budget import (amplifier_noise_rms_V, eps_min_eq11, johnson_density_V_per_rtHz,
                            min_detectable_strain, min_detectable_torque_Nm, noise_budget)
 from bridge.config import SensorConfig, load_sensor_config, sensor_config_from_dict
-from bridge.errors import BridgeInverseWarning, InputError, StrainRangeWarning
+from bridge.wheatstone import BridgeInverseWarning, StrainRangeWarning
+from userio.errors import InputError
 from bridge.wheatstone import (ARRANGEMENTS, effective_gauge_factor, gauge_strains,
                                linear_output_ratio, output_ratio, pattern, ratio_from_strain,
                                self_heating_W, sensitivity_factor, strain_from_ratio)

@@ -10,7 +10,9 @@ from bridge import adc
 from bridge.chain import (GRAVITY_m_per_s2, PAPER_LEVER_ARM_m, PAPER_STRAIN_PER_NM, SensorChain,
                           paper_chain)
 from bridge.config import SensorConfig
-from bridge.errors import ADCSaturationWarning, InputError, StrainRangeWarning
+from bridge.chain import ADCSaturationWarning
+from bridge.wheatstone import StrainRangeWarning
+from userio.errors import InputError
 
 N = 200_000
 

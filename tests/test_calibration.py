@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from calibration.errors import InputError
+from userio.errors import InputError
 from calibration.fit import fit_session
 from calibration.posterior import design_matrix, exact_posterior
 from calibration.session import Session, read_session, write_session

@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from estimator.detection import DetectorState, debounce_chunk, detect
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.estimate import estimate
 from estimator.log import write_log
 from estimator.log_reader import LogReader, read_log
@@ -139,7 +139,7 @@ def test_reader_errors_name_the_line_across_chunks(tmp_path):
     frame = pd.read_csv(path)
     frame.loc[2500, "t"] = frame.loc[2499, "t"]
     frame.to_csv(tmp_path / "back.csv", index=False)
-    from estimator.errors import InputError
+    from userio.errors import InputError
     with pytest.raises(InputError, match="line 2502"):
         list(LogReader(tmp_path / "back.csv", ROBOT, chunk_samples=100))
     frame = pd.read_csv(path)

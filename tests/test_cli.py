@@ -7,7 +7,8 @@ import sys
 import pytest
 
 from torquebench.cli import build_parser, main
-from torquebench.io import atomic_path, jsonable, write_text_atomic
+from torquebench.io import jsonable
+from userio.files import atomic_path, write_text_atomic
 
 
 def _subcommands():

@@ -10,7 +10,7 @@ from estimator import excitation as X
 from estimator.model import ModelUncertainty
 from estimator.noise import paper_leg_noise
 from estimator.robot import paper_leg
-from torquebench.errors import InputError
+from userio.errors import InputError
 from torquebench.scenes import load_scene, scene_path
 
 ROBOT = paper_leg()

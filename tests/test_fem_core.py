@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from flexure.bc import Problem, face_set_properties, traction_load
-from flexure.errors import InputError
+from userio.errors import InputError
 from flexure.fem import element_stiffness, rigid_body_modes, stiffness_matrix
 from flexure.material import ALUMINIUM_6061_T6, Material
 from flexure.mesh import Mesh, box_mesh, cylinder_mesh, quality, to_linear, to_quadratic, unique_edges

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from flexure.design import load_design
-from flexure.errors import InputError
+from userio.errors import InputError
 from flexure.geometry import Surface, extrude, spoke_disc_surface
 from flexure.surface_check import check_gauges, check_solid, self_intersections, thin_walls
 from torquebench.cli import main

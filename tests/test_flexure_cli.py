@@ -7,7 +7,7 @@ import pytest
 
 from flexure.analysis import parse_sweep
 from flexure.convergence import P1_WARNING
-from flexure.errors import InputError
+from userio.errors import InputError
 from torquebench.cli import main
 
 ISSUE_KEYS = ("sensitivity_mV_per_V_per_Nm", "torsional_stiffness_Nm_per_rad", "max_von_mises_Pa",

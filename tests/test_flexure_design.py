@@ -9,7 +9,7 @@ import pytest
 from conftest import shared_result
 from flexure.analysis import analyze, analyze_mesh, build_mesh
 from flexure.design import load_design
-from flexure.errors import InputError
+from userio.errors import InputError
 from flexure.fem import stiffness_matrix
 from flexure.geometry import SpokeDisc, check_watertight, load_stl, profile, spoke_disc_surface
 from torquebench.io import shipped

@@ -11,7 +11,7 @@ pv = pytest.importorskip("pyvista")
 
 from flexure import render  # noqa: E402
 from flexure.analysis import Fields  # noqa: E402
-from flexure.errors import InputError  # noqa: E402
+from userio.errors import InputError  # noqa: E402
 from userio.files import atomic_write  # noqa: E402
 from flexure.gauges import Gauge  # noqa: E402
 from flexure.mesh import Mesh, box_mesh, to_quadratic  # noqa: E402

@@ -11,7 +11,8 @@ from calibration.store import encode
 from torquebench.cli import main
 from torquebench.io import REPO_ROOT
 from userio.errors import InputError
-from userio.files import plan_outputs, write_files_atomic
+from userio.files import write_files_atomic
+from userio.outputs import Outputs
 
 DATA = REPO_ROOT / "calibration" / "data"
 SCENES = REPO_ROOT / "scenes"
@@ -133,22 +134,37 @@ def test_plan_outputs_refuses_collisions_and_symlinked_inputs(tmp_path):
     inp = tmp_path / "in.csv"
     inp.write_text("x")
     (tmp_path / "link.csv").symlink_to(inp)
+
+    def plan(inputs, outs):
+        p = Outputs()
+        for label, path in inputs.items():
+            p.input(label, path)
+        for label, path in outs.items():
+            p.file(label, path)
+        return p.check()
+
     with pytest.raises(InputError, match="--out: .*link.csv is the input data"):
-        plan_outputs({"data": inp}, {"--out": tmp_path / "link.csv"})
+        plan({"data": inp}, {"--out": tmp_path / "link.csv"})
     with pytest.raises(InputError, match="--b: .* is also written as --a"):
-        plan_outputs({}, {"--a": tmp_path / "o.csv", "--b": tmp_path / "." / "o.csv"})
+        plan({}, {"--a": tmp_path / "o.csv", "--b": tmp_path / "." / "o.csv"})
+    with pytest.raises(InputError, match="o.csv is also written as .*o.csv; two outputs"):
+        write_files_atomic([(tmp_path / "o.csv", "a"), (tmp_path / "." / "o.csv", "b")])
     with pytest.raises(InputError, match="directory .* does not exist"):
-        plan_outputs({}, {"--out": tmp_path / "nope" / "o.csv"})
-    assert plan_outputs({"data": inp}, {"--out": tmp_path / "o.csv"}) == [tmp_path / "o.csv"]
+        write_files_atomic([(tmp_path / "nope" / "o.csv", "a")])
+    assert plan({"data": inp}, {"--out": tmp_path / "new" / "o.csv"}).files == [("--out", tmp_path / "new" / "o.csv")]
+    assert (tmp_path / "new").is_dir()
 
 
 def test_reproduce_default_never_writes_the_shipped_report(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     code, _, err = cli(["reproduce", "--scene", "paper_fixed_link1", "--regenerate-shipped"], capsys)
     assert_one_line_error(code, err, "--regenerate-shipped")
-    from userio.files import output_dir
-    d = output_dir(None, default="reproduction", shipped_dir=REPO_ROOT / "reports")
-    assert d == tmp_path / "reproduction" and d.is_dir()
+    from userio.outputs import default_dir
+    d = default_dir(None, default="reproduction", shipped_dir=REPO_ROOT / "reports")
+    assert d == tmp_path / "reproduction"
+    monkeypatch.chdir(REPO_ROOT)
+    with pytest.raises(InputError, match="shipped reports directory"):
+        default_dir(None, default="reports", shipped_dir=REPO_ROOT / "reports")
 
 
 # --------------------------------------------------------------------------- numbers and files

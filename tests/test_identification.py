@@ -11,7 +11,7 @@ import pytest
 
 from estimator import identification as ident
 from estimator import inertial
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.excitation import Fourier
 from estimator.log import SensorLog
 from estimator.model import ModelUncertainty

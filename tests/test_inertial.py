@@ -10,7 +10,7 @@ import pytest
 
 from estimator import dynamics as D
 from estimator import inertial
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.model import ModelUncertainty, RobotModel
 from estimator.observer import momentum_terms
 from estimator.robot import PAPER_LEG_TOML, Robot, load_robot, paper_leg, robot_from_dict

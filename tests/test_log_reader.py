@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import estimator.log_parsing as P
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.log import log_columns
 from estimator.log_reader import LogReader, read_log
 from estimator.robot import paper_leg

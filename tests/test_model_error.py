@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from estimator import compiled, inertial, observer
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.log import SensorLog
 from estimator.model import ModelUncertainty
 from estimator.model_error import ModelTerm, statistic_numpy

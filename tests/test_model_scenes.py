@@ -11,7 +11,7 @@ from estimator.inertial import robot_toml
 from estimator.model import ModelUncertainty
 from estimator.robot import paper_leg
 from torquebench import pipeline as P
-from torquebench.errors import InputError
+from userio.errors import InputError
 from torquebench.scenes import load_scene, scene_path
 
 BASE = scene_path("paper_floating_link1").read_text()

@@ -6,7 +6,7 @@ import pytest
 
 from estimator import noise as Nz
 from estimator import observer as O
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.robot import paper_leg
 from estimator.synthetic import inverse_dynamics_log, sinusoidal_motion
 

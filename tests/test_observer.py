@@ -6,7 +6,7 @@ import pytest
 from estimator import dynamics as D
 from estimator import observer as O
 from estimator.detection import detect, isolate
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.robot import paper_leg
 from estimator.synthetic import moving_leg_poke
 

@@ -6,7 +6,7 @@ import warnings
 import numpy as np
 import pytest
 
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.log import SensorLog, write_log
 from estimator.log_reader import read_log
 from estimator.plausibility import PlausibilityWarning, check_log, velocity_scale

@@ -5,9 +5,9 @@ import re
 import numpy as np
 import pytest
 
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.robot import PAPER_LEG_TOML, load_robot, paper_leg, robot_from_dict
-from torquebench.io import read_toml
+from userio.files import read_toml
 
 
 def test_paper_leg_matches_table_one():

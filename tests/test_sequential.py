@@ -11,7 +11,7 @@ from estimator import cusum_calibration as C
 from estimator import noise as Nz
 from estimator import sequential as S
 from estimator import timing
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.estimate import estimate
 from estimator.log import SensorLog
 from estimator.robot import paper_leg

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from calibration.acquire import RawCapture, Reader, capture, guided_session, open_port, settled_mean
-from calibration.errors import InputError
+from userio.errors import InputError
 from calibration.frames import (FrameParser, crc16_ccitt_false, crc16_rows, encode_frames,
                                 frame_length, parse_bytes)
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from estimator import dynamics as dyn
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.robot import paper_leg
 from estimator.sim import (Controller, Ground, Poke, Sensors, SimConfig, check_stability, simulate,
                            static_readings)

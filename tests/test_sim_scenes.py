@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from torquebench.errors import InputError
+from userio.errors import InputError
 from torquebench.scenes import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -231,7 +231,7 @@ def test_collision_overrides_in_the_declaration(tmp_path):
     res = loc.localize(model, surfs, q, r, _whitener(model, q))
     assert res.reason[0] == loc.OK and np.linalg.norm(res.point_body[0] - p) < 1e-9
     (tmp_path / "bad.toml").write_text('urdf = "leg.urdf"\n[[collision]]\nlink = "shin"\nkind = "sphere"\nsize = [0.01]\n')
-    from estimator.errors import InputError
+    from userio.errors import InputError
     with pytest.raises(InputError, match="collision: no link 'shin'"):
         load_spatial_robot(tmp_path / "bad.toml")
     (tmp_path / "bad.toml").write_text('urdf = "leg.urdf"\n[[collision]]\nlink = "shank"\nkind = "cone"\n')

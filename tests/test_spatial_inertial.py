@@ -13,7 +13,7 @@ import pytest
 
 pin = pytest.importorskip("pinocchio")
 
-from estimator.errors import InputError  # noqa: E402
+from userio.errors import InputError  # noqa: E402
 from estimator.model import ModelUncertainty, RobotModel  # noqa: E402
 from estimator.spatial import inertial as si  # noqa: E402
 from estimator.spatial.model import UrdfModel  # noqa: E402

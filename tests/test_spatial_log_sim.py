@@ -9,7 +9,7 @@ import pytest
 
 pytest.importorskip("pinocchio")
 
-from estimator.errors import InputError  # noqa: E402
+from userio.errors import InputError  # noqa: E402
 from estimator.spatial import model as mm  # noqa: E402
 from estimator.spatial.logs import (SpatialLogReader, make_noise, noise_text, read_noise,  # noqa: E402
                                     read_spatial_log, read_timing, spatial_columns,

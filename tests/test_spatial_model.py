@@ -9,7 +9,7 @@ import pytest
 
 pin = pytest.importorskip("pinocchio")
 
-from estimator.errors import InputError  # noqa: E402
+from userio.errors import InputError  # noqa: E402
 from estimator.model import RobotModel  # noqa: E402
 from estimator.spatial import tree as tree_mod  # noqa: E402
 from estimator.spatial.model import UrdfModel, pinocchio_terms  # noqa: E402

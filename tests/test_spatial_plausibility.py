@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.plausibility import check_head_model
 from torquebench.io import REPO_ROOT
 

@@ -5,7 +5,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.sim import simulate
 from torquebench.cli import main
 from torquebench.scenes import load_scene

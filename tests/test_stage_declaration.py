@@ -132,12 +132,29 @@ def test_the_stage_graph_and_the_reproduction_report_are_in_no_import_cycle():
                    "torquebench.stages.planner") for m in top[s] | inner[s])
 
 
-def test_the_scene_schema_accepts_exactly_what_the_stages_offer():
-    """A scene's ``[outputs] want`` is checked by the input schema (userio.schema.scene.OUTPUTS,
-    listed for the generated docs); it must name exactly what the stage declarations let a scene
-    ask for (``Stage.scene_output`` and aliases), so a new stage a scene may want fails here until
-    the schema lists it."""
-    from torquebench.stages.registry import scene_outputs
-    from userio.schema.scene import OUTPUTS
+def test_a_new_wantable_stage_is_one_declaration_for_the_schema_and_the_docs(toy, tmp_path):
+    """A scene's ``[outputs] want`` is checked by the input schema against the names the stage
+    declarations offer (passed in by the reader: userio.schema.base.OneOf), and the generated
+    docs/inputs.md lists them from the same place: the toy stage registered above (this file is its
+    one declaration) is wantable by its alias and documented, without any other file naming it."""
+    from userio.errors import InputError
+    from userio.schema import docs
+    from userio.schema.scene import SceneFile
 
-    assert set(OUTPUTS) == set(scene_outputs())
+    text = SCENE.read_text() + '\n[outputs]\nwant = ["noise_squared"]\n'
+    (tmp_path / "s.toml").write_text(text.replace('robot = "paper_leg.toml"',
+                                                  f'robot = "{ROOT / "robots" / "paper_leg.toml"}"'))
+    scene = load_scene(tmp_path / "s.toml")
+    assert "toy_noise_power" in {s.stage.name for s in plan(scene, None, None) if s.action == "run"}
+    assert '`"noise_squared"`' in docs.render()
+    schema_sources = "".join(p.read_text() for p in (ROOT / "userio" / "schema").glob("*.py"))
+    assert "noise_squared" not in schema_sources and "localization_error" not in schema_sources
+    registry.unregister(TOY.name)                       # without the declaration: refused, named
+    try:
+        with pytest.raises(InputError, match=r"outputs\.want\[1\]: must be .*'report'.*got 'noise_squared'"):
+            load_scene(tmp_path / "s.toml")
+        assert '`"noise_squared"`' not in docs.render()
+    finally:
+        registry.register(TOY)
+    with pytest.raises(TypeError, match="needs context"):   # the schema holds no list of its own
+        SceneFile.model_validate({"outputs": {"want": ["report"]}})

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import calibration
-from calibration.errors import InputError
+from userio.errors import InputError
 from calibration.fit import fit_session
 from calibration.session import write_session
 from calibration.simulate import paper_session

@@ -7,7 +7,7 @@ import pytest
 
 from estimator import observer as O
 from estimator import log_declarations, timing
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.robot import paper_leg
 from estimator.synthetic import inverse_dynamics_log
 

@@ -4,7 +4,7 @@ against the real observer + pipeline on noisy logs."""
 import numpy as np
 import pytest
 
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.log import SensorLog
 from estimator.observer import residual_offline
 from estimator.estimate import estimate

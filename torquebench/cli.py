@@ -23,7 +23,10 @@ import sys
 
 import torquebench
 import torquebench.commands
-from torquebench.errors import USER_ERRORS
+from userio.errors import InputError
+
+#: the user errors the CLI turns into exit code 2 and one line on stderr
+USER_ERRORS = (InputError, FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError)
 
 DESCRIPTION = ("torquebench: design a strain-gauge joint torque sensor (flexure FEM, bridge and ADC),\n"
                "calibrate it, and estimate contacts on a robot leg with a momentum observer.")
@@ -136,8 +139,10 @@ def _main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.error("a command is required (see torquebench --help)")
     where = f"torquebench {args.command}"
+    from userio import outputs
+
     try:
-        with _warnings_as_lines():
+        with _warnings_as_lines(), outputs.required():     # every write through the command's plan
             return int(args._run(args) or 0)
     except KeyboardInterrupt as exc:
         return _interrupted(where, str(exc))

@@ -1,7 +1,6 @@
-"""Output shared by the commands: shipped files and JSON (atomic files are ``userio.files``).
-
-Contracts (CONTRIBUTING.md, "Errors and files"): files the tool writes appear whole or not at all (temp file + rename);
-``--json`` prints exactly one JSON object on stdout, numbers in SI units, NaN as null.
+"""The commands' stdout and the repository's own files: ``--json`` prints exactly one JSON object
+(numbers in SI units, NaN as null); ``shipped`` names a file shipped with the project. Files are
+written through ``userio.files`` under the rules of ``userio.outputs``.
 """
 
 from __future__ import annotations
@@ -13,8 +12,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
-from userio.files import atomic_path, read_toml, write_text_atomic  # noqa: F401  (re-exported)
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 

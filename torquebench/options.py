@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from torquebench.errors import InputError
+from userio.errors import InputError
 
 DEFAULT_PRIOR = 0.3        # identify's prior when neither --prior nor the file's [model_uncertainty]
 

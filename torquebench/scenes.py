@@ -9,7 +9,7 @@ Three kinds of scene:
 - ``kind = "posture_sweep"``: a grid of postures × contact points × one force, same static model.
 
 Validated by the scene schema (userio.schema.scene; every field in docs/inputs.md); every error
-is a torquebench.errors.InputError naming the file and the field.
+is a userio.errors.InputError naming the file and the field.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from estimator.robot import Robot, load_robot
 from estimator.sim.config import Controller, Ground, Poke, Sensors, SimConfig
 from estimator.limits import ALPHA_RANGE, FORCE_RANGE, GAIN_RANGE, SAMPLE_RATE_RANGE, THRESHOLD_RANGE
 from estimator.noise import FT_SIGMA_RANGE, TORQUE_SIGMA_RANGE
-from torquebench.errors import InputError
+from userio.errors import InputError
 from torquebench.io import REPO_ROOT
 from userio.errors import nearest
 from userio.ranges import Range, ranged
@@ -263,6 +263,14 @@ def _dynamic(path: Path, d, robot: Robot, name: str) -> SimConfig:
     pokes = []
     for i, p in enumerate(d.poke, start=1):
         _link(path, f"poke[{i}].link", p.link, n)
+        if p.t_off_s is not None and p.t_off_s > d.duration_s:
+            import warnings
+
+            from estimator.plausibility import PlausibilityWarning
+
+            warnings.warn(f"{path}: poke[{i}].t_off_s = {p.t_off_s:g} s is after the end of the simulation "
+                          f"(duration_s = {d.duration_s:g} s): the poke acts to the end (leave t_off_s "
+                          "out for that; a time in ms?)", PlausibilityWarning, stacklevel=2)
         if p.mass_kg is not None:
             mag, direction = p.mass_kg * G_M_PER_S2, -math.pi / 2
         else:
@@ -409,13 +417,14 @@ def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
     """Read a scene file, validated by its schema (userio.schema.scene.SceneFile; ``overrides``:
     dotted keys set before validation), then built against its robot and the files it names."""
     from userio.schema import parse
-    from userio.schema.scene import SceneFile
+    from torquebench.stages.registry import scene_outputs
+    from userio.schema.scene import WANTABLE, SceneFile
 
     path = Path(path)
     data = read_toml(path)                         # a regular file: not found, a directory or a device say so
     for key, value in (overrides or {}).items():
         set_key(data, key, value, path)
-    d = parse(SceneFile, data, path)
+    d = parse(SceneFile, data, path, context={WANTABLE: scene_outputs()})   # what the stages offer
     ref = d.robot if not isinstance(d.robot, str) else None
     robot, rfile = _robot_file(path, d.robot if ref is None else ref.file, "robot")
     name = path.stem if d.name is None else d.name

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from torquebench.errors import InputError
+from userio.errors import InputError
 from torquebench.options import floats as _floats
 
 
@@ -157,7 +157,7 @@ def simulate(args) -> int:
     from estimator.spatial.sim import simulate as run_sim
     from estimator.timing import side_file
     from torquebench.io import print_json
-    from userio.files import atomic_write, write_text_atomic
+    from userio.files import atomic_write, remove, write_text_atomic
 
     scene = load_spatial_scene(args.scene)
     spec = scene.spec
@@ -176,8 +176,8 @@ def simulate(args) -> int:
     nfile = noise_side_file(out)
     if noise is not None:
         write_text_atomic(nfile, noise_text(noise))
-    elif nfile.exists():
-        nfile.unlink()
+    else:
+        remove(nfile)             # an old noise file of another log (the plan's rules: never the user's)
     summary = {"scene": scene.name, "robot": scene.robot.name, "log": str(out), "truth": str(tpath),
                "samples": len(log.t), "contact_samples": int((truth["link"] != "").sum()),
                "run_time_s": time.perf_counter() - start}

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from torquebench.errors import InputError
+from userio.errors import InputError
 
 
 class _RowNoise:
@@ -42,6 +42,29 @@ def _keep_rows(e, rows):
 
 
 def identify(args) -> int:
+    from estimator.spatial.robot import load_spatial_robot
+
+    robot_path = Path(args.robot)
+    out = Path(args.out)
+    if out.suffix.lower() != ".toml":
+        raise InputError(f"--out {out}: a URDF robot is written as IDENTIFIED.toml beside "
+                         f"IDENTIFIED.urdf; give a .toml name")
+    out_urdf = out.with_suffix(".urdf")
+    robot = load_spatial_robot(robot_path)
+    from userio.outputs import Outputs
+
+    plan = Outputs(force=args.force)
+    for i, log_path in enumerate(args.logs):
+        plan.input(f"LOG {i + 1}", log_path, log=True)
+    plan.input("--robot", robot_path)
+    plan.input("the robot's URDF", robot.urdf_path)
+    plan.file("--out", out)
+    plan.file("--out (its URDF)", out_urdf)
+    with plan.active():                             # checked before the fit; every write obeys it
+        return _identify(args, robot_path, robot, out, out_urdf)
+
+
+def _identify(args, robot_path, robot, out, out_urdf) -> int:
     from estimator import identification as ident
     from estimator.spatial.logs import make_noise, read_noise, read_spatial_log, read_timing
     from estimator.spatial.model import UrdfModel
@@ -53,19 +76,8 @@ def identify(args) -> int:
     from torquebench.options import fit_prior
     from userio.outputs import sha256_of
     from torquebench.io import print_json
-    from torquebench.outputs import prepare_file
     from userio.files import read_toml, write_text_atomic
 
-    robot_path = Path(args.robot)
-    out = Path(args.out)
-    if out.suffix.lower() != ".toml":
-        raise InputError(f"--out {out}: a URDF robot is written as IDENTIFIED.toml beside "
-                         f"IDENTIFIED.urdf; give a .toml name")
-    out_urdf = out.with_suffix(".urdf")
-    robot = load_spatial_robot(robot_path)
-    inputs = (*args.logs, robot_path, robot.urdf_path)
-    prepare_file(out, "--out", force=args.force, inputs=inputs)
-    prepare_file(out_urdf, "--out (its URDF)", force=args.force, inputs=inputs)
     model = UrdfModel(robot)
     prior, prior_source = fit_prior(args.prior, robot, robot_path)
     n_sensed = int(sum(robot.sensed))

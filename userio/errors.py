@@ -52,12 +52,46 @@ class CallbackInterrupt:
     print the KeyboardInterrupt with a traceback and swallow it, and the C code would carry on or
     fail with an unrelated error. ``wrap(fn, abort_value)`` records the interrupt and returns
     ``abort_value`` (which makes the C code stop) from then on; ``check()``, called once the C call
-    has returned or failed, re-raises it as a plain KeyboardInterrupt."""
+    has returned or failed, re-raises it as a plain KeyboardInterrupt.
+
+    From ``wrap`` to ``check`` SIGINT only sets the flag (a handler that raises nothing): a
+    KeyboardInterrupt raised by Python's own handler could land in the C library's ctypes wrapper
+    around the callback, outside ``fn``, where nothing catches it. A second Ctrl-C raises at once."""
 
     def __init__(self):
         self.hit = False
+        self._previous = None
+
+    def _on_sigint(self, signum, frame):
+        if self.hit:                      # pressed again: do not wait for the C code
+            self._restore()
+            raise KeyboardInterrupt
+        self.hit = True
+
+    def _install(self):
+        import signal
+        import threading
+
+        if threading.current_thread() is not threading.main_thread():
+            return
+        current = signal.getsignal(signal.SIGINT)
+        if getattr(current, "__self__", None) is not self:
+            self._previous = current
+            signal.signal(signal.SIGINT, self._on_sigint)
+
+    def _restore(self):
+        import signal
+
+        if self._previous is not None:
+            try:
+                signal.signal(signal.SIGINT, self._previous)
+            except (ValueError, OSError):          # not the main thread
+                return
+            self._previous = None
 
     def wrap(self, fn, abort_value):
+        self._install()
+
         def guarded(*args):
             if self.hit:
                 return abort_value
@@ -69,6 +103,7 @@ class CallbackInterrupt:
         return guarded
 
     def check(self) -> None:
+        self._restore()
         if self.hit:
             self.hit = False
             raise KeyboardInterrupt

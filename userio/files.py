@@ -49,6 +49,8 @@ def _mode(path: Path, overwrite: bool, policy: bool, final: bool = False) -> str
     plan = outputs.current() if policy else None
     if plan is not None:
         return plan.admit(path, final=final)
+    if policy:
+        outputs.unplanned(path)
     if not overwrite and os.path.lexists(path):
         raise _refuse_existing(path)
     return "replace" if overwrite else "new"
@@ -122,6 +124,8 @@ def remove(path: str | os.PathLike) -> bool:
     if not os.path.lexists(path):
         return False
     plan = outputs.current()
+    if plan is None:
+        outputs.unplanned(path)
     if plan is None or plan.admit(path) != "replace":
         raise InputError(f"{path}: refusing to remove a file this command did not write")
     path.unlink()
@@ -149,17 +153,6 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes, *, overwrite: bool 
 def write_text_atomic(path: str | os.PathLike, text: str, *, overwrite: bool = True) -> Path:
     """Text (UTF-8) version of :func:`write_bytes_atomic`."""
     return write_bytes_atomic(path, text.encode("utf-8"), overwrite=overwrite)
-
-
-def next_version_path(path: str | os.PathLike) -> Path:
-    """First free ``NAME.vK.SUFFIX`` (K = 2, 3, ...) beside ``path``."""
-    path = Path(path)
-    k = 2
-    while True:
-        cand = path.with_name(f"{path.stem}.v{k}{path.suffix}")
-        if not cand.exists():
-            return cand
-        k += 1
 
 
 MAX_TEXT_INPUT_BYTES = 64 << 20       # a TOML, JSON or small CSV file the tool reads whole
@@ -210,49 +203,6 @@ def read_toml(path: str | os.PathLike) -> dict:
         raise InputError(f"{path}: invalid TOML: nested too deeply") from None
 
 
-def _label_items(items) -> list[tuple[str, Path]]:
-    """``{label: path}`` or ``[(label, path)]`` or ``[path]`` → ``[(label, Path)]`` (None skipped)."""
-    if isinstance(items, dict):
-        items = list(items.items())
-    out = []
-    for it in items or ():
-        label, p = it if isinstance(it, tuple) else (str(it), it)
-        if p is not None:
-            out.append((str(label), Path(p)))
-    return out
-
-
-def same_file(a: Path, b: Path) -> bool:
-    """Same file: equal real paths, or (both existing) the same inode (userio.outputs.same_file)."""
-    from userio.outputs import same_file as _same
-
-    return _same(a, b)
-
-
-def plan_outputs(inputs, outputs) -> list[Path]:
-    """Check, before any work, the files a command will write against the files it reads.
-
-    ``inputs``/``outputs``: ``{label: path}`` (label: the option or argument, e.g. ``"--out"``).
-    Refuses (InputError) an output that is an input (real path or same inode), two outputs that
-    are the same file, an output that is a directory or whose directory does not exist.
-    Returns the output paths (as given), in order.
-    """
-    ins, outs = _label_items(inputs), _label_items(outputs)
-    for i, (olabel, o) in enumerate(outs):
-        if o.is_dir():
-            raise InputError(f"{olabel}: {o} is a directory, not a file")
-        if not o.parent.is_dir():
-            raise InputError(f"{olabel}: directory {o.parent} does not exist")
-        for ilabel, p in ins:
-            if same_file(o, p):
-                raise InputError(f"{olabel}: {o} is the input {ilabel}; refusing to overwrite an input")
-        for olabel2, o2 in outs[:i]:
-            if same_file(o, o2):
-                raise InputError(f"{olabel}: {o} is also written as {olabel2}; two outputs would "
-                                 "overwrite each other")
-    return [o for _, o in outs]
-
-
 def write_files_atomic(files, *, overwrite: bool = True) -> list[Path]:
     """Write several files as a set: all of them or none.
 
@@ -264,7 +214,7 @@ def write_files_atomic(files, *, overwrite: bool = True) -> list[Path]:
     target is an InputError before anything is written. Under an active output plan
     (userio.outputs) the plan decides per file, before and again at the final move.
     """
-    from userio.outputs import os_error, place
+    from userio.outputs import distinct, os_error, place
 
     items = []
     for path, what in files:
@@ -275,7 +225,12 @@ def write_files_atomic(files, *, overwrite: bool = True) -> list[Path]:
             data = what.encode("utf-8") if isinstance(what, str) else bytes(what)
             fn = (lambda d: (lambda tmp: Path(tmp).write_bytes(d)))(data)
         items.append((path, fn))
-    plan_outputs({}, [(str(p), p) for p, _ in items])
+    distinct([(str(p), p) for p, _ in items])
+    for p, _ in items:
+        if p.is_dir():
+            raise InputError(f"{p}: is a directory, not a file")
+        if not p.parent.is_dir():
+            raise InputError(f"{p}: directory {p.parent} does not exist")
     for p, _ in items:
         _mode(p, overwrite, True)
     temps: list[Path] = []
@@ -324,27 +279,3 @@ def write_files_atomic(files, *, overwrite: bool = True) -> list[Path]:
     for p, _ in items:
         _record(p, True)
     return [p for p, _ in items]
-
-
-def output_dir(out_dir, *, default: str, shipped_dir=None, regenerate: bool = False,
-               option: str = "--out-dir") -> Path:
-    """Where a report command writes: ``out_dir`` if given (must be a directory); the shipped
-    reports directory only when ``regenerate`` is asked explicitly; else ``./<default>``
-    (created). Shipped reports are never replaced by a default run."""
-    if out_dir is not None and regenerate:
-        raise InputError(f"{option}: give either {option} or --regenerate-shipped, not both")
-    if regenerate:
-        return Path(shipped_dir)
-    if out_dir is not None:
-        out_dir = Path(out_dir)
-        if not out_dir.is_dir():
-            raise InputError(f"{option}: {out_dir} is not a directory")
-        return out_dir
-    path = Path.cwd() / default
-    if path.exists() and not path.is_dir():
-        raise InputError(f"{option}: default output directory {path} exists and is not a directory")
-    if shipped_dir is not None and path.resolve() == Path(shipped_dir).resolve():
-        raise InputError(f"{option}: {path} is the shipped reports directory; pass "
-                         "--regenerate-shipped to replace the shipped reports")
-    path.mkdir(exist_ok=True)
-    return path

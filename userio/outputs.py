@@ -22,6 +22,14 @@ Rules (a refusal is an InputError naming the option and the path; the CLI exits 
 6. Missing directories are created; a file in the way, a read-only or full file system, or a
    directory that cannot be created is refused up front, naming the path and the cause.
 7. Nothing is removed that the tool did not write (``remove`` obeys rules 1–5).
+8. A report directory holding a file of a name a builder may write (``names``) that the tool did
+   not write is refused up front (rule 4 for names known only while building).
+9. Versioned outputs (``free_version``): instead of replacing, the first free ``NAME.vK.SUFFIX``
+   whose companion files are free too.
+
+This module is the only place of these rules: the writers (``userio.files``) ask it, the commands
+declare their plans on it (``torquebench.outputs`` declares what a scene run reads and writes),
+and ``tests/test_output_options.py`` runs every command's output options against it.
 """
 
 from __future__ import annotations
@@ -41,6 +49,25 @@ MANIFEST = ".torquebench-outputs.json"
 MIN_FREE_BYTES = 1 << 20            # a file system with less room than this is "full" up front
 
 _ACTIVE: list["Outputs"] = []       # a stack: the plan of the running command (threads see it too)
+_REQUIRED: list[bool] = []          # inside a command (the CLI): every write needs an active plan
+
+
+@contextmanager
+def required():
+    """Within the block (a CLI command) a write outside an active plan is a bug, not a user
+    error: every command declares what it writes (``tests/test_output_options.py``)."""
+    _REQUIRED.append(True)
+    try:
+        yield
+    finally:
+        _REQUIRED.pop()
+
+
+def unplanned(path) -> None:
+    """Called by the writers when no plan is active: refuse inside a command (``required``)."""
+    if _REQUIRED:
+        raise RuntimeError(f"{path}: written outside the command's output plan (a bug: every "
+                           "command declares its outputs on userio.outputs.Outputs)")
 
 
 def current() -> "Outputs | None":
@@ -121,19 +148,32 @@ def os_error(exc: OSError, path=None, doing: str = "write") -> InputError:
     return InputError(f"{where}: cannot {doing}: {cause}")
 
 
-def check_room(directory: Path, label: str) -> None:
-    """Refuse, before the work, a directory on a read-only or full file system."""
+def room_problem(directory: Path) -> str | None:
+    """Why files cannot be created in ``directory`` (or, when it is missing, in its nearest
+    existing parent): a read-only or full file system, no permission; None when they can."""
+    directory = Path(directory)
+    while not directory.exists() and directory != directory.parent:
+        directory = directory.parent
     try:
         vfs = os.statvfs(directory)
     except OSError:
-        return
+        return None
     if vfs.f_flag & os.ST_RDONLY:
-        raise InputError(f"{label}: {directory} is on a read-only file system; choose another place")
+        return f"{directory} is on a read-only file system"
     if vfs.f_bavail * vfs.f_frsize < MIN_FREE_BYTES:
-        raise InputError(f"{label}: the file system of {directory} is full "
-                         f"({vfs.f_bavail * vfs.f_frsize} bytes free); free some space or write elsewhere")
+        return f"the file system of {directory} is full ({vfs.f_bavail * vfs.f_frsize} bytes free)"
     if not os.access(directory, os.W_OK | os.X_OK):
-        raise InputError(f"{label}: {directory}: permission denied (cannot create files there)")
+        return f"{directory}: permission denied (cannot create files there)"
+    return None
+
+
+def check_room(directory: Path, label: str) -> None:
+    """Refuse, before the work, a directory on a read-only or full file system."""
+    why = room_problem(directory)
+    if why is not None:
+        hint = ("choose another place" if "read-only" in why else "free some space or write elsewhere"
+                if "full" in why else "")
+        raise InputError(f"{label}: {why}" + (f"; {hint}" if hint else ""))
 
 
 def make_dir(directory: Path, label: str) -> None:
@@ -199,6 +239,7 @@ class Outputs:
         self.inputs: list[tuple[str, Path]] = []
         self.files: list[tuple[str, Path]] = []
         self.dirs: list[tuple[str, Path, bool]] = []      # (label, dir, shipped: every file is the tool's)
+        self.names: list[tuple[str, Path, tuple]] = []    # (label, dir, name parts a builder may write)
         self.checked = False
 
     # ---------------------------------------------------------------- declaring
@@ -221,11 +262,14 @@ class Outputs:
         self.files.append((label, path))
         return path
 
-    def directory(self, label: str, path, *, shipped: bool = False) -> Path:
+    def directory(self, label: str, path, *, shipped: bool = False, names=()) -> Path:
         """Declare an output directory (files are written inside it; ``shipped``: the repository's
-        own reports, every file in it the tool's to regenerate)."""
+        own reports, every file in it the tool's to regenerate; ``names``: parts of the file names
+        its builders may write, refused up front when such a file is not the tool's, rule 8)."""
         path = Path(path)
         self.dirs.append((label, path, shipped))
+        if names and not shipped:
+            self.names.append((label, path, tuple(names)))
         return path
 
     def file_in(self, label: str, directory, name: str) -> Path:
@@ -305,6 +349,13 @@ class Outputs:
         for label, d, _ in self.dirs:
             make_dir(d, label)
             check_room(d, label)
+        for label, d, names in self.names:
+            clash = foreign_files(d, names, self.force)
+            if clash:
+                raise InputError(f"{label}: {clash[0]} exists and was not written by torquebench "
+                                 f"({len(clash)} such file(s) with a name the run writes); "
+                                 + (f"add {self.force_flag} to replace it or " if self.force_flag else "")
+                                 + "choose another directory")
         self.checked = True
         return self
 
@@ -381,3 +432,58 @@ def place(tmp, path, mode: str) -> None:
         os.replace(tmp, path)
         return
     os.unlink(tmp)
+
+
+# ----------------------------------------------------------------------------------- more rules
+def foreign_files(out_dir, names, force: bool = False) -> list[Path]:
+    """Files in ``out_dir`` that a builder may write (a name containing one of ``names``;
+    .md/.png/.csv/.json) and that the tool did not write there (its manifest), rule 8."""
+    out_dir = Path(out_dir)
+    if force or not out_dir.is_dir():
+        return []
+    return sorted(p for p in out_dir.iterdir() if p.suffix in (".md", ".png", ".csv", ".json")
+                  and any(n.lower() in p.name.lower() for n in names) and not is_own(p))
+
+
+def distinct(outputs) -> None:
+    """Rule 2 for a set written together: ``[(label, path)]`` naming no file twice."""
+    outputs = [(str(label), Path(p)) for label, p in outputs]
+    for i, (label, path) in enumerate(outputs):
+        for label2, other in outputs[:i]:
+            if same_file(path, other):
+                raise InputError(f"{label}: {path} is also written as {label2}; two outputs would "
+                                 "overwrite each other")
+
+
+def free_version(path, companions=lambda p: ()) -> Path:
+    """Rule 9: ``path`` if it and its ``companions(path)`` are free, else the first
+    ``NAME.vK.SUFFIX`` (K = 2, 3, ...) free with its companions (nothing is replaced)."""
+    path = Path(path)
+
+    def free(c: Path) -> bool:
+        return not os.path.lexists(c) and not any(os.path.lexists(p) for p in companions(c))
+
+    if free(path):
+        return path
+    k = 2
+    while not free(cand := path.with_name(f"{path.stem}.v{k}{path.suffix}")):
+        k += 1
+    return cand
+
+
+def default_dir(out_dir, *, default: str, shipped_dir=None, regenerate: bool = False,
+                option: str = "--out-dir") -> Path:
+    """Where a report command writes: ``out_dir`` if given; the shipped reports directory only when
+    ``regenerate`` is asked explicitly; else ``./<default>``. Shipped reports are never the
+    default's target. The directory is declared and created by the plan (``Outputs.directory``)."""
+    if out_dir is not None and regenerate:
+        raise InputError(f"{option}: give either {option} or --regenerate-shipped, not both")
+    if regenerate:
+        return Path(shipped_dir)
+    if out_dir is not None:
+        return Path(out_dir)
+    path = Path.cwd() / default
+    if shipped_dir is not None and same_file(path, Path(shipped_dir)):
+        raise InputError(f"{option}: {path} is the shipped reports directory; pass "
+                         "--regenerate-shipped to replace the shipped reports")
+    return path

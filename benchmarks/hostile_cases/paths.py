@@ -61,8 +61,14 @@ def gen_paths(rng) -> list[Case]:
                 argv[3] = p.replace("notes.md", "notes.json")
         else:
             argv = ["apply", "cal.json", "readings.csv", "--out", p]
+        # a file that is not an input of the command, named as --out with --force: replacing it is
+        # what was asked (the alias itself is the named output; a symlink's or hard link's target,
+        # an input or not, must stay as it was)
+        asked = force and target not in {"calibrate": ("session.csv",),
+                                         "apply": ("cal.json", "readings.csv")}[argv[0]]
         cases.append(Case("paths", f"{argv[0]} over {target} via {kind}", argv + (["--force"] if force else []),
-                          setup, "error", force))
+                          setup, "any" if asked else "error", force,
+                          outputs=(argv[argv.index("--out") + 1],) if asked else ()))
     # existing user files at an output path, without --force (must be kept)
     for cmd in (["estimate", "fixed.csv", "--out", "existing.csv"],
                 ["apply", "cal.json", "readings.csv", "--out", "existing.csv"],

@@ -130,8 +130,12 @@ class Sensors:
 
     sample_rate_Hz: float = ranged(1000.0, SAMPLE_RATE_RANGE)
     torque_model: str = "gaussian"
-    torque_noise_Nm: float = ranged(0.01, Range(0.0, 1e4, "N·m", high="N·mm typed as N·m?"))
-    ft_noise: np.ndarray = ranged([0.1, 0.1, 0.01], Range(0.0, 1e5, "N or N·m", high="mN typed as N?"))
+    torque_noise_Nm: float = ranged(0.01, Range(1e-12, 1e4, "N·m", zero_ok=True, low="0 for a noise-free "
+                                                "sensor; no torque sensor is quieter than 1 pN·m",
+                                                high="N·mm typed as N·m?"))
+    ft_noise: np.ndarray = ranged([0.1, 0.1, 0.01], Range(1e-9, 1e5, "N or N·m", zero_ok=True,
+                                                           low="0 for a noise-free sensor; no FT sensor is "
+                                                               "quieter than 1 nN", high="mN typed as N?"))
     encoder_counts: int = ranged(0, Range(4, 2.0 ** 40, "counts/rev", zero_ok=True))
     velocity_noise_rad_per_s: float = ranged(0.0, Range(0.0, 1e3, "rad/s", high="deg/s typed as rad/s?"))
     seed: int = 0

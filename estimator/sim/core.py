@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from estimator import dynamics as dyn
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.log import SensorLog
 from estimator.sim.cost import Watch, estimate_cost
 from estimator.sim.integrate import _adaptive, _rk4, sample_times

@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.sim.config import ADAPTIVE, SimConfig
 
 PROBE_RHS_CAP = 200_000          # rhs evaluations allowed in one probe

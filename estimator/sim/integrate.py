@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.sim.config import SimConfig
 from estimator.sim.model import Plant
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.sim.config import Sensors
 
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.sim.config import SimConfig
 from estimator.sim.model import Plant
 

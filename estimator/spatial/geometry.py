@@ -146,7 +146,7 @@ def _mesh(shape: Shape):
     if shape.mesh_path not in _MESHES:
         import trimesh
 
-        from estimator.errors import InputError
+        from userio.errors import InputError
 
         try:
             m = trimesh.load(shape.mesh_path, force="mesh")
@@ -311,7 +311,7 @@ def surface_point(surface: BodySurface, link: str | None, along: float, around_r
     """A point on the lateral surface of a link's first cylinder/capsule (``along`` ∈ [0, 1]
     from the solid's −z end to +z, ``around_rad`` about its axis from its local +x), or on a
     sphere/box (along: polar fraction, around: azimuth) — body frame, with its outward normal."""
-    from estimator.errors import InputError
+    from userio.errors import InputError
 
     solids = [(n, s) for n, s in surface.solids if link in (None, n)]
     if not solids:

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.log_parsing import file_line
 from estimator.log_reader import DEFAULT_CHUNK_SAMPLES, LogReader, check_steps_numpy, rows_to_lines
 

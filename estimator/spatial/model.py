@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.spatial import inertial as spatial_inertial
 from estimator.spatial import tree as tree_mod
 from estimator.spatial.robot import SpatialRobot

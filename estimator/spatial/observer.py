@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from estimator import observer as obs
-from estimator.errors import InputError
+from userio.errors import InputError
 
 
 def used_rows(model) -> np.ndarray:

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from estimator.errors import InputError
+from userio.errors import InputError
 
 SUPPORTED_JOINTS = ("revolute", "continuous", "prismatic", "fixed")
 

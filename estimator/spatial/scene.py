@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from estimator.errors import InputError
+from userio.errors import InputError
 
 
 @dataclass

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimator.errors import InputError
+from userio.errors import InputError
 from estimator.spatial.logs import SpatialLog, SpatialNoise
 from estimator.spatial.robot import SpatialRobot
 

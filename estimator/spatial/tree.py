@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimator.errors import InputError
+from userio.errors import InputError
 
 
 @dataclass(frozen=True)

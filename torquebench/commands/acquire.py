@@ -49,7 +49,7 @@ def add_arguments(parser) -> None:
 
 def run(args) -> int:
     from calibration.acquire import RawCapture
-    from calibration.errors import InputError
+    from userio.errors import InputError
     from calibration.frames import MAX_CHANNELS
 
     from userio.errors import finite
@@ -83,7 +83,7 @@ def run(args) -> int:
         from calibration.session import MASS_RANGE_G
         for m in masses:
             MASS_RANGE_G.check(m, "--guided")
-    from torquebench.outputs import Outputs
+    from userio.outputs import Outputs
 
     plan = Outputs(force=args.force)
     if "://" not in str(args.port):
@@ -99,7 +99,7 @@ def run(args) -> int:
 def _acquire(args, masses) -> int:
     import numpy as np
 
-    from calibration.errors import InputError
+    from userio.errors import InputError
     from calibration.acquire import RawCapture, Reader, capture, guided_session, open_port, session_csv
     from calibration.frames import FrameParser
     from torquebench.io import print_json
@@ -148,7 +148,7 @@ def _acquire(args, masses) -> int:
         spath = args.session or raw_path.with_suffix(".csv")
         files.append((spath, session_csv(rows, sensor_id=args.sensor_id,
                                          lever_arm_m=args.lever_arm_m, source=str(raw_path))))
-    write_files_atomic(files, overwrite=args.force)      # decoded CSV + session: all or none
+    write_files_atomic(files)            # decoded CSV + session, all or none (the plan decides)
     written += [str(p) for p, _ in files]
     st = reader.parser.stats.as_dict()
     steps, warnings = load_steps(rows or [], args.tolerance_counts)

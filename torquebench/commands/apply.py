@@ -25,7 +25,7 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
-    from torquebench.outputs import Outputs
+    from userio.outputs import Outputs
 
     plan = Outputs(force=args.force)
     plan.input("calibration", args.calibration)
@@ -43,8 +43,9 @@ def _apply(args, plan) -> int:
     import pandas as pd
 
     import calibration
-    from calibration.errors import InputError
-    from torquebench.io import print_json, write_text_atomic
+    from userio.errors import InputError
+    from torquebench.io import print_json
+    from userio.files import write_text_atomic
 
     from calibration.session import MAX_SESSION_BYTES, _parse_meta
     from userio.files import check_input
@@ -102,7 +103,7 @@ def _apply(args, plan) -> int:
     buf = io.StringIO()
     out.to_csv(buf, index=False, float_format="%.9g")
     if args.out is not None:
-        write_text_atomic(args.out, buf.getvalue(), overwrite=args.force)
+        write_text_atomic(args.out, buf.getvalue())          # the output plan decides (--force)
     if args.json:
         res = {"n": int(vals.size), "sensor_id": model.sensor_id, "model": model.model,
                "out_of_range": n_nan, "saturated_adc": n_sat, "outside_calibrated_range": n_range,
@@ -155,7 +156,7 @@ def _check_magnitude(vals, model, args) -> None:
     rather than answered with NaN (outside the calibrated range) for every reading."""
     import numpy as np
 
-    from calibration.errors import InputError
+    from userio.errors import InputError
 
     if model.mass_range_g is None or vals.size == 0:
         return

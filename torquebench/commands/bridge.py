@@ -37,7 +37,7 @@ def _fmt(v) -> str:
 def run(args) -> int:
     from bridge.budget import sensor_summary
     from bridge.config import load_sensor_config
-    from torquebench.errors import InputError
+    from userio.errors import InputError
     from torquebench.io import print_json, shipped
 
     from userio.errors import finite

@@ -89,22 +89,16 @@ def _report(doc: dict, fit, session, out: Path) -> list[tuple[Path, object]]:
 
 def _target(out: Path, force: bool, no_report: bool) -> Path:
     """The calibration path to write: ``out``, or its first free ``NAME.vK.json`` without --force
-    (the report files of a versioned name must be free too)."""
-    def free(c: Path) -> bool:
-        return not c.exists() and (no_report or not any(p.exists() for p in report_paths(c)))
+    (the report files of a versioned name must be free too; userio.outputs.free_version)."""
+    from userio.outputs import free_version
 
-    if force or free(out):
-        return out
-    k = 2
-    while not free(cand := out.with_name(f"{out.stem}.v{k}{out.suffix}")):
-        k += 1
-    return cand
+    return out if force else free_version(out, (lambda c: ()) if no_report else report_paths)
 
 
 def _plan(args, out: Path, replace: bool = False):
     """The output plan (userio.outputs): the calibration and its report files, never the data
     (``replace``: existing files are not the question, only the other rules)."""
-    from torquebench.outputs import Outputs
+    from userio.outputs import Outputs
 
     plan = Outputs(force=args.force or replace)
     plan.input("data", args.data)
@@ -118,7 +112,7 @@ def _plan(args, out: Path, replace: bool = False):
 
 
 def run(args) -> int:
-    from calibration.errors import InputError
+    from userio.errors import InputError
     from calibration.session import LEVER_ARM_RANGE_M, MASS_RANGE_G
 
     from userio.errors import finite, seed
@@ -142,7 +136,7 @@ def run(args) -> int:
 
 
 def _calibrate(args, written: Path) -> int:
-    from calibration.errors import InputError
+    from userio.errors import InputError
     from calibration.fit import fit_session
     from calibration.session import read_session
     from calibration.store import calibration_payload, encode
@@ -167,12 +161,12 @@ def _calibrate(args, written: Path) -> int:
     files = [(written, encode(payload))]
     if not args.no_report:
         files += _report(payload, fit, session, written)
-    write_files_atomic(files, overwrite=args.force)    # calibration + report + plots: all or none
+    write_files_atomic(files)          # calibration + report + plots, all or none (the plan decides)
     reports = [p for p, _ in files[1:]]
     versioned = written != args.out
     if versioned:
-        print(f"calibrate: {args.out} exists; kept it and wrote {written} (use --force to replace)",
-              file=sys.stderr)
+        print(f"warning: calibrate: {args.out} exists; kept it and wrote {written} (use --force to "
+              "replace)", file=sys.stderr)
     post = payload["posterior"]
     unit = session.reading_unit
     keys = {n: coefficient_key(n, unit) for n in (*fit.coef_names, "sigma")}

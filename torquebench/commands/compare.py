@@ -69,11 +69,10 @@ def run(args) -> int:
                 if isinstance(v, str) and cand.is_file():
                     plan.input(f"--vary {key}", cand)
     plan.file("--png", args.png)
-    plan.check()                                             # before the points run
-    rows = [row(r) for r in run_sweep(path, vary, None, args.executor,
-                                      str(args.cache_dir) if args.cache_dir else None,
-                                      progress=not args.json)]
-    with plan.active():
+    with plan.active():                                      # checked before the points run
+        rows = [row(r) for r in run_sweep(path, vary, None, args.executor,
+                                          str(args.cache_dir) if args.cache_dir else None,
+                                          progress=not args.json)]
         return _report(args, path, rows)
 
 
@@ -146,6 +145,6 @@ def _plot(path: Path, rows: list[dict]) -> None:
     a.legend()
     b.bar(x, val("torque_noise_std_Nm"))
     b.set(xticks=x, xticklabels=names, ylabel="torque noise σ_τ [N·m]")
-    with atomic_path(path, overwrite=False) as tmp:      # the output plan decides (--force)
+    with atomic_path(path) as tmp:                      # the output plan decides (--force)
         fig.savefig(tmp, format="png", dpi=100)
     plt.close(fig)

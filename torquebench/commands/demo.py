@@ -69,7 +69,8 @@ def _demo(args, scene, out_dir) -> int:
     from torquebench import pipeline as P
     from torquebench.cache import Cache
     from torquebench import formatting as fmt
-    from torquebench.io import print_json, write_text_atomic
+    from torquebench.io import print_json
+    from userio.files import write_text_atomic
 
     say = (lambda *a: print(*a, file=sys.stderr)) if args.json else print
     arts, timing = P.execute(scene, ["localization_error", "predicted_error"], Cache(), seed=args.seed)

@@ -132,7 +132,7 @@ def add_arguments(parser) -> None:
 def _detector_options(args, n_links):
     """(NoiseModel or None, quiet window or None, (rate, unit)) from the options."""
     from estimator.noise import NoiseModel, paper_leg_noise, parse_rate
-    from torquebench.errors import InputError
+    from userio.errors import InputError
 
     rate = parse_rate(args.false_alarm_rate, "--false-alarm-rate")
     if not (math.isfinite(rate[0]) and rate[0] > 0):
@@ -178,7 +178,7 @@ def _peak_memory_MB() -> float:
 def run(args) -> int:
     import time
 
-    from torquebench.outputs import Outputs
+    from userio.outputs import Outputs
 
     start = time.perf_counter()
 
@@ -207,7 +207,7 @@ def _run(args, start) -> int:
     from estimator.log_reader import LogReader, prefetch
     from estimator.outframe import BackgroundWriter, FrameWriter
     from estimator.robot import PAPER_LEG_TOML, load_robot
-    from torquebench.errors import InputError
+    from userio.errors import InputError
     from torquebench.io import print_json
 
     from estimator.spatial.robot import is_spatial_robot_file

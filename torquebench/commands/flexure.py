@@ -15,7 +15,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from torquebench.errors import InputError
+from userio.errors import InputError
 from torquebench.formatting import pm as _pm
 
 HELP = "flexure FEM: sensitivity (mV/V per N·m), stiffness, stress, cross-talk, min torque; sweeps"
@@ -68,7 +68,7 @@ def add_arguments(parser) -> None:
 def _check_outputs(args, design_path: Path, design=None):
     """The output plan (userio.outputs), checked before the (long) analysis runs: --vtu / --png
     never the design or the files it names (STL/STEP, sensor), never replaced without --force."""
-    from torquebench.outputs import Outputs
+    from userio.outputs import Outputs
 
     for flag, path, suffix in (("--vtu", args.vtu, ".vtu"), ("--png", args.png, ".png")):
         if path is not None and path.suffix.lower() != suffix:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from torquebench.errors import InputError
+from userio.errors import InputError
 from torquebench.options import DEFAULT_PRIOR, fit_prior
 from userio.outputs import sha256_of
 
@@ -103,6 +103,24 @@ def _read(args, path: Path, robot):
 
 
 def run(args) -> int:
+    from estimator.robot import PAPER_LEG_TOML
+    from estimator.spatial.robot import is_spatial_robot_file
+    if args.robot is not None and is_spatial_robot_file(args.robot):   # a URDF robot: the 3-D path
+        from torquebench.spatial_identify import identify as identify_3d
+        return identify_3d(args)
+    robot_path = args.robot or PAPER_LEG_TOML
+    from userio.outputs import Outputs
+
+    plan = Outputs(force=args.force)
+    for i, log_path in enumerate(args.logs):
+        plan.input(f"LOG {i + 1}", log_path, log=True)
+    plan.input("--robot", robot_path)
+    plan.file("--out", args.out)
+    with plan.active():                             # checked before the fit; every write obeys it
+        return _identify(args, robot_path)
+
+
+def _identify(args, robot_path) -> int:
     import datetime
     import sys
 
@@ -110,18 +128,11 @@ def run(args) -> int:
 
     from estimator import identification as ident
     from estimator.inertial import robot_toml
-    from estimator.robot import PAPER_LEG_TOML, load_robot
+    from estimator.robot import load_robot
     from estimator.timing import describe as describe_timing
     from torquebench.io import print_json
-    from torquebench.outputs import prepare_file
     from userio.files import write_text_atomic
 
-    from estimator.spatial.robot import is_spatial_robot_file
-    if args.robot is not None and is_spatial_robot_file(args.robot):   # a URDF robot: the 3-D path
-        from torquebench.spatial_identify import identify as identify_3d
-        return identify_3d(args)
-    robot_path = args.robot or PAPER_LEG_TOML
-    prepare_file(args.out, "--out", force=args.force, inputs=(*args.logs, robot_path))
     robot = load_robot(robot_path)
     prior, prior_source = fit_prior(args.prior, robot, robot_path)
     eqs, logs_info = [], []

@@ -15,11 +15,12 @@ link, where the estimator refuses); in the JSON under ``bounds`` and in the ``--
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
 
-from torquebench.errors import InputError
+from userio.errors import InputError
 
 HELP = "propagate sensor noise and calibration uncertainty into contact-localization error"
 EXAMPLES = """\
@@ -120,8 +121,12 @@ def scene_from_args(args, robot, link, alpha, magnitude, direction):
     calibration file as the chain's inputs, and the posture-grid settings."""
     from torquebench.scenes import ChainSpec, PredictionSpec, prediction_scene
 
-    if args.sensor is not None and not Path(args.sensor).is_file():
-        raise InputError(f"--sensor: {args.sensor}: file not found")
+    from userio.files import check_input
+
+    if args.sensor is not None:           # a regular file of a sane size: not a directory or a device
+        check_input(args.sensor, "--sensor", what="sensor TOML file")
+    if args.calibration is not None and os.path.lexists(args.calibration):   # read only when needed
+        check_input(args.calibration, "--calibration", what="calibration JSON file")
     chain = ChainSpec(strain_per_Nm=args.strain_per_Nm, sensor_file=args.sensor,
                       calibration_file=args.calibration)
     pred = PredictionSpec(link=link, alpha=alpha, magnitude_N=magnitude, direction_rad=direction,
@@ -140,8 +145,16 @@ def run(args) -> int:
     _finite_args(args)
     from estimator.spatial.robot import is_spatial_robot_file
     if args.robot is not None and is_spatial_robot_file(args.robot):   # a URDF robot: the 3-D map
+        from estimator.spatial.robot import load_spatial_robot
         from torquebench.spatial_cli import propagate as propagate_3d
-        return propagate_3d(args)
+        from userio.outputs import Outputs
+
+        plan = Outputs(force_flag=None)          # --force is the contact force here: never replace
+        plan.input("--robot", args.robot)
+        plan.input("the robot's URDF", load_spatial_robot(args.robot).urdf_path)
+        plan.file("--png", args.png)
+        with plan.active():                      # checked now; the picture obeys it
+            return propagate_3d(args)
     from estimator.robot import load_robot, paper_leg
     from torquebench import pipeline as P
     from torquebench.cache import Cache
@@ -174,7 +187,7 @@ def run(args) -> int:
                          f"{args.max_localizations:.3g}; reduce them or raise the limit")
     if args.png and robot.n_links != 2:
         raise InputError("--png: the heat map is drawn for two-link robots only")
-    from torquebench.outputs import Outputs
+    from userio.outputs import Outputs
 
     plan = Outputs(force_flag=None)              # --force is the contact force here: never replace
     for label, p in (("--robot", args.robot), ("--sensor", args.sensor), ("--calibration", args.calibration)):
@@ -281,7 +294,7 @@ def _heat_map(path: Path, maps: dict, axes, bmaps: dict | None = None) -> None:
     import matplotlib.pyplot as plt
     from matplotlib.colors import LogNorm
 
-    from torquebench.io import atomic_path
+    from userio.files import atomic_path
 
     have_b = bool(bmaps) and "bound_per_sample_m" in bmaps
     rows = 2 if have_b else 1

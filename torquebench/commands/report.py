@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 import torquebench.reports
-from torquebench.errors import InputError
+from userio.errors import InputError
 
 HELP = "regenerate the Markdown + PNG reports in reports/ (all areas, or --only AREA)"
 EXAMPLES = """\
@@ -92,19 +92,13 @@ def run(args) -> int:
     unknown = sorted(set(chosen) - set(areas))
     if unknown:
         raise InputError(f"--only: unknown report area {unknown[0]!r}; known: {', '.join(areas)}")
-    from torquebench.outputs import Outputs, foreign_files
+    from userio.outputs import Outputs
 
     shipped = args.out_dir is None                 # the repository's reports: regenerated in place
     out_dir = args.out_dir or REPO_ROOT / "reports"
     plan = Outputs(force=args.force)
-    plan.directory("--out-dir", out_dir, shipped=shipped)
-    plan.check()
-    if not shipped:
-        clash = foreign_files(out_dir, [*chosen, "README"], plan.force)
-        if clash:
-            raise InputError(f"--out-dir: {clash[0]} exists and was not written by `report` "
-                             f"({len(clash)} such file(s) with a report's name); add --force to "
-                             "replace them or choose another directory")
+    plan.directory("--out-dir", out_dir, shipped=shipped, names=[*chosen, "README"])
+    plan.check()                                   # user files of a report's name are refused
     with plan.active():                            # every builder's write obeys it
         return _build(args, areas, chosen, out_dir)
 
@@ -115,7 +109,8 @@ def _build(args, areas, chosen, out_dir) -> int:
     written, timings = {}, {}
     for area in chosen:
         start = time.perf_counter()
-        print(f"report: building {area} ...", file=sys.stderr)
+        if sys.stderr.isatty():          # progress for a person watching; a pipe gets only the result
+            print(f"report: building {area} ...", file=sys.stderr)
         paths = importlib.import_module(areas[area]).build(out_dir)
         timings[f"{area}_s"] = time.perf_counter() - start
         written[area] = [str(p) for p in paths]

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from torquebench.errors import InputError
+from userio.errors import InputError
 
 HELP = "reproduce the paper's Tables III-V, the posture sweep and Fig. 4 (writes ./reproduction/paper_reproduction.md)"
 EXAMPLES = """\
@@ -41,24 +41,16 @@ def run(args) -> int:
     for n in names:
         if n not in rr.ALL_SCENES:
             raise InputError(f"--scene: unknown scene {n!r}; known: {', '.join(rr.ALL_SCENES)}")
-    from userio.files import output_dir
-
     if args.regenerate_shipped and (args.scene or args.quick):
         raise InputError("--regenerate-shipped: the shipped report covers every scene at full "
                          "settings; drop --scene/--quick or write elsewhere with --out-dir")
-    from torquebench.outputs import Outputs, foreign_files, prepare_dir
+    from userio.outputs import Outputs, default_dir
 
-    if args.out_dir is not None:
-        prepare_dir(args.out_dir, "--out-dir")                     # created if missing
-    out_dir = output_dir(args.out_dir, default="reproduction", shipped_dir=REPO_ROOT / "reports",
-                         regenerate=args.regenerate_shipped)
+    out_dir = default_dir(args.out_dir, default="reproduction", shipped_dir=REPO_ROOT / "reports",
+                          regenerate=args.regenerate_shipped)
     plan = Outputs(force=args.force)
-    plan.directory("--out-dir", out_dir, shipped=args.regenerate_shipped)
-    plan.check()
-    clash = [] if args.regenerate_shipped else foreign_files(Path(out_dir), ["reproduction"], args.force)
-    if clash:
-        raise InputError(f"--out-dir: {clash[0]} exists and was not written by `reproduce`; add "
-                         "--force to replace it or choose another directory")
+    plan.directory("--out-dir", out_dir, shipped=args.regenerate_shipped, names=["reproduction"])
+    plan.check()                                       # created if missing; user files kept
     with plan.active():                                # every write obeys it
         return _reproduce(args, names, out_dir)
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from torquebench.errors import InputError
+from userio.errors import InputError
 
 HELP = "simulate a scene file: write a sensor log CSV (docs/conventions.md), LOG.truth.csv and its sensor timing LOG.timing.toml beside it"
 EXAMPLES = """\

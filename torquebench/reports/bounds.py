@@ -23,7 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from torquebench.io import atomic_path, write_text_atomic
+from userio.files import atomic_path, write_text_atomic
+from userio.outputs import make_dir
 
 NOISES = (("paper leg sensors (τ 0.005 N·m, FT 0.1 N, 0.01 N·m)", 0.005, (0.1, 0.1, 0.01)),
           ("3× noisier (τ 0.015 N·m, FT 0.3 N, 0.03 N·m)", 0.015, (0.3, 0.3, 0.03)))
@@ -131,7 +132,7 @@ def build(out_dir: Path, quick: bool = False) -> list[Path]:
 
     robot = paper_leg()
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_dir(out_dir, "output directory")
     start = time.perf_counter()
     n_cases, seeds = (4, range(4)) if quick else (24, range(10))
     cases = _cases(n_cases, seed=29)

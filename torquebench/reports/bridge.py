@@ -120,7 +120,8 @@ def build(out_dir: Path) -> list[Path]:
     from bridge.budget import noise_budget, sensor_summary
     from bridge.chain import PAPER_LEVER_ARM_m, PAPER_STRAIN_PER_NM, paper_chain
     from bridge.config import load_sensor_config
-    from torquebench.io import atomic_path, shipped, write_text_atomic
+    from torquebench.io import shipped
+    from userio.files import atomic_path, write_text_atomic
 
     out_dir = Path(out_dir)
     cfg, spn = load_sensor_config(shipped("sensors", "paper_sensor.toml"))

@@ -20,7 +20,7 @@ def build(out_dir: Path) -> list[Path]:
     from calibration.plots import corner_plot, fidelity_plot, residual_plot
     from calibration.simulate import PAPER_FITS, paper_session
     from calibration.store import calibration_payload, model_from_document
-    from torquebench.io import atomic_path, write_text_atomic
+    from userio.files import atomic_path, write_text_atomic
 
     out_dir = Path(out_dir)
     L = ["# Calibration: static loading, Bayesian fit, store, serial, torque fidelity", "",

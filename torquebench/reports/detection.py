@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from torquebench.io import atomic_path, write_text_atomic
+from userio.files import atomic_path, write_text_atomic
+from userio.outputs import make_dir
 
 SUB, RATE = 5, 1000.0
 SIGMA = np.array([0.1, 0.1, 0.01, 0.005, 0.005])
@@ -138,7 +139,7 @@ def build(out_dir: Path, quick: bool = False) -> list[Path]:
 
     robot = paper_leg()
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_dir(out_dir, "output directory")
     start = time.perf_counter()
     n_quiet_s = 100.0 if quick else 1000.0
     dt = 1.0 / RATE

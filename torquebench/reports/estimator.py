@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from torquebench.io import REPO_ROOT, atomic_path, write_text_atomic
+from torquebench.io import REPO_ROOT
+from userio.files import atomic_path, write_text_atomic
 
 SAMPLES = REPO_ROOT / "examples" / "leg_poke"
 

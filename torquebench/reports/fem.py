@@ -130,7 +130,7 @@ def _headline(rows, orders) -> str:
 
 
 def build(out_dir: Path) -> list[Path]:
-    from torquebench.io import atomic_path, write_text_atomic
+    from userio.files import atomic_path, write_text_atomic
 
     out_dir = Path(out_dir)
     rows = study()

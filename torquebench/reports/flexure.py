@@ -86,7 +86,8 @@ def build(out_dir: Path) -> list[Path]:
     from flexure.analysis import analyze, sweep, sweep_plot, sweep_table
     from flexure.design import load_design
     from flexure.render import render_png
-    from torquebench.io import shipped, write_text_atomic
+    from torquebench.io import shipped
+    from userio.files import write_text_atomic
 
     out_dir = Path(out_dir)
     path = shipped("designs", "paper_disc.toml")

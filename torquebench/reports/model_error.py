@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from torquebench.io import atomic_path, write_text_atomic
+from userio.files import atomic_path, write_text_atomic
+from userio.outputs import make_dir
 
 SIGMA = np.array([0.1, 0.1, 0.01, 0.005, 0.005])
 LEVELS = (0.0, 0.01, 0.02, 0.05, 0.1, 0.2)
@@ -121,7 +122,7 @@ def build(out_dir: Path, quick: bool = False) -> list[Path]:
     from estimator.uncertainty import SensorNoise, interval_rms
 
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_dir(out_dir, "output directory")
     start = time.perf_counter()
     nominal = paper_leg()
     seeds = range(2 if quick else 4)

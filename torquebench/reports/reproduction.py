@@ -130,7 +130,7 @@ def stiffness_cases(quick: bool = False):
 
 
 def stiffness_table(quick=False, progress=True) -> list[dict]:
-    from estimator.errors import InputError
+    from userio.errors import InputError
     from estimator.estimate import estimate
     from estimator.sim import simulate
 
@@ -468,7 +468,7 @@ def markdown(results, plot_names) -> str:
 
 
 def write(results, out_dir: Path) -> list[Path]:
-    from torquebench.io import write_text_atomic
+    from userio.files import write_text_atomic
 
     out_dir = Path(out_dir)
     plots = _plots(results, out_dir)

@@ -246,7 +246,7 @@ def missing_tests(root: Path) -> list[str]:
 
 
 def build(out_dir: Path) -> list[Path]:
-    from torquebench.errors import InputError
+    from userio.errors import InputError
     from torquebench.io import REPO_ROOT
     from userio.files import write_text_atomic
 

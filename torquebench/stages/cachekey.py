@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -53,7 +55,13 @@ def file_hash(p):
     if not p:
         return None
     try:
-        return hashlib.sha256(Path(p).read_bytes()).hexdigest()
+        if not stat.S_ISREG(os.stat(p).st_mode):        # a device or FIFO: never read to its end
+            return f"not a regular file: {p}"
+        h = hashlib.sha256()
+        with open(p, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+        return h.hexdigest()
     except OSError as exc:
         return f"unreadable: {p}: {type(exc).__name__}"
 

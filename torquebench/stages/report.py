@@ -27,9 +27,10 @@ def run_report(scene, inp, seed=None):
     drawn from ``inp`` only) into the scene's output directory, and ``<scene>.md``: the summary of
     what this scene computed followed by the views' sections."""
     from userio.files import write_text_atomic
+    from userio.outputs import make_dir
 
     out_dir = report_dir(scene)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_dir(out_dir, "output directory")
     have = {k for k, v in inp.items() if v is not None}
     areas, _ = report_areas(scene, have)
     written, sections = {}, []

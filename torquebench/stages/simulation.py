@@ -52,7 +52,7 @@ def run_raw_counts(scene, inp, seed):
     import warnings
     from dataclasses import replace
 
-    from bridge.errors import ADCSaturationWarning
+    from bridge.chain import ADCSaturationWarning
     from estimator.sim.sensors import measure
 
     if scene.chain.log_file is not None:

@@ -108,6 +108,33 @@ def vector(length: int | None = None, rng: Range | None = None, *, ge=None, gt=N
     return Annotated[list[elem], Field(min_length=1)]
 
 
+class OneOf:
+    """A string that must be one of the names a *vocabulary* offers, where the package that owns
+    those names declares them: the schema lists none itself. The reader passes them in the
+    validation context, ``parse(model, data, src, context={vocabulary: names})``; e.g. a scene's
+    ``[outputs] want`` takes what the stage declarations offer (torquebench.stages), so a new
+    stage is declared in one place. The documentation lists them through the same vocabulary."""
+
+    def __init__(self, vocabulary: str):
+        self.vocabulary = vocabulary
+
+    def __call__(self, v: str, info):
+        names = (info.context or {}).get(self.vocabulary)
+        if names is None:
+            raise TypeError(f"validating a {self.vocabulary!r} name needs context="
+                            f"{{{self.vocabulary!r}: names}} (a bug in the reader)")
+        if v not in names:
+            expected = ", ".join(repr(n) for n in names[:-1]) + f" or {names[-1]!r}" if len(names) > 1 \
+                else repr(names[0]) if names else "(nothing is offered)"
+            raise PydanticCustomError("literal_error", "Input should be {expected}", {"expected": expected})
+        return v
+
+
+def one_of(vocabulary: str):
+    """A string field checked against a vocabulary given at validation time (:class:`OneOf`)."""
+    return Annotated[str, AfterValidator(OneOf(vocabulary))]
+
+
 def fail(field: str, msg: str):
     """The error of a cross-field check, naming ``field`` (relative to the model being checked)."""
     return PydanticCustomError("field", "{msg}", {"field": field, "msg": msg})

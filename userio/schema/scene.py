@@ -19,12 +19,13 @@ from calibration.session import LEVER_ARM_RANGE_M, MASS_RANGE_G
 from estimator.limits import ALPHA_RANGE, FORCE_RANGE, GAIN_RANGE, SAMPLE_RATE_RANGE, THRESHOLD_RANGE
 from estimator.sim import config as sim
 from userio.ranges import field_range
-from userio.schema.base import Field, Model, Range, fail, integer, num, vector
+from userio.schema.base import Field, Model, Range, fail, integer, num, one_of, vector
 
 G_M_PER_S2 = 9.81
 KINDS = ("dynamic", "static_loading", "posture_sweep")
-OUTPUTS = ("sensitivity", "noise_budget", "flexure", "calibration", "estimates",
-           "localization_error", "predicted_error", "report")
+#: the vocabulary of ``[outputs] want``: the names the stage declarations offer a scene
+#: (torquebench.stages.registry.scene_outputs), passed in by the reader (``OneOf``)
+WANTABLE = "scene_outputs"
 SESSION_KEYS = ("masses_g", "lever_arm_m", "repeats", "n_avg", "seed")
 MAX_SESSION_SAMPLES = 2e7            # ADC codes a simulated calibration session draws (160 MB)
 SIM_KEYS = ("controller", "poke", "ground", "integrator", "mount")
@@ -312,7 +313,7 @@ class Source(Model):
 class Outputs(Model):
     """``[outputs]``: what to compute."""
 
-    want: list[Literal[OUTPUTS]] = Field([], description="results wanted (the planner runs what they need)")
+    want: list[one_of(WANTABLE)] = Field([], description="results wanted (the planner runs what they need)")
     reports: Optional[list[str]] = Field(None, min_length=1, description="report areas "
                                          "(torquebench/reports/<area>.py; default: every area the scene feeds)")
     dir: Optional[str] = Field(None, description="where reports go (default ./out/<scene name>)")
