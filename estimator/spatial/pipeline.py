@@ -67,14 +67,9 @@ class SpatialStream:
         no-contact covariance ("whitened", default), or unweighted ("identity": the planar
         dynamic method's fit, with its ambiguity rule 2·√tr R on the residual norm).
         ``model_cov``: Σ_θ of the file's inertial parameters (``model.model_covariance``); the
-<<<<<<< HEAD
         no-contact covariance is then R_k = R_noise + Φ_k Σ_θ Φ_kᵀ (estimator.model_error).
         ``release_test`` / ``onset_restart``: the episode machinery of the module doc."""
         from userio.errors import InputError
-=======
-        no-contact covariance is then R_k = R_noise + Φ_k Σ_θ Φ_kᵀ (estimator.model_error)."""
-        from userio.errors import InputError
->>>>>>> compose3
 
         if weighting not in ("whitened", "identity"):
             raise InputError(f"weighting: use 'whitened' or 'identity', got {weighting!r}")
