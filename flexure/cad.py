@@ -6,37 +6,17 @@ on as a closed, outward-oriented ``Surface`` for tetgen, exactly like an STL.
 
 from __future__ import annotations
 
-import os
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
 from userio.errors import CallbackInterrupt
 
-
 from flexure.errors import InputError
 from flexure.geometry import Surface, check_watertight
+from flexure.gmsh_session import LC_INTEGRATION_PRECISION, _quiet_stdout
 
 _INTERRUPT = CallbackInterrupt()     # Ctrl-C inside gmsh's size callback → KeyboardInterrupt after it
-
-
-@contextmanager
-def _quiet_stdout():
-    """OpenCASCADE prints its transfer statistics on file descriptor 1: keep them off stdout
-    (the ``--json`` contract) by pointing fd 1 at /dev/null for the duration."""
-    import sys
-
-    sys.stdout.flush()
-    saved = os.dup(1)
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(devnull, 1)
-    try:
-        yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-        os.close(devnull)
 
 
 def import_step(gmsh, path) -> None:
@@ -53,8 +33,6 @@ def load_step(path: str | Path, size_for=None, where: str = "geometry.file") -> 
     triangles per turn of a curved face: a fillet tessellated coarser folds by more than
     meshing.EDGE_ANGLE_DEG between its triangles and would read as a sharp re-entrant edge (the
     STEP part's 1 mm fillets did at h × √2 and h × 1/√2 but not at h × 1)."""
-    from flexure.gmsh_mesh import LC_INTEGRATION_PRECISION
-
     unit_m = 1e-3                                       # import_step reads every STEP in mm
     path = Path(path)
     if not path.is_file():

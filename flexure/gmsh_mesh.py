@@ -1,10 +1,10 @@
 """Graded isotropic tetrahedral meshes with gmsh's size fields, for every kind of input.
 
-The size at a point is the project's ``meshing.SizeField``, given to gmsh as its size callback:
+The size at a point is the project's ``sizing.SizeField``, given to gmsh as its size callback:
 the smallest of
 
     h_gauge + g (d − r_gauge)          d: distance to the nearest gauge centre   (≥ h_gauge)
-    meshing.edge_size(h_edge, d_e)     d_e: distance to a sharp re-entrant edge, graded as √d_e
+    sizing.edge_size(h_edge, d_e)      d_e: distance to a sharp re-entrant edge, graded as √d_e
                                        down to h_edge / 4 at the edge
     2πR / curvature_elements           on a curved edge or face of radius R (gmsh's own, CAD only)
     h_far
@@ -35,7 +35,8 @@ import numpy as np
 from userio.errors import CallbackInterrupt
 
 from flexure.errors import InputError
-from flexure.meshing import edge_size
+from flexure.gmsh_session import LC_INTEGRATION_PRECISION, _quiet_stdout
+from flexure.sizing import edge_size
 
 MM = 1e3                        # metres → gmsh units (mm)
 #: gmsh options of the volume mesh: Delaunay 3-D, gmsh's optimiser on every tetrahedron of quality
@@ -55,17 +56,11 @@ MM = 1e3                        # metres → gmsh units (mm)
 VOLUME_OPTIONS = {"Mesh.Algorithm3D": 1, "Mesh.Optimize": 1, "Mesh.OptimizeNetgen": 1,
                   "Mesh.OptimizeThreshold": 0.7, "Mesh.Smoothing": 10}
 
-#: relative accuracy of gmsh's integral ∫ ds / h along each curve, which places the curve's nodes
-#: (gmsh's default 1e-9). Its adaptive quadrature calls the size callback (Python) at every
-#: sample: at 1e-9 that was 70–90 % of the meshing time, 333k of 339k calls on the thick disc at
-#: h × 1 (11.5 s), 691k on a 47k-triangle STL (39 s of 39 s). At 1e-4: 18k calls and 4.6 s, 58k calls
-#: and 15 s; node placement along a curve changes by < 1e-4 of an element.
-LC_INTEGRATION_PRECISION = 1e-4
 _INTERRUPT = CallbackInterrupt()     # Ctrl-C inside gmsh's size callback → KeyboardInterrupt after it
 
 
 def _size_field(gmsh, field, spots=None) -> None:
-    """Mesh size from ``field`` (meshing.SizeField, metres: h = clip(h_gauge + g(d − r_gauge),
+    """Mesh size from ``field`` (sizing.SizeField, metres: h = clip(h_gauge + g(d − r_gauge),
     h_gauge, h_far), and 2πR / curvature_elements on curved edges and faces) through gmsh's size
     callback, in mm; ``spots`` (k, 4: x, y, z, h in mm) add h_k + g·d_k around the tetrahedra a
     previous pass left too flat (``_session``)."""
@@ -268,8 +263,6 @@ def _one_pass(build, field, where: str, order: int, curved: bool, spots):
     """One gmsh session: the volume meshed with ``field`` (+ ``spots``) → (points, corner tets,
     gmsh's curved mid-edge nodes or None, the boundary's classification (``_entities``))."""
     import gmsh
-
-    from flexure.cad import _quiet_stdout
 
     gmsh.initialize(interruptible=False)
     try:
