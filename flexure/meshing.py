@@ -318,8 +318,9 @@ def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gau
     if mesher == "gmsh":
         from flexure import gmsh_mesh
         if is_surface:
+            from flexure.stl_remesh import mesh_surface
             surface = surface_or_poly
-            mesh = gmsh_mesh.mesh_surface(surface, field, order)
+            mesh = mesh_surface(surface, field, order)
         else:
             mesh = (gmsh_mesh.mesh_spoke_disc(exact_disc, field, order) if exact_disc is not None else
                     gmsh_mesh.mesh_extrusion(surface_or_poly, thickness, field, order))
@@ -343,6 +344,12 @@ def mesh_report(mesh, size: str, mesher: str, layers, field: SizeField, surface:
     if surface is not None and mesher == "gmsh":
         v0 = surface_volume(surface)
         rep["remesh_volume_change"] = float(rep["total_volume_m3"] / v0 - 1.0) if v0 > 0 else math.nan
+    attempts = mesh._cache.get("attempts")
+    if attempts:                                # gmsh's meshing attempts (gmsh_mesh._session)
+        rep["mesh_attempts"] = attempts
+        kept = next(a for a in attempts if a.get("kept"))
+        if "surface_distance_m" in kept:
+            rep["remesh_surface_distance_m"] = kept["surface_distance_m"]
     return rep
 
 
