@@ -280,7 +280,7 @@ def _session(build, field, where: str, order: int, curved: bool = False, check=N
         # next: this strategy once more, finer around its slivers; then an untried one; then the best
         name = name if tries[name] < 2 else (untried.pop(0) if untried else best[5])
     if best is None:
-        raise error
+        raise error if str(error).startswith(where) else InputError(f"{where}: {error}")
     _, points, tets, geometric, entities, _, _, kept = best
     attempts[kept]["kept"] = True
     if geometric is not None:

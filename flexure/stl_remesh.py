@@ -86,9 +86,27 @@ def _surface_triangles(gmsh):
     return np.asarray(coords, float).reshape(-1, 3)[used], remap[tri]
 
 
+def _strategy(what: str):
+    """A build whose gmsh failure is an InputError naming ``what`` (gmsh_mesh._session then tries
+    the next strategy); Ctrl-C in the size callback stays a KeyboardInterrupt."""
+
+    def wrap(build):
+        def run(gmsh):
+            try:
+                build(gmsh)
+            except Exception as exc:
+                gmsh_mesh._INTERRUPT.check()
+                raise InputError(f"{what} failed ({str(exc).splitlines()[0]})") from None
+            gmsh_mesh._INTERRUPT.check()
+        return run
+
+    return wrap
+
+
 def build_direct(surface, angle_deg: float):
     """The STL's own triangles classified into parametrisable patches (cut where needed)."""
 
+    @_strategy("classifying the STL's triangles")
     def build(gmsh):
         gmsh.model.add("stl")
         _add_discrete(gmsh, surface.points * MM, surface.faces)
@@ -103,17 +121,13 @@ def build_reparametrised(surface, angle_deg: float):
     """Re-triangulate the STL's uncut patches at the size field's size (gmsh_mesh._one_pass sets it
     on the current model before the build), then classify that triangulation as ``build_direct``."""
 
+    @_strategy("re-parametrising the STL")
     def build(gmsh):
-        try:
-            _add_discrete(gmsh, surface.points * MM, surface.faces)
-            gmsh.model.mesh.classifySurfaces(np.deg2rad(angle_deg), True, False, np.pi)
-            gmsh.model.mesh.createGeometry()
-            gmsh.model.mesh.generate(2)
-            pts, tri = _surface_triangles(gmsh)
-        except Exception as exc:
-            gmsh_mesh._INTERRUPT.check()
-            raise InputError(f"re-parametrising the STL failed ({str(exc).splitlines()[0]})") from None
-        gmsh_mesh._INTERRUPT.check()
+        _add_discrete(gmsh, surface.points * MM, surface.faces)
+        gmsh.model.mesh.classifySurfaces(np.deg2rad(angle_deg), True, False, np.pi)
+        gmsh.model.mesh.createGeometry()
+        gmsh.model.mesh.generate(2)
+        pts, tri = _surface_triangles(gmsh)
         gmsh.model.remove()
         gmsh.model.add("stl")
         _add_discrete(gmsh, pts, tri)

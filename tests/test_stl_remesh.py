@@ -100,6 +100,26 @@ def test_attempts_are_bounded_and_the_warning_names_them(monkeypatch):
     assert f"after {stl_remesh.MAX_ATTEMPTS} meshing attempts" in line and "re-parametrised:" in line
 
 
+def test_a_strategy_gmsh_cannot_build_gives_way_to_the_next(monkeypatch):
+    """gmsh failing on one surface strategy (an InputError from its build) is recorded and the next
+    one meshes; when every strategy fails, one InputError naming the file."""
+    from flexure.errors import InputError
+    from flexure.mesh import box_mesh
+
+    def fake_pass(build, field, where, order, curved, spots):
+        if build == "R":
+            raise InputError("re-parametrising the STL failed (Wrong topology)")
+        m = box_mesh(2, 2, 2)
+        return m.points, m.tets, None, (np.zeros((0, 3), int), np.zeros(0), np.zeros((0, 2), int), np.zeros(0))
+
+    monkeypatch.setattr(gmsh_mesh, "_one_pass", fake_pass)
+    mesh = gmsh_mesh._session([("re-parametrised", "R"), ("direct", "D")], _field(1.0), "part.toml", 1)
+    attempts = mesh._cache["attempts"]
+    assert "failed" in attempts[0] and attempts[1]["strategy"] == "direct" and attempts[1]["kept"]
+    with pytest.raises(InputError, match="^part.toml: re-parametrising the STL failed"):
+        gmsh_mesh._session([("re-parametrised", "R")], _field(1.0), "part.toml", 1)
+
+
 def test_surface_distance_is_exact_within_its_tolerance():
     """The binned distance equals brute force over every triangle for points within tol, inf beyond."""
     tm = thin_tube(6.0, 0.8, 4.0, res=8)
