@@ -74,7 +74,7 @@ def test_hostile_design_refused_from_its_geometry_before_meshing(tmp_path, capsy
     from torquebench.cli import main
 
     code = main(["flexure", str(_design(tmp_path, **replace))])
-    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    err = [ln for ln in capsys.readouterr().err.splitlines() if "error" in ln]
     assert code == 2 and len(err) == 1, err
     assert key in err[0] and "tetrahedra" in err[0] and "GB" in err[0] and "--max-elements" in err[0]
 
@@ -97,3 +97,34 @@ def test_curved_walls_add_to_the_estimate_where_gmsh_refines_them():
     assert tall["geometry.hub_bolt_diameter_mm"] == pytest.approx(100 * parts["geometry.hub_bolt_diameter_mm"])
     flat = estimate_parts(replace(field, curvature_elements=0.0), 1e-6, d.disc.thickness, walls)
     assert set(flat) == {"volume", "gauges", "edges"}
+
+
+def test_hostile_step_refused_before_its_surface_is_meshed(tmp_path, capsys):
+    """A 300 × 300 × 0.2 mm STEP plate: the estimate from the solid's volume and area refuses it
+    before gmsh triangulates its surface (at 0.2 mm that alone is millions of triangles)."""
+    import gmsh
+
+    from flexure.gmsh_session import _quiet_stdout
+    from torquebench.cli import main
+
+    gmsh.initialize(interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.occ.addBox(-150, -150, 0, 300, 300, 0.2)
+        gmsh.model.occ.synchronize()
+        with _quiet_stdout():
+            gmsh.write(str(tmp_path / "plate.step"))
+    finally:
+        gmsh.finalize()
+    sensor = ROOT / "sensors" / "paper_sensor.toml"
+    (tmp_path / "plate.toml").write_text(
+        'name = "plate"\n[geometry]\nkind = "step"\nfile = "plate.step"\n[gauges]\ngrid_length_mm = 1.0\n'
+        'grid_width_mm = 1.0\n' + "".join(
+            f"[[gauges.gauge]]\ncentre_mm = [{x}, {y}, 0.2]\naxis = [0.7071067812, 0.7071067812, 0.0]\narm = {i}\n"
+            for i, (x, y) in enumerate(((20, 0), (0, 20), (-20, 0), (0, -20)), 1))
+        + f'[loads]\nrated_torque_Nm = 2.0\nload_radius_max_mm = 5.0\nfixed_radius_min_mm = 140.0\n'
+          f'[bridge]\nsensor = "{sensor}"\n')
+    code = main(["flexure", str(tmp_path / "plate.toml")])
+    err = [ln for ln in capsys.readouterr().err.splitlines() if "error" in ln]
+    assert code == 2 and len(err) == 1, err
+    assert "plate.step" in err[0] and "tetrahedra" in err[0] and "GB" in err[0] and "--max-elements" in err[0]
