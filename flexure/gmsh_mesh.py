@@ -12,7 +12,7 @@ the smallest of
 with g = 0.35 (grading), every term scaled with the refinement level. The *volume* is meshed with
 this field (not just the surface, as with tetgen), so a gauge is covered by several isotropic
 elements whatever the STL's triangles: an STL is re-meshed through gmsh's
-``classifySurfaces``/``createGeometry`` (its triangles only define the shape), a parametric profile
+``classifySurfaces``/``createGeometry`` (its triangles only define the shape; flexure.stl_remesh), a parametric profile
 is extruded in OpenCASCADE and a STEP solid is meshed directly on its exact geometry, and so is the
 parametric spoke disc (an exact OpenCASCADE solid, ``mesh_spoke_disc``). gmsh's Delaunay 3-D +
 optimisers (VOLUME_OPTIONS). Everything in gmsh is in millimetres (its tolerances are absolute).
@@ -52,7 +52,8 @@ MM = 1e3                        # metres → gmsh units (mm)
 #: facets, 30° folds), which no volume optimiser may move. gmsh's MeshAdapt surface algorithm
 #: (Mesh.Algorithm 1) gave 10.5° there but 9 % fewer elements, 30 % more time and a re-meshed volume
 #: 0.65 % off the STL's (0.46 % with the default), so it is not used. What lifts these (and the
-#: plate-spanning tetrahedra of a CAD part) is a second pass finer around them: MIN_DIHEDRAL_DEG.
+#: plate-spanning tetrahedra of a CAD part) is a second pass finer around them: MIN_DIHEDRAL_DEG;
+#: an STL's needle walls went only when its surface was re-triangulated first (flexure.stl_remesh).
 VOLUME_OPTIONS = {"Mesh.Algorithm3D": 1, "Mesh.Optimize": 1, "Mesh.OptimizeNetgen": 1,
                   "Mesh.OptimizeThreshold": 0.7, "Mesh.Smoothing": 10}
 
