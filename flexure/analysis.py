@@ -80,7 +80,7 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
     if design.kind == "step":
         from flexure.cad import load_step
         from flexure.meshing import size_field
-        surf = load_step(design.file_path, where=where,
+        surf = load_step(design.file_path, where=where, max_elements=cap,
                          size_for=lambda scale: size_field(size, scale, centres, extent, gw, h_factor,
                                                            curvature_h_factor=curvature_h_factor))
     else:

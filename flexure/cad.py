@@ -6,37 +6,17 @@ on as a closed, outward-oriented ``Surface`` for tetgen, exactly like an STL.
 
 from __future__ import annotations
 
-import os
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
 from userio.errors import CallbackInterrupt
 
-
 from userio.errors import InputError
 from flexure.geometry import Surface, check_watertight
+from flexure.gmsh_session import LC_INTEGRATION_PRECISION, _quiet_stdout
 
 _INTERRUPT = CallbackInterrupt()     # Ctrl-C inside gmsh's size callback → KeyboardInterrupt after it
-
-
-@contextmanager
-def _quiet_stdout():
-    """OpenCASCADE prints its transfer statistics on file descriptor 1: keep them off stdout
-    (the ``--json`` contract) by pointing fd 1 at /dev/null for the duration."""
-    import sys
-
-    sys.stdout.flush()
-    saved = os.dup(1)
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(devnull, 1)
-    try:
-        yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-        os.close(devnull)
 
 
 def import_step(gmsh, path) -> None:
@@ -47,14 +27,15 @@ def import_step(gmsh, path) -> None:
     gmsh.model.occ.synchronize()
 
 
-def load_step(path: str | Path, size_for=None, where: str = "geometry.file") -> Surface:
+def load_step(path: str | Path, size_for=None, where: str = "geometry.file",
+              max_elements: float | None = None) -> Surface:
     """Surface (m) of the one solid in a STEP file (``import_step``). ``size_for(scale_m) -> SizeField`` gives the
     surface mesh size (m) from the solid's smallest bounding-box extent, never coarser than 16
     triangles per turn of a curved face: a fillet tessellated coarser folds by more than
     meshing.EDGE_ANGLE_DEG between its triangles and would read as a sharp re-entrant edge (the
-    STEP part's 1 mm fillets did at h × √2 and h × 1/√2 but not at h × 1)."""
-    from flexure.gmsh_mesh import LC_INTEGRATION_PRECISION
-
+    STEP part's 1 mm fillets did at h × √2 and h × 1/√2 but not at h × 1). With ``max_elements``
+    the volume mesh's estimated cost (flexure.sizing.check_cost, from the solid's volume and area)
+    refuses a hopeless part before its surface is meshed."""
     unit_m = 1e-3                                       # import_step reads every STEP in mm
     path = Path(path)
     if not path.is_file():
@@ -79,6 +60,12 @@ def load_step(path: str | Path, size_for=None, where: str = "geometry.file") -> 
             scale_m = float((box[3:] - box[:3]).min()) * unit_m
             if size_for is not None:
                 field = size_for(scale_m)
+                if max_elements is not None:           # the volume's cost, before its surface is meshed
+                    from flexure.sizing import check_cost
+                    tag = solids[0][1]
+                    area = sum(gmsh.model.occ.getMass(2, t) for _, t in gmsh.model.getBoundary([(3, tag)], oriented=False))
+                    check_cost(field, gmsh.model.occ.getMass(3, tag) * unit_m ** 3, area * unit_m ** 2,
+                               max_elements, f"{where}: {path}")
                 gmsh.model.mesh.setSizeCallback(_INTERRUPT.wrap(   # Ctrl-C: size 0 stops gmsh
                     lambda dim, tag, x, y, z, lc: min(lc, float(field(np.array([[x, y, z]]) * unit_m)[0]) / unit_m),
                     0.0))

@@ -183,6 +183,20 @@ def thinnest_wall(design: Design) -> tuple[float, str] | None:
     return min(walls)
 
 
+def curved_walls(d) -> list:
+    """The spoke disc's curved faces for the mesh-cost estimate (flexure.sizing.estimate_parts):
+    (design key, radius m, total wall height m, arc fraction, material outside the circle?)."""
+    t = d.thickness
+    n_arms = len(d.spoke_angles_rad())
+    return [("geometry.bore_radius_mm", d.bore_radius, t, 1.0, True),
+            ("geometry.hub_bolt_diameter_mm", d.hub_bolt_diameter / 2, t * d.hub_bolts, 1.0, True),
+            ("geometry.rim_bolt_diameter_mm", d.rim_bolt_diameter / 2, t * d.rim_bolts, 1.0, True),
+            ("geometry.rim_inner_radius_mm", d.rim_inner_radius, t, 1.0, True),
+            ("geometry.hub_radius_mm", d.hub_radius, t, 1.0, False),
+            ("geometry.outer_radius_mm", d.outer_radius, t, 1.0, False),
+            ("geometry.fillet_radius_mm", d.fillet_radius, 4 * n_arms * t, 0.25, True)]
+
+
 def preflight(design: Design, size: str | None = None, order: int | None = None,
               max_elements: float | None = None, levels: int = 3) -> dict:
     """Cost and soundness before any meshing, for ``levels`` mesh levels (1: the answer's; 2: a
@@ -196,7 +210,8 @@ def preflight(design: Design, size: str | None = None, order: int | None = None,
       from ν ≥ 0.49999 is beyond its measured accuracy: refused; P2 from 0.49 warned (the solver
       needs more iterations).
     Returns {"elements_estimate" (at the answer's level), "levels", "warnings"}."""
-    from flexure.meshing import MAX_ELEMENTS, SIZES, estimate_elements, size_field
+    from flexure.meshing import SIZES, size_field
+    from flexure.sizing import BYTES_PER_ELEMENT, MAX_ELEMENTS, estimate_parts
     from flexure.solve import NU_LOCKING
 
     size = size or design.size
@@ -225,19 +240,34 @@ def preflight(design: Design, size: str | None = None, order: int | None = None,
     extent = 0.5 * max(g.length_m + g.width_m for g in design.gauges) / math.sqrt(2) * 1.3
     gw = min(min(g.width_m, g.length_m) for g in design.gauges)
     factors = {1: (1.0,), 2: (2 ** 0.5, 1.0), 3: (2 ** 0.5, 1.0, 2 ** -0.5)}.get(levels, (1.0,))
+    walls = curved_walls(d) if design.mesher == "gmsh" else ()
     for f in factors:
         field = size_field(size, d.thickness, centres, extent, gw, f)
-        n = estimate_elements(field, V, 2 * V / A)
+        parts = estimate_parts(field, V, 2 * V / A, walls)
+        n = float(sum(parts.values()))
         out["levels"].append({"h_factor": f, "elements_estimate": n})
         if f == 1.0:
             out["elements_estimate"] = n
         if not np.isfinite(n) or n > cap:
-            wall, what = thinnest_wall(design)
             lvl = "" if f == 1.0 else f" level h × {f:.3g}{' (the finest)' if f < 1 else ''}"
+            top = max(parts, key=lambda k: parts[k] if np.isfinite(parts[k]) else math.inf)
+            if top in ("volume", "edges"):
+                wall, what = thinnest_wall(design)
+                why = (f"the thinnest wall, {what} = {wall * 1e3:.3g} mm, bounds the element size (h ≤ "
+                       f"{min(field.h_far, 2 * V / A) * 1e3:.3g} mm over {V * 1e9:.4g} mm³)")
+                fix = "Thicken the wall, use --single-level"
+            elif top == "gauges":
+                why = (f"the gauges (gauges.grid_width_mm / grid_length_mm: {field.h_gauge * 1e3:.3g} mm elements "
+                       f"at each of {len(centres)}, graded out to {field.h_far * 1e3:.3g} mm)")
+                fix = "Use larger gauge grids, --single-level"
+            else:
+                R = next(r for k, r, *_ in walls if k == top)
+                why = (f"{top}'s curved walls ({100 * parts[top] / n:.0f} %: {2 * math.pi * R / field.curvature_elements * 1e3:.3g} mm "
+                       f"elements, 2πR / {field.curvature_elements:.3g} per turn, over walls geometry.thickness_mm = "
+                       f"{d.thickness * 1e3:.4g} mm tall)")
+                fix = "Check geometry.thickness_mm and that radius, use --single-level"
             raise InputError(
-                f"{design.path}: the mesh{lvl} would have ~{n:.3g} tetrahedra, above --max-elements "
-                f"{cap:.3g}: the thinnest wall, {what} = {wall * 1e3:.3g} mm, bounds the element size "
-                f"(h ≤ {min(field.h_far, 2 * V / A) * 1e3:.3g} mm over {V * 1e9:.4g} mm³); refused before "
-                "meshing. Thicken the wall, use --single-level"
+                f"{design.path}: the mesh{lvl} would have ~{n:.3g} tetrahedra (~{n * BYTES_PER_ELEMENT / 1e9:.3g} GB "
+                f"for P2), above --max-elements {cap:.3g}: {why}; refused before meshing. {fix}"
                 + (" or --size coarse" if size != "coarse" else "") + ", or raise --max-elements")
     return out

@@ -1,10 +1,10 @@
 """Graded isotropic tetrahedral meshes with gmsh's size fields, for every kind of input.
 
-The size at a point is the project's ``meshing.SizeField``, given to gmsh as its size callback:
+The size at a point is the project's ``sizing.SizeField``, given to gmsh as its size callback:
 the smallest of
 
     h_gauge + g (d − r_gauge)          d: distance to the nearest gauge centre   (≥ h_gauge)
-    meshing.edge_size(h_edge, d_e)     d_e: distance to a sharp re-entrant edge, graded as √d_e
+    sizing.edge_size(h_edge, d_e)      d_e: distance to a sharp re-entrant edge, graded as √d_e
                                        down to h_edge / 4 at the edge
     2πR / curvature_elements           on a curved edge or face of radius R (gmsh's own, CAD only)
     h_far
@@ -12,7 +12,7 @@ the smallest of
 with g = 0.35 (grading), every term scaled with the refinement level. The *volume* is meshed with
 this field (not just the surface, as with tetgen), so a gauge is covered by several isotropic
 elements whatever the STL's triangles: an STL is re-meshed through gmsh's
-``classifySurfaces``/``createGeometry`` (its triangles only define the shape), a parametric profile
+``classifySurfaces``/``createGeometry`` (its triangles only define the shape; flexure.stl_remesh), a parametric profile
 is extruded in OpenCASCADE and a STEP solid is meshed directly on its exact geometry, and so is the
 parametric spoke disc (an exact OpenCASCADE solid, ``mesh_spoke_disc``). gmsh's Delaunay 3-D +
 optimisers (VOLUME_OPTIONS). Everything in gmsh is in millimetres (its tolerances are absolute).
@@ -35,7 +35,8 @@ import numpy as np
 from userio.errors import CallbackInterrupt
 
 from userio.errors import InputError
-from flexure.meshing import edge_size
+from flexure.gmsh_session import LC_INTEGRATION_PRECISION, _quiet_stdout
+from flexure.sizing import edge_size
 
 MM = 1e3                        # metres → gmsh units (mm)
 #: gmsh options of the volume mesh: Delaunay 3-D, gmsh's optimiser on every tetrahedron of quality
@@ -51,21 +52,16 @@ MM = 1e3                        # metres → gmsh units (mm)
 #: facets, 30° folds), which no volume optimiser may move. gmsh's MeshAdapt surface algorithm
 #: (Mesh.Algorithm 1) gave 10.5° there but 9 % fewer elements, 30 % more time and a re-meshed volume
 #: 0.65 % off the STL's (0.46 % with the default), so it is not used. What lifts these (and the
-#: plate-spanning tetrahedra of a CAD part) is a second pass finer around them: MIN_DIHEDRAL_DEG.
+#: plate-spanning tetrahedra of a CAD part) is a second pass finer around them: MIN_DIHEDRAL_DEG;
+#: an STL's needle walls went only when its surface was re-triangulated first (flexure.stl_remesh).
 VOLUME_OPTIONS = {"Mesh.Algorithm3D": 1, "Mesh.Optimize": 1, "Mesh.OptimizeNetgen": 1,
                   "Mesh.OptimizeThreshold": 0.7, "Mesh.Smoothing": 10}
 
-#: relative accuracy of gmsh's integral ∫ ds / h along each curve, which places the curve's nodes
-#: (gmsh's default 1e-9). Its adaptive quadrature calls the size callback (Python) at every
-#: sample: at 1e-9 that was 70–90 % of the meshing time, 333k of 339k calls on the thick disc at
-#: h × 1 (11.5 s), 691k on a 47k-triangle STL (39 s of 39 s). At 1e-4: 18k calls and 4.6 s, 58k calls
-#: and 15 s; node placement along a curve changes by < 1e-4 of an element.
-LC_INTEGRATION_PRECISION = 1e-4
 _INTERRUPT = CallbackInterrupt()     # Ctrl-C inside gmsh's size callback → KeyboardInterrupt after it
 
 
 def _size_field(gmsh, field, spots=None) -> None:
-    """Mesh size from ``field`` (meshing.SizeField, metres: h = clip(h_gauge + g(d − r_gauge),
+    """Mesh size from ``field`` (sizing.SizeField, metres: h = clip(h_gauge + g(d − r_gauge),
     h_gauge, h_far), and 2πR / curvature_elements on curved edges and faces) through gmsh's size
     callback, in mm; ``spots`` (k, 4: x, y, z, h in mm) add h_k + g·d_k around the tetrahedra a
     previous pass left too flat (``_session``)."""
@@ -235,32 +231,66 @@ QUALITY_PASSES = 2
 SPOT_REFINEMENT = 0.2
 
 
-def _session(build, field, where: str, order: int, curved: bool = False):
+def _session(build, field, where: str, order: int, curved: bool = False, check=None):
     """Run ``build(gmsh)`` (creates the volume), mesh it with ``field``; → flexure.mesh.Mesh.
     ``curved`` (order 2, exact CAD geometry): mid-edge nodes of boundary edges on the true curved
     faces (isoparametric P2), else on the chords. A mesh with a tetrahedron below MIN_DIHEDRAL_DEG
-    is made again, finer around it (MIN_DIHEDRAL_DEG says how)."""
+    is made again, finer around it (MIN_DIHEDRAL_DEG says how).
+
+    ``build`` may also be a list of (name, build) strategies (an STL's surface treatments,
+    flexure.stl_remesh): while the mesh has such a tetrahedron, a strategy is tried once more finer
+    around them, then the next strategy, then the best one finer again: len(strategies) +
+    QUALITY_PASSES attempts at most (one strategy: itself and QUALITY_PASSES finer passes); ``check(points, tets, entities) -> dict`` with "ok" (the
+    geometry kept) rules an attempt out unless none passes. Every attempt is recorded in
+    ``mesh._cache["attempts"]`` (strategy, min dihedral angle, count below MIN_DIHEDRAL_DEG, the
+    check's figures; the mesh returned "kept")."""
     from flexure.mesh import Mesh, element_shape_metrics, to_quadratic
 
-    spots, best = np.zeros((0, 4)), None
-    for _ in range(QUALITY_PASSES + 1):
-        points, tets, geometric, entities = _one_pass(build, field, where, order, curved, spots)
+    builds = dict(build) if isinstance(build, (list, tuple)) else {"mesh": build}
+    untried = list(builds)
+    spots = {name: np.zeros((0, 4)) for name in builds}
+    tries = dict.fromkeys(builds, 0)
+    best, attempts, error, name = None, [], None, untried.pop(0)
+    for _ in range(len(builds) + QUALITY_PASSES):
+        tries[name] += 1
+        try:
+            points, tets, geometric, entities = _one_pass(builds[name], field, where, order, curved, spots[name])
+        except InputError as exc:                   # this strategy failed: the next one may not
+            attempts.append({"strategy": name, "failed": str(exc)})
+            error = exc
+            if not untried:
+                break
+            name = untried.pop(0)
+            continue
         worst = element_shape_metrics(points, tets)["dihedral_deg"].min(axis=1)
-        if best is None or worst.min() > best[0]:
-            best = (worst.min(), points, tets, geometric, entities)
         bad = worst < MIN_DIHEDRAL_DEG
+        geo = check(points, tets, entities) if check is not None else {"ok": True}
+        attempts.append({"strategy": name + (" + finer at its slivers" if len(spots[name]) else ""),
+                         "min_dihedral_deg": float(worst.min()), "n_below_min": int(bad.sum()),
+                         "n_tets": int(len(tets)), **geo})
+        if best is None or (geo["ok"], worst.min()) > (best[6]["ok"], best[0]):
+            best = (worst.min(), points, tets, geometric, entities, name, geo, len(attempts) - 1)
         if not bad.any():
-            break
-        x = points[tets[bad]] * MM
+            if geo["ok"] or not untried:
+                break
+            name = untried.pop(0)                   # geometry lost: another surface strategy
+            continue
+        x = points[tets[bad]] * MM                  # this strategy's next pass: finer around them
         longest = np.linalg.norm(x[:, :, None] - x[:, None], axis=-1).max(axis=(1, 2))
-        spots = np.vstack([spots, np.column_stack([x.mean(axis=1), SPOT_REFINEMENT * longest])])
-    _, points, tets, geometric, entities = best
+        spots[name] = np.vstack([spots[name], np.column_stack([x.mean(axis=1), SPOT_REFINEMENT * longest])])
+        # next: this strategy once more, finer around its slivers; then an untried one; then the best
+        name = name if tries[name] < 2 else (untried.pop(0) if untried else best[5])
+    if best is None:
+        raise error if str(error).startswith(where) else InputError(f"{where}: {error}")
+    _, points, tets, geometric, entities, _, _, kept = best
+    attempts[kept]["kept"] = True
     if geometric is not None:
         mesh = _curved_quadratic(points, tets, *geometric)
     else:
         mesh = Mesh(points, tets)
         mesh = to_quadratic(mesh) if order == 2 else mesh
     mesh._cache["entities"] = entities          # gmsh's classification (flexure.project.classify)
+    mesh._cache["attempts"] = attempts
     return mesh
 
 
@@ -269,12 +299,11 @@ def _one_pass(build, field, where: str, order: int, curved: bool, spots):
     gmsh's curved mid-edge nodes or None, the boundary's classification (``_entities``))."""
     import gmsh
 
-    from flexure.cad import _quiet_stdout
-
     gmsh.initialize(interruptible=False)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         with _quiet_stdout():
+            _size_field(gmsh, field, spots)      # for a build that meshes a surface first (stl_remesh)
             build(gmsh)
             _size_field(gmsh, field, spots)
             points, tets, entities = _volume_tets(gmsh, where)
@@ -305,30 +334,6 @@ def mesh_extrusion(poly, height: float, field, order: int = 1, where: str = "mes
         occ.synchronize()
 
     return _session(build, field, where, order)
-
-
-def mesh_surface(surface, field, order: int = 1, where: str = "mesh", angle_deg: float = 40.0):
-    """Re-mesh a closed triangulated surface (STL, m) and its volume with the size field: the
-    triangles are classified into patches (dihedral angle > ``angle_deg`` = sharp edge), each patch
-    re-parametrised and re-triangulated at the field's size, then the volume is meshed. The
-    field's curvature term is not used: a triangulated surface is its facets, and gmsh would read
-    every fold between facets as a tight radius and refine along it."""
-    from dataclasses import replace
-
-    def build(gmsh):
-        gmsh.model.add("stl")
-        tag = gmsh.model.addDiscreteEntity(2)
-        n = len(surface.points)
-        gmsh.model.mesh.addNodes(2, tag, np.arange(1, n + 1), (surface.points * MM).ravel())
-        gmsh.model.mesh.addElementsByType(tag, 2, [], (np.asarray(surface.faces) + 1).ravel())
-        gmsh.model.mesh.classifySurfaces(np.deg2rad(angle_deg), True, True, np.pi)
-        gmsh.model.mesh.createGeometry()
-        surfs = [t for _, t in gmsh.model.getEntities(2)]
-        loop = gmsh.model.geo.addSurfaceLoop(surfs)
-        gmsh.model.geo.addVolume([loop])
-        gmsh.model.geo.synchronize()
-
-    return _session(build, replace(field, curvature_elements=0.0), where, order)
 
 
 def mesh_step(path, field, order: int = 1, where: str = "geometry.file"):

@@ -59,7 +59,7 @@ class CadProjector:
     def project(self, points: np.ndarray, dim: np.ndarray, tag: np.ndarray) -> np.ndarray:
         import gmsh
 
-        from flexure.cad import _quiet_stdout
+        from flexure.gmsh_session import _quiet_stdout
 
         out = np.array(points, float)
         gmsh.initialize(interruptible=False)

@@ -34,12 +34,19 @@ def sliver_count(mesh) -> tuple[int, float]:
     return int(np.count_nonzero(dmin < SLIVER_DEG)), float(dmin.min())
 
 
-def explain(n: int, total: int, worst_deg: float) -> str:
-    """The sliver warning, one line: how many, how bad, what it means, what to do."""
+def explain(n: int, total: int, worst_deg: float, attempts: list | None = None) -> str:
+    """The sliver warning, one line: how many, how bad, after how many meshing attempts (gmsh's
+    record, flexure.gmsh_mesh._session), what it means, what to do."""
+    tried = ""
+    if attempts:
+        ran = [a for a in attempts if "min_dihedral_deg" in a]
+        tried = (f" after {len(attempts)} meshing attempt{'s' if len(attempts) > 1 else ''} ("
+                 + ", ".join(f"{a['strategy']}: {a['min_dihedral_deg']:.2g}°" for a in ran)
+                 + (f"; {len(attempts) - len(ran)} failed" if len(ran) < len(attempts) else "") + ")")
     return (f"sliver_elements: {n} of {total} tetrahedra have a dihedral angle below {SLIVER_DEG:g}° (worst "
-            f"{worst_deg:.2g}°): such flat elements are ill-conditioned and the strains and stresses around them "
-            "unreliable, so every figure's ± is widened to the spread over the mesh levels; remove thin walls "
-            "and long, needle-like triangles from the part's surface (or try --size medium)")
+            f"{worst_deg:.2g}°{tried}): such flat elements are ill-conditioned and the strains and stresses "
+            "around them unreliable, so every figure's ± is widened to the spread over the mesh levels; remove "
+            "thin walls and long, needle-like triangles from the part's surface (or try --size medium)")
 
 
 def annotate(warnings: list[str], mesh, report: dict) -> list[str]:
@@ -50,7 +57,7 @@ def annotate(warnings: list[str], mesh, report: dict) -> list[str]:
     report[KEY] = n
     out = [w for w in warnings if w != "sliver_elements"]
     if n:
-        out.append(explain(n, int(len(mesh.corner_tets)), worst))
+        out.append(explain(n, int(len(mesh.corner_tets)), worst, report.get("mesh_attempts")))
     return out
 
 

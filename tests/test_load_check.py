@@ -43,12 +43,12 @@ def design(tmp_path, loads: str):
 @pytest.fixture
 def no_meshing(monkeypatch):
     """Every mesher fails the test if it is called."""
-    from flexure import gmsh_mesh, meshing
+    from flexure import gmsh_mesh, meshing, stl_remesh
 
     def refuse(*a, **k):
         raise AssertionError("a mesher was called before the geometry check")
 
-    for mod, name in ((gmsh_mesh, "mesh_surface"), (gmsh_mesh, "_session"), (meshing, "tetrahedralize"),
+    for mod, name in ((stl_remesh, "mesh_surface"), (gmsh_mesh, "_session"), (meshing, "tetrahedralize"),
                       (meshing, "sweep_mesh"), (meshing, "mesh_design_surface")):
         monkeypatch.setattr(mod, name, refuse)
 
