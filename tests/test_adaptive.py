@@ -249,8 +249,11 @@ def test_stl_boundary_vertices_and_mid_nodes_are_put_on_the_stl(small_tagged):
     assert projector.snap_vertices
     info = snap(tm, projector, vertices=True)
     assert info["projection_undone"] == 0 and info.get("vertices_projection_undone", 0) == 0
-    # a few moves would fold an element (a mid node across the 24-gon's kink): left pending, retried
-    assert len(tm.pending[0]) <= 0.02 * len(tm.mesh.boundary_nodes())
+    # a few moves would fold an element (a mid node across the 24-gon's kink): left pending, retried.
+    # Measured 2026-11-26: ≤ 2 % of the boundary nodes on gmsh's direct STL surface, 17 of 684 (2.5 %)
+    # since needle-faced STLs are re-parametrised first (flexure.stl_remesh: its vertices sit up to
+    # 36 µm off this coarse 24-gon's facets, so more mid nodes move far); the bound is a minority
+    assert len(tm.pending[0]) <= 0.05 * len(tm.mesh.boundary_nodes())
     nodes = np.setdiff1d(np.union1d(vertex_targets(tm)[0], tm.mesh.boundary_nodes()), tm.pending[0])
     P = tm.mesh.points[nodes]
     assert np.abs(projector.project(P) - P).max() < 1e-9
@@ -284,7 +287,12 @@ def test_nested_bands_keep_the_dirichlet_set_as_the_mesh_is_refined(small_tagged
     load1, fixed1 = adaptive._nested_selections(tm1.mesh, bands1)
     r1 = np.hypot(*(tm1.mesh.points[:, :2].T))
     assert set(sets0[0]) <= set(load1) and set(sets0[1]) <= set(fixed1)
-    assert r1[load1].max() <= r[sets0[0]].max() + 1e-9 and r1[fixed1].min() >= r[sets0[1]].min() - 1e-9
+    # a new node is projected onto the STL, so it may lie farther out than the first mesh's nodes but
+    # only on the same surface: the bore's 24-gon (r ≤ 3 mm, circumradius) and the rim's (r ≥ its
+    # inradius), inside the radius bands (3.02 / 9.9 mm) that re-selecting would use
+    bore_out, rim_in = 3e-3, 10e-3 * np.cos(np.pi / 24)
+    assert r1[load1].max() <= max(r[sets0[0]].max(), bore_out) + 1e-9
+    assert r1[fixed1].min() >= min(r[sets0[1]].min(), rim_in) - 1e-9
     assert len(load1) > len(sets0[0]) and len(fixed1) > len(sets0[1])          # the refined faces' nodes
     # re-selecting by the bands would change the set: e.g. a bottom-face chord between two clamped rim
     # vertices is clamped on the first mesh (its mid node with it), its midpoint (r = 9.82 mm < 9.9)
