@@ -50,7 +50,7 @@ def read_noise_declaration(log_path, n_links: int) -> noise.NoiseModel | None:
     path = noise.noise_side_file(log_path)
     if not path.exists():
         return None
-    t = parse(NoiseFile, read_toml(path), path, {"torque_sizes": (1, n_links), "ft_sizes": (3,)}).noise
+    t = parse(NoiseFile, read_toml(path), path, {"torque_sizes": (1, n_links), "ft_sizes": (3,), "planar": True}).noise
     return noise.NoiseModel(torque_sigma_Nm=np.asarray(t.torque_sigma_Nm, float),
                             ft_sigma=np.asarray(t.ft_sigma, float),
                             velocity_sigma_rad_per_s=t.velocity_sigma_rad_per_s,

@@ -162,3 +162,16 @@ def test_ctrl_c_while_c_code_holds_the_callback_stops_it_and_is_raised_after():
         guard.check()
     assert signal.getsignal(signal.SIGINT) is before     # Python's handler is back
     guard.check()
+
+
+def test_a_planar_noise_declaration_with_3d_base_noise_is_refused(tmp_path, capsys):
+    """base_*_sigma keys belong to a 3-D floating base's noise; a planar log's declaration naming one
+    was accepted and silently ignored."""
+    for suf in (".csv", ".timing.toml", ".noise.toml"):
+        shutil.copy(ROOT / "examples" / "sim" / f"paper_floating_link1{suf}", tmp_path / f"p{suf}")
+    noise = tmp_path / "p.noise.toml"
+    before = noise.read_text() + "base_rate_sigma_rad_per_s = [0.002]\n"
+    noise.write_text(before)
+    line = _one_line_error(capsys, main(["estimate", str(tmp_path / "p.csv")]))
+    assert "p.noise.toml" in line and "base_rate_sigma_rad_per_s" in line and "3-D" in line
+    assert noise.read_text() == before

@@ -81,6 +81,12 @@ class NoiseTable(Model):
             if sizes is not None and n not in sizes:
                 want = " or ".join(str(s) for s in sorted(set(sizes)))
                 raise fail(key, f"expected {want} values, got {n}")
+        if ctx.get("planar"):
+            for key in ("base_orientation_sigma_rad", "base_velocity_sigma_m_per_s",
+                        "base_rate_sigma_rad_per_s"):
+                if key in self.model_fields_set:
+                    raise fail(key, "a 3-D floating base's noise: a planar log's base state is "
+                                    "not estimated from it (remove the key)")
         return self
 
 
