@@ -231,8 +231,7 @@ QUALITY_PASSES = 2
 SPOT_REFINEMENT = 0.2
 
 
-def _session(build, field, where: str, order: int, curved: bool = False, check=None,
-             single_try=frozenset()):
+def _session(build, field, where: str, order: int, curved: bool = False, check=None):
     """Run ``build(gmsh)`` (creates the volume), mesh it with ``field``; → flexure.mesh.Mesh.
     ``curved`` (order 2, exact CAD geometry): mid-edge nodes of boundary edges on the true curved
     faces (isoparametric P2), else on the chords. A mesh with a tetrahedron below MIN_DIHEDRAL_DEG
@@ -244,8 +243,7 @@ def _session(build, field, where: str, order: int, curved: bool = False, check=N
     QUALITY_PASSES attempts at most (one strategy: itself and QUALITY_PASSES finer passes); ``check(points, tets, entities) -> dict`` with "ok" (the
     geometry kept) rules an attempt out unless none passes. Every attempt is recorded in
     ``mesh._cache["attempts"]`` (strategy, min dihedral angle, count below MIN_DIHEDRAL_DEG, the
-    check's figures; the mesh returned "kept"). A strategy named in ``single_try`` is not retried
-    finer while an untried one remains."""
+    check's figures; the mesh returned "kept")."""
     from flexure.mesh import Mesh, element_shape_metrics, to_quadratic
 
     builds = dict(build) if isinstance(build, (list, tuple)) else {"mesh": build}
@@ -281,8 +279,7 @@ def _session(build, field, where: str, order: int, curved: bool = False, check=N
         longest = np.linalg.norm(x[:, :, None] - x[:, None], axis=-1).max(axis=(1, 2))
         spots[name] = np.vstack([spots[name], np.column_stack([x.mean(axis=1), SPOT_REFINEMENT * longest])])
         # next: this strategy once more, finer around its slivers; then an untried one; then the best
-        retry = tries[name] < 2 and not (name in single_try and untried)
-        name = name if retry else (untried.pop(0) if untried else best[5])
+        name = name if tries[name] < 2 else (untried.pop(0) if untried else best[5])
     if best is None:
         raise error if str(error).startswith(where) else InputError(f"{where}: {error}")
     _, points, tets, geometric, entities, _, _, kept = best

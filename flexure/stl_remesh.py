@@ -18,13 +18,10 @@ around them). Three surface strategies:
                           *those* the same way: whatever gmsh cuts internally now runs along them
     re-parametrised, cut  the same, the second classification cut into parametrisable patches
 
-Every STL tries direct first: a mesh without slivers keeps the STL's own vertices (the exact
-references of tests/test_adaptive.py lost up to 1 % on a gauge when a 192-gon annulus, whose caps
-are needles, was re-parametrised first: its new chords cut across the curved facets). While the
-volume mesh has a tetrahedron below gmsh_mesh.MIN_DIHEDRAL_DEG: the same strategy once more, finer
-around those (gmsh_mesh._session's spots), except direct on an STL with needle triangles (an angle
-below NEEDLE_DEG), whose slivers stand on the needles; then the next strategy: at most
-MAX_ATTEMPTS = 5 volume meshes. Every attempt's geometry
+An STL with needle triangles (an angle below NEEDLE_DEG) tries the re-parametrised ones first, one
+without tries direct first. While the volume mesh has a tetrahedron below
+gmsh_mesh.MIN_DIHEDRAL_DEG: the same strategy once more, finer around those (gmsh_mesh._session's
+spots), then the next strategy: at most MAX_ATTEMPTS = 5 volume meshes. Every attempt's geometry
 is checked against the STL (``geometry_check``): volume within VOLUME_TOL and every boundary vertex
 of either surface within SURFACE_TOL_REL × h_far of the other (a re-parametrisation that dropped
 or moved a feature is not kept while another attempt keeps the geometry).
@@ -153,15 +150,8 @@ def strategies(surface, angle_deg: float) -> list:
     direct = ("direct", build_direct(surface, angle_deg))
     reparam = [("re-parametrised", build_reparametrised(surface, angle_deg)),
                ("re-parametrised, cut", build_reparametrised(surface, angle_deg, cut=True))]
-    return [direct] + reparam
-
-
-def single_try(surface) -> set:
-    """The strategies not retried finer around their slivers: on an STL with needle triangles the
-    direct one (its slivers stand on the needles, which no finer field moves), so a needle STL
-    goes from a direct mesh with slivers straight to the re-parametrised surface."""
     needles = bool((triangle_min_angles_deg(surface.points, surface.faces) < NEEDLE_DEG).any())
-    return {"direct"} if needles else set()
+    return reparam + [direct] if needles else [direct] + reparam
 
 
 def geometry_check(surface, h_far_m: float):
@@ -193,5 +183,4 @@ def mesh_surface(surface, field, order: int = 1, where: str = "mesh", angle_deg:
     term is not used: a triangulated surface is its facets, and gmsh would read every fold between
     facets as a tight radius and refine along it."""
     return gmsh_mesh._session(strategies(surface, angle_deg), replace(field, curvature_elements=0.0),
-                              where, order, check=geometry_check(surface, field.h_far),
-                              single_try=single_try(surface))
+                              where, order, check=geometry_check(surface, field.h_far))

@@ -171,30 +171,3 @@ def test_designer_parts_mesh_without_slivers(part, h_mm):
     mesh = stl_remesh.mesh_surface(surf, field)
     _check_kept(surf, mesh, field)
 
-
-def test_direct_first_and_a_needle_stl_not_retried_on_its_own_triangles(monkeypatch):
-    """Every STL is meshed on its own triangles first (a mesh without slivers keeps its vertices);
-    on an STL with needles a direct mesh with slivers goes straight to the re-parametrised surface
-    (no finer pass on the needles), without needles direct is retried finer first."""
-    from flexure.mesh import box_mesh
-
-    calls = []
-
-    def fake_pass(build, field, where, order, curved, spots):
-        calls.append(build)
-        m = box_mesh(2, 2, 2)
-        pts = m.points.copy()
-        if build == "D":                                 # direct leaves a flat tetrahedron
-            pts[13] = [0.5, 0.5, 0.94]
-        return pts, m.tets, None, (np.zeros((0, 3), int), np.zeros(0), np.zeros((0, 2), int), np.zeros(0))
-
-    monkeypatch.setattr(gmsh_mesh, "_one_pass", fake_pass)
-    needle = _surface(thin_tube(6.0, 0.8, 4.0, res=24))
-    assert [n for n, _ in stl_remesh.strategies(needle, 40.0)][0] == "direct"
-    assert stl_remesh.single_try(needle) == {"direct"}
-    plain = [("direct", "D"), ("re-parametrised", "R"), ("re-parametrised, cut", "C")]
-    mesh = gmsh_mesh._session(plain, _field(1.0), "x", 1, single_try={"direct"})
-    assert calls == ["D", "R"] and mesh._cache["attempts"][1]["kept"]
-    calls.clear()
-    gmsh_mesh._session(plain, _field(1.0), "x", 1)
-    assert calls == ["D", "D", "R"]
