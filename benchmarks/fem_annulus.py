@@ -4,7 +4,7 @@
 
 A round annulus (r a … b, thickness t, rigid bore, clamped rim) under a torque about its axis
 carries u_θ = B/r − B r/b² whatever a, b and t (free faces traction-free), so every gauge's read-out
-is known in closed form (tests/test_adaptive.annulus_gauge_exact). Two parts:
+is known in closed form (flexure.exact.annulus_gauge_exact). Two parts:
 
 * ``round``: r 3 … 10 mm, 3 mm thick, four ±45° 2 × 2 mm gauges at r = 6.5 mm (the test's part);
 * ``thin``: r 5 … 18 mm, 1.2 mm thick, four 1.5 × 1 mm gauges at r = 8, 9.5, 11, 12.5 mm, at
@@ -27,6 +27,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from flexure.exact import annulus_gauge_exact  # noqa: E402
 
 PARTS = {
     "round": dict(r_in=3.0, r_out=10.0, t=3.0, load_max=3.02, fixed_min=9.9, grid=(2.0, 2.0),
@@ -99,24 +101,6 @@ def stiffness_exact(part: str, shear_modulus_Pa: float) -> float:
     p = PARTS[part]
     a, b, t = p["r_in"] * 1e-3, p["r_out"] * 1e-3, p["t"] * 1e-3
     return 4.0 * math.pi * shear_modulus_Pa * t / (1.0 / a**2 - 1.0 / b**2)
-
-
-def annulus_gauge_exact(design, thickness_m: float, torque_Nm: float = 1.0) -> np.ndarray:
-    """Each gauge's exact read-out (the same as tests/test_adaptive.annulus_gauge_exact): τ_rθ =
-    −2μB/r², B = T/(4πμt), ε_aa = −(B/r²)·2(e_r·a)(e_θ·a), averaged over the grid (Gauss 40 × 40)."""
-    B = torque_Nm / (4.0 * math.pi * design.material.shear_modulus_Pa * thickness_m)
-    s, w = np.polynomial.legendre.leggauss(40)
-    out = []
-    for g in design.gauges:
-        c, a, b, _ = g.frame()
-        P = (c[None, None, :] + 0.5 * g.length_m * s[:, None, None] * a[None, None, :]
-             + 0.5 * g.width_m * s[None, :, None] * b[None, None, :])
-        r = np.hypot(P[..., 0], P[..., 1])
-        er = np.stack([P[..., 0], P[..., 1], 0 * r], -1) / r[..., None]
-        et = np.stack([-P[..., 1], P[..., 0], 0 * r], -1) / r[..., None]
-        eps = -B / r**2 * 2.0 * (er @ a) * (et @ a)
-        out.append(float(np.einsum("i,j,ij->", w, w, eps) / 4.0))
-    return np.array(out)
 
 
 def run(name: str, rtol: float) -> dict:

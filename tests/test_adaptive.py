@@ -155,26 +155,10 @@ def test_levels_are_the_default_and_adaptive_is_opt_in(tmp_path, monkeypatch):
 
 
 def annulus_gauge_exact(design, thickness_m: float = 3e-3, torque_Nm: float = 1.0):
-    """Each gauge's exact read-out on the annulus (r a … b, thickness t, rigid bore, clamped rim)
-    under a torque about z: the field u_θ(r) = B/r − B r/b² (z-independent, free faces
-    traction-free) is exact, τ_rθ = −2μB/r², T = 4πμtB, so ε = −(T/(4πμ t r²))·2(e_r·a)(e_θ·a) along
-    the gauge axis a — the read-out does not depend on a or b. Averaged over the grid square (tensor
-    Gauss–Legendre, 40 × 40: converged to 1e-12 for this smooth integrand)."""
-    import numpy as np
+    """The annulus's exact gauge read-outs (flexure.exact: the torsion field u_θ = B/r − Br/b²)."""
+    from flexure.exact import annulus_gauge_exact as exact
 
-    B = torque_Nm / (4.0 * math.pi * design.material.shear_modulus_Pa * thickness_m)
-    s, w = np.polynomial.legendre.leggauss(40)
-    out = []
-    for g in design.gauges:
-        c, a, b, _ = g.frame()
-        P = (c[None, None, :] + 0.5 * g.length_m * s[:, None, None] * a[None, None, :]
-             + 0.5 * g.width_m * s[None, :, None] * b[None, None, :])
-        r = np.hypot(P[..., 0], P[..., 1])
-        er = np.stack([P[..., 0], P[..., 1], 0 * r], -1) / r[..., None]
-        et = np.stack([-P[..., 1], P[..., 0], 0 * r], -1) / r[..., None]
-        eps = -B / r**2 * 2.0 * (er @ a) * (et @ a)
-        out.append(float(np.einsum("i,j,ij->", w, w, eps) / 4.0))
-    return np.array(out)
+    return exact(design, thickness_m, torque_Nm)
 
 
 @pytest.fixture(scope="module")

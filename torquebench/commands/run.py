@@ -51,15 +51,7 @@ def run(args) -> int:
     scene = load_scene(scene_path(str(args.scene)))
     cache = Cache(args.cache_dir)
     if args.explain:
-        steps = P.plan(scene, args.only, cache, args.seed, args.force)
-        rows = [{"stage": s.stage.name, "action": s.action, "reason": s.reason, "gives": s.stage.gives,
-                 "needs": list(s.stage.needs), "reads": list(s.stage.reads)} for s in steps]
-        if args.json:
-            print_json({"scene": scene.name, "stages": rows})
-        else:
-            for r in rows:
-                print(f"{r['stage']:20s} {r['action']:7s} {r['reason']}")
-        return 0
+        return _explain(scene, args, cache)
     with run_plan(scene, args.only, force=args.overwrite).active():     # inputs kept, reports checked
         arts, timing = P.execute(scene, args.only, cache, args.seed, args.force)
     out = {"scene": scene.name, **summarize(arts),
@@ -104,18 +96,8 @@ def _run_3d(args) -> int:
     cache = Cache(args.cache_dir)
     if args.explain:
         from estimator.spatial.scene import load_spatial_scene
-        from torquebench import pipeline as P
 
-        scene = load_spatial_scene(path)
-        steps = P.plan(scene, args.only, cache, args.seed, args.force)
-        rows = [{"stage": s.stage.name, "action": s.action, "reason": s.reason, "gives": s.stage.gives,
-                 "needs": list(s.stage.needs), "reads": list(s.stage.reads)} for s in steps]
-        if args.json:
-            print_json({"scene": scene.name, "stages": rows})
-        else:
-            for r in rows:
-                print(f"{r['stage']:20s} {r['action']:7s} {r['reason']}")
-        return 0
+        return _explain(load_spatial_scene(path), args, cache)
     out, timing = run_scene_stages(path, seed=args.seed, cache=cache, force=args.force,
                                    outputs=args.only)
     out["stages"] = [{"stage": n, "action": a, "time_s": t} for n, a, t in timing]
@@ -138,4 +120,20 @@ def _run_3d(args) -> int:
         head += (f"; false alarms {100 * (me['false_alarm_fraction'] or 0):.3f} % of "
                  f"{me['contact_free_samples']} contact-free samples")
     print(f"{head}; {out['run_time_s']:.1f} s")
+    return 0
+
+
+def _explain(scene, args, cache) -> int:
+    """``--explain``: the plan of a scene (planar or 3-D), one line (or JSON row) per stage."""
+    from torquebench import pipeline as P
+    from torquebench.io import print_json
+
+    steps = P.plan(scene, args.only, cache, args.seed, args.force)
+    rows = [{"stage": s.stage.name, "action": s.action, "reason": s.reason, "gives": s.stage.gives,
+             "needs": list(s.stage.needs), "reads": list(s.stage.reads)} for s in steps]
+    if args.json:
+        print_json({"scene": scene.name, "stages": rows})
+    else:
+        for r in rows:
+            print(f"{r['stage']:20s} {r['action']:7s} {r['reason']}")
     return 0
