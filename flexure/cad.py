@@ -10,9 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from userio.errors import CallbackInterrupt
+from userio.errors import CallbackInterrupt, InputError
 
-from userio.errors import InputError
 from flexure.geometry import Surface, check_watertight
 from flexure.gmsh_session import LC_INTEGRATION_PRECISION, _quiet_stdout
 

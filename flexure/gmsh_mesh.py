@@ -32,9 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from userio.errors import CallbackInterrupt
+from userio.errors import CallbackInterrupt, InputError
 
-from userio.errors import InputError
 from flexure.gmsh_session import LC_INTEGRATION_PRECISION, _quiet_stdout
 from flexure.sizing import edge_size
 
