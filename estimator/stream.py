@@ -95,6 +95,7 @@ class EstimatorStream:
         self.timing = timing
         self.obs = observer.ObserverRun.planar(robot, self.K, self.dt, discretization, timing)
         self.state = DetectorState()
+        self.misfit = None               # MisfitTally of the whitened localization fits (dynamic, χ²)
         self.info = {"timing": timing_mod.describe(timing), "timing_source": timing_source}
         self.R = self.Linv = None
         self._post = None                # posture(s) of the covariance block(s): (q, q̇)
@@ -370,6 +371,8 @@ class EstimatorStream:
             elif n_sel:
                 res = loc_mod.localize_dynamic(self.robot, rec["q_loc"][sel], r[sel],
                                                expected=self.expected, weight=weight, **kw)
+            if n_sel and not self.expected and rec.get("Linv") is not None and self.n > 3:
+                self._tally_misfit(t[sel], res)
             if self.expected:
                 expected_force = np.full((T, len(self.expected), 2), np.nan)
                 quiet = np.flatnonzero(~contact)
@@ -410,6 +413,19 @@ class EstimatorStream:
                                Fz=force[:, 1], px=point[:, 0], pz=point[:, 1], rnorm=rec["rnorm"],
                                condition=condition, reason=reason, residual=r_obs, method=self.method,
                                expected_force_N=expected_force)
+
+    def _tally_misfit(self, t_s, res) -> None:
+        """The whitened fits' χ² (estimator.misfit) of the well-localized samples."""
+        from estimator.misfit import MisfitTally
+
+        if self.misfit is None:
+            self.misfit = MisfitTally(dof=self.n - 3)
+        ok = res.reason == loc_mod.OK
+        self.misfit.add(t_s[ok], res.cost[ok])
+
+    def misfit_warning(self, src: str) -> str | None:
+        """A warning when one contact does not explain the residual (estimator.misfit)."""
+        return None if self.misfit is None else self.misfit.warning(src)
 
     def _close_episodes(self):
         eps = self.episodes.closed
@@ -486,4 +502,5 @@ class EstimatorStream:
         flags = {names[k]: int(v) for k, v in enumerate(self.reason_counts) if v}
         return {"method": self.method, "samples": int(self.samples),
                 "contact_samples": int(self.contact_samples), "flags_during_contact": flags,
-                "intervals": list(self.intervals), **self.info}
+                "intervals": list(self.intervals), **self.info,
+                **({"misfit": self.misfit.summary()} if self.misfit is not None else {})}

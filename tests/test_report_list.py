@@ -53,6 +53,12 @@ def test_every_build_of_the_shipped_reports_records_each_areas_time(tmp_path, mo
     times = report.recorded_times(tmp_path / "reports")
     assert set(times) == {"old", "fake_a", "fake_b"} and times["old"]["s"] == 3.0
     assert all(times[a]["s"] >= 0 and len(times[a]["date"]) == 10 for a in ("fake_a", "fake_b"))
+    # and the machine it was timed on: the 1-minute load and the cores (a time means little without)
+    assert all(times[a]["load_1min"] >= 0 and times[a]["cores"] >= 1 for a in ("fake_a", "fake_b"))
+    monkeypatch.setattr(report, "recorded_times", lambda d: {"bridge": times["fake_a"]})
+    row = next(r for r in report._listing(builders()) if r["area"] == "bridge")
+    assert row["last_build_load_1min"] == times["fake_a"]["load_1min"]
+    assert f"on {times['fake_a']['cores']} cores" in report._machine(row)
 
 
 def test_shipped_build_times_name_only_real_areas():

@@ -73,6 +73,50 @@ def test_base_jacobians_against_pinocchio(leg):
     assert np.allclose(P1, P2, atol=1e-12) and np.allclose(u1, u2, atol=1e-12)
 
 
+def test_base_jacobians_of_a_moving_leg_against_pinocchio_forward_dynamics(leg):
+    """At v ≠ 0 the Coriolis part Cᵀv turns with the orientation and the twist too. Reference:
+    u = Ṗ at τ = 0 along pinocchio's forward dynamics (aba; our P is pinocchio's crba, above),
+    Ṗ by a central difference along the motion, then ∂u/∂x by central differences in x."""
+    import pinocchio as pin
+
+    model = leg.robot.model
+    data = model.createData()
+    rng = np.random.default_rng(4)
+    q = _posture(rng)
+    v = rng.normal(size=9)
+
+    def u_ref(q, v, eps=1e-5):
+        R = quat_matrix(q[3:7][None])[0]
+        vp = v.copy()
+        vp[:3] = R.T @ v[:3]                      # pinocchio's free flyer: base-frame velocity
+        ap = pin.aba(model, data, q, vp, np.zeros(9))
+        a = ap.copy()
+        a[:3] = R @ (ap[:3] + np.cross(vp[3:6], vp[:3]))                 # p̈ in the world
+        P = [leg.momentum_terms(pin.integrate(model, q, s * eps * vp)[None], (v + s * eps * a)[None],
+                                np.zeros((1, 9)))[0][0] for s in (1, -1)]
+        return (P[0] - P[1]) / (2 * eps)
+
+    _, u = leg.momentum_terms(q[None], v[None], np.zeros((1, 9)))
+    assert np.abs(u[0] - u_ref(q, v)).max() < 1e-8 * np.abs(u).max()   # the identity itself
+    h = 1e-4
+    ref = np.zeros((9, 9))
+    for i in range(3):
+        e = np.eye(3)[i] * h
+        qp, qm = q.copy(), q.copy()
+        qp[3:7] = quat_times_exp(q[3:7][None], e[None])[0]
+        qm[3:7] = quat_times_exp(q[3:7][None], -e[None])[0]
+        ref[:, i] = (u_ref(qp, v) - u_ref(qm, v)) / (2 * h)
+        for col, k in ((3 + i, i), (6 + i, 3 + i)):                      # ṗ (world), ω (base)
+            vp, vm = v.copy(), v.copy()
+            vp[k] += h
+            vm[k] -= h
+            ref[:, col] = (u_ref(q, vp) - u_ref(q, vm)) / (2 * h)
+    _, Ju = base_jacobians(leg, q[None], v[None], wrench=np.zeros((1, 6)))
+    _, Ju0 = base_jacobians(leg, q[None], np.zeros((1, 9)), wrench=np.zeros((1, 6)))
+    assert np.abs((Ju - Ju0)[0]).max() > 0.1 * np.abs(ref).max()        # the motion matters here
+    assert np.abs(Ju[0] - ref).max() < 1e-5 * np.abs(ref).max()
+
+
 def _held_log(leg, noise, T, seed):
     """A held posture read with white noise on every channel (FT, torques, base state)."""
     rng = np.random.default_rng(seed)

@@ -269,7 +269,7 @@ def _run(args, start) -> int:
                "chunk_samples": chunk, "peak_memory_MB": _peak_memory_MB()}
     if args.out is not None:
         summary["out"] = str(args.out)
-    found += [w for w in [whole_log_contact(summary, found)] if w]
+    found += [w for w in [whole_log_contact(summary, found), stream.misfit_warning(str(args.log))] if w]
     found += list(getattr(reader, "plausibility_warnings", []) or []) + reader.constant_channels()
     from estimator.plausibility import attach_warnings
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import os
 import pkgutil
 import sys
 import time
@@ -60,8 +61,18 @@ def _listing(areas: dict) -> list[dict]:
 
     times = recorded_times(REPO_ROOT / "reports")
     return [{"area": a, "description": describe(m),
-             "last_build_s": times.get(a, {}).get("s"), "last_build_date": times.get(a, {}).get("date")}
+             "last_build_s": times.get(a, {}).get("s"), "last_build_date": times.get(a, {}).get("date"),
+             "last_build_load_1min": times.get(a, {}).get("load_1min"),
+             "last_build_cores": times.get(a, {}).get("cores")}
             for a, m in areas.items()]
+
+
+def _machine(row: dict) -> str:
+    """", 1-min load 7.2 on 2 cores" when the build recorded them."""
+    load, cores = row.get("last_build_load_1min"), row.get("last_build_cores")
+    if load is None:
+        return ""
+    return f", 1-min load {load:g}" + (f" on {cores} cores" if cores else "")
 
 
 def add_arguments(parser) -> None:
@@ -84,7 +95,7 @@ def run(args) -> int:
             print_json({"areas": list(areas), "reports": rows})
             return 0
         for r in rows:
-            took = (f"{r['last_build_s']:.0f} s when last built ({r['last_build_date']})"
+            took = (f"{r['last_build_s']:.0f} s when last built ({r['last_build_date']}{_machine(r)})"
                     if r["last_build_s"] is not None else "not timed yet")
             print(f"{r['area']:17s} {r['description']}\n{'':17s} run time: {took}")
         return 0
@@ -103,16 +114,26 @@ def run(args) -> int:
         return _build(args, areas, chosen, out_dir)
 
 
+def _load() -> float:
+    """The 1-minute load average (a build time means little without it); NaN where unknown."""
+    try:
+        return round(os.getloadavg()[0], 1)
+    except (OSError, AttributeError):
+        return float("nan")
+
+
 def _build(args, areas, chosen, out_dir) -> int:
     from torquebench.io import REPO_ROOT, print_json
 
-    written, timings = {}, {}
+    written, timings, loads = {}, {}, {}
     for area in chosen:
         start = time.perf_counter()
+        loads[area] = _load()
         if sys.stderr.isatty():          # progress for a person watching; a pipe gets only the result
             print(f"report: building {area} ...", file=sys.stderr)
         paths = importlib.import_module(areas[area]).build(out_dir)
         timings[f"{area}_s"] = time.perf_counter() - start
+        loads[area] = max(loads[area], _load())
         written[area] = [str(p) for p in paths]
     from torquebench.reports_index import write_index
     index = write_index(out_dir, list(areas))
@@ -124,7 +145,8 @@ def _build(args, areas, chosen, out_dir) -> int:
 
         times = recorded_times(out_dir)
         today = datetime.date.today().isoformat()
-        times.update({a: {"s": round(timings[f"{a}_s"], 1), "date": today} for a in written})
+        times.update({a: {"s": round(timings[f"{a}_s"], 1), "date": today, "load_1min": loads[a],
+                          "cores": os.cpu_count()} for a in written})
         write_text_atomic(out_dir / TIMES_FILE, json.dumps(times, indent=1, sort_keys=True) + "\n")
     if args.json:
         print_json({"written": written, "index": str(index), "build_time_s": timings})
