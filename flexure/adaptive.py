@@ -111,6 +111,17 @@ def geometry(design, mres):
     return TaggedMesh.untagged(mesh), None
 
 
+def start_mesh(design, size: str | None = None, initial_h_factor: float = INITIAL_H_FACTOR,
+               max_elements: float | None = None):
+    """The first mesh (meshing.MeshResult): the design's size field × ``initial_h_factor``, curved
+    faces resolved as at CURVATURE_SHARE × it, an STL's too (stl_remesh.mesh_surface ``curvature``:
+    its nodes can then all be put on the STL, refine.snap)."""
+    from flexure.analysis import build_mesh
+
+    return build_mesh(design, size, 2, initial_h_factor, max_elements,
+                      curvature_h_factor=CURVATURE_SHARE * initial_h_factor, stl_curvature=True)
+
+
 def goal_values(design, sol) -> dict:
     """Figures of one level: θ, k = 1/θ, each gauge's strain, the bridge strain ε_ref."""
     arms = [g.arm for g in design.gauges]
@@ -150,7 +161,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
     """Adaptive analysis (module docstring) → (results as ``analysis.analyze`` gives them on the
     final mesh, with ``<figure>_error_estimate``/``_error_method``, the levels and what stopped
     the refinement; Fields). ``initial_h_factor``: the first mesh's coarsening of the size field."""
-    from flexure.analysis import _selections, analyze_mesh, build_mesh
+    from flexure.analysis import _selections, analyze_mesh
     from flexure.goals import indicators, solve_goals
     from flexure.meshing import MeshResult, mesh_report
     from flexure.mesh import quality
@@ -169,8 +180,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
     stopped = None
     try:
         bar.set_description("flexure: meshing")
-        mres = build_mesh(design, size, 2, initial_h_factor, max_elements,
-                          curvature_h_factor=CURVATURE_SHARE * initial_h_factor)
+        mres = start_mesh(design, size, initial_h_factor, max_elements)
         tm, projector = geometry(design, mres)
         snapped = snap(tm, projector, getattr(projector, "snap_vertices", False)) if projector is not None else {}
         bands = _band_indicator(tm.mesh, _selections(design, tm.mesh))
