@@ -232,9 +232,9 @@ def test_stl_boundary_vertices_and_mid_nodes_are_put_on_the_stl(small_tagged):
     info = snap(tm, projector, vertices=True)
     assert info["projection_undone"] == 0 and info.get("vertices_projection_undone", 0) == 0
     # every boundary node on the STL at once (refine.morph: the interior moved with them), none left
-    # pending. Measured 2026-11-26: 0 of 2,420 targeted nodes on this start mesh (its bore resolved as
-    # a curve, adaptive.start_mesh), where projecting the boundary nodes alone on the uncurved start
-    # left 17 of 684 partly moved
+    # pending. Measured 2026-11-26: 0 of 816 boundary nodes on this start mesh (its bore resolved as a
+    # curve from the STL's folds, adaptive.start_mesh), where projecting the boundary nodes alone on
+    # the uncurved start left 17 of 684 partly moved
     assert len(tm.pending[0]) == 0 and info["projection_partial"] == 0
     nodes = np.setdiff1d(np.union1d(vertex_targets(tm)[0], tm.mesh.boundary_nodes()), tm.pending[0])
     P = tm.mesh.points[nodes]
