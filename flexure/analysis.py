@@ -54,10 +54,12 @@ class Fields:
 
 
 def build_mesh(design: Design, size: str | None = None, order: int | None = None, h_factor: float = 1.0,
-               max_elements: float | None = None, curvature_h_factor: float | None = None):
+               max_elements: float | None = None, curvature_h_factor: float | None = None,
+               stl_curvature: bool = False):
     """Mesh of the design (P1/P2), finer at the gauges: a swept or tetgen mesh of the parametric
     profile, or tetgen on the surface of an STL (repaired if need be) or a STEP solid (gmsh).
-    ``curvature_h_factor``: the curved faces' resolution as at that level (default ``h_factor``)."""
+    ``curvature_h_factor``: the curved faces' resolution as at that level (default ``h_factor``);
+    ``stl_curvature``: an STL's curved faces resolved too (meshing.mesh_design_surface)."""
     from flexure.geometry import extrude, load_stl, profile
     from flexure.meshing import MAX_ELEMENTS, mesh_design_surface
 
@@ -98,7 +100,7 @@ def build_mesh(design: Design, size: str | None = None, order: int | None = None
         return MeshResult(mesh, surf, mesh_report(mesh, size, "gmsh", None, field))
     return mesh_design_surface(surf, None, size, centres, extent, scale, order, gauge_width=gw,
                                mesher=design.mesher, h_factor=h_factor, max_elements=cap,
-                               curvature_h_factor=curvature_h_factor)
+                               curvature_h_factor=curvature_h_factor, stl_curvature=stl_curvature)
 
 
 def _check_gauges(design: Design, surface) -> None:

@@ -65,6 +65,7 @@ def _size_field(gmsh, field, spots=None) -> None:
     callback, in mm; ``spots`` (k, 4: x, y, z, h in mm) add h_k + g·d_k around the tetrahedra a
     previous pass left too flat (``_session``)."""
     spots = np.zeros((0, 4)) if spots is None else np.asarray(spots, float).reshape(-1, 4)
+    spots = np.vstack([spots, np.asarray(getattr(field, "spots", np.zeros((0, 4))), float).reshape(-1, 4) * MM])
     c = np.asarray(field.centres, float).reshape(-1, 3) * MM
     h0, h1, r0, g = field.h_gauge * MM, field.h_far * MM, field.r_gauge * MM, field.grading
 

@@ -284,7 +284,7 @@ def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gau
                         gauge_width: float | None = None, mesher: str = "sweep",
                         h_factor: float = 1.0, max_elements: float = MAX_ELEMENTS, exact_disc=None,
                         curvature_h_factor: float | None = None,
-                        feature_surface: Surface | None = None) -> MeshResult:
+                        feature_surface: Surface | None = None, stl_curvature: bool = False) -> MeshResult:
     """Mesh an extruded profile (shapely polygon + thickness) or a closed Surface (user STL).
     With ``exact_disc`` (a geometry.SpokeDisc) the gmsh mesher meshes that disc's exact solid
     (true circles and fillets, flexure.gmsh_mesh.mesh_spoke_disc) instead of the polygon.
@@ -295,7 +295,8 @@ def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gau
     (``"tetgen"``, which grades only from the surface); ``"gmsh"`` meshes the volume with the size
     field (isotropic, graded in 3-D; flexure.gmsh_mesh), re-meshing a Surface (STL) on the way;
     gmsh also refines toward the re-entrant edges of ``feature_surface`` (the part's closed surface;
-    the Surface itself when one is given).
+    the Surface itself when one is given). ``stl_curvature``: a Surface's curved faces resolved as
+    a CAD solid's (flexure.stl_remesh.mesh_surface ``curvature``).
     """
     if mesher not in MESHERS:
         raise InputError(f"mesh.mesher: must be one of {', '.join(MESHERS)}, got {mesher!r}")
@@ -320,7 +321,7 @@ def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gau
         if is_surface:
             from flexure.stl_remesh import mesh_surface
             surface = surface_or_poly
-            mesh = mesh_surface(surface, field, order)
+            mesh = mesh_surface(surface, field, order, curvature=stl_curvature)
         else:
             mesh = (gmsh_mesh.mesh_spoke_disc(exact_disc, field, order) if exact_disc is not None else
                     gmsh_mesh.mesh_extrusion(surface_or_poly, thickness, field, order))

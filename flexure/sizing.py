@@ -32,6 +32,9 @@ class SizeField:
     #: like the curvature term)
     edges: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
     h_edge: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: local sizes (k, 4: x, y, z, h; m): h ≤ h_k + grading · distance (gmsh only; an STL's curved
+    #: faces, flexure.stl_remesh.curvature_spots)
+    spots: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
 
     def __call__(self, xy: np.ndarray) -> np.ndarray:
         xy = np.asarray(xy, float)
