@@ -3,6 +3,7 @@ k = 1 … 6 columns, one function per k so that the k accumulators stay in regis
 numba on first use and cached beside this file."""
 
 import numba
+import numpy as np
 
 
 @numba.njit(cache=True, nogil=True)
@@ -333,3 +334,28 @@ def block_gs_6(indptr, indices, data, Dinv, X, B, forward):
         X[3 * i + 2, 3] += Dinv[i, 2, 0] * s0_3 + Dinv[i, 2, 1] * s1_3 + Dinv[i, 2, 2] * s2_3
         X[3 * i + 2, 4] += Dinv[i, 2, 0] * s0_4 + Dinv[i, 2, 1] * s1_4 + Dinv[i, 2, 2] * s2_4
         X[3 * i + 2, 5] += Dinv[i, 2, 0] * s0_5 + Dinv[i, 2, 1] * s1_5 + Dinv[i, 2, 2] * s2_5
+
+
+@numba.njit(cache=True, nogil=True)
+def block_gs_any(indptr, indices, data, Dinv, X, B, forward):
+    nb = Dinv.shape[0]
+    bs = Dinv.shape[1]
+    k = X.shape[1]
+    s = np.empty((bs, k))
+    for t in range(nb):
+        i = t if forward else nb - 1 - t
+        for a in range(bs):
+            r = bs * i + a
+            for c in range(k):
+                s[a, c] = B[r, c]
+            for p in range(indptr[r], indptr[r + 1]):
+                v = data[p]
+                j = indices[p]
+                for c in range(k):
+                    s[a, c] -= v * X[j, c]
+        for a in range(bs):
+            for c in range(k):
+                acc = 0.0
+                for b in range(bs):
+                    acc += Dinv[i, a, b] * s[b, c]
+                X[bs * i + a, c] += acc

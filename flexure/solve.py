@@ -140,22 +140,30 @@ def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False, sweeps: int = 1):
     (flexure.multirhs: one pass over the matrix per Gauss–Seidel sweep for all columns); the
     coarse V-cycle runs per column. Returns (M(R) → Z for R (n, k), pyamg hierarchy)."""
     from flexure import multirhs
+    from flexure.vcycle import MultiVCycle
 
     Ac = A.tocsr()
-    _, Dinv, ml, M1, It = _pmg_setup(Ac, coarse, B_coarse, smoothed)
+    _, Dinv, ml, _, It = _pmg_setup(Ac, coarse, B_coarse, smoothed)
     Dinv = np.ascontiguousarray(Dinv)
+    V = MultiVCycle(ml)                     # the coarse V-cycle on all columns at once
 
     def apply(R):
         X = np.zeros_like(R)
         for _ in range(sweeps):
             multirhs.block_gauss_seidel(Ac, Dinv, X, R, forward=True)
-        Rc = It @ (R - multirhs.spmm(Ac, X))
-        X += coarse @ np.column_stack([M1 @ Rc[:, j] for j in range(Rc.shape[1])])
+        X += coarse @ V(It @ (R - multirhs.spmm(Ac, X)))
         for _ in range(sweeps):
             multirhs.block_gauss_seidel(Ac, Dinv, X, R, forward=False)
         return X
 
-    return apply, ml
+    return apply, V
+
+
+def _hierarchy_info(ml) -> dict:
+    """Levels and operator complexity of a pyamg hierarchy or a flexure.vcycle.MultiVCycle."""
+    if hasattr(ml, "n_levels"):
+        return {"amg_levels": ml.n_levels, "operator_complexity": ml.operator_complexity}
+    return {"amg_levels": len(ml.levels), "operator_complexity": float(ml.operator_complexity())}
 
 
 def _multirhs_available() -> bool:
@@ -236,8 +244,7 @@ def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, m
         info["iterations"] = its[0] if b.ndim == 1 else its
         info["case_s"] = case_s                          # per case (one CG each); together: cg_s only
         info.setdefault("cg_s", float(sum(case_s)))
-        info["amg_levels"] = len(ml.levels)
-        info["operator_complexity"] = float(ml.operator_complexity())
+        info.update(_hierarchy_info(ml))
     elif method == "cg":
         it = [0]
 
@@ -337,8 +344,7 @@ def prepared(system, rtol: float = 1e-10, smoothed_coarse: bool = False):
                            f"{'smoothed ' if smoothed_coarse else ''}aggregation AMG on the P1 vertex system, "
                            "6 rigid-body modes; all load cases together)"),
                 "dofs": int(n), "iterations": its, "setup_s": setup_s, "cg_s": time.perf_counter() - t,
-                "solve_s": time.perf_counter() - t, "amg_levels": len(ml.levels),
-                "operator_complexity": float(ml.operator_complexity())})
+                "solve_s": time.perf_counter() - t, **_hierarchy_info(ml)})
         return solve_pmg
 
     def solve_each(B, x0=None, rtol_=None):
