@@ -42,6 +42,63 @@ def block_gs_1(indptr, indices, data, Dinv, X, B, forward):
 
 
 @numba.njit(cache=True, nogil=True)
+def gs0_res_1(indptr, indices, data, Dinv, X, B, R):
+    for i in range(Dinv.shape[0]):
+        lo = 3 * i
+        r = 3 * i + 0
+        s0_0 = B[r, 0]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s0_0 -= v * X[j, 0]
+        r = 3 * i + 1
+        s1_0 = B[r, 0]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s1_0 -= v * X[j, 0]
+        r = 3 * i + 2
+        s2_0 = B[r, 0]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s2_0 -= v * X[j, 0]
+        x0_0 = Dinv[i, 0, 0] * s0_0 + Dinv[i, 0, 1] * s1_0 + Dinv[i, 0, 2] * s2_0
+        x1_0 = Dinv[i, 1, 0] * s0_0 + Dinv[i, 1, 1] * s1_0 + Dinv[i, 1, 2] * s2_0
+        x2_0 = Dinv[i, 2, 0] * s0_0 + Dinv[i, 2, 1] * s1_0 + Dinv[i, 2, 2] * s2_0
+        X[3 * i + 0, 0] = x0_0
+        X[3 * i + 1, 0] = x1_0
+        X[3 * i + 2, 0] = x2_0
+        r = 3 * i + 0
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x0_0
+        r = 3 * i + 1
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x1_0
+        r = 3 * i + 2
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x2_0
+
+
+@numba.njit(cache=True, nogil=True)
 def spmm_2(indptr, indices, data, X, Y):
     for i in range(Y.shape[0]):
         a0 = 0.0; a1 = 0.0
@@ -82,6 +139,75 @@ def block_gs_2(indptr, indices, data, Dinv, X, B, forward):
         X[3 * i + 1, 1] += Dinv[i, 1, 0] * s0_1 + Dinv[i, 1, 1] * s1_1 + Dinv[i, 1, 2] * s2_1
         X[3 * i + 2, 0] += Dinv[i, 2, 0] * s0_0 + Dinv[i, 2, 1] * s1_0 + Dinv[i, 2, 2] * s2_0
         X[3 * i + 2, 1] += Dinv[i, 2, 0] * s0_1 + Dinv[i, 2, 1] * s1_1 + Dinv[i, 2, 2] * s2_1
+
+
+@numba.njit(cache=True, nogil=True)
+def gs0_res_2(indptr, indices, data, Dinv, X, B, R):
+    for i in range(Dinv.shape[0]):
+        lo = 3 * i
+        r = 3 * i + 0
+        s0_0 = B[r, 0]; s0_1 = B[r, 1]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s0_0 -= v * X[j, 0]
+            s0_1 -= v * X[j, 1]
+        r = 3 * i + 1
+        s1_0 = B[r, 0]; s1_1 = B[r, 1]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s1_0 -= v * X[j, 0]
+            s1_1 -= v * X[j, 1]
+        r = 3 * i + 2
+        s2_0 = B[r, 0]; s2_1 = B[r, 1]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s2_0 -= v * X[j, 0]
+            s2_1 -= v * X[j, 1]
+        x0_0 = Dinv[i, 0, 0] * s0_0 + Dinv[i, 0, 1] * s1_0 + Dinv[i, 0, 2] * s2_0
+        x0_1 = Dinv[i, 0, 0] * s0_1 + Dinv[i, 0, 1] * s1_1 + Dinv[i, 0, 2] * s2_1
+        x1_0 = Dinv[i, 1, 0] * s0_0 + Dinv[i, 1, 1] * s1_0 + Dinv[i, 1, 2] * s2_0
+        x1_1 = Dinv[i, 1, 0] * s0_1 + Dinv[i, 1, 1] * s1_1 + Dinv[i, 1, 2] * s2_1
+        x2_0 = Dinv[i, 2, 0] * s0_0 + Dinv[i, 2, 1] * s1_0 + Dinv[i, 2, 2] * s2_0
+        x2_1 = Dinv[i, 2, 0] * s0_1 + Dinv[i, 2, 1] * s1_1 + Dinv[i, 2, 2] * s2_1
+        X[3 * i + 0, 0] = x0_0
+        X[3 * i + 0, 1] = x0_1
+        X[3 * i + 1, 0] = x1_0
+        X[3 * i + 1, 1] = x1_1
+        X[3 * i + 2, 0] = x2_0
+        X[3 * i + 2, 1] = x2_1
+        r = 3 * i + 0
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x0_0
+            R[j, 1] -= v * x0_1
+        r = 3 * i + 1
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x1_0
+            R[j, 1] -= v * x1_1
+        r = 3 * i + 2
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x2_0
+            R[j, 1] -= v * x2_1
 
 
 @numba.njit(cache=True, nogil=True)
@@ -133,6 +259,87 @@ def block_gs_3(indptr, indices, data, Dinv, X, B, forward):
         X[3 * i + 2, 0] += Dinv[i, 2, 0] * s0_0 + Dinv[i, 2, 1] * s1_0 + Dinv[i, 2, 2] * s2_0
         X[3 * i + 2, 1] += Dinv[i, 2, 0] * s0_1 + Dinv[i, 2, 1] * s1_1 + Dinv[i, 2, 2] * s2_1
         X[3 * i + 2, 2] += Dinv[i, 2, 0] * s0_2 + Dinv[i, 2, 1] * s1_2 + Dinv[i, 2, 2] * s2_2
+
+
+@numba.njit(cache=True, nogil=True)
+def gs0_res_3(indptr, indices, data, Dinv, X, B, R):
+    for i in range(Dinv.shape[0]):
+        lo = 3 * i
+        r = 3 * i + 0
+        s0_0 = B[r, 0]; s0_1 = B[r, 1]; s0_2 = B[r, 2]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s0_0 -= v * X[j, 0]
+            s0_1 -= v * X[j, 1]
+            s0_2 -= v * X[j, 2]
+        r = 3 * i + 1
+        s1_0 = B[r, 0]; s1_1 = B[r, 1]; s1_2 = B[r, 2]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s1_0 -= v * X[j, 0]
+            s1_1 -= v * X[j, 1]
+            s1_2 -= v * X[j, 2]
+        r = 3 * i + 2
+        s2_0 = B[r, 0]; s2_1 = B[r, 1]; s2_2 = B[r, 2]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s2_0 -= v * X[j, 0]
+            s2_1 -= v * X[j, 1]
+            s2_2 -= v * X[j, 2]
+        x0_0 = Dinv[i, 0, 0] * s0_0 + Dinv[i, 0, 1] * s1_0 + Dinv[i, 0, 2] * s2_0
+        x0_1 = Dinv[i, 0, 0] * s0_1 + Dinv[i, 0, 1] * s1_1 + Dinv[i, 0, 2] * s2_1
+        x0_2 = Dinv[i, 0, 0] * s0_2 + Dinv[i, 0, 1] * s1_2 + Dinv[i, 0, 2] * s2_2
+        x1_0 = Dinv[i, 1, 0] * s0_0 + Dinv[i, 1, 1] * s1_0 + Dinv[i, 1, 2] * s2_0
+        x1_1 = Dinv[i, 1, 0] * s0_1 + Dinv[i, 1, 1] * s1_1 + Dinv[i, 1, 2] * s2_1
+        x1_2 = Dinv[i, 1, 0] * s0_2 + Dinv[i, 1, 1] * s1_2 + Dinv[i, 1, 2] * s2_2
+        x2_0 = Dinv[i, 2, 0] * s0_0 + Dinv[i, 2, 1] * s1_0 + Dinv[i, 2, 2] * s2_0
+        x2_1 = Dinv[i, 2, 0] * s0_1 + Dinv[i, 2, 1] * s1_1 + Dinv[i, 2, 2] * s2_1
+        x2_2 = Dinv[i, 2, 0] * s0_2 + Dinv[i, 2, 1] * s1_2 + Dinv[i, 2, 2] * s2_2
+        X[3 * i + 0, 0] = x0_0
+        X[3 * i + 0, 1] = x0_1
+        X[3 * i + 0, 2] = x0_2
+        X[3 * i + 1, 0] = x1_0
+        X[3 * i + 1, 1] = x1_1
+        X[3 * i + 1, 2] = x1_2
+        X[3 * i + 2, 0] = x2_0
+        X[3 * i + 2, 1] = x2_1
+        X[3 * i + 2, 2] = x2_2
+        r = 3 * i + 0
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x0_0
+            R[j, 1] -= v * x0_1
+            R[j, 2] -= v * x0_2
+        r = 3 * i + 1
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x1_0
+            R[j, 1] -= v * x1_1
+            R[j, 2] -= v * x1_2
+        r = 3 * i + 2
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x2_0
+            R[j, 1] -= v * x2_1
+            R[j, 2] -= v * x2_2
 
 
 @numba.njit(cache=True, nogil=True)
@@ -192,6 +399,99 @@ def block_gs_4(indptr, indices, data, Dinv, X, B, forward):
         X[3 * i + 2, 1] += Dinv[i, 2, 0] * s0_1 + Dinv[i, 2, 1] * s1_1 + Dinv[i, 2, 2] * s2_1
         X[3 * i + 2, 2] += Dinv[i, 2, 0] * s0_2 + Dinv[i, 2, 1] * s1_2 + Dinv[i, 2, 2] * s2_2
         X[3 * i + 2, 3] += Dinv[i, 2, 0] * s0_3 + Dinv[i, 2, 1] * s1_3 + Dinv[i, 2, 2] * s2_3
+
+
+@numba.njit(cache=True, nogil=True)
+def gs0_res_4(indptr, indices, data, Dinv, X, B, R):
+    for i in range(Dinv.shape[0]):
+        lo = 3 * i
+        r = 3 * i + 0
+        s0_0 = B[r, 0]; s0_1 = B[r, 1]; s0_2 = B[r, 2]; s0_3 = B[r, 3]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s0_0 -= v * X[j, 0]
+            s0_1 -= v * X[j, 1]
+            s0_2 -= v * X[j, 2]
+            s0_3 -= v * X[j, 3]
+        r = 3 * i + 1
+        s1_0 = B[r, 0]; s1_1 = B[r, 1]; s1_2 = B[r, 2]; s1_3 = B[r, 3]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s1_0 -= v * X[j, 0]
+            s1_1 -= v * X[j, 1]
+            s1_2 -= v * X[j, 2]
+            s1_3 -= v * X[j, 3]
+        r = 3 * i + 2
+        s2_0 = B[r, 0]; s2_1 = B[r, 1]; s2_2 = B[r, 2]; s2_3 = B[r, 3]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s2_0 -= v * X[j, 0]
+            s2_1 -= v * X[j, 1]
+            s2_2 -= v * X[j, 2]
+            s2_3 -= v * X[j, 3]
+        x0_0 = Dinv[i, 0, 0] * s0_0 + Dinv[i, 0, 1] * s1_0 + Dinv[i, 0, 2] * s2_0
+        x0_1 = Dinv[i, 0, 0] * s0_1 + Dinv[i, 0, 1] * s1_1 + Dinv[i, 0, 2] * s2_1
+        x0_2 = Dinv[i, 0, 0] * s0_2 + Dinv[i, 0, 1] * s1_2 + Dinv[i, 0, 2] * s2_2
+        x0_3 = Dinv[i, 0, 0] * s0_3 + Dinv[i, 0, 1] * s1_3 + Dinv[i, 0, 2] * s2_3
+        x1_0 = Dinv[i, 1, 0] * s0_0 + Dinv[i, 1, 1] * s1_0 + Dinv[i, 1, 2] * s2_0
+        x1_1 = Dinv[i, 1, 0] * s0_1 + Dinv[i, 1, 1] * s1_1 + Dinv[i, 1, 2] * s2_1
+        x1_2 = Dinv[i, 1, 0] * s0_2 + Dinv[i, 1, 1] * s1_2 + Dinv[i, 1, 2] * s2_2
+        x1_3 = Dinv[i, 1, 0] * s0_3 + Dinv[i, 1, 1] * s1_3 + Dinv[i, 1, 2] * s2_3
+        x2_0 = Dinv[i, 2, 0] * s0_0 + Dinv[i, 2, 1] * s1_0 + Dinv[i, 2, 2] * s2_0
+        x2_1 = Dinv[i, 2, 0] * s0_1 + Dinv[i, 2, 1] * s1_1 + Dinv[i, 2, 2] * s2_1
+        x2_2 = Dinv[i, 2, 0] * s0_2 + Dinv[i, 2, 1] * s1_2 + Dinv[i, 2, 2] * s2_2
+        x2_3 = Dinv[i, 2, 0] * s0_3 + Dinv[i, 2, 1] * s1_3 + Dinv[i, 2, 2] * s2_3
+        X[3 * i + 0, 0] = x0_0
+        X[3 * i + 0, 1] = x0_1
+        X[3 * i + 0, 2] = x0_2
+        X[3 * i + 0, 3] = x0_3
+        X[3 * i + 1, 0] = x1_0
+        X[3 * i + 1, 1] = x1_1
+        X[3 * i + 1, 2] = x1_2
+        X[3 * i + 1, 3] = x1_3
+        X[3 * i + 2, 0] = x2_0
+        X[3 * i + 2, 1] = x2_1
+        X[3 * i + 2, 2] = x2_2
+        X[3 * i + 2, 3] = x2_3
+        r = 3 * i + 0
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x0_0
+            R[j, 1] -= v * x0_1
+            R[j, 2] -= v * x0_2
+            R[j, 3] -= v * x0_3
+        r = 3 * i + 1
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x1_0
+            R[j, 1] -= v * x1_1
+            R[j, 2] -= v * x1_2
+            R[j, 3] -= v * x1_3
+        r = 3 * i + 2
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x2_0
+            R[j, 1] -= v * x2_1
+            R[j, 2] -= v * x2_2
+            R[j, 3] -= v * x2_3
 
 
 @numba.njit(cache=True, nogil=True)
@@ -259,6 +559,111 @@ def block_gs_5(indptr, indices, data, Dinv, X, B, forward):
         X[3 * i + 2, 2] += Dinv[i, 2, 0] * s0_2 + Dinv[i, 2, 1] * s1_2 + Dinv[i, 2, 2] * s2_2
         X[3 * i + 2, 3] += Dinv[i, 2, 0] * s0_3 + Dinv[i, 2, 1] * s1_3 + Dinv[i, 2, 2] * s2_3
         X[3 * i + 2, 4] += Dinv[i, 2, 0] * s0_4 + Dinv[i, 2, 1] * s1_4 + Dinv[i, 2, 2] * s2_4
+
+
+@numba.njit(cache=True, nogil=True)
+def gs0_res_5(indptr, indices, data, Dinv, X, B, R):
+    for i in range(Dinv.shape[0]):
+        lo = 3 * i
+        r = 3 * i + 0
+        s0_0 = B[r, 0]; s0_1 = B[r, 1]; s0_2 = B[r, 2]; s0_3 = B[r, 3]; s0_4 = B[r, 4]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s0_0 -= v * X[j, 0]
+            s0_1 -= v * X[j, 1]
+            s0_2 -= v * X[j, 2]
+            s0_3 -= v * X[j, 3]
+            s0_4 -= v * X[j, 4]
+        r = 3 * i + 1
+        s1_0 = B[r, 0]; s1_1 = B[r, 1]; s1_2 = B[r, 2]; s1_3 = B[r, 3]; s1_4 = B[r, 4]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s1_0 -= v * X[j, 0]
+            s1_1 -= v * X[j, 1]
+            s1_2 -= v * X[j, 2]
+            s1_3 -= v * X[j, 3]
+            s1_4 -= v * X[j, 4]
+        r = 3 * i + 2
+        s2_0 = B[r, 0]; s2_1 = B[r, 1]; s2_2 = B[r, 2]; s2_3 = B[r, 3]; s2_4 = B[r, 4]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s2_0 -= v * X[j, 0]
+            s2_1 -= v * X[j, 1]
+            s2_2 -= v * X[j, 2]
+            s2_3 -= v * X[j, 3]
+            s2_4 -= v * X[j, 4]
+        x0_0 = Dinv[i, 0, 0] * s0_0 + Dinv[i, 0, 1] * s1_0 + Dinv[i, 0, 2] * s2_0
+        x0_1 = Dinv[i, 0, 0] * s0_1 + Dinv[i, 0, 1] * s1_1 + Dinv[i, 0, 2] * s2_1
+        x0_2 = Dinv[i, 0, 0] * s0_2 + Dinv[i, 0, 1] * s1_2 + Dinv[i, 0, 2] * s2_2
+        x0_3 = Dinv[i, 0, 0] * s0_3 + Dinv[i, 0, 1] * s1_3 + Dinv[i, 0, 2] * s2_3
+        x0_4 = Dinv[i, 0, 0] * s0_4 + Dinv[i, 0, 1] * s1_4 + Dinv[i, 0, 2] * s2_4
+        x1_0 = Dinv[i, 1, 0] * s0_0 + Dinv[i, 1, 1] * s1_0 + Dinv[i, 1, 2] * s2_0
+        x1_1 = Dinv[i, 1, 0] * s0_1 + Dinv[i, 1, 1] * s1_1 + Dinv[i, 1, 2] * s2_1
+        x1_2 = Dinv[i, 1, 0] * s0_2 + Dinv[i, 1, 1] * s1_2 + Dinv[i, 1, 2] * s2_2
+        x1_3 = Dinv[i, 1, 0] * s0_3 + Dinv[i, 1, 1] * s1_3 + Dinv[i, 1, 2] * s2_3
+        x1_4 = Dinv[i, 1, 0] * s0_4 + Dinv[i, 1, 1] * s1_4 + Dinv[i, 1, 2] * s2_4
+        x2_0 = Dinv[i, 2, 0] * s0_0 + Dinv[i, 2, 1] * s1_0 + Dinv[i, 2, 2] * s2_0
+        x2_1 = Dinv[i, 2, 0] * s0_1 + Dinv[i, 2, 1] * s1_1 + Dinv[i, 2, 2] * s2_1
+        x2_2 = Dinv[i, 2, 0] * s0_2 + Dinv[i, 2, 1] * s1_2 + Dinv[i, 2, 2] * s2_2
+        x2_3 = Dinv[i, 2, 0] * s0_3 + Dinv[i, 2, 1] * s1_3 + Dinv[i, 2, 2] * s2_3
+        x2_4 = Dinv[i, 2, 0] * s0_4 + Dinv[i, 2, 1] * s1_4 + Dinv[i, 2, 2] * s2_4
+        X[3 * i + 0, 0] = x0_0
+        X[3 * i + 0, 1] = x0_1
+        X[3 * i + 0, 2] = x0_2
+        X[3 * i + 0, 3] = x0_3
+        X[3 * i + 0, 4] = x0_4
+        X[3 * i + 1, 0] = x1_0
+        X[3 * i + 1, 1] = x1_1
+        X[3 * i + 1, 2] = x1_2
+        X[3 * i + 1, 3] = x1_3
+        X[3 * i + 1, 4] = x1_4
+        X[3 * i + 2, 0] = x2_0
+        X[3 * i + 2, 1] = x2_1
+        X[3 * i + 2, 2] = x2_2
+        X[3 * i + 2, 3] = x2_3
+        X[3 * i + 2, 4] = x2_4
+        r = 3 * i + 0
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x0_0
+            R[j, 1] -= v * x0_1
+            R[j, 2] -= v * x0_2
+            R[j, 3] -= v * x0_3
+            R[j, 4] -= v * x0_4
+        r = 3 * i + 1
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x1_0
+            R[j, 1] -= v * x1_1
+            R[j, 2] -= v * x1_2
+            R[j, 3] -= v * x1_3
+            R[j, 4] -= v * x1_4
+        r = 3 * i + 2
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x2_0
+            R[j, 1] -= v * x2_1
+            R[j, 2] -= v * x2_2
+            R[j, 3] -= v * x2_3
+            R[j, 4] -= v * x2_4
 
 
 @numba.njit(cache=True, nogil=True)
@@ -334,6 +739,123 @@ def block_gs_6(indptr, indices, data, Dinv, X, B, forward):
         X[3 * i + 2, 3] += Dinv[i, 2, 0] * s0_3 + Dinv[i, 2, 1] * s1_3 + Dinv[i, 2, 2] * s2_3
         X[3 * i + 2, 4] += Dinv[i, 2, 0] * s0_4 + Dinv[i, 2, 1] * s1_4 + Dinv[i, 2, 2] * s2_4
         X[3 * i + 2, 5] += Dinv[i, 2, 0] * s0_5 + Dinv[i, 2, 1] * s1_5 + Dinv[i, 2, 2] * s2_5
+
+
+@numba.njit(cache=True, nogil=True)
+def gs0_res_6(indptr, indices, data, Dinv, X, B, R):
+    for i in range(Dinv.shape[0]):
+        lo = 3 * i
+        r = 3 * i + 0
+        s0_0 = B[r, 0]; s0_1 = B[r, 1]; s0_2 = B[r, 2]; s0_3 = B[r, 3]; s0_4 = B[r, 4]; s0_5 = B[r, 5]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s0_0 -= v * X[j, 0]
+            s0_1 -= v * X[j, 1]
+            s0_2 -= v * X[j, 2]
+            s0_3 -= v * X[j, 3]
+            s0_4 -= v * X[j, 4]
+            s0_5 -= v * X[j, 5]
+        r = 3 * i + 1
+        s1_0 = B[r, 0]; s1_1 = B[r, 1]; s1_2 = B[r, 2]; s1_3 = B[r, 3]; s1_4 = B[r, 4]; s1_5 = B[r, 5]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s1_0 -= v * X[j, 0]
+            s1_1 -= v * X[j, 1]
+            s1_2 -= v * X[j, 2]
+            s1_3 -= v * X[j, 3]
+            s1_4 -= v * X[j, 4]
+            s1_5 -= v * X[j, 5]
+        r = 3 * i + 2
+        s2_0 = B[r, 0]; s2_1 = B[r, 1]; s2_2 = B[r, 2]; s2_3 = B[r, 3]; s2_4 = B[r, 4]; s2_5 = B[r, 5]
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            s2_0 -= v * X[j, 0]
+            s2_1 -= v * X[j, 1]
+            s2_2 -= v * X[j, 2]
+            s2_3 -= v * X[j, 3]
+            s2_4 -= v * X[j, 4]
+            s2_5 -= v * X[j, 5]
+        x0_0 = Dinv[i, 0, 0] * s0_0 + Dinv[i, 0, 1] * s1_0 + Dinv[i, 0, 2] * s2_0
+        x0_1 = Dinv[i, 0, 0] * s0_1 + Dinv[i, 0, 1] * s1_1 + Dinv[i, 0, 2] * s2_1
+        x0_2 = Dinv[i, 0, 0] * s0_2 + Dinv[i, 0, 1] * s1_2 + Dinv[i, 0, 2] * s2_2
+        x0_3 = Dinv[i, 0, 0] * s0_3 + Dinv[i, 0, 1] * s1_3 + Dinv[i, 0, 2] * s2_3
+        x0_4 = Dinv[i, 0, 0] * s0_4 + Dinv[i, 0, 1] * s1_4 + Dinv[i, 0, 2] * s2_4
+        x0_5 = Dinv[i, 0, 0] * s0_5 + Dinv[i, 0, 1] * s1_5 + Dinv[i, 0, 2] * s2_5
+        x1_0 = Dinv[i, 1, 0] * s0_0 + Dinv[i, 1, 1] * s1_0 + Dinv[i, 1, 2] * s2_0
+        x1_1 = Dinv[i, 1, 0] * s0_1 + Dinv[i, 1, 1] * s1_1 + Dinv[i, 1, 2] * s2_1
+        x1_2 = Dinv[i, 1, 0] * s0_2 + Dinv[i, 1, 1] * s1_2 + Dinv[i, 1, 2] * s2_2
+        x1_3 = Dinv[i, 1, 0] * s0_3 + Dinv[i, 1, 1] * s1_3 + Dinv[i, 1, 2] * s2_3
+        x1_4 = Dinv[i, 1, 0] * s0_4 + Dinv[i, 1, 1] * s1_4 + Dinv[i, 1, 2] * s2_4
+        x1_5 = Dinv[i, 1, 0] * s0_5 + Dinv[i, 1, 1] * s1_5 + Dinv[i, 1, 2] * s2_5
+        x2_0 = Dinv[i, 2, 0] * s0_0 + Dinv[i, 2, 1] * s1_0 + Dinv[i, 2, 2] * s2_0
+        x2_1 = Dinv[i, 2, 0] * s0_1 + Dinv[i, 2, 1] * s1_1 + Dinv[i, 2, 2] * s2_1
+        x2_2 = Dinv[i, 2, 0] * s0_2 + Dinv[i, 2, 1] * s1_2 + Dinv[i, 2, 2] * s2_2
+        x2_3 = Dinv[i, 2, 0] * s0_3 + Dinv[i, 2, 1] * s1_3 + Dinv[i, 2, 2] * s2_3
+        x2_4 = Dinv[i, 2, 0] * s0_4 + Dinv[i, 2, 1] * s1_4 + Dinv[i, 2, 2] * s2_4
+        x2_5 = Dinv[i, 2, 0] * s0_5 + Dinv[i, 2, 1] * s1_5 + Dinv[i, 2, 2] * s2_5
+        X[3 * i + 0, 0] = x0_0
+        X[3 * i + 0, 1] = x0_1
+        X[3 * i + 0, 2] = x0_2
+        X[3 * i + 0, 3] = x0_3
+        X[3 * i + 0, 4] = x0_4
+        X[3 * i + 0, 5] = x0_5
+        X[3 * i + 1, 0] = x1_0
+        X[3 * i + 1, 1] = x1_1
+        X[3 * i + 1, 2] = x1_2
+        X[3 * i + 1, 3] = x1_3
+        X[3 * i + 1, 4] = x1_4
+        X[3 * i + 1, 5] = x1_5
+        X[3 * i + 2, 0] = x2_0
+        X[3 * i + 2, 1] = x2_1
+        X[3 * i + 2, 2] = x2_2
+        X[3 * i + 2, 3] = x2_3
+        X[3 * i + 2, 4] = x2_4
+        X[3 * i + 2, 5] = x2_5
+        r = 3 * i + 0
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x0_0
+            R[j, 1] -= v * x0_1
+            R[j, 2] -= v * x0_2
+            R[j, 3] -= v * x0_3
+            R[j, 4] -= v * x0_4
+            R[j, 5] -= v * x0_5
+        r = 3 * i + 1
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x1_0
+            R[j, 1] -= v * x1_1
+            R[j, 2] -= v * x1_2
+            R[j, 3] -= v * x1_3
+            R[j, 4] -= v * x1_4
+            R[j, 5] -= v * x1_5
+        r = 3 * i + 2
+        for p in range(indptr[r], indptr[r + 1]):
+            j = indices[p]
+            if j >= lo:
+                break
+            v = data[p]
+            R[j, 0] -= v * x2_0
+            R[j, 1] -= v * x2_1
+            R[j, 2] -= v * x2_2
+            R[j, 3] -= v * x2_3
+            R[j, 4] -= v * x2_4
+            R[j, 5] -= v * x2_5
 
 
 @numba.njit(cache=True, nogil=True)

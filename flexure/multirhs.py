@@ -43,6 +43,7 @@ def warm() -> bool:
         spmm(A, np.zeros((6, k)))
         for order in "CF":                # pcg's X is C-ordered, a caller's may be Fortran-ordered
             block_gauss_seidel(A, Dinv, np.zeros((6, k), order=order), np.ones((6, k)), True)
+        forward_gauss_seidel_residual(A, Dinv, np.ones((6, k)))
     for bs in (3, 6):                     # flexure.vcycle's coarse levels
         block_gauss_seidel_blocks(A, np.tile(np.eye(bs) / 2.0, (6 // bs, 1, 1)), np.zeros((6, 2)), np.ones((6, 2)), True)
     return True
@@ -75,6 +76,39 @@ def _gs_src(k: int) -> str:
                       "    nb = Dinv.shape[0]",
                       "    for t in range(nb):",
                       "        i = t if forward else nb - 1 - t", *rows, *upd])
+
+
+def _gs0_src(k: int) -> str:
+    """Forward block Gauss–Seidel from X = 0 and the residual R = B − A X in one pass over the lower
+    triangle (A symmetric, CSR indices sorted; R zero on entry): in block row i the entries right of
+    the diagonal block meet X = 0 and are skipped; once x_i is known, the residual rows j < i take
+    −A_ji x_i = −A_ij x_i (the rows j ≥ i have b − A x = 0 when they are solved, later x_i add)."""
+    c = range(k)
+    rows = []
+    for a in range(3):
+        rows += ["        r = 3 * i + %d" % a,
+                 "        " + "; ".join(f"s{a}_{j} = B[r, {j}]" for j in c),
+                 "        for p in range(indptr[r], indptr[r + 1]):",
+                 "            j = indices[p]",
+                 "            if j >= lo:",
+                 "                break",
+                 "            v = data[p]",
+                 *[f"            s{a}_{j} -= v * X[j, {j}]" for j in c]]
+    upd = [f"        x{a}_{j} = Dinv[i, {a}, 0] * s0_{j} + Dinv[i, {a}, 1] * s1_{j} + Dinv[i, {a}, 2] * s2_{j}"
+           for a in range(3) for j in c]
+    upd += [f"        X[3 * i + {a}, {j}] = x{a}_{j}" for a in range(3) for j in c]
+    scatter = []
+    for a in range(3):
+        scatter += ["        r = 3 * i + %d" % a,
+                    "        for p in range(indptr[r], indptr[r + 1]):",
+                    "            j = indices[p]",
+                    "            if j >= lo:",
+                    "                break",
+                    "            v = data[p]",
+                    *[f"            R[j, {j}] -= v * x{a}_{j}" for j in c]]
+    return "\n".join(["def gs0_res(indptr, indices, data, Dinv, X, B, R):",
+                      "    for i in range(Dinv.shape[0]):",
+                      "        lo = 3 * i", *rows, *upd, *scatter])
 
 
 #: block Gauss–Seidel for any block size b (D⁻¹ (n/b, b, b)) and any k columns (runtime loops):
@@ -138,6 +172,22 @@ def block_gauss_seidel(A, Dinv: np.ndarray, X: np.ndarray, B: np.ndarray, forwar
             X[:, g] = Xg
 
 
+def forward_gauss_seidel_residual(A, Dinv: np.ndarray, B: np.ndarray):
+    """(X, R): one forward block Gauss–Seidel sweep from X = 0 on A X = B and R = B − A X, in one
+    pass over the lower triangle of the symmetric CSR A (sorted indices), for B (n, k)."""
+    B = np.ascontiguousarray(B)
+    X = np.empty_like(B)
+    R = np.zeros_like(B)
+    for g in _groups(B.shape[1]):
+        if g.start == 0 and g.stop == B.shape[1]:
+            _kernel("gs0_res", B.shape[1])(A.indptr, A.indices, A.data, Dinv, X, B, R)
+        else:
+            Xg, Rg = np.empty((B.shape[0], g.stop - g.start)), np.zeros((B.shape[0], g.stop - g.start))
+            _kernel("gs0_res", g.stop - g.start)(A.indptr, A.indices, A.data, Dinv, Xg, np.ascontiguousarray(B[:, g]), Rg)
+            X[:, g], R[:, g] = Xg, Rg
+    return X, R
+
+
 def block_gauss_seidel_blocks(A, Dinv: np.ndarray, X: np.ndarray, B: np.ndarray, forward: bool) -> None:
     """One block Gauss–Seidel sweep in place on X (n, k), C-ordered, for A X = B with b × b nodal
     blocks (CSR A, Dinv (n/b, b, b)): the coarse levels of an AMG hierarchy, any b and k."""
@@ -190,7 +240,7 @@ def _generate() -> str:
            'k = 1 … 6 columns, one function per k so that the k accumulators stay in registers; compiled by',
            'numba on first use and cached beside this file."""', '', 'import numba', 'import numpy as np', '']
     for k in range(1, KMAX + 1):
-        for name, src in (("spmm", _spmm_src(k)), ("block_gs", _gs_src(k))):
+        for name, src in (("spmm", _spmm_src(k)), ("block_gs", _gs_src(k)), ("gs0_res", _gs0_src(k))):
             out += ["", "@numba.njit(cache=True, nogil=True)", src.replace(f"def {name}(", f"def {name}_{k}(", 1), ""]
     out += ["", "@numba.njit(cache=True, nogil=True)", _GS_ANY_SRC, ""]
     return "\n".join(out).rstrip() + "\n"

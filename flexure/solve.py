@@ -30,6 +30,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from userio.errors import InputError
+from flexure import blas
 from flexure.fem import stiffness_matrix
 from flexure.mesh import SLIVER_DIHEDRAL_DEG, element_shape_metrics
 
@@ -101,17 +102,27 @@ def _sa_hierarchy(A, B, smoothed: bool = True, max_coarse: int = 1000):
         max_coarse=max_coarse, coarse_solver="splu")
 
 
-def _pmg_setup(A, coarse, B_coarse, smoothed: bool):
-    """The parts of the two-level p-multigrid: the 3×3 block-diagonal inverses of the P2 system
-    (its BSR form), and the coarse V-cycle M₁ on the Galerkin P1-vertex system A₁ = Iᵀ A I
-    (aggregation AMG with the rigid-body modes; plain keeps the wide-stencil A₁ sparse)."""
-    from pyamg.util.utils import get_block_diag
+def block_diagonal_inverse(A) -> np.ndarray:
+    """(n/3, 3, 3) pseudo-inverses of the 3×3 diagonal blocks of A (as pyamg's get_block_diag), read
+    from its five central diagonals: no BSR copy of the matrix."""
+    A = sp.csr_matrix(A)
+    nb = A.shape[0] // 3
+    D = np.zeros((nb, 3, 3))
+    for a in range(3):
+        for b in range(3):
+            d = A.diagonal(b - a)                  # k ≥ 0: A[r, r + k];  k < 0: A[r − k, r]
+            D[:, a, b] = d[3 * np.arange(nb) + min(a, b)]
+    return np.linalg.pinv(D)
 
-    Ab = A.tobsr(blocksize=(3, 3))
-    Dinv = get_block_diag(Ab, blocksize=3, inv_flag=True)
+
+def _pmg_setup(A, coarse, B_coarse, smoothed: bool):
+    """The parts of the two-level p-multigrid: the 3×3 block-diagonal inverses of the P2 system,
+    and the coarse V-cycle M₁ on the Galerkin P1-vertex system A₁ = Iᵀ A I
+    (aggregation AMG with the rigid-body modes; plain keeps the wide-stencil A₁ sparse)."""
+    Dinv = block_diagonal_inverse(A)
     A1 = (coarse.T @ A @ coarse).tocsr()
     ml = _sa_hierarchy(A1, B_coarse, smoothed=smoothed, max_coarse=PMG_MAX_COARSE)
-    return Ab, Dinv, ml, ml.aspreconditioner(cycle="V"), coarse.T.tocsr()
+    return Dinv, ml, ml.aspreconditioner(cycle="V"), coarse.T.tocsr()
 
 
 def _pmg_preconditioner(A, coarse, B_coarse, smoothed: bool = False):
@@ -121,7 +132,8 @@ def _pmg_preconditioner(A, coarse, B_coarse, smoothed: bool = False):
     pay off on layered, flat-element meshes). Symmetric, so it preconditions CG."""
     from pyamg.relaxation.relaxation import block_gauss_seidel
 
-    Ab, Dinv, ml, M1, It = _pmg_setup(A, coarse, B_coarse, smoothed)
+    Dinv, ml, M1, It = _pmg_setup(A, coarse, B_coarse, smoothed)
+    Ab = A.tobsr(blocksize=(3, 3))
 
     def apply(r):
         r = np.asarray(r).ravel()
@@ -138,20 +150,25 @@ def _pmg_preconditioner(A, coarse, B_coarse, smoothed: bool = False):
 def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False, sweeps: int = 1):
     """The same two-level p-multigrid as ``_pmg_preconditioner`` applied to k columns at once
     (flexure.multirhs: one pass over the matrix per Gauss–Seidel sweep for all columns); the
-    coarse V-cycle runs per column. Returns (M(R) → Z for R (n, k), pyamg hierarchy)."""
+    coarse V-cycle too (flexure.vcycle); the first forward sweep (from zero) and the residual it
+    leaves take one pass over the lower triangle (``multirhs.forward_gauss_seidel_residual``).
+    Returns (M(R) → Z for R (n, k), the coarse hierarchy)."""
     from flexure import multirhs
     from flexure.vcycle import MultiVCycle
 
     Ac = A.tocsr()
-    _, Dinv, ml, _, It = _pmg_setup(Ac, coarse, B_coarse, smoothed)
+    Ac.sort_indices()
+    Dinv, ml, _, It = _pmg_setup(Ac, coarse, B_coarse, smoothed)
     Dinv = np.ascontiguousarray(Dinv)
     V = MultiVCycle(ml)                     # the coarse V-cycle on all columns at once
 
     def apply(R):
-        X = np.zeros_like(R)
-        for _ in range(sweeps):
+        X, res = multirhs.forward_gauss_seidel_residual(Ac, Dinv, R)
+        for _ in range(sweeps - 1):
             multirhs.block_gauss_seidel(Ac, Dinv, X, R, forward=True)
-        X += coarse @ V(It @ (R - multirhs.spmm(Ac, X)))
+        if sweeps > 1:
+            res = R - multirhs.spmm(Ac, X)
+        X += coarse @ V(It @ res)
         for _ in range(sweeps):
             multirhs.block_gauss_seidel(Ac, Dinv, X, R, forward=False)
         return X
@@ -172,6 +189,7 @@ def _multirhs_available() -> bool:
     return MULTI_RHS and multirhs.available()
 
 
+@blas.single_threaded
 def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, method: str = "auto",
                  rtol: float = 1e-10, maxiter: int = 2000, condition_estimate: bool = True,
                  coarse: sp.csr_matrix | None = None, B_coarse: np.ndarray | None = None,
@@ -306,6 +324,7 @@ def solve_reduced(system, b: np.ndarray | None = None, method: str = "auto", rto
                         coarse=system.coarse, B_coarse=system.B_coarse, smoothed_coarse=smoothed_coarse, x0=x0)
 
 
+@blas.single_threaded
 def prepared(system, rtol: float = 1e-10, smoothed_coarse: bool = False):
     """A solver for ``system`` that is set up once and reused for further right-hand sides:
     → solve(B (n_q,) or (n_q, k), x0=None, rtol=None) → (q, info). The P2 p-multigrid (all columns
@@ -319,6 +338,7 @@ def prepared(system, rtol: float = 1e-10, smoothed_coarse: bool = False):
         lu = spla.splu(A.tocsc(), permc_spec="COLAMD")
         setup_s = time.perf_counter() - t0
 
+        @blas.single_threaded
         def solve_direct(B, x0=None, rtol_=None):
             t = time.perf_counter()
             q = lu.solve(np.asarray(B, dtype=np.float64))
@@ -332,6 +352,7 @@ def prepared(system, rtol: float = 1e-10, smoothed_coarse: bool = False):
         Ac = A.tocsr()
         setup_s = time.perf_counter() - t0
 
+        @blas.single_threaded
         def solve_pmg(B, x0=None, rtol_=None):
             t = time.perf_counter()
             B = np.asarray(B, dtype=np.float64)

@@ -107,3 +107,24 @@ def test_vcycle_on_all_columns_equals_pyamg_per_column(disc, smoothed):
         ref = M @ R[:, j]
         assert np.abs(X[:, j] - ref).max() <= 1e-10 * np.abs(ref).max()
     assert V.n_levels == len(ml.levels) and V.operator_complexity == pytest.approx(ml.operator_complexity())
+
+
+@pytest.mark.parametrize("k", [1, 5, 8])
+def test_forward_sweep_from_zero_with_residual_equals_sweep_then_product(disc, k):
+    """multirhs.forward_gauss_seidel_residual: one pass over the lower triangle gives the forward
+    sweep from X = 0 and R = B − A X (A symmetric), as the sweep and a product do in two passes;
+    and the block-diagonal inverses read from the diagonals equal pyamg's from the BSR form."""
+    from pyamg.util.utils import get_block_diag
+
+    sy, _ = disc
+    A = sy.A.tocsr()
+    A.sort_indices()
+    Dinv = np.ascontiguousarray(get_block_diag(A.tobsr(blocksize=(3, 3)), blocksize=3, inv_flag=True))
+    assert np.abs(fsolve.block_diagonal_inverse(A) - Dinv).max() <= 1e-12 * np.abs(Dinv).max()
+    B = np.random.default_rng(k).standard_normal((A.shape[0], k))
+    X, R = multirhs.forward_gauss_seidel_residual(A, Dinv, B)
+    X_ref = np.zeros_like(B)
+    multirhs.block_gauss_seidel(A, Dinv, X_ref, B, True)
+    assert np.abs(X - X_ref).max() <= 1e-12 * np.abs(X_ref).max()
+    R_ref = B - A @ X_ref
+    assert np.abs(R - R_ref).max() <= 1e-9 * np.abs(B).max()
