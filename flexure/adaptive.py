@@ -183,6 +183,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             mesh = tm.mesh
             tl = time.perf_counter()
             sol = solve_goals(design, mesh, x0, ref0, selections=_nested_selections(mesh, bands))
+            sol.K = sol.solver = None          # not needed again (the last mesh's load cases: goal_cases): free them
             vals = goal_values(design, sol)
             td = time.perf_counter()
             eta_v = indicators(design, mesh, sol)

@@ -78,3 +78,22 @@ def test_dual_readings_equal_the_solved_load_cases(mesh_and_design, coupling, di
         assert abs(dual["crosstalk_percent"][key] - ref["crosstalk_percent"][key]) <= tol * max(single.values())
     assert "duals" in dual["solver"]["solver"] and not dual["warnings"] == ["large_residual"]
     assert np.allclose(fields.u_rated_m, sol.U[:, :, 0] * design.rated_torque_Nm)
+
+
+def test_goal_solve_algebraic_error_is_far_below_the_targets(mesh_and_design, monkeypatch):
+    """The p-multigrid CG's goal values (torque case + duals together, flexure.goals.GOAL_RTOL) against
+    a direct solve of the same system: the algebraic error of θ and of every gauge reading is below
+    1e-6 relative, 10⁴ times below a 1 % --rtol (and the dual readings of the off-axis cases too)."""
+    from flexure import goal_cases, goals
+    from flexure import solve as fsolve
+
+    design, mres = mesh_and_design
+    direct = goals.solve_goals(design, mres.mesh)
+    monkeypatch.setattr(fsolve, "DIRECT_MAX_DOFS", 100)
+    cg = goals.solve_goals(design, mres.mesh)
+    assert "direct" in direct.info["solver"] and "amg-cg" in cg.info["solver"]
+    assert abs(cg.theta - direct.theta) <= 1e-6 * abs(direct.theta)
+    assert np.abs(cg.eps - direct.eps).max() <= 1e-6 * np.abs(direct.eps).max()
+    wrench = np.eye(6)[[5, 0, 1, 2, 3, 4]]
+    read = [goal_cases.from_goals(s)(design, mres.mesh, None, None, None, None, wrench)[1] for s in (cg, direct)]
+    assert np.abs(read[0] - read[1]).max() <= 1e-6 * np.abs(read[1]).max()
