@@ -12,6 +12,10 @@ tolerance with three preconditioners — the anchor is the first, measured in th
 * ``after``: flexure.solve._pmg_multi (sweep + residual in one pass over the lower triangle, the
   coarse V-cycle on all columns at once, flexure.vcycle), one BLAS thread.
 
+Then, from the level's own initial guess (the previous level prolongated), the CG at tolerances
+1e-3 … 1e-8: iterations and the largest relative error of the goal values (θ, each gauge reading of
+the torque case) against a 1e-10 solve — what a CG tolerance tied to --rtol would save.
+
 Prints CPU and wall seconds of the set-up and of the CG, iterations, the largest difference of the
 solutions (they must agree to the CG tolerance) and the machine's load.
 """
@@ -115,11 +119,22 @@ def bench(name: str, rtol: float) -> dict:
         rows.append({"variant": label, "setup_cpu_s": c1 - c0, "setup_wall_s": t1 - t0, "cg_cpu_s": c2 - c1,
                      "cg_wall_s": t2 - t1, "iterations": its, "converged": bool(np.all(done)),
                      "max_rel_diff": float(np.abs(X - ref).max() / np.abs(ref).max())})
+    # what a CG tolerance tied to --rtol would save: goal values J = B[:, g]ᵀ q₀ (θ, each gauge) from
+    # the level's warm start at looser tolerances, against a 1e-10 solve
+    with blas.limited(1):
+        M, _ = fsolve._pmg_multi(A, sy.coarse, sy.B_coarse, seen["smoothed"], fsolve.PMG_SWEEPS)
+        X_ref, _, _ = multirhs.pcg(A, B, M, 1e-10, 4000, seen["x0"])
+        J_ref = B.T @ X_ref[:, 0]
+        sweep = []
+        for tol in (1e-3, 1e-4, 1e-5, 1e-6, 1e-8):
+            Xt, its_t, _ = multirhs.pcg(A, B, M, tol, 2000, seen["x0"])
+            sweep.append({"cg_rtol": tol, "iterations": its_t,
+                          "goal_rel_err": float(np.max(np.abs(B.T @ Xt[:, 0] - J_ref) / np.abs(J_ref)))})
     base = rows[0]["cg_cpu_s"]
     for r in rows:
         r["cg_cpu_ratio"] = r["cg_cpu_s"] / base
     return {"part": name, "rtol": rtol, "dofs": int(A.shape[0]), "columns": int(B.shape[1]),
-            "cg_rtol": cg_rtol, "rows": rows, "load": float(open("/proc/loadavg").read().split()[0])}
+            "cg_rtol": cg_rtol, "rows": rows, "tolerance_sweep": sweep, "load": float(open("/proc/loadavg").read().split()[0])}
 
 
 class _nothing:
@@ -137,6 +152,9 @@ def show(r: dict) -> None:
         print(f"  {x['variant']:>14}: set-up {x['setup_cpu_s']:5.1f} CPU-s ({x['setup_wall_s']:5.1f} wall), "
               f"CG {x['cg_cpu_s']:6.1f} CPU-s ({x['cg_wall_s']:6.1f} wall) = {x['cg_cpu_ratio']:.2f} × before, "
               f"iterations {x['iterations']}, Δ {x['max_rel_diff']:.1e}", flush=True)
+    for x in r["tolerance_sweep"]:
+        print(f"  CG to {x['cg_rtol']:g} from the prolongated start: iterations {x['iterations']}, "
+              f"largest relative goal error {x['goal_rel_err']:.1e}")
 
 
 def main(argv: list[str]) -> None:

@@ -4,7 +4,9 @@ AMG: on P1 systems PyAMG smoothed aggregation (six rigid-body modes as near-null
 nodal blocks) preconditions CG; on P2 systems a two-level p-multigrid (block Gauss–Seidel on P2,
 Galerkin P1-vertex coarse system, one aggregation-AMG V-cycle, direct below PMG_MAX_COARSE unknowns)
 preconditions CG; with numba the load cases are solved together (flexure.multirhs: the smoother
-and A·X read the matrix once for all cases; same iterations and answers as one CG per case).
+and A·X read the matrix once for all cases, the first sweep and its residual one pass over the lower
+triangle; the coarse V-cycle on all columns at once, flexure.vcycle; same iterations and answers as
+one CG per case), with one BLAS thread (flexure.blas).
 ``info`` reports the solver, iterations, relative residual ‖b − A q‖/‖b‖, dofs, timings and named
 conditioning warnings:
 * ``near_incompressible``: ν ≥ NU_LOCKING[order]. P1 (ν ≥ 0.49, λ/μ ≥ 49): linear tetrahedra lock
