@@ -52,6 +52,7 @@ import time
 import numpy as np
 
 from userio.errors import InputError
+from flexure import blas
 
 DEFAULT_RTOL = 0.02
 #: the first mesh: the design's size function × this, its curved faces resolved as at
@@ -69,7 +70,6 @@ ROUNDS = 2
 SAFETY = 1.5
 #: CG tolerance of the last mesh's six load cases (cross-talk, stress): the goal solves' 1e-6 gives
 #: goal values within 1e-9 of 1e-8's (flexure.goals.GOAL_RTOL)
-FINAL_RTOL = 3e-7       # below solve.RESIDUAL_LIMIT (1e-6), which flags a solve as not converged
 #: the geometry criterion's share of --rtol (δ/R of a boundary edge, ``_geometry_marks``)
 GEOMETRY_SHARE = 0.1
 KAPPA_MIN = 0.25
@@ -159,12 +159,14 @@ def _mark(mesh, eta_vertex: np.ndarray, weights: np.ndarray, fraction: float) ->
     return order[:n]
 
 
+@blas.single_threaded
 def analyze_adaptive(design, size: str | None = None, rtol: float | None = None, max_dofs: int = MAX_DOFS,
                      max_memory_gb: float = MAX_MEMORY_GB, progress: bool = False,
                      max_elements: float | None = None, initial_h_factor: float = INITIAL_H_FACTOR):
     """Adaptive analysis (module docstring) → (results as ``analysis.analyze`` gives them on the
     final mesh, with ``<figure>_error_estimate``/``_error_method``, the levels and what stopped
     the refinement; Fields). ``initial_h_factor``: the first mesh's coarsening of the size field."""
+    from flexure import goal_cases
     from flexure.analysis import _selections, analyze_mesh
     from flexure.goals import indicators, solve_goals
     from flexure.meshing import MeshResult, mesh_report
@@ -194,6 +196,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             mesh = tm.mesh
             tl = time.perf_counter()
             sol = solve_goals(design, mesh, x0, ref0, selections=_nested_selections(mesh, bands))
+            sol.K = sol.solver = None          # not needed again (the last mesh's load cases: goal_cases): free them
             vals = goal_values(design, sol)
             td = time.perf_counter()
             eta_v = indicators(design, mesh, sol)
@@ -252,10 +255,8 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
     report = mesh_report(mesh, mres.report["size"], "gmsh+bisection", None, _field(mres), mres.surface)
     report.update({k: mres.report[k] for k in ("h_far_m", "h_gauge_m") if k in mres.report})
     fin = MeshResult(mesh, mres.surface, report)
-    x0_final = np.zeros((sol.q.shape[0], 6))
-    x0_final[:, 0] = sol.q[:, 0]
-    res, fields = analyze_mesh(design, fin, mesh_s, progress=False, x0=x0_final, K=sol.K, solver=sol.solver,
-                               rtol=FINAL_RTOL, selections=_nested_selections(mesh, bands))
+    res, fields = analyze_mesh(design, fin, mesh_s, progress=False, cases=goal_cases.from_goals(sol),
+                               selections=_nested_selections(mesh, bands))
     _attach(res, hist, design, rtol, stopped, max_dofs, max_memory_gb)
     res["mesh"]["initial_snap"] = snapped
     res["total_s"] = float(time.perf_counter() - t_start)

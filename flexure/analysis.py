@@ -214,6 +214,19 @@ def _solve_cases(design: Design, mesh, K, load_nodes, fixed_nodes, ref: np.ndarr
     return U, np.column_stack([mean_rotation(mesh, faces, U[..., j]) for j in range(len(wrench))]), info
 
 
+def solved_cases(design: Design, mesh, K, load_nodes, fixed_nodes, ref: np.ndarray, wrench: np.ndarray,
+                 x0: np.ndarray | None = None, solver=None, rtol: float | None = None):
+    """What ``analyze_mesh`` reads of the load cases, by solving all of them (``_solve_cases``):
+    (u of the first case (n, 3), each gauge's reading under each case (g, cases), the hub rotation
+    Θ_z of the first case, solver info). flexure.goal_cases gives the same from an adaptive level's
+    goal solve (the readings from its gauge duals)."""
+    from flexure.fem import stiffness_matrix
+
+    K = stiffness_matrix(mesh, design.material) if K is None else K
+    U, theta, info = _solve_cases(design, mesh, K, load_nodes, fixed_nodes, ref, wrench, x0, solver, rtol)
+    return U[:, :, 0], read_footprint(design.gauges, mesh, U), float(theta[2, 0]), info
+
+
 def _sensor_config(design: Design):
     from bridge.config import SensorConfig, load_sensor_config
 
@@ -239,12 +252,13 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
 
 
 def analyze_mesh(design: Design, mres, mesh_s: float = 0.0, progress: bool = False, x0=None, K=None,
-                 solver=None, rtol: float | None = None, selections=None):
+                 solver=None, rtol: float | None = None, selections=None, cases=None):
     """``analyze`` on a given mesh (``mres``: meshing.MeshResult; ``mesh_s`` its meshing time):
     the six load cases (``x0``: an initial guess of the solver, (n_q, 6); ``K`` the stiffness matrix
     and ``solver`` a prepared solver of the system, if already made; ``rtol`` the CG tolerance,
     default RTOL; ``selections`` the (load, fixed) node sets if not the design's radius bands on this
-    mesh, e.g. flexure.adaptive's nested ones), the gauges, the figures → (results dict, Fields)."""
+    mesh, e.g. flexure.adaptive's nested ones; ``cases`` what gives the load cases' readings, default
+    ``solved_cases``), the gauges, the figures → (results dict, Fields)."""
     from bridge.budget import min_detectable_strain
     from bridge.wheatstone import output_ratio
     from flexure import slivers
@@ -261,13 +275,14 @@ def analyze_mesh(design: Design, mres, mesh_s: float = 0.0, progress: bool = Fal
     t_mid = 0.5 * (mesh.points[:, 2].min() + mesh.points[:, 2].max())
     ref = np.array([0.0, 0.0, t_mid])
     t0 = time.perf_counter()
-    K = stiffness_matrix(mesh, design.material) if K is None else K
+    K = stiffness_matrix(mesh, design.material) if K is None and cases is None else K
     assemble_s = time.perf_counter() - t0
     wrench = np.zeros((6, 6))                        # rows: cases; cols: (F, M)
     for i, c in enumerate(CASES):
         wrench[i, {"Fx": 0, "Fy": 1, "Fz": 2, "Mx": 3, "My": 4, "Mz": 5}[c]] = 1.0
     t0 = time.perf_counter()
-    U, theta, info = _solve_cases(design, mesh, K, load_nodes, fixed_nodes, ref, wrench, x0, solver, rtol)
+    u0, readings, theta_z, info = (cases or solved_cases)(design, mesh, K, load_nodes, fixed_nodes, ref, wrench,
+                                                          x0, solver, rtol)
     solve_s = time.perf_counter() - t0
     say(f"solved {len(CASES)} load cases ({info['solver']}, {solve_s:.1f} s, residual {info['residual_norm']:.1e})")
     warnings, metrics = fsolve.conditioning_warnings(mesh, design.material)
@@ -280,7 +295,6 @@ def analyze_mesh(design: Design, mres, mesh_s: float = 0.0, progress: bool = Fal
     if repairs:                                    # a repair changes the geometry: say so
         warnings.append(f"the surface was repaired before meshing ({', '.join(repairs)}); check the result")
 
-    readings = read_footprint(design.gauges, mesh, U)                       # (g, cases)
     eps = bridge_strains(design.gauges, readings)                           # (cases, 4)
     T = design.rated_torque_Nm
     gf = design.gauge_factor
@@ -301,9 +315,9 @@ def analyze_mesh(design: Design, mres, mesh_s: float = 0.0, progress: bool = Fal
                 for i, c in enumerate(CASES) if c != "Mz"}
     # a symmetric layout reads |ε| equal on all arms under Mz: the spread is discretisation error
     imbalance = float(np.ptp(np.abs(eps[0])) / np.abs(eps[0]).mean())
-    stiffness = float(1.0 / theta[2, 0]) if theta[2, 0] != 0 else math.nan
+    stiffness = float(1.0 / theta_z) if theta_z != 0 else math.nan
 
-    u_rated = U[:, :, 0] * T
+    u_rated = u0 * T
     eps_nodes = element_nodal_strains(mesh, u_rated)
     vm_elem = von_mises(stress_from_strain(eps_nodes, design.material))
     max_vm = float(vm_elem.max())

@@ -174,6 +174,7 @@ def stiffness_matrix(mesh: Mesh, material, chunk_elements: int | None = None,
     np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
     K = sp.bsr_matrix((np.ascontiguousarray(data.transpose(2, 0, 1)), cols, indptr),
                       shape=(3 * n, 3 * n))
+    del data                                  # one copy of the values fewer alive while K becomes CSR
     if fmt == "bsr":
         return K
     K = K.tocsr()

@@ -43,6 +43,9 @@ def warm() -> bool:
         spmm(A, np.zeros((6, k)))
         for order in "CF":                # pcg's X is C-ordered, a caller's may be Fortran-ordered
             block_gauss_seidel(A, Dinv, np.zeros((6, k), order=order), np.ones((6, k)), True)
+        forward_gauss_seidel_residual(A, Dinv, np.ones((6, k)))
+    for bs in (3, 6):                     # flexure.vcycle's coarse levels
+        block_gauss_seidel_blocks(A, np.tile(np.eye(bs) / 2.0, (6 // bs, 1, 1)), np.zeros((6, 2)), np.ones((6, 2)), True)
     return True
 
 
@@ -75,13 +78,72 @@ def _gs_src(k: int) -> str:
                       "        i = t if forward else nb - 1 - t", *rows, *upd])
 
 
+def _gs0_src(k: int) -> str:
+    """Forward block Gauss–Seidel from X = 0 and the residual R = B − A X in one pass over the lower
+    triangle (A symmetric, CSR indices sorted; R zero on entry): in block row i the entries right of
+    the diagonal block meet X = 0 and are skipped; once x_i is known, the residual rows j < i take
+    −A_ji x_i = −A_ij x_i (the rows j ≥ i have b − A x = 0 when they are solved, later x_i add)."""
+    c = range(k)
+    rows = []
+    for a in range(3):
+        rows += ["        r = 3 * i + %d" % a,
+                 "        " + "; ".join(f"s{a}_{j} = B[r, {j}]" for j in c),
+                 "        for p in range(indptr[r], indptr[r + 1]):",
+                 "            j = indices[p]",
+                 "            if j >= lo:",
+                 "                break",
+                 "            v = data[p]",
+                 *[f"            s{a}_{j} -= v * X[j, {j}]" for j in c]]
+    upd = [f"        x{a}_{j} = Dinv[i, {a}, 0] * s0_{j} + Dinv[i, {a}, 1] * s1_{j} + Dinv[i, {a}, 2] * s2_{j}"
+           for a in range(3) for j in c]
+    upd += [f"        X[3 * i + {a}, {j}] = x{a}_{j}" for a in range(3) for j in c]
+    scatter = []
+    for a in range(3):
+        scatter += ["        r = 3 * i + %d" % a,
+                    "        for p in range(indptr[r], indptr[r + 1]):",
+                    "            j = indices[p]",
+                    "            if j >= lo:",
+                    "                break",
+                    "            v = data[p]",
+                    *[f"            R[j, {j}] -= v * x{a}_{j}" for j in c]]
+    return "\n".join(["def gs0_res(indptr, indices, data, Dinv, X, B, R):",
+                      "    for i in range(Dinv.shape[0]):",
+                      "        lo = 3 * i", *rows, *upd, *scatter])
+
+
+#: block Gauss–Seidel for any block size b (D⁻¹ (n/b, b, b)) and any k columns (runtime loops):
+#: the coarse AMG levels (b = 3 on the P1 vertex system, 6 below: the six rigid-body modes)
+_GS_ANY_SRC = """def block_gs_any(indptr, indices, data, Dinv, X, B, forward):
+    nb = Dinv.shape[0]
+    bs = Dinv.shape[1]
+    k = X.shape[1]
+    s = np.empty((bs, k))
+    for t in range(nb):
+        i = t if forward else nb - 1 - t
+        for a in range(bs):
+            r = bs * i + a
+            for c in range(k):
+                s[a, c] = B[r, c]
+            for p in range(indptr[r], indptr[r + 1]):
+                v = data[p]
+                j = indices[p]
+                for c in range(k):
+                    s[a, c] -= v * X[j, c]
+        for a in range(bs):
+            for c in range(k):
+                acc = 0.0
+                for b in range(bs):
+                    acc += Dinv[i, a, b] * s[b, c]
+                X[bs * i + a, c] += acc"""
+
+
 def _kernel(name: str, k: int):
     """The numba loop ``name`` ("spmm" or "block_gs") for exactly k ≤ KMAX columns
-    (flexure._multirhs_loops, generated from the two sources above by ``python -m flexure.multirhs``;
+    (flexure._multirhs_loops / _multirhs_fused, generated from the sources above by ``python -m flexure.multirhs``;
     numba caches the compiled code)."""
-    from flexure import _multirhs_loops
+    from flexure import _multirhs_fused, _multirhs_loops
 
-    return getattr(_multirhs_loops, f"{name}_{k}")
+    return getattr(_multirhs_fused if name == "gs0_res" else _multirhs_loops, f"{name}_{k}")
 
 
 def _groups(k: int):
@@ -108,6 +170,30 @@ def block_gauss_seidel(A, Dinv: np.ndarray, X: np.ndarray, B: np.ndarray, forwar
             _kernel("block_gs", g.stop - g.start)(A.indptr, A.indices, A.data, Dinv, Xg,
                                              np.ascontiguousarray(B[:, g]), forward)
             X[:, g] = Xg
+
+
+def forward_gauss_seidel_residual(A, Dinv: np.ndarray, B: np.ndarray):
+    """(X, R): one forward block Gauss–Seidel sweep from X = 0 on A X = B and R = B − A X, in one
+    pass over the lower triangle of the symmetric CSR A (sorted indices), for B (n, k)."""
+    B = np.ascontiguousarray(B)
+    X = np.empty_like(B)
+    R = np.zeros_like(B)
+    for g in _groups(B.shape[1]):
+        if g.start == 0 and g.stop == B.shape[1]:
+            _kernel("gs0_res", B.shape[1])(A.indptr, A.indices, A.data, Dinv, X, B, R)
+        else:
+            Xg, Rg = np.empty((B.shape[0], g.stop - g.start)), np.zeros((B.shape[0], g.stop - g.start))
+            _kernel("gs0_res", g.stop - g.start)(A.indptr, A.indices, A.data, Dinv, Xg, np.ascontiguousarray(B[:, g]), Rg)
+            X[:, g], R[:, g] = Xg, Rg
+    return X, R
+
+
+def block_gauss_seidel_blocks(A, Dinv: np.ndarray, X: np.ndarray, B: np.ndarray, forward: bool) -> None:
+    """One block Gauss–Seidel sweep in place on X (n, k), C-ordered, for A X = B with b × b nodal
+    blocks (CSR A, Dinv (n/b, b, b)): the coarse levels of an AMG hierarchy, any b and k."""
+    from flexure import _multirhs_fused
+
+    _multirhs_fused.block_gs_any(A.indptr, A.indices, A.data, Dinv, X, np.ascontiguousarray(B), forward)
 
 
 def pcg(A, B: np.ndarray, M, rtol: float, maxiter: int, X0: np.ndarray | None = None):
@@ -148,18 +234,28 @@ def pcg(A, B: np.ndarray, M, rtol: float, maxiter: int, X0: np.ndarray | None = 
     return X, its.tolist(), done
 
 
-def _generate() -> str:
-    """Source of flexure/_multirhs_loops.py."""
+#: the generated files: the loops of the sweeps and products, and of the fused first sweep and the
+#: coarse levels (two files, each under the project's module-size limit)
+GENERATED = {"_multirhs_loops.py": ("spmm", "block_gs"), "_multirhs_fused.py": ("gs0_res",)}
+
+
+def _generate(filename: str = "_multirhs_loops.py") -> str:
+    """Source of flexure/<filename> (one of GENERATED)."""
+    srcs = {"spmm": _spmm_src, "block_gs": _gs_src, "gs0_res": _gs0_src}
     out = ['"""Generated by ``python -m flexure.multirhs`` (do not edit): the loops of flexure.multirhs for',
            'k = 1 … 6 columns, one function per k so that the k accumulators stay in registers; compiled by',
-           'numba on first use and cached beside this file."""', '', 'import numba', '']
+           'numba on first use and cached beside this file."""', '', 'import numba']
+    out += ['import numpy as np', ''] if filename == "_multirhs_fused.py" else ['']
     for k in range(1, KMAX + 1):
-        for name, src in (("spmm", _spmm_src(k)), ("block_gs", _gs_src(k))):
-            out += ["", "@numba.njit(cache=True, nogil=True)", src.replace(f"def {name}(", f"def {name}_{k}(", 1), ""]
+        for name in GENERATED[filename]:
+            out += ["", "@numba.njit(cache=True, nogil=True)", srcs[name](k).replace(f"def {name}(", f"def {name}_{k}(", 1), ""]
+    if filename == "_multirhs_fused.py":
+        out += ["", "@numba.njit(cache=True, nogil=True)", _GS_ANY_SRC, ""]
     return "\n".join(out).rstrip() + "\n"
 
 
 if __name__ == "__main__":
     from pathlib import Path
 
-    Path(__file__).with_name("_multirhs_loops.py").write_text(_generate())
+    for name in GENERATED:
+        Path(__file__).with_name(name).write_text(_generate(name))

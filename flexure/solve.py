@@ -4,7 +4,9 @@ AMG: on P1 systems PyAMG smoothed aggregation (six rigid-body modes as near-null
 nodal blocks) preconditions CG; on P2 systems a two-level p-multigrid (block Gauss–Seidel on P2,
 Galerkin P1-vertex coarse system, one aggregation-AMG V-cycle, direct below PMG_MAX_COARSE unknowns)
 preconditions CG; with numba the load cases are solved together (flexure.multirhs: the smoother
-and A·X read the matrix once for all cases; same iterations and answers as one CG per case).
+and A·X read the matrix once for all cases, the first sweep and its residual one pass over the lower
+triangle; the coarse V-cycle on all columns at once, flexure.vcycle; same iterations and answers as
+one CG per case), with one BLAS thread (flexure.blas).
 ``info`` reports the solver, iterations, relative residual ‖b − A q‖/‖b‖, dofs, timings and named
 conditioning warnings:
 * ``near_incompressible``: ν ≥ NU_LOCKING[order]. P1 (ν ≥ 0.49, λ/μ ≥ 49): linear tetrahedra lock
@@ -30,6 +32,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from userio.errors import InputError
+from flexure import blas
 from flexure.fem import stiffness_matrix
 from flexure.mesh import SLIVER_DIHEDRAL_DEG, element_shape_metrics
 
@@ -101,17 +104,27 @@ def _sa_hierarchy(A, B, smoothed: bool = True, max_coarse: int = 1000):
         max_coarse=max_coarse, coarse_solver="splu")
 
 
-def _pmg_setup(A, coarse, B_coarse, smoothed: bool):
-    """The parts of the two-level p-multigrid: the 3×3 block-diagonal inverses of the P2 system
-    (its BSR form), and the coarse V-cycle M₁ on the Galerkin P1-vertex system A₁ = Iᵀ A I
-    (aggregation AMG with the rigid-body modes; plain keeps the wide-stencil A₁ sparse)."""
-    from pyamg.util.utils import get_block_diag
+def block_diagonal_inverse(A) -> np.ndarray:
+    """(n/3, 3, 3) pseudo-inverses of the 3×3 diagonal blocks of A (as pyamg's get_block_diag), read
+    from its five central diagonals: no BSR copy of the matrix."""
+    A = sp.csr_matrix(A)
+    nb = A.shape[0] // 3
+    D = np.zeros((nb, 3, 3))
+    for a in range(3):
+        for b in range(3):
+            d = A.diagonal(b - a)                  # k ≥ 0: A[r, r + k];  k < 0: A[r − k, r]
+            D[:, a, b] = d[3 * np.arange(nb) + min(a, b)]
+    return np.linalg.pinv(D)
 
-    Ab = A.tobsr(blocksize=(3, 3))
-    Dinv = get_block_diag(Ab, blocksize=3, inv_flag=True)
+
+def _pmg_setup(A, coarse, B_coarse, smoothed: bool):
+    """The parts of the two-level p-multigrid: the 3×3 block-diagonal inverses of the P2 system,
+    and the coarse V-cycle M₁ on the Galerkin P1-vertex system A₁ = Iᵀ A I
+    (aggregation AMG with the rigid-body modes; plain keeps the wide-stencil A₁ sparse)."""
+    Dinv = block_diagonal_inverse(A)
     A1 = (coarse.T @ A @ coarse).tocsr()
     ml = _sa_hierarchy(A1, B_coarse, smoothed=smoothed, max_coarse=PMG_MAX_COARSE)
-    return Ab, Dinv, ml, ml.aspreconditioner(cycle="V"), coarse.T.tocsr()
+    return Dinv, ml, ml.aspreconditioner(cycle="V"), coarse.T.tocsr()
 
 
 def _pmg_preconditioner(A, coarse, B_coarse, smoothed: bool = False):
@@ -121,7 +134,8 @@ def _pmg_preconditioner(A, coarse, B_coarse, smoothed: bool = False):
     pay off on layered, flat-element meshes). Symmetric, so it preconditions CG."""
     from pyamg.relaxation.relaxation import block_gauss_seidel
 
-    Ab, Dinv, ml, M1, It = _pmg_setup(A, coarse, B_coarse, smoothed)
+    Dinv, ml, M1, It = _pmg_setup(A, coarse, B_coarse, smoothed)
+    Ab = A.tobsr(blocksize=(3, 3))
 
     def apply(r):
         r = np.asarray(r).ravel()
@@ -138,24 +152,37 @@ def _pmg_preconditioner(A, coarse, B_coarse, smoothed: bool = False):
 def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False, sweeps: int = 1):
     """The same two-level p-multigrid as ``_pmg_preconditioner`` applied to k columns at once
     (flexure.multirhs: one pass over the matrix per Gauss–Seidel sweep for all columns); the
-    coarse V-cycle runs per column. Returns (M(R) → Z for R (n, k), pyamg hierarchy)."""
+    coarse V-cycle too (flexure.vcycle); the first forward sweep (from zero) and the residual it
+    leaves take one pass over the lower triangle (``multirhs.forward_gauss_seidel_residual``).
+    Returns (M(R) → Z for R (n, k), the coarse hierarchy)."""
     from flexure import multirhs
+    from flexure.vcycle import MultiVCycle
 
     Ac = A.tocsr()
-    _, Dinv, ml, M1, It = _pmg_setup(Ac, coarse, B_coarse, smoothed)
+    Ac.sort_indices()
+    Dinv, ml, _, It = _pmg_setup(Ac, coarse, B_coarse, smoothed)
     Dinv = np.ascontiguousarray(Dinv)
+    V = MultiVCycle(ml)                     # the coarse V-cycle on all columns at once
 
     def apply(R):
-        X = np.zeros_like(R)
-        for _ in range(sweeps):
+        X, res = multirhs.forward_gauss_seidel_residual(Ac, Dinv, R)
+        for _ in range(sweeps - 1):
             multirhs.block_gauss_seidel(Ac, Dinv, X, R, forward=True)
-        Rc = It @ (R - multirhs.spmm(Ac, X))
-        X += coarse @ np.column_stack([M1 @ Rc[:, j] for j in range(Rc.shape[1])])
+        if sweeps > 1:
+            res = R - multirhs.spmm(Ac, X)
+        X += coarse @ V(It @ res)
         for _ in range(sweeps):
             multirhs.block_gauss_seidel(Ac, Dinv, X, R, forward=False)
         return X
 
-    return apply, ml
+    return apply, V
+
+
+def _hierarchy_info(ml) -> dict:
+    """Levels and operator complexity of a pyamg hierarchy or a flexure.vcycle.MultiVCycle."""
+    if hasattr(ml, "n_levels"):
+        return {"amg_levels": ml.n_levels, "operator_complexity": ml.operator_complexity}
+    return {"amg_levels": len(ml.levels), "operator_complexity": float(ml.operator_complexity())}
 
 
 def _multirhs_available() -> bool:
@@ -164,6 +191,7 @@ def _multirhs_available() -> bool:
     return MULTI_RHS and multirhs.available()
 
 
+@blas.single_threaded
 def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, method: str = "auto",
                  rtol: float = 1e-10, maxiter: int = 2000, condition_estimate: bool = True,
                  coarse: sp.csr_matrix | None = None, B_coarse: np.ndarray | None = None,
@@ -236,8 +264,7 @@ def solve_system(A: sp.csr_matrix, b: np.ndarray, B: np.ndarray | None = None, m
         info["iterations"] = its[0] if b.ndim == 1 else its
         info["case_s"] = case_s                          # per case (one CG each); together: cg_s only
         info.setdefault("cg_s", float(sum(case_s)))
-        info["amg_levels"] = len(ml.levels)
-        info["operator_complexity"] = float(ml.operator_complexity())
+        info.update(_hierarchy_info(ml))
     elif method == "cg":
         it = [0]
 
@@ -299,6 +326,7 @@ def solve_reduced(system, b: np.ndarray | None = None, method: str = "auto", rto
                         coarse=system.coarse, B_coarse=system.B_coarse, smoothed_coarse=smoothed_coarse, x0=x0)
 
 
+@blas.single_threaded
 def prepared(system, rtol: float = 1e-10, smoothed_coarse: bool = False):
     """A solver for ``system`` that is set up once and reused for further right-hand sides:
     → solve(B (n_q,) or (n_q, k), x0=None, rtol=None) → (q, info). The P2 p-multigrid (all columns
@@ -312,6 +340,7 @@ def prepared(system, rtol: float = 1e-10, smoothed_coarse: bool = False):
         lu = spla.splu(A.tocsc(), permc_spec="COLAMD")
         setup_s = time.perf_counter() - t0
 
+        @blas.single_threaded
         def solve_direct(B, x0=None, rtol_=None):
             t = time.perf_counter()
             q = lu.solve(np.asarray(B, dtype=np.float64))
@@ -325,6 +354,7 @@ def prepared(system, rtol: float = 1e-10, smoothed_coarse: bool = False):
         Ac = A.tocsr()
         setup_s = time.perf_counter() - t0
 
+        @blas.single_threaded
         def solve_pmg(B, x0=None, rtol_=None):
             t = time.perf_counter()
             B = np.asarray(B, dtype=np.float64)
@@ -337,8 +367,7 @@ def prepared(system, rtol: float = 1e-10, smoothed_coarse: bool = False):
                            f"{'smoothed ' if smoothed_coarse else ''}aggregation AMG on the P1 vertex system, "
                            "6 rigid-body modes; all load cases together)"),
                 "dofs": int(n), "iterations": its, "setup_s": setup_s, "cg_s": time.perf_counter() - t,
-                "solve_s": time.perf_counter() - t, "amg_levels": len(ml.levels),
-                "operator_complexity": float(ml.operator_complexity())})
+                "solve_s": time.perf_counter() - t, **_hierarchy_info(ml)})
         return solve_pmg
 
     def solve_each(B, x0=None, rtol_=None):

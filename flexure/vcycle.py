@@ -1,0 +1,80 @@
+"""One V-cycle of a pyamg hierarchy on k right-hand sides at once: the coarse correction of the P2
+p-multigrid (flexure.solve) for all load cases and goal duals together.
+
+On level ℓ (matrix A_ℓ, prolongation P_ℓ, restriction R_ℓ = P_ℓᵀ), from X = 0:
+
+    X ← block Gauss–Seidel forward on A_ℓ X = B,     B_(ℓ+1) = R_ℓ (B − A_ℓ X),
+    X ← X + P_ℓ V_(ℓ+1)(B_(ℓ+1)),                    X ← block Gauss–Seidel backward,
+
+and on the last level X = A_L⁻¹ B (sparse LU, every column in one triangular solve). The same
+arithmetic per column as pyamg's ``ml.aspreconditioner(cycle="V")`` with its block Gauss–Seidel
+smoothers (D⁻¹ the pseudo-inverses of the diagonal blocks, as pyamg), so the same CG iterations;
+it reads each level's matrix once for all k columns, and skips what pyamg's ``solve`` does per
+call for a stand-alone solver (‖b‖ and a residual norm). Needs numba (flexure.multirhs).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+
+def _blocks(A) -> int:
+    return A.blocksize[0] if A.format == "bsr" else 1
+
+
+def _csr(A) -> sp.csr_matrix:
+    """A as CSR with sorted int32 indices (the numba loops' input)."""
+    C = sp.csr_matrix(A, dtype=np.float64)
+    C.sort_indices()
+    if C.shape[0] < 2**31 and C.nnz < 2**31:
+        C.indices = C.indices.astype(np.int32, copy=False)
+        C.indptr = C.indptr.astype(np.int32, copy=False)
+    return C
+
+
+class MultiVCycle:
+    """V(B) → X for B (n, k): one V-cycle of ``ml`` (a pyamg MultilevelSolver whose smoothers are
+    block Gauss–Seidel, forward before and backward after) on all columns; ``levels`` and
+    ``operator_complexity`` describe the hierarchy (``ml`` itself is not kept)."""
+
+    def __init__(self, ml):
+        from pyamg.util.utils import get_block_diag
+
+        self.n_levels = len(ml.levels)
+        self.operator_complexity = float(ml.operator_complexity())
+        self._levels = []
+        for lv in ml.levels[:-1]:
+            bs = _blocks(lv.A)
+            Dinv = (get_block_diag(lv.A, blocksize=bs, inv_flag=True) if bs > 1
+                    else (1.0 / lv.A.diagonal()).reshape(-1, 1, 1))
+            self._levels.append((_csr(lv.A), np.ascontiguousarray(Dinv, dtype=np.float64),
+                                 _csr(lv.P), _csr(lv.R)))
+        Ac = sp.csc_matrix(ml.levels[-1].A, dtype=np.float64)
+        Ac.eliminate_zeros()
+        keep = np.flatnonzero(np.diff(Ac.indptr) != 0)          # zero rows/columns (pyamg's splu does the same)
+        self._keep = keep
+        self._n_last = Ac.shape[0]
+        self._lu = spla.splu(Ac[keep][:, keep].tocsc(), permc_spec="COLAMD")
+
+    def _coarse(self, B: np.ndarray) -> np.ndarray:
+        X = np.zeros((self._n_last, B.shape[1]))
+        X[self._keep] = self._lu.solve(np.asfortranarray(B[self._keep]))
+        return X
+
+    def __call__(self, B: np.ndarray) -> np.ndarray:
+        return self._cycle(0, np.ascontiguousarray(B, dtype=np.float64))
+
+    def _cycle(self, lvl: int, B: np.ndarray) -> np.ndarray:
+        from flexure import multirhs
+
+        if lvl == len(self._levels):
+            return self._coarse(B)
+        A, Dinv, P, R = self._levels[lvl]
+        X = np.zeros_like(B)
+        multirhs.block_gauss_seidel_blocks(A, Dinv, X, B, True)
+        Bc = np.ascontiguousarray(R @ (B - A @ X))
+        X += P @ self._cycle(lvl + 1, Bc)
+        multirhs.block_gauss_seidel_blocks(A, Dinv, X, B, False)
+        return X
