@@ -384,9 +384,9 @@ def cli_inprocess(capsys, monkeypatch):
     """``torquebench ARGS`` as the CLI's ``main`` in this process → CompletedProcess (returncode,
     stdout, stderr), ``cwd`` the directory it runs in (default: unchanged). For tests of what a
     command answers (exit code, one-line error, files written or kept): the same as a subprocess
-    without an interpreter start-up and import per call (≈ 0.5–1 CPU-s each). A subprocess stays
-    where the process is what is tested (usage text, --version, examples run as typed, signals,
-    pipes, what a fresh interpreter imports)."""
+    without an interpreter start-up and import per call (≈ 0.5–1 CPU-s each); the README's and
+    the help's examples run this way. A subprocess stays where the process is what is tested (the
+    entry point: --version and one README example; signals, pipes, what a fresh interpreter imports)."""
     import subprocess
 
     from torquebench.cli import main
