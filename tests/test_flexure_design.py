@@ -46,9 +46,16 @@ THIN_H_FACTOR = 2.0
 
 
 @pytest.fixture(scope="module")
-def thin():
+def thin_mesh():
+    """The beam check analysed once per run (shared by the xdist workers): design, results,
+    fields and its mesh."""
     return shared_result("beam_check", lambda: _analyzed(BEAM_CHECK, THIN_H_FACTOR), BEAM_CHECK,
-                         THIN_H_FACTOR)[:3]
+                         THIN_H_FACTOR)
+
+
+@pytest.fixture(scope="module")
+def thin(thin_mesh):
+    return thin_mesh[:3]
 
 
 # ------------------------------------------------------------------ design files
@@ -192,14 +199,16 @@ def test_stiffness_equals_strain_energy(paper):
     assert 0.5 * u @ (K @ u) == pytest.approx(T ** 2 / (2 * res["torsional_stiffness_Nm_per_rad"]), rel=1e-6)
 
 
-def test_distributed_hub_load_is_softer_and_energy_consistent(paper_mesh):
+def test_distributed_hub_load_is_softer_and_energy_consistent(thin_mesh):
     """The bore loaded by the statically equivalent traction instead of a rigid shaft: fewer
     constraints, so a lower stiffness (minimum potential energy; on the same mesh as the rigid
     one, the mesh does not depend on the coupling); the mean rotation it reports is the moment's
-    work-conjugate, so ½uᵀKu = ½ T Θ_z holds exactly; the spoke strain barely moves."""
+    work-conjugate, so ½uᵀKu = ½ T Θ_z holds exactly; the spoke strain barely moves. On the beam
+    check's mesh (50k dofs; the paper disc's is 2× larger and the coupling logic the same):
+    stiffness ratio 0.974, strain ratio 1.002, energy to 4e-13 (measured 2026-11-26)."""
     from dataclasses import replace
 
-    design, rigid, _, mres = paper_mesh
+    design, rigid, _, mres = thin_mesh
     K = stiffness_matrix(mres.mesh, design.material)         # assembled once: the solve and the check
     res, fields = analyze_mesh(replace(design, coupling="distributed"), mres, K=K)
     assert res["warnings"] == []
