@@ -37,11 +37,13 @@ def warm() -> bool:
         log_reader.check_steps(t + np.arange(3), rows, (-1.0, -1), 1.0, 0.01, True)
     outframe.format_rows(outframe._empty_part())
     observer.first_order(np.ones(2), np.ones(2), np.zeros((2, 2)), np.zeros((2, 3)), 0, 2)
-    plausibility.plausibility_rows(t, np.zeros((3, 5)), np.zeros((3, 5)), 0, 2, 6.3, None, np.zeros(3))
+    sums = plausibility.Checker("warm", False, 2).sums          # the checker's own running sums
+    plausibility.plausibility_rows(t, np.zeros((3, 5)), np.zeros((3, 5)), 0, 2, 6.3, None, sums)
     plausibility.plausibility_rows(t, np.zeros((3, 5)), np.zeros((3, 5)), 3, 2, 6.3,
-                                   (-1.0, np.zeros(2), np.zeros(2)), np.zeros(3))
+                                   (-1.0, np.zeros((1, 2)), np.zeros((1, 2))), sums)
     cusum_calibration.warm()
     _warm_episode(robot)
+    _warm_spatial()
     return True
 
 
@@ -61,12 +63,24 @@ def _warm_episode(robot) -> None:
                              np.ones(T, bool), np.zeros(T, np.int64), 1, None)
 
 
+def _warm_spatial() -> None:
+    """The 3-D tree's whitened-statistic loop (estimator.spatial.tree; the shipped 3-D estimate
+    run at install compiles its other loops, not this one)."""
+    from estimator.spatial import tree
+
+    tree.whitened_statistic(np.zeros((2, 3)), [0, 1], np.eye(2)[None], np.zeros(2, np.int64))
+
+
 def _warm_model(robot) -> None:
     """The inertial-parameter model's loops (estimator.model_kernels) on a two-sample chain."""
     if not model_kernels.available():
         return
     q = np.zeros((2, robot.n_links + 3))
     model_kernels.momentum_regressor(robot, q, q)
+    args = (np.arange(2) * 1e-3, q, q, np.zeros((robot.n_links + 3, 2)), np.eye(robot.n_links + 3)[None],
+            np.zeros(2, np.int64))
     term = ModelTerm(robot, np.eye(len(robot.parameter_names)), 100.0, 1e-3)
-    term.statistic(np.arange(2) * 1e-3, q, q, np.zeros((robot.n_links + 3, 2)),
-                   np.eye(robot.n_links + 3)[None], np.zeros(2, np.int64))
+    term.statistic(*args)           # the planar chain's fused loop (it calls the statistic on column slices)
+    term = ModelTerm(robot, np.eye(len(robot.parameter_names)), 100.0, 1e-3)
+    term.fused = None
+    term.statistic(*args)           # the statistic alone on contiguous blocks, as a 3-D robot's term calls it

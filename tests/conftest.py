@@ -137,6 +137,17 @@ class _Meter:
     depth = 0
     jit = 0.0                    # CPU of numba compiling (cache misses) in this process, ever
     jit_start = 0.0
+    jit_by: dict = {}            # {kernel(signature): CPU s compiling it in this process}
+    jit_by_start: dict = {}
+
+
+def _kernel_name(data) -> str:
+    """``module.function(argument types)`` of a numba compile event (what missed the cache)."""
+    try:
+        fn = data["dispatcher"].py_func
+        return f"{fn.__module__}.{fn.__qualname__}({', '.join(map(str, data['args']))})"
+    except Exception:                                               # pragma: no cover
+        return "?"
 
 
 def _install_jit_meter():
@@ -152,15 +163,20 @@ def _install_jit_meter():
         level = 0
         t0 = 0.0
 
+        name = ""
+
         def on_start(self, ev):
             if JitMeter.level == 0:
                 JitMeter.t0 = time.process_time()
+                JitMeter.name = _kernel_name(ev.data)
             JitMeter.level += 1
 
         def on_end(self, ev):
             JitMeter.level -= 1
             if JitMeter.level == 0:
-                _Meter.jit += time.process_time() - JitMeter.t0
+                dt = time.process_time() - JitMeter.t0
+                _Meter.jit += dt
+                _Meter.jit_by[JitMeter.name] = _Meter.jit_by.get(JitMeter.name, 0.0) + dt
 
     event.register("numba:compile", JitMeter())
 
@@ -168,7 +184,7 @@ def _install_jit_meter():
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_setup(item):
     _Meter.item, _Meter.start, _Meter.shared, _Meter.shared_by = item, _cpu_s(), 0.0, {}
-    _Meter.jit_start = _Meter.jit
+    _Meter.jit_start, _Meter.jit_by_start = _Meter.jit, dict(_Meter.jit_by)
     yield
 
 
@@ -223,11 +239,16 @@ def _record_shared(report, item):
         report.user_properties.append(("shared_fixture_cpu_s", dict(_Meter.shared_by)))
     if report.when == "call" and item is _Meter.item and _Meter.jit > _Meter.jit_start:
         report.user_properties.append(("shared_fixture_cpu_s", {"(numba compiling)": _Meter.jit - _Meter.jit_start}))
+        report.user_properties.append(("numba_compiled", {
+            k: v - _Meter.jit_by_start.get(k, 0.0) for k, v in _Meter.jit_by.items()
+            if v > _Meter.jit_by_start.get(k, 0.0)}))
 
 
 _SHARED_SEEN: dict = {}
 #: {nodeid: CPU s of the test itself + the shared fixtures (and compiling) set up for it}
 _TEST_CPU: dict = {}
+#: {kernel(signature): (CPU s compiling it, summed over workers, the first test that paid it)}
+_JIT_SEEN: dict = {}
 
 
 def pytest_runtest_logreport(report):
@@ -236,6 +257,10 @@ def pytest_runtest_logreport(report):
             for k, v in value.items():
                 _SHARED_SEEN[k] = _SHARED_SEEN.get(k, 0.0) + v
             _TEST_CPU[report.nodeid] = _TEST_CPU.get(report.nodeid, 0.0) + sum(value.values())
+        elif name == "numba_compiled":
+            for k, v in value.items():
+                s, first = _JIT_SEEN.get(k, (0.0, report.nodeid))
+                _JIT_SEEN[k] = (s + v, first)
         elif name == "own_cpu_s":
             _TEST_CPU[report.nodeid] = _TEST_CPU.get(report.nodeid, 0.0) + value
 
@@ -255,6 +280,11 @@ def _cpu_top(terminalreporter, n: int) -> None:
     w(f"the {n} costliest tests, CPU s:")
     for t, s in sorted(_TEST_CPU.items(), key=lambda kv: -kv[1])[:n]:
         w(f"  {s:7.1f}  {t}")
+    if _JIT_SEEN:
+        w(f"numba compiled in the tests (an install-time cache miss), CPU s: "
+          f"{sum(v for v, _ in _JIT_SEEN.values()):.1f}; the {n} costliest kernels:")
+        for k, (s, first) in sorted(_JIT_SEEN.items(), key=lambda kv: -kv[1][0])[:n]:
+            w(f"  {s:7.1f}  {k}  (first: {first})")
 
 
 # ---------------------------------------------------------------- shared expensive results
@@ -354,9 +384,9 @@ def cli_inprocess(capsys, monkeypatch):
     """``torquebench ARGS`` as the CLI's ``main`` in this process → CompletedProcess (returncode,
     stdout, stderr), ``cwd`` the directory it runs in (default: unchanged). For tests of what a
     command answers (exit code, one-line error, files written or kept): the same as a subprocess
-    without an interpreter start-up and import per call (≈ 0.5–1 CPU-s each). A subprocess stays
-    where the process is what is tested (usage text, --version, examples run as typed, signals,
-    pipes, what a fresh interpreter imports)."""
+    without an interpreter start-up and import per call (≈ 0.5–1 CPU-s each); the README's and
+    the help's examples run this way. A subprocess stays where the process is what is tested (the
+    entry point: --version and one README example; signals, pipes, what a fresh interpreter imports)."""
     import subprocess
 
     from torquebench.cli import main

@@ -8,7 +8,6 @@ import threading
 import time
 
 import numpy as np
-from scipy.signal import lfilter
 
 
 class FrameDevice(threading.Thread):
@@ -18,6 +17,8 @@ class FrameDevice(threading.Thread):
         self.stop, self.seq = threading.Event(), 0
 
     def run(self):
+        from scipy.signal import lfilter          # here, not at import: scipy.signal costs ≈ 1 CPU-s
+
         from calibration.frames import encode_frames
         rng = np.random.default_rng(0)
         zi = np.zeros((1, 2))

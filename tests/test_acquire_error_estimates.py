@@ -7,7 +7,6 @@ import sys
 
 import numpy as np
 import pytest
-from scipy.signal import lfilter
 
 from calibration.acquire import autocorr_times, window_stats
 from pty_device import pty_device
@@ -16,6 +15,8 @@ from torquebench.cli import main
 
 def ar1(rng, a: float, n: int, sigma_innov: float = 1.0, burn: int = 2000) -> np.ndarray:
     """x_k = a x_{k−1} + e_k: stationary variance σ²/(1 − a²), τ = (1 + a)/(1 − a)."""
+    from scipy.signal import lfilter          # here, not at collection: scipy.signal costs ≈ 1 CPU-s
+
     return lfilter([1.0], [1.0, -a], rng.normal(0.0, sigma_innov, n + burn))[burn:]
 
 

@@ -46,9 +46,16 @@ THIN_H_FACTOR = 2.0
 
 
 @pytest.fixture(scope="module")
-def thin():
+def thin_mesh():
+    """The beam check analysed once per run (shared by the xdist workers): design, results,
+    fields and its mesh."""
     return shared_result("beam_check", lambda: _analyzed(BEAM_CHECK, THIN_H_FACTOR), BEAM_CHECK,
-                         THIN_H_FACTOR)[:3]
+                         THIN_H_FACTOR)
+
+
+@pytest.fixture(scope="module")
+def thin(thin_mesh):
+    return thin_mesh[:3]
 
 
 # ------------------------------------------------------------------ design files
@@ -192,14 +199,16 @@ def test_stiffness_equals_strain_energy(paper):
     assert 0.5 * u @ (K @ u) == pytest.approx(T ** 2 / (2 * res["torsional_stiffness_Nm_per_rad"]), rel=1e-6)
 
 
-def test_distributed_hub_load_is_softer_and_energy_consistent(paper_mesh):
+def test_distributed_hub_load_is_softer_and_energy_consistent(thin_mesh):
     """The bore loaded by the statically equivalent traction instead of a rigid shaft: fewer
     constraints, so a lower stiffness (minimum potential energy; on the same mesh as the rigid
     one, the mesh does not depend on the coupling); the mean rotation it reports is the moment's
-    work-conjugate, so ½uᵀKu = ½ T Θ_z holds exactly; the spoke strain barely moves."""
+    work-conjugate, so ½uᵀKu = ½ T Θ_z holds exactly; the spoke strain barely moves. On the beam
+    check's mesh (50k dofs; the paper disc's is 2× larger and the coupling logic the same):
+    stiffness ratio 0.974, strain ratio 1.002, energy to 4e-13 (measured 2026-11-26)."""
     from dataclasses import replace
 
-    design, rigid, _, mres = paper_mesh
+    design, rigid, _, mres = thin_mesh
     K = stiffness_matrix(mres.mesh, design.material)         # assembled once: the solve and the check
     res, fields = analyze_mesh(replace(design, coupling="distributed"), mres, K=K)
     assert res["warnings"] == []
@@ -377,7 +386,9 @@ def test_step_design_matches_the_parametric_one(tmp_path, paper, capfd):
 
 def test_near_incompressible_design_is_flagged_not_printed(tmp_path):
     p = _write(tmp_path, BEAM_CHECK.read_text().replace("[gauges]", "[material]\nnu = 0.499\n[gauges]"))
-    res, _ = analyze(load_design(p), order=1, h_factor=2.0)   # coarse: the flag, not the numbers
+    # coarse: the flag (from ν and the element order, flexure.solve.conditioning_warnings), not the
+    # numbers: h × 4 (4.4k P1 dofs, 2.3 CPU-s) flags and withholds the same as h × 2 (8.4k, 9.2 CPU-s)
+    res, _ = analyze(load_design(p), order=1, h_factor=4.0)
     assert "near_incompressible" in res["warnings"]
     assert math.isnan(res["sensitivity_mV_per_V_per_Nm"]) and math.isnan(res["safety_factor"])
     assert "near_incompressible" in res["nan_reason"]

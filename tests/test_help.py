@@ -32,8 +32,8 @@ def _tb(*argv, cwd=ROOT, **kw):
 @pytest.fixture
 def tb(cli_inprocess):
     """``main`` in-process for the tests of a command's contract (exit code, one-line error,
-    files kept); ``_tb`` stays where the process is what is tested (usage, --version, examples as
-    typed, broken pipe)."""
+    files kept, usage on a bare call, the help's examples); ``_tb`` stays where the process is
+    what is tested: ``python -m torquebench --version`` (the entry point) and the broken pipe."""
     return cli_inprocess
 
 
@@ -56,8 +56,8 @@ def test_version():
     assert proc.returncode == 0 and proc.stdout.strip() == f"torquebench {torquebench.__version__}"
 
 
-def test_bare_call_shows_usage_and_every_command():
-    proc = _tb()
+def test_bare_call_shows_usage_and_every_command(tb):
+    proc = tb()
     assert proc.returncode == 2 and proc.stdout == ""
     assert proc.stderr.startswith("usage: torquebench")
     for name in _subparsers():
@@ -103,13 +103,13 @@ def test_help_example_parses_and_its_inputs_exist(name, example):
 
 @pytest.mark.parametrize("name,example", [e for e in _help_examples()
                                           if any(e[1].startswith(f"torquebench {r}") for r in RUN)])
-def test_cheap_help_examples_run(name, example, tmp_path):
+def test_cheap_help_examples_run(name, example, tmp_path, tb):
     work = tmp_path / "repo"
     work.mkdir()
     for d in SHIPPED:
         (work / d).symlink_to(ROOT / d)
     argv = shlex.split(example)
-    proc = _tb(*argv[1:], cwd=work)
+    proc = tb(*argv[1:], cwd=work)          # as typed, in a checkout's layout: the relative paths resolve there
     assert proc.returncode == 0, f"{example}\n{proc.stderr[-2000:]}"
     if "--json" in argv:
         json.loads(proc.stdout)

@@ -44,19 +44,34 @@ def _params():
             for c in readme_commands()]
 
 
-@pytest.mark.parametrize("command", _params())
-def test_readme_example_runs(command, tmp_path):
+def _scratch(tmp_path):
     work = tmp_path / "repo"
     work.mkdir()
     for name in SHIPPED:
         (work / name).symlink_to(ROOT / name)          # shipped inputs, read-only by contract
     (work / "out").mkdir()                             # everything an example writes goes here
+    return work
+
+
+@pytest.mark.parametrize("command", _params())
+def test_readme_example_runs(command, tmp_path, cli_inprocess):
+    """Each example through the CLI's ``main`` in this process (what it answers: exit code, JSON);
+    the interpreter start-up and imports per example are what test_readme_example_as_a_program
+    and test_help.test_version check once."""
     argv = shlex.split(command)
-    proc = subprocess.run([sys.executable, "-m", "torquebench", *argv[1:]], cwd=work,
-                          capture_output=True, text=True, timeout=300)
+    proc = cli_inprocess(*argv[1:], cwd=_scratch(tmp_path))
     assert proc.returncode == 0, f"{command}\n{proc.stderr[-2000:]}"
     if "--json" in argv:
         json.loads(proc.stdout)
+
+
+def test_readme_example_as_a_program(tmp_path):
+    """One example as a user types it: a fresh interpreter, the package's entry point, JSON on stdout."""
+    command = next(c for c in readme_commands() if c.startswith("torquebench bridge ") and "--json" in c)
+    proc = subprocess.run([sys.executable, "-m", "torquebench", *shlex.split(command)[1:]],
+                          cwd=_scratch(tmp_path), capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, f"{command}\n{proc.stderr[-2000:]}"
+    json.loads(proc.stdout)
 
 
 def test_readme_uses_only_in_repo_files():

@@ -14,7 +14,7 @@ from torquebench.scenes import load_scene
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_reproduce_cli_end_to_end_quick(tmp_path):
+def test_reproduce_cli_end_to_end_quick(tmp_path, cli_inprocess):
     proc = subprocess.run([sys.executable, "-m", "torquebench", "reproduce", "--scene", "paper_fixed_link2",
                            "--scene", "paper_static_loading", "--quick", "--out-dir", str(tmp_path), "--json"],
                           capture_output=True, text=True, cwd=ROOT, env={"MPLBACKEND": "Agg", "PATH": ""})
@@ -31,8 +31,7 @@ def test_reproduce_cli_end_to_end_quick(tmp_path):
     assert all(r["max_q_error_rad"] < 1e-4 for r in stiff if r["status"] == "ok")
     rows = out["tables"]["paper_static_loading"]
     assert [(r["link"], r["load_g"]) for r in rows] == [(1, 100), (1, 500), (2, 50), (2, 100)]
-    bad = subprocess.run([sys.executable, "-m", "torquebench", "reproduce", "--scene", "nope"],
-                         capture_output=True, text=True, cwd=ROOT)
+    bad = cli_inprocess("reproduce", "--scene", "nope", cwd=ROOT)       # the answer, not the process
     assert bad.returncode == 2 and "unknown scene" in bad.stderr
 
 

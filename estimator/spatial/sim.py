@@ -149,11 +149,11 @@ class _Sim:
         if self.robot.floating:
             f, m = self.mount(q, v)
             Jf = pin.getFrameJacobian(model, data, self.fid, pin.LOCAL_WORLD_ALIGNED)
-            tau = tau_ext + Jf.T @ np.r_[f, m]
+            tau = tau_ext + Jf.T @ np.concatenate((f, m))
             tau[6:] += tau_j
             a = pin.aba(model, data, q, v, tau)
             R_s = data.oMf[self.fid].rotation
-            wrench = np.r_[R_s.T @ f, R_s.T @ m]
+            wrench = np.concatenate((R_s.T @ f, R_s.T @ m))
         else:
             M = pin.crba(model, data, q)
             M = np.triu(M) + np.triu(M, 1).T
@@ -162,7 +162,7 @@ class _Sim:
             a[6:] = np.linalg.solve(M[6:, 6:], tau_j + tau_ext[6:] - h[6:])
             w_b = (M @ a + h - tau_ext)[:6]                # the mount's wrench ON the base (base frame)
             ws = self.X_bs.actInv(pin.Force(w_b[:3], w_b[3:]))
-            wrench = np.r_[ws.linear, ws.angular]
+            wrench = np.concatenate((ws.linear, ws.angular))
         return a, wrench, tau_j, active
 
     def equilibrium(self, q):
@@ -214,7 +214,7 @@ class _Sim:
             a, wrench, tau_j, active = self.accel(q, v, t)
             R = _quat_R(q[3:7])
             out_q[k] = q
-            out_v[k] = np.r_[R @ v[:3], v[3:]]
+            out_v[k, :3], out_v[k, 3:] = R @ v[:3], v[3:]
             out_tau[k], out_w[k] = tau_j, wrench
             truth.append((t, active))
             if k == T - 1:
