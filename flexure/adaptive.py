@@ -68,8 +68,6 @@ MIN_MARKED = 0.12
 #: bisection rounds per level (1: each marked element halved once, + closure)
 ROUNDS = 2
 SAFETY = 1.5
-#: CG tolerance of the last mesh's six load cases (cross-talk, stress): the goal solves' 1e-6 gives
-#: goal values within 1e-9 of 1e-8's (flexure.goals.GOAL_RTOL)
 #: the geometry criterion's share of --rtol (δ/R of a boundary edge, ``_geometry_marks``)
 GEOMETRY_SHARE = 0.1
 KAPPA_MIN = 0.25
