@@ -114,26 +114,19 @@ def run(args) -> int:
         return _build(args, areas, chosen, out_dir)
 
 
-def _load() -> float:
-    """The 1-minute load average (a build time means little without it); NaN where unknown."""
-    try:
-        return round(os.getloadavg()[0], 1)
-    except (OSError, AttributeError):
-        return float("nan")
-
-
 def _build(args, areas, chosen, out_dir) -> int:
     from torquebench.io import REPO_ROOT, print_json
 
     written, timings, loads = {}, {}, {}
     for area in chosen:
         start = time.perf_counter()
-        loads[area] = _load()
+        load_start = torquebench.reports.load_1min()
         if sys.stderr.isatty():          # progress for a person watching; a pipe gets only the result
             print(f"report: building {area} ...", file=sys.stderr)
         paths = importlib.import_module(areas[area]).build(out_dir)
         timings[f"{area}_s"] = time.perf_counter() - start
-        loads[area] = max(loads[area], _load())
+        known = [x for x in (load_start, torquebench.reports.load_1min()) if x is not None]
+        loads[area] = max(known) if known else None
         written[area] = [str(p) for p in paths]
     from torquebench.reports_index import write_index
     index = write_index(out_dir, list(areas))

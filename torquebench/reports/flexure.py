@@ -82,24 +82,17 @@ def _stiffness_paragraph() -> str:
             + ", ".join(f"{lv[eps] * 1e6:.2f}" for lv in levels) + " µε/N·m at the same sizes).\n")
 
 
-def _load() -> float:
-    """The 1-minute load average (NaN where the system does not say)."""
-    try:
-        return round(os.getloadavg()[0], 1)
-    except (OSError, AttributeError):
-        return float("nan")
-
-
 def build(out_dir: Path) -> list[Path]:
     from bridge.chain import PAPER_STRAIN_PER_NM
     from flexure.analysis import analyze, sweep, sweep_plot, sweep_table
     from flexure.design import load_design
     from flexure.render import render_png
     from torquebench.io import shipped
+    from torquebench.reports import load_1min
     from userio.files import write_text_atomic
 
     out_dir = Path(out_dir)
-    load0 = _load()
+    load0 = load_1min()
     path = shipped("designs", "paper_disc.toml")
     design = load_design(path)
     runs, fields = {}, None
@@ -144,8 +137,8 @@ def build(out_dir: Path) -> list[Path]:
          *[_row(f"P2 {s}", runs[s]) for s in SIZES],
          _row("P2 coarse, tetgen", tet["coarse"]), _row("P2 medium, tetgen", tet["medium"]),
          _row("P2 medium, distributed hub load", dist), _row("P1 medium", p1), "",
-         f"Times are wall seconds on {os.cpu_count()} cores at a 1-minute load of {load0:g} (start) and "
-         f"{_load():g} (end) of this build: compare rows, not machines.\n",
+         f"Times are wall seconds on {os.cpu_count()} cores at a 1-minute load of {load0} (start) and "
+         f"{load_1min()} (end) of this build: compare rows, not machines.\n",
          f"Gauge strain changes by {abs(coarse['gauge_strain_per_Nm'] / eps - 1) * 100:.2f} % from coarse "
          f"to fine and by {abs(runs['medium']['gauge_strain_per_Nm'] / eps - 1) * 100:.2f} % from medium to "
          "fine. Cross-talk of this symmetric layout is mesh error and falls with refinement, as the "
