@@ -164,22 +164,21 @@ def show(r: dict) -> None:
 
 
 def main(argv: list[str]) -> None:
-    rtol, out, names = 0.02, None, []
-    it = iter(argv)
-    for a in it:
-        if a == "--rtol":
-            rtol = float(next(it))
-        elif a == "--json":
-            out = next(it)
-        else:
-            names.append(a)
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("parts", nargs="*", default=["thin_step"],
+                        help="a design TOML, or a part of benchmarks/fem_annulus.py (default: thin_step)")
+    parser.add_argument("--rtol", type=float, default=0.02, help="the adaptive analysis's --rtol")
+    parser.add_argument("--json", type=Path, default=None, metavar="OUT", help="write the results here")
+    args = parser.parse_args(argv)
     results = []
-    for n in names or ["thin_step"]:
-        r = bench(n, rtol)
+    for n in args.parts:
+        r = bench(n, args.rtol)
         show(r)
         results.append(r)
-    if out:
-        Path(out).write_text(json.dumps(results, indent=1))
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=1))
 
 
 if __name__ == "__main__":
