@@ -261,6 +261,8 @@ def join_parts(parts: list, stream: EstimatorStream, n_skipped: int = 0) -> Cont
         ef = np.concatenate([p.expected_force_N for p in parts]) if parts else \
             np.zeros((0, len(stream.expected), 2))
     info = dict(stream.info)
+    if stream.misfit is not None:
+        info["misfit"] = stream.misfit.summary()
     return ContactEstimate(t=cat("t", 0), contact=cat("contact", 0).astype(bool),
                            link=cat("link", 0).astype(int), alpha=cat("alpha", 0), Fx=cat("Fx", 0),
                            Fz=cat("Fz", 0), px=cat("px", 0), pz=cat("pz", 0), rnorm=cat("rnorm", 0),

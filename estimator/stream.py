@@ -30,14 +30,26 @@ WORK_SAMPLES = 16384            # samples per piece of work inside a chunk (cach
 
 
 def _fit_weights(rec, sel, T: int, n: int, row_weights):
-    """The localization's weights for the selected samples: W = L⁻ᵀL⁻¹ = R⁻¹ from the detector's
-    whitening blocks (the maximum-likelihood fit; the noise covariance R is the detector's, per
-    posture block), else the diagonal ``row_weights`` (the paper rule: no noise model)."""
+    """The localization's weights for the selected samples: W = R⁻¹ from the detector's whitening
+    blocks L⁻¹ (W = L⁻ᵀL⁻¹; the maximum-likelihood fit; the noise covariance R is the detector's,
+    per posture block), with the robot's model term where it has one,
+
+        W_k = (R_b(k) + G_k G_kᵀ)⁻¹        (estimator.model_error: R_model,k = G_k G_kᵀ),
+
+    the fit the detector's statistic assumes (a fit weighted by R⁻¹ alone over-trusts the rows the
+    model error lives in, and its misfit χ² (estimator.misfit) is then judged against the noise
+    alone); else the diagonal ``row_weights`` (the paper rule: no noise model)."""
     if rec.get("Linv") is None:
         return loc_mod.weight_blocks(n, T, row_weights)[0], \
             np.zeros(T, np.int64)[sel]
     Linv, idx = rec["Linv"]
-    return np.einsum("bki,bkj->bij", Linv, Linv), idx[sel]
+    W = np.einsum("bki,bkj->bij", Linv, Linv)
+    G = rec.get("G")
+    if G is None:
+        return W, idx[sel]
+    Gs = G[sel]
+    R = np.linalg.inv(W)[idx[sel]] + np.einsum("tic,tjc->tij", Gs, Gs)
+    return np.linalg.inv(R), np.arange(len(Gs))
 
 
 class EstimatorStream:

@@ -143,13 +143,29 @@ def _fit_weights(noise: SensorNoise, n_links: int, method: str):
 
 
 def _localize(robot, method, q, r, link, ambiguity_tol=1e-3, weights=None):
-    """(α, F) from residual-form readings r = G − τ_meas (rows [x, z, θ, q…])."""
+    """(α, F) from residual-form readings r = G − τ_meas (rows [x, z, θ, q…]); ``weights``: the
+    fit's row weights (n,) or its weight blocks (W, index) (``_fit``)."""
     if method == "dynamic":
-        out = loc.localize_dynamic(robot, q, r, ambiguity_tol=ambiguity_tol, row_weights=weights)
+        kw = {"weight": weights} if isinstance(weights, tuple) else {"row_weights": weights}
+        out = loc.localize_dynamic(robot, q, r, ambiguity_tol=ambiguity_tol, **kw)
     else:
         G = dyn.gravity_vector(robot.with_base(True), q)
         out = loc.localize_paper(robot, q, np.zeros_like(q), G - r, link, bias=G)
     return out.alpha, out.force_N
+
+
+def _fit(noise: SensorNoise, n_links: int, method: str, Ym, repeat: int):
+    """The estimator's own fit for B postures, each localized ``repeat`` times in a row: the row
+    weights 1/(f σ)² (``_fit_weights``), or with the robot's model rows Y (B, n, r) the weight blocks
+
+        W_b = (diag((f σ)²) + Y_b Y_bᵀ)⁻¹
+
+    (estimator.stream weights by the noise + model covariance R + G Gᵀ; settled, G Gᵀ = Y Yᵀ)."""
+    rw = _fit_weights(noise, n_links, method)
+    if rw is None or Ym is None:
+        return rw
+    W = np.linalg.inv(np.eye(len(rw)) / rw + Ym @ np.swapaxes(Ym, 1, 2))
+    return W, np.repeat(np.arange(len(W)), repeat)
 
 
 def _model_rows(robot, q, parameter_cov):
@@ -179,9 +195,12 @@ def _link_length(robot, q, link):
 
 
 def first_order(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise,
-                method: str = "dynamic", step: float = 1e-6, parameter_cov=None) -> Propagation:
+                method: str = "dynamic", step: float = 1e-6, parameter_cov=None,
+                model_error: bool = True) -> Propagation:
     """Linearized error: Σ_(α,F) = J Σ_r Jᵀ, Σ_r = diag(f² σ_n² + g² τ_true²) + Y Σ_θ Yᵀ
-    (f: filter factor; Y = −Y_u(q, 0) with ``parameter_cov`` Σ_θ, module doc)."""
+    (f: filter factor; Y = −Y_u(q, 0) with ``parameter_cov`` Σ_θ, module doc), J through the
+    estimator's fit (weighted by the noise and Σ_θ: ``_fit``). ``model_error=False``: the robot's
+    error is left out of Σ_r (the noise's part alone), not out of the fit."""
     if method not in METHODS:
         raise InputError(f"method: unknown {method!r}; use one of {', '.join(METHODS)}")
     q_joint, link, alpha, force = _check(robot, q_joint, link, alpha, force_N)
@@ -191,12 +210,12 @@ def first_order(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise,
     var_r = (noise.filter_factor(method) * sig_n) ** 2 + (sig_g * readings) ** 2     # (B, n)
     cov_r = var_r[:, :, None] * np.eye(n)
     Ym = _model_rows(robot, q, parameter_cov)
-    if Ym is not None:
+    if Ym is not None and model_error:
         cov_r = cov_r + Ym @ np.swapaxes(Ym, 1, 2)
     eye = np.eye(n) * step
     r_pert = np.concatenate([r_true[:, None, :] + eye, r_true[:, None, :] - eye], axis=1)   # (B, 2n, n)
     a_out, f_out = _localize(robot, method, np.repeat(q, 2 * n, axis=0), r_pert.reshape(-1, n),
-                             np.repeat(link, 2 * n), weights=_fit_weights(noise, robot.n_links, method))
+                             np.repeat(link, 2 * n), weights=_fit(noise, robot.n_links, method, Ym, 2 * n))
     y = np.concatenate([a_out[:, None], f_out], axis=1).reshape(B, 2 * n, 3)
     jac = (y[:, :n] - y[:, n:]) / (2 * step)                        # (B, n, 3): ∂(α, Fx, Fz)/∂r_k
     cov = np.einsum("bki,bkl,blj->bij", jac, cov_r, jac)
@@ -228,7 +247,7 @@ def monte_carlo(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise,
     if Ym is not None:                            # r = Jᵀ F + Y δθ − e, δθ = S z per draw
         e = e - np.einsum("bnr,bdr->bdn", Ym, rng.standard_normal((B, draws, Ym.shape[2])))
     r = (r_true[:, None, :] - e).reshape(-1, n)
-    weights = _fit_weights(noise, robot.n_links, method)
+    weights = _fit(noise, robot.n_links, method, Ym, draws)
     tol = noise.ambiguity_tol(robot.n_links, method) if weights is None else \
         AMBIGUITY_N_SIGMA * np.sqrt(robot.n_links + 3)          # whitened cost: noise norm √n
     a_out, f_out = _localize(robot, method, np.repeat(q, draws, axis=0), r, np.repeat(link, draws),
@@ -273,7 +292,7 @@ def interval_rms(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise
     if Ym is not None:
         e = e - np.einsum("bnr,bdr->bdn", Ym, rng.standard_normal((B, draws, Ym.shape[2])))
     r = (r_true[:, None, :] - e).reshape(-1, n)
-    weights = _fit_weights(noise, robot.n_links, method)            # the estimator's own fit
+    weights = _fit(noise, robot.n_links, method, Ym, draws)        # the estimator's own fit
     tol = noise.ambiguity_tol(robot.n_links, method) if weights is None else \
         AMBIGUITY_N_SIGMA * np.sqrt(robot.n_links + 3)
     a_out, _ = _localize(robot, method, np.repeat(q, draws, axis=0), r, np.repeat(link, draws),
@@ -282,7 +301,8 @@ def interval_rms(robot: Robot, q_joint, link, alpha, force_N, noise: SensorNoise
     quiet = SensorNoise(torque_std_Nm=noise.torque_std_Nm, wrench_std=noise.wrench_std,
                         torque_gain_rel_std=np.zeros(1), sample_rate_Hz=noise.sample_rate_Hz,
                         gain_per_s=noise.gain_per_s)
-    sig = first_order(robot, q_joint, link, alpha, force, quiet, method=method).position_rms_m[:, None]
+    sig = first_order(robot, q_joint, link, alpha, force, quiet, method=method, parameter_cov=parameter_cov,
+                      model_error=False).position_rms_m[:, None]
     if samples is None:
         return np.sqrt(bias ** 2 + sig ** 2)
     a = np.exp(-noise.gain_per_s / noise.sample_rate_Hz)
