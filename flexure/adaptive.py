@@ -163,7 +163,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
     the refinement; Fields). ``initial_h_factor``: the first mesh's coarsening of the size field."""
     from flexure import goal_cases
     from flexure.analysis import _selections, analyze_mesh
-    from flexure.goals import indicators, solve_goals
+    from flexure.goals import ALGEBRAIC_SHARE, cg_rtol_for, indicators, solve_goals
     from flexure.meshing import MeshResult, mesh_report
     from flexure.mesh import quality
     from flexure.refine import bisect, snap
@@ -192,8 +192,12 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
         for lv in range(MAX_LEVELS):
             mesh = tm.mesh
             tl = time.perf_counter()
-            sol = solve_goals(design, mesh, x0, ref0, selections=_nested_selections(mesh, bands))
-            sol.K = sol.solver = None          # not needed again (the last mesh's load cases: goal_cases): free them
+            peak_before = _rss_gb()
+            # CG tied to --rtol; the goals dual-corrected and their algebraic error held below a share of it
+            sol = solve_goals(design, mesh, x0, ref0, selections=_nested_selections(mesh, bands),
+                              rtol=cg_rtol_for(rtol), algebraic_limit=ALGEBRAIC_SHARE * rtol)
+            rss_level = _rss_now_gb()          # the level's fields, matrix and hierarchy alive
+            sol.solver = None                  # not needed again (the last mesh's load cases: goal_cases): free it
             vals = goal_values(design, sol)
             td = time.perf_counter()
             eta_v = indicators(design, mesh, sol)
@@ -206,6 +210,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
                            "eps_ref": float(vals["sign"] @ eta[1:] / 4.0)},
                    "safety_factor": _safety_factor(design, mesh, sol.U[:, :, 0]),
                    "cg_iterations": sol.info.get("iterations"), "solve_s": sol.info["total_s"], "dwr_s": dwr_s,
+                   "goal_algebraic_error": sol.info.get("goal_algebraic_error"),
                    "min_dihedral_deg": float(quality(mesh)["min_dihedral_deg"]), "pending_nodes": int(len(tm.pending[0]))}
             tg = time.perf_counter()
             geo_marked, rec["geometry"] = _geometry_marks(tm, projector, rtol)
@@ -218,6 +223,8 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             bar.set_description(f"flexure: level {lv} {mesh.n_dofs} dofs, worst error ±{worst:.2%}")
             rec["level_s"] = time.perf_counter() - tl
             rec["peak_rss_gb"] = _rss_gb()
+            # this level's peak: the process's if the level raised it, else the largest sampled RSS
+            level_peak = max(rss_level, _rss_now_gb(), rec["peak_rss_gb"] if rec["peak_rss_gb"] > peak_before else 0.0)
             if worst <= rtol and lv + 1 >= MIN_LEVELS:
                 stopped = "rtol"
                 break
@@ -228,11 +235,12 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             goals_rel = {"dofs": rec["dofs"], "rel": [rel["torsional_stiffness_Nm_per_rad"], *rel["arms"]]}
             grow = sizing.min_growth(MIN_DROP)
             want = sizing.target_dofs(mesh.n_dofs, goals_rel["rel"], sizing.rates(prev_rel, goals_rel), rtol, grow)
-            mem_cap = sizing.memory_dofs(mesh.n_dofs, base_gb, rec["peak_rss_gb"], max_memory_gb)
+            mem_cap = sizing.memory_dofs(mesh.n_dofs, base_gb, level_peak, max_memory_gb)
             nxt = min(want, max_dofs, mem_cap)
-            rec["sizing"] = {"target_dofs": int(want), "memory_cap_dofs": int(mem_cap), "base_rss_gb": base_gb}
+            rec["sizing"] = {"target_dofs": int(want), "memory_cap_dofs": int(mem_cap), "base_rss_gb": base_gb,
+                            "level_peak_gb": level_peak}
             prev_rel = goals_rel
-            if nxt < grow * mesh.n_dofs:
+            if nxt < want and nxt < grow * mesh.n_dofs:        # a budget leaves no measurable step
                 stopped = "max_dofs" if max_dofs <= mem_cap else "memory"
                 break
             weights = np.array([1.0 / max(abs(rec["theta"]), 1e-300)]
