@@ -208,7 +208,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
                    "gauge_strain_per_Nm": vals["eps_ref"], "gauge_strains": vals["eps"].tolist(),
                    "eta": {"theta": float(eta[0]), "gauges": eta[1:].tolist(),
                            "eps_ref": float(vals["sign"] @ eta[1:] / 4.0)},
-                   "safety_factor": _safety_factor(design, mesh, sol.U[:, :, 0]),
+                   "safety_factor": None,      # below: only where the run goes on (the last level's: the final figures')
                    "cg_iterations": sol.info.get("iterations"), "solve_s": sol.info["total_s"], "dwr_s": dwr_s,
                    "goal_algebraic_error": sol.info.get("goal_algebraic_error"),
                    "min_dihedral_deg": float(quality(mesh)["min_dihedral_deg"]), "pending_nodes": int(len(tm.pending[0]))}
@@ -252,6 +252,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             from flexure.dwr import element_indicators
             marked, rec["sizing"]["marks"] = sizing.marks_for(tm, element_indicators(mesh, eta_v) @ w, nxt, ROUNDS,
                                                               geo_marked)
+            rec["safety_factor"] = _safety_factor(design, mesh, sol.U[:, :, 0])
             ref0 = sol.q[-6:] if design.coupling == "rigid" else None
             tm, (x0, bands), rinfo = bisect(tm, marked, [sol.U, bands], rounds=ROUNDS, projector=projector)
             sol = None                                       # free the old level's matrix and hierarchy
@@ -267,6 +268,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
     fin = MeshResult(mesh, mres.surface, report)
     res, fields = analyze_mesh(design, fin, mesh_s, progress=False, cases=goal_cases.from_goals(sol),
                                selections=_nested_selections(mesh, bands))
+    hist[-1]["safety_factor"] = float(design.material.yield_Pa / res["max_von_mises_Pa"])   # the same u, mesh
     _attach(res, hist, design, rtol, stopped, max_dofs, max_memory_gb)
     res["mesh"]["initial_snap"] = snapped
     res["total_s"] = float(time.perf_counter() - t_start)
