@@ -5,10 +5,10 @@ goal's error estimate is below ``rtol`` or a budget stops it.
 Level ℓ: solve the torque case and the gauges' duals together (flexure.goals; the previous
 level's fields prolongated as the CG's initial guess), read the goals J — the hub rotation θ
 (stiffness k = 1/θ) and each gauge's strain (their bridge combination ε_ref too) — and their raw
-DWR estimates η_ℓ ≈ J − J_ℓ (flexure.dwr). Mark by Dörfler (the fewest elements carrying
-DORFLER of the sum of the goals' indicators, each goal weighted by 1/(rtol |J|) while it is not
-yet converged) and bisect them (closure keeps the mesh conforming; new boundary nodes go onto the
-true surface).
+DWR estimates η_ℓ ≈ J − J_ℓ (flexure.dwr). Mark the elements with the largest sum of the goals'
+indicators (each goal weighted by 1/|J| while it is not yet converged), as many as the DOFs the
+next level needs to just reach rtol at the goals' convergence rates (flexure.adaptive_sizing), and
+bisect them (closure keeps the mesh conforming; new boundary nodes go onto the true surface).
 
 Geometry and boundary conditions, the same problem on every level. The first mesh's boundary
 vertices (an STL's: gmsh puts them off the facets) and boundary mid-edge nodes are put on the true
@@ -52,6 +52,7 @@ import time
 import numpy as np
 
 from userio.errors import InputError
+from flexure import adaptive_sizing as sizing
 from flexure import blas
 
 DEFAULT_RTOL = 0.02
@@ -61,11 +62,8 @@ DEFAULT_RTOL = 0.02
 #: the elements next to them), so curved faces are resolved from the start
 INITIAL_H_FACTOR = 2.0
 CURVATURE_SHARE = 0.5
-DORFLER = 0.5
-#: ... and at least this fraction of the elements (those with the largest indicators): a level
-#: then grows the DOFs by about 1.6–2×, few enough levels for the set-up of each to pay
-MIN_MARKED = 0.12
-#: bisection rounds per level (1: each marked element halved once, + closure)
+#: bisection rounds per level (1: each marked element halved once, + closure); how many elements
+#: are marked: flexure.adaptive_sizing (a step sized to just reach rtol)
 ROUNDS = 2
 SAFETY = 1.5
 #: the geometry criterion's share of --rtol (δ/R of a boundary edge, ``_geometry_marks``)
@@ -88,6 +86,17 @@ def _rss_gb() -> float:
     import resource
 
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+
+
+def _rss_now_gb() -> float:
+    """Resident memory of this process now (GB; Linux /proc, else the peak so far)."""
+    import os
+
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1024 / 1e6   # as ru_maxrss (KB) / 1e6
+    except (OSError, ValueError, IndexError):
+        return _rss_gb()
 
 
 def geometry(design, mres):
@@ -145,18 +154,6 @@ def calibrate(eta_prev: float, eta: float, J_prev: float, J: float, kappa_prev: 
     return 1.0, "not measured yet"
 
 
-def _mark(mesh, eta_vertex: np.ndarray, weights: np.ndarray, fraction: float) -> np.ndarray:
-    """Dörfler: the fewest elements whose combined indicator Σ_goals w_g |η_K,g| carries
-    ``fraction`` of the total (at least MIN_MARKED of the elements)."""
-    from flexure.dwr import element_indicators
-
-    comb = element_indicators(mesh, eta_vertex) @ weights
-    order = np.argsort(-comb)
-    csum = np.cumsum(comb[order])
-    n = max(int(np.searchsorted(csum, fraction * csum[-1])) + 1, int(MIN_MARKED * len(comb)))
-    return order[:n]
-
-
 @blas.single_threaded
 def analyze_adaptive(design, size: str | None = None, rtol: float | None = None, max_dofs: int = MAX_DOFS,
                      max_memory_gb: float = MAX_MEMORY_GB, progress: bool = False,
@@ -166,7 +163,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
     the refinement; Fields). ``initial_h_factor``: the first mesh's coarsening of the size field."""
     from flexure import goal_cases
     from flexure.analysis import _selections, analyze_mesh
-    from flexure.goals import indicators, solve_goals
+    from flexure.goals import ALGEBRAIC_SHARE, cg_rtol_for, indicators, solve_goals
     from flexure.meshing import MeshResult, mesh_report
     from flexure.mesh import quality
     from flexure.refine import bisect, snap
@@ -180,6 +177,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
     t0 = time.perf_counter()
     bar = _bar(progress)
     hist, kappas = [], {}
+    prev_rel = None
     x0 = ref0 = None
     stopped = None
     try:
@@ -189,12 +187,17 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
         snapped = snap(tm, projector, getattr(projector, "snap_vertices", False)) if projector is not None else {}
         bands = _band_indicator(tm.mesh, _selections(design, tm.mesh))
         mesh_s = time.perf_counter() - t0
+        base_gb = _rss_now_gb()
         bar.set_description(f"flexure: mesh {tm.mesh.n_dofs} dofs ({mesh_s:.0f} s)")
         for lv in range(MAX_LEVELS):
             mesh = tm.mesh
             tl = time.perf_counter()
-            sol = solve_goals(design, mesh, x0, ref0, selections=_nested_selections(mesh, bands))
-            sol.K = sol.solver = None          # not needed again (the last mesh's load cases: goal_cases): free them
+            peak_before = _rss_gb()
+            # CG tied to --rtol; the goals dual-corrected and their algebraic error held below a share of it
+            sol = solve_goals(design, mesh, x0, ref0, selections=_nested_selections(mesh, bands),
+                              rtol=cg_rtol_for(rtol), algebraic_limit=ALGEBRAIC_SHARE * rtol)
+            rss_level = _rss_now_gb()          # the level's fields, matrix and hierarchy alive
+            sol.solver = None                  # not needed again (the last mesh's load cases: goal_cases): free it
             vals = goal_values(design, sol)
             td = time.perf_counter()
             eta_v = indicators(design, mesh, sol)
@@ -205,8 +208,9 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
                    "gauge_strain_per_Nm": vals["eps_ref"], "gauge_strains": vals["eps"].tolist(),
                    "eta": {"theta": float(eta[0]), "gauges": eta[1:].tolist(),
                            "eps_ref": float(vals["sign"] @ eta[1:] / 4.0)},
-                   "safety_factor": _safety_factor(design, mesh, sol.U[:, :, 0]),
+                   "safety_factor": None,      # below: only where the run goes on (the last level's: the final figures')
                    "cg_iterations": sol.info.get("iterations"), "solve_s": sol.info["total_s"], "dwr_s": dwr_s,
+                   "goal_algebraic_error": sol.info.get("goal_algebraic_error"),
                    "min_dihedral_deg": float(quality(mesh)["min_dihedral_deg"]), "pending_nodes": int(len(tm.pending[0]))}
             tg = time.perf_counter()
             geo_marked, rec["geometry"] = _geometry_marks(tm, projector, rtol)
@@ -219,19 +223,25 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             bar.set_description(f"flexure: level {lv} {mesh.n_dofs} dofs, worst error ±{worst:.2%}")
             rec["level_s"] = time.perf_counter() - tl
             rec["peak_rss_gb"] = _rss_gb()
+            # this level's peak: the process's if the level raised it, else the largest sampled RSS
+            level_peak = max(rss_level, _rss_now_gb(), rec["peak_rss_gb"] if rec["peak_rss_gb"] > peak_before else 0.0)
             if worst <= rtol and lv + 1 >= MIN_LEVELS:
                 stopped = "rtol"
                 break
             if lv + 1 == MAX_LEVELS:
                 stopped = "max_levels"
                 break
-            growth = hist[-1]["dofs"] / hist[-2]["dofs"] if len(hist) >= 2 else 1.6
-            nxt = int(mesh.n_dofs * max(growth, 1.2))
-            if nxt > max_dofs:
-                stopped = "max_dofs"
-                break
-            if rec["peak_rss_gb"] * nxt / mesh.n_dofs > max_memory_gb:
-                stopped = "memory"
+            # the next level: sized to just reach rtol, within the budgets (flexure.adaptive_sizing)
+            goals_rel = {"dofs": rec["dofs"], "rel": [rel["torsional_stiffness_Nm_per_rad"], *rel["arms"]]}
+            grow = sizing.min_growth(MIN_DROP)
+            want = sizing.target_dofs(mesh.n_dofs, goals_rel["rel"], sizing.rates(prev_rel, goals_rel), rtol, grow)
+            mem_cap = sizing.memory_dofs(mesh.n_dofs, base_gb, level_peak, max_memory_gb)
+            nxt = min(want, max_dofs, mem_cap)
+            rec["sizing"] = {"target_dofs": int(want), "memory_cap_dofs": int(mem_cap), "base_rss_gb": base_gb,
+                            "level_peak_gb": level_peak}
+            prev_rel = goals_rel
+            if nxt < want and nxt < grow * mesh.n_dofs:        # a budget leaves no measurable step
+                stopped = "max_dofs" if max_dofs <= mem_cap else "memory"
                 break
             weights = np.array([1.0 / max(abs(rec["theta"]), 1e-300)]
                                + [1.0 / s for s in _strain_scales(rec["gauge_strains"])])
@@ -239,7 +249,10 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
                                   + [r > rtol for r in rel["arms"]])
             w = weights * np.where(open_goals, 1.0, 1e-3)
             tr = time.perf_counter()
-            marked = np.union1d(_mark(mesh, eta_v, w, DORFLER), geo_marked)
+            from flexure.dwr import element_indicators
+            marked, rec["sizing"]["marks"] = sizing.marks_for(tm, element_indicators(mesh, eta_v) @ w, nxt, ROUNDS,
+                                                              geo_marked)
+            rec["safety_factor"] = _safety_factor(design, mesh, sol.U[:, :, 0])
             ref0 = sol.q[-6:] if design.coupling == "rigid" else None
             tm, (x0, bands), rinfo = bisect(tm, marked, [sol.U, bands], rounds=ROUNDS, projector=projector)
             sol = None                                       # free the old level's matrix and hierarchy
@@ -255,6 +268,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
     fin = MeshResult(mesh, mres.surface, report)
     res, fields = analyze_mesh(design, fin, mesh_s, progress=False, cases=goal_cases.from_goals(sol),
                                selections=_nested_selections(mesh, bands))
+    hist[-1]["safety_factor"] = float(design.material.yield_Pa / res["max_von_mises_Pa"])   # the same u, mesh
     _attach(res, hist, design, rtol, stopped, max_dofs, max_memory_gb)
     res["mesh"]["initial_snap"] = snapped
     res["total_s"] = float(time.perf_counter() - t_start)

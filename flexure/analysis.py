@@ -251,6 +251,18 @@ def analyze(design: Design, size: str | None = None, order: int | None = None, p
     return analyze_mesh(design, mres, mesh_s, progress)
 
 
+def _solve_unconverged(info: dict) -> bool:
+    """The solve's check: a goal solve with a loose CG (flexure.goals, ``goal_algebraic_limit``) by
+    its goals' algebraic error (from the residual and the duals) against its limit, any other by its
+    relative residual against solve.RESIDUAL_LIMIT."""
+    from flexure import solve as fsolve
+
+    if "goal_algebraic_limit" in info:
+        e = info.get("goal_algebraic_error", math.nan)
+        return not (math.isfinite(e) and e <= info["goal_algebraic_limit"])
+    return not np.isfinite(info["residual_norm"]) or info["residual_norm"] > fsolve.RESIDUAL_LIMIT
+
+
 def analyze_mesh(design: Design, mres, mesh_s: float = 0.0, progress: bool = False, x0=None, K=None,
                  solver=None, rtol: float | None = None, selections=None, cases=None):
     """``analyze`` on a given mesh (``mres``: meshing.MeshResult; ``mesh_s`` its meshing time):
@@ -289,7 +301,7 @@ def analyze_mesh(design: Design, mres, mesh_s: float = 0.0, progress: bool = Fal
     warnings = slivers.annotate(warnings, mesh, mres.report)     # any below 10°, explained
     if info.get("condition_estimate", 0.0) > fsolve.COND_LIMIT:
         warnings.append("ill_conditioned")
-    if not np.isfinite(info["residual_norm"]) or info["residual_norm"] > fsolve.RESIDUAL_LIMIT:
+    if _solve_unconverged(info):
         warnings.append("large_residual")
     repairs = (mres.surface.info.get("repairs") if mres.surface is not None else None) or []
     if repairs:                                    # a repair changes the geometry: say so
@@ -357,7 +369,8 @@ def analyze_mesh(design: Design, mres, mesh_s: float = 0.0, progress: bool = Fal
         "size": mres.report["size"],
         "mesh": {k: v for k, v in mres.report.items()},
         "solver": {k: v for k, v in info.items() if k in ("solver", "residual_norm", "condition_estimate",
-                                                           "iterations", "dofs")},
+                                                           "iterations", "dofs", "cg_rtol", "goal_algebraic_error",
+                                                           "goal_algebraic_limit")},
         "warnings": warnings,
         "material": {"name": design.material.name, "E_Pa": design.material.E_Pa, "nu": design.material.nu,
                      "yield_Pa": design.material.yield_Pa},
