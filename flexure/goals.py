@@ -38,6 +38,7 @@ class GoalSolution:
     traction: list
     K: object = None            # the stiffness matrix and the prepared solver of the system (solve.prepared):
     solver: object = None       # the last level's remaining load cases reuse them
+    system: object = None       # the reduced system (flexure.enriched's error solve)
 
 
 def solve_goals(design, mesh, x0_fields=None, x0_ref=None, rtol: float | None = None,
@@ -90,7 +91,7 @@ def solve_goals(design, mesh, x0_fields=None, x0_ref=None, rtol: float | None = 
     eps = read_footprint(design.gauges, mesh, U[:, :, :1])[:, 0]
     info["assemble_s"] = assemble_s
     info["total_s"] = time.perf_counter() - t0
-    return GoalSolution(U, theta, eps, constrained, q, info, traction, K, solver)
+    return GoalSolution(U, theta, eps, constrained, q, info, traction, K, solver, system)
 
 
 def indicators(design, mesh, sol: GoalSolution) -> np.ndarray:
