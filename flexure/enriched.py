@@ -32,8 +32,9 @@ import numpy as np
 
 from flexure.mesh import TET_EDGES, TET_FACES, TET_FACES_P2, Mesh
 
-#: relative residual of the surplus PCG
-RTOL = 1e-6
+#: relative residual of the enriched CG: 1e-2 already moves the goals' J(u⁺) − J(u_h) by < 1 % of
+#: themselves against 1e-6 (thin annulus, 15 k P2 dofs: 23 against 64 iterations); 1e-3 keeps a margin
+RTOL = 1e-3
 MAX_ITER = 2000
 
 
@@ -214,9 +215,11 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
     Dinv = _block_jacobi(Kww)
     t1 = time.perf_counter()
 
+    CqT = Cq.T.tocsr()
+
     def matvec(x):
         xh, xw = x[:nq], x[nq:]
-        return np.concatenate([A @ xh + Cq @ xw, Cq.T @ xh + Kww @ xw])
+        return np.concatenate([A @ xh + Cq @ xw, CqT @ xh + Kww @ xw])
 
     def prec(r):
         zh = np.asarray(precond_h(np.ascontiguousarray(r[:nq, None])))[:, 0]
