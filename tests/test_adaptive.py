@@ -62,8 +62,9 @@ def test_calibration_rules():
 @pytest.fixture(scope="module")
 def small_run(tmp_path_factory):
     d = annulus(tmp_path_factory.mktemp("annulus"))
-    # at least two levels: 0.005 stops on the first mesh (h × 2, 48-gon: MIN_LEVELS = 1 with the enriched estimate)
-    return d, analyze_adaptive(d, rtol=0.003, initial_h_factor=2.5)
+    # at least two levels (0.005 stopped on the first mesh, h × 2: MIN_LEVELS = 1 with the enriched estimate);
+    # the memory budget is of this whole test process
+    return d, analyze_adaptive(d, rtol=0.004, initial_h_factor=2.5, max_memory_gb=8.0)
 
 
 @pytest.mark.slow
@@ -81,11 +82,11 @@ def test_adaptive_contract_and_nested_levels(small_run):
         assert f"{key}_error_method" in res and math.isfinite(res[f"{key}_error_estimate"]), key
     rel_k = res["torsional_stiffness_Nm_per_rad_error_estimate"] / res["torsional_stiffness_Nm_per_rad"]
     rel_e = res["gauge_strain_per_Nm_error_estimate"] / abs(res["gauge_strain_per_Nm"])
-    assert 0 < rel_k <= 0.003 and 0 < rel_e <= 0.003
+    assert 0 < rel_k <= 0.004 and 0 < rel_e <= 0.004
     arms = res["gauge_strains_per_Nm_error_estimate"]
     assert set(arms) == {"arm1", "arm2", "arm3", "arm4"}
     rel_scale = sum(abs(v) for v in res["gauge_strains_per_Nm"].values()) / 4      # adaptive._strain_scales
-    assert all(arms[a] <= 0.003 * max(abs(res["gauge_strains_per_Nm"][a]), rel_scale) for a in arms)
+    assert all(arms[a] <= 0.004 * max(abs(res["gauge_strains_per_Nm"][a]), rel_scale) for a in arms)
     assert res["dofs"] == lv[-1]["dofs"] and fields.mesh.n_dofs == res["dofs"]
     assert res["torsional_stiffness_Nm_per_rad"] == pytest.approx(k[-1], rel=1e-6)
     assert res["warnings"] == []
