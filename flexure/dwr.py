@@ -258,11 +258,6 @@ def primal_weight(mesh: Mesh, u: np.ndarray, constrained: np.ndarray, material=N
     u (n,3): from the element residuals and traction jumps (``WEIGHT = "residual"``), or from
     patch-wise cubic fits of u_h (``"recovered"``)."""
     constrained = np.asarray(constrained, bool)
-    if (how or WEIGHT) == "enriched":
-        from flexure.enriched import surplus_error
-
-        ce, cf, _ = surplus_error(mesh, material, u, constrained, traction)
-        return ce, cf
     if (how or WEIGHT) == "residual":
         from flexure.bank_weiser import local_errors
 
