@@ -78,6 +78,19 @@ def local_errors(mesh: Mesh, material, u: np.ndarray, constrained: np.ndarray, t
     """Element-local surplus coefficients of the error (edges (m,6,3) in each element's own edge
     orientation, faces (m,4,3)) of the P2 displacement u (n,3); ``traction``: an optional
     (face mask (m,4) bool, t(x) (…,3) → (…,3)) of loaded free faces."""
+    coef = np.zeros((mesh.n_elements, 10, 3))
+    for sl, A, r, _ in element_blocks(mesh, material, u, constrained, traction, chunk):
+        coef[sl] = np.linalg.solve(A, r[..., None])[..., 0].reshape(-1, 10, 3)
+    return coef[:, :6], coef[:, 6:]
+
+
+def element_blocks(mesh: Mesh, material, u: np.ndarray, constrained: np.ndarray, traction=None,
+                   chunk: int = 4000):
+    """Per chunk of elements: (slice, A (e,30,30), r (e,30), kept (e,30)) — the surplus stiffness
+    a_K(φ_b, φ_c) and the right-hand side −a_K(u_h, φ_b) + ∫_∂K t̂·φ_b of the local problems above,
+    rows (b, i) → 3b + i; constrained functions have an identity row and a zero right-hand side.
+    The traction-jump terms cancel between neighbours, so assembled they give the global residual
+    R(u_h)(φ) (flexure.enriched)."""
     from flexure.surplus import surplus_basis, tet_rule_degree5
     from flexure.fem import tet_shape
 
@@ -141,7 +154,6 @@ def local_errors(mesh: Mesh, material, u: np.ndarray, constrained: np.ndarray, t
     keep = np.ones((m, 10), bool)
     keep[:, :6] = ~constrained[t[:, 4:]]
     keep[:, 6:] = ~constrained[t[:, TET_FACES_P2]].all(axis=2)
-    coef = np.zeros((m, 10, 3))
     diag = np.arange(30)
     for s in range(0, m, chunk):
         sl = slice(s, min(m, s + chunk))
@@ -160,6 +172,5 @@ def local_errors(mesh: Mesh, material, u: np.ndarray, constrained: np.ndarray, t
         A = np.where(kk[:, :, None] & kk[:, None, :], A, 0.0)
         A[:, diag, diag] = np.where(kk, A[:, diag, diag], 1.0)
         r = np.where(kk, r.reshape(e, 30), 0.0)
-        coef[sl] = np.linalg.solve(A, r[..., None])[..., 0].reshape(e, 10, 3)
-    return coef[:, :6], coef[:, 6:]
+        yield sl, A, r, kk
 

@@ -66,6 +66,7 @@ class GoalSolution:
     traction: list
     K: object = None            # not kept (freed before the solve; the load cases come from the duals, goal_cases)
     solver: object = None       # the prepared solver of the system (solve.prepared)
+    system: object = None       # the reduced system (flexure.enriched's error solve)
 
 
 def solve_goals(design, mesh, x0_fields=None, x0_ref=None, rtol: float | None = None,
@@ -139,9 +140,10 @@ def solve_goals(design, mesh, x0_fields=None, x0_ref=None, rtol: float | None = 
     if algebraic_limit is not None:
         d = J - B.T @ q[:, 0]                      # the dual corrections z̃_gᵀ r₀ (read_footprint = B_gᵀ q₀)
         theta, eps = theta + float(d[0]), eps + d[1:]
+        info["goal_dual_correction"] = d.tolist()   # already in θ, ε: flexure.enriched's J(u⁺) − J(q) less it
     info["assemble_s"] = assemble_s
     info["total_s"] = time.perf_counter() - t0
-    return GoalSolution(U, theta, eps, constrained, q, info, traction, None, solver)
+    return GoalSolution(U, theta, eps, constrained, q, info, traction, None, solver, system)
 
 
 def indicators(design, mesh, sol: GoalSolution) -> np.ndarray:

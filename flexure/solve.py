@@ -346,6 +346,7 @@ def prepared(system, rtol: float = 1e-10, smoothed_coarse: bool = False):
             q = lu.solve(np.asarray(B, dtype=np.float64))
             return q, _residual_info(A, B, q, {"solver": "direct (SuperLU)", "dofs": int(n), "iterations": 1,
                                               "setup_s": setup_s, "solve_s": time.perf_counter() - t})
+        solve_direct.precond = lu.solve          # flexure.enriched: the P2 block of the enriched solve
         return solve_direct
     if system.coarse is not None and n % 3 == 0 and _multirhs_available():
         from flexure import multirhs
@@ -368,6 +369,7 @@ def prepared(system, rtol: float = 1e-10, smoothed_coarse: bool = False):
                            "6 rigid-body modes; all load cases together)"),
                 "dofs": int(n), "iterations": its, "setup_s": setup_s, "cg_s": time.perf_counter() - t,
                 "solve_s": time.perf_counter() - t, **_hierarchy_info(ml)})
+        solve_pmg.precond = M                    # flexure.enriched: the P2 block of the enriched solve
         return solve_pmg
 
     def solve_each(B, x0=None, rtol_=None):

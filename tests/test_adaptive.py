@@ -62,7 +62,9 @@ def test_calibration_rules():
 @pytest.fixture(scope="module")
 def small_run(tmp_path_factory):
     d = annulus(tmp_path_factory.mktemp("annulus"))
-    return d, analyze_adaptive(d, rtol=0.01, initial_h_factor=2.0)
+    # at least two levels (0.005 stopped on the first mesh, h × 2: MIN_LEVELS = 1 with the enriched estimate);
+    # the memory budget is of this whole test process
+    return d, analyze_adaptive(d, rtol=0.004, initial_h_factor=2.5, max_memory_gb=8.0)
 
 
 @pytest.mark.slow
@@ -80,10 +82,11 @@ def test_adaptive_contract_and_nested_levels(small_run):
         assert f"{key}_error_method" in res and math.isfinite(res[f"{key}_error_estimate"]), key
     rel_k = res["torsional_stiffness_Nm_per_rad_error_estimate"] / res["torsional_stiffness_Nm_per_rad"]
     rel_e = res["gauge_strain_per_Nm_error_estimate"] / abs(res["gauge_strain_per_Nm"])
-    assert 0 < rel_k <= 0.01 and 0 < rel_e <= 0.01
+    assert 0 < rel_k <= 0.004 and 0 < rel_e <= 0.004
     arms = res["gauge_strains_per_Nm_error_estimate"]
     assert set(arms) == {"arm1", "arm2", "arm3", "arm4"}
-    assert all(arms[a] <= 0.01 * abs(res["gauge_strains_per_Nm"][a]) for a in arms)
+    rel_scale = sum(abs(v) for v in res["gauge_strains_per_Nm"].values()) / 4      # adaptive._strain_scales
+    assert all(arms[a] <= 0.004 * max(abs(res["gauge_strains_per_Nm"][a]), rel_scale) for a in arms)
     assert res["dofs"] == lv[-1]["dofs"] and fields.mesh.n_dofs == res["dofs"]
     assert res["torsional_stiffness_Nm_per_rad"] == pytest.approx(k[-1], rel=1e-6)
     assert res["warnings"] == []
@@ -91,12 +94,14 @@ def test_adaptive_contract_and_nested_levels(small_run):
 
 @pytest.mark.slow
 def test_estimate_covers_the_last_change(small_run):
-    """Two-level check: the previous level's error is at least the (exact) change to the last one
-    (the compliance of nested spaces rises monotonically), and its stiffness estimate covered it."""
+    """Two-level check: each level's error is at least the (exact) change to the next one (the
+    compliance of nested spaces rises monotonically), and its stiffness estimate covered it."""
     _, (res, _) = small_run
-    a, b = res["discretization_levels"][-2:]
-    change = a["torsional_stiffness_Nm_per_rad"] - b["torsional_stiffness_Nm_per_rad"]
-    assert a["estimate"]["torsional_stiffness_Nm_per_rad"] >= change > 0
+    lv = res["discretization_levels"]
+    assert len(lv) >= 2
+    for a, b in zip(lv, lv[1:]):
+        change = a["torsional_stiffness_Nm_per_rad"] - b["torsional_stiffness_Nm_per_rad"]
+        assert a["estimate"]["torsional_stiffness_Nm_per_rad"] >= change > 0
 
 
 @pytest.mark.parametrize("budget,stop,needle", [
@@ -158,10 +163,12 @@ def round_annulus_run(tmp_path_factory):
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason=(
-    "measured 2026-11-26 (reports/fem_adaptive.md, benchmarks/fem_annulus.py round_stl), the start mesh on the "
-    "STL at every level: --rtol 0.01 stops at 14.7 k dofs with the arms' true errors 0.015-0.13 % and their "
-    "effectivities 0.06, 0.97, 4.2, 27 (stiffness 1.85); a per-arm DWR estimate does not follow an error of "
-    "0.01-0.1 % that changes sign between levels"))
+    "measured 2026-11-26 (benchmarks/fem_annulus.py round_stl, enriched estimate 2|J(u+) - J(u_h)|): --rtol 0.01 "
+    "stops at 14.7 k dofs with the arms' effectivities 2.43, 0.47, 1.28, 5.23, the bridge's 0.13 (stiffness 1.86) "
+    "against the round annulus. The same estimate on the exact circles (STEP, test_enriched_estimate_brackets_"
+    "the_exact_torsion_field) is 1.7-2.2 on every goal: the 192-gon's discrete domain (P2 faces on the facets, "
+    "boundary nodes up to 81 um off the STL at level 1) moves the read-outs by 0.02-0.1 %, a geometric error "
+    "that no estimate of the discretization error on the discrete domain sees"))
 def test_gauge_estimates_bracket_the_exact_torsion_strain(round_annulus_run):
     """Against the exact read-outs of the torsion field (``annulus_gauge_exact``: no reference run,
     no allowance): every arm's estimate covers its true error and is at most 3× conservative, the
@@ -178,6 +185,44 @@ def test_gauge_estimates_bracket_the_exact_torsion_strain(round_annulus_run):
     ref = float(np.mean(np.abs(exact)))
     e_ref = abs(abs(res["gauge_strain_per_Nm"]) - ref)
     assert e_ref <= res["gauge_strain_per_Nm_error_estimate"] <= 3.0 * e_ref
+
+
+def _fem_annulus():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "fem_annulus.py"
+    spec = importlib.util.spec_from_file_location("fem_annulus", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("part", ["round", "thin"])
+def test_enriched_estimate_brackets_the_exact_torsion_field(tmp_path, part):
+    """On exact geometry (a STEP of circles; load and clamp on the bore and rim faces alone, so the
+    torsion field u_θ = B/r − Br/b² is the exact solution of the discrete problem), --rtol 0.01:
+    every goal's estimate on every level (stiffness, each gauge, the bridge strain) covers its true
+    error and is at most 3× conservative. Measured 2026-11-26 (benchmarks/fem_annulus.py
+    --exact-bands): round 1.88-2.15 (arms), 2.06 (k), 1.70 (bridge); thin (arms 30-65° off the
+    radial, no symmetry) 1.98-2.03, 2.15, 1.92."""
+    import numpy as np
+
+    fa = _fem_annulus()
+    design = fa.make_part(tmp_path, part, "step", exact_bands=True)
+    exact = annulus_gauge_exact(design, thickness_m=fa.PARTS[part]["t"] * 1e-3)
+    k_ex = fa.stiffness_exact(part, design.material.shear_modulus_Pa)
+    s = np.array([adaptive.ARM_SIGN[g.arm] for g in design.gauges])
+    res, _ = analyze_adaptive(design, rtol=0.01)
+    assert res["stopped_by"] == "rtol"
+    for lv in res["discretization_levels"]:
+        est = lv["estimate"]
+        eff_arms = np.array(est["gauge_strains"]) / np.abs(np.array(lv["gauge_strains"]) - exact)
+        eff_k = est["torsional_stiffness_Nm_per_rad"] / abs(lv["torsional_stiffness_Nm_per_rad"] - k_ex)
+        eff_b = est["gauge_strain_per_Nm"] / abs(lv["gauge_strain_per_Nm"] - s @ exact / 4)
+        eff = np.r_[eff_arms, eff_k, eff_b]
+        assert np.all((eff >= 1.0) & (eff <= 3.0)), (lv["level"], eff)
 
 
 @pytest.mark.slow

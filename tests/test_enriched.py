@@ -1,0 +1,129 @@
+"""The enriched-space error estimate (flexure.enriched): its system against an exact energy, its
+iterative solve against a direct one, and its identity J(u⁺) − J(u_h) = R*(z_h)(e_W)."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from flexure import dwr, enriched
+from flexure.bc import Problem
+from flexure.fem import stiffness_matrix
+from flexure.gauges import Gauge, functionals
+from flexure.material import Material
+from flexure.mesh import box_mesh, to_linear, to_quadratic
+from flexure.surplus import tet_rule_degree5
+
+AL = Material(70e9, 0.33, 270e6, "aluminium")
+
+
+def _distorted_box():
+    rng = np.random.default_rng(3)
+    m = to_quadratic(box_mesh(3, 2, 4, size=(1.0, 0.8, 1.3)))
+    m.points[:] += rng.normal(size=m.points.shape) * 0.03
+    return to_quadratic(to_linear(m))
+
+
+def test_enriched_system_holds_a_cubic_exact_energy():
+    """A cubic field u (u_k = A_kj x_j + T_kijl x_i x_j x_l / 6) lies in V⁺ = P2 ⊕ W: its P2 nodal
+    values plus the surplus coefficients of its third derivatives T (dwr.cubic_surplus). The
+    assembled enriched matrix [[K, C], [Cᵀ, K_WW]] must give its energy ∫ σ(u):ε(u) dV, computed
+    here from the analytic gradient (degree-5 rule, exact for this degree-4 integrand)."""
+    rng = np.random.default_rng(7)
+    mesh = _distorted_box()
+    A = rng.normal(size=(3, 3))
+    T = rng.normal(size=(3, 3, 3, 3))
+    T = sum(T.transpose(0, *p) for p in ((1, 2, 3), (1, 3, 2), (2, 1, 3), (2, 3, 1), (3, 1, 2), (3, 2, 1))) / 6.0
+
+    def grad(x):                                                       # (…,3) → (…,3,3) ∂u_k/∂x_i
+        return A[None] + 0.5 * np.einsum("kijl,pj,pl->pki", T, x, x)
+
+    def u(x):
+        return x @ A.T + np.einsum("kijl,pi,pj,pl->pk", T, x, x, x) / 6.0
+
+    n = mesh.n_nodes
+    none = np.zeros(n, bool)
+    K_ww, _, num = enriched.assemble(mesh, AL, np.zeros((n, 3)), none)
+    C = enriched.coupling_matrix(mesh, AL, num)
+    K = stiffness_matrix(mesh, AL)
+    G, sign, free = num
+    assert free.all()
+    D3 = np.broadcast_to(T.transpose(0, 1, 2, 3)[None], (mesh.n_elements, 3, 3, 3, 3))
+    ce, cf = dwr.cubic_surplus(mesh, D3)                                # (m,6,3), (m,4,3)
+    coef = np.concatenate([ce, cf], axis=1) * sign[..., None]           # global orientation
+    xw = np.zeros((len(free), 3))
+    xw[G] = coef
+    # continuity: every element gives a shared edge/face the same coefficient
+    assert np.abs(xw[G] - coef).max() < 1e-9 * np.abs(coef).max()
+    xh = u(mesh.points).ravel()
+    xw = xw.ravel()
+    energy = xh @ (K @ xh) + 2.0 * xh @ (C @ xw) + xw @ (K_ww @ xw)
+    xi, wq = tet_rule_degree5()
+    X = mesh.points[mesh.corner_tets]
+    L = np.column_stack([1.0 - xi.sum(axis=1), xi])
+    xq = np.einsum("qa,eai->eqi", L, X).reshape(-1, 3)
+    H = grad(xq)
+    eps = 0.5 * (H + H.swapaxes(-1, -2))
+    lam, mu = AL.lame_lambda_Pa, AL.shear_modulus_Pa
+    dens = 2.0 * mu * (eps * eps).sum(axis=(1, 2)) + lam * np.trace(eps, axis1=1, axis2=2) ** 2
+    vol = np.abs(mesh.signed_volumes())
+    exact = float((dens.reshape(len(X), -1) @ wq * 6.0 * vol).sum())
+    assert energy == pytest.approx(exact, rel=1e-9)
+
+
+def _bar():
+    """A 10 × 10 × 30 mm bar clamped at z = 0, a unit torque through a rigid coupling of its top,
+    one gauge on a side face: (mesh, problem, system, LU of A, gauge)."""
+    mesh = to_quadratic(box_mesh(2, 2, 6, size=(0.01, 0.01, 0.03)))
+    p = mesh.points
+    fixed = np.flatnonzero(p[:, 2] < 1e-12)
+    load = np.flatnonzero(p[:, 2] > 0.03 - 1e-12)
+    pr = Problem(mesh, AL).fix(fixed)
+    pr.couple_rigid(load, (0.005, 0.005, 0.03), moment_Nm=(0, 0, 1))
+    sy = pr.reduced_system(stiffness_matrix(mesh, AL))
+    g = Gauge(centre_m=(0.01, 0.005, 0.012), axis=(0.0, 0.7071067811865476, 0.7071067811865476),
+              normal=(1.0, 0.0, 0.0), length_m=0.004, width_m=0.003, arm=1)
+    cons = np.zeros(mesh.n_nodes, bool)
+    cons[fixed] = cons[load] = True
+    return mesh, pr, sy, spla.splu(sy.A.tocsc()), g, cons
+
+
+def test_enriched_solve_against_a_direct_solve_and_the_dual_identity():
+    """enriched_solve's block-preconditioned CG gives the direct solution of the whole enriched
+    system: θ⁺ − θ_h and the gauge's J(u⁺) − J(u_h), which also equals R*(z_h)(e_W) through the
+    gauge's P2 dual z_h (flexure.enriched (1))."""
+    mesh, pr, sy, lu, g, cons = _bar()
+    i_th = sy.ref_slices[0].start + 5
+    nq = sy.A.shape[0]
+    F = functionals([g], mesh)                                           # (n,3,1)
+    B = np.zeros((nq, 2))
+    B[i_th, 0] = 1.0
+    B[:, 1] = sy.T.T @ F.reshape(-1)
+    B[sy.fixed_q] = 0.0
+    Q = lu.solve(B)
+    U = pr.expand(sy, Q[:, 0])
+    Z = pr.expand(sy, Q[:, 1])
+    d_eps, d_th, info = enriched.enriched_solve(sy, mesh, AL, [g], U, Q[:, 0], cons, lambda R: lu.solve(R),
+                                                rtol=1e-12, theta_index=i_th)
+    # the direct solve of [[A, C], [Cᵀ, K_WW]] [e_h; e_W] = [0; r_W]
+    K_ww, r_w, num = enriched.assemble(mesh, AL, U, cons)
+    keep = np.repeat(num[2], 3)
+    C = enriched.coupling_matrix(mesh, AL, num)
+    mask = np.ones(nq)
+    mask[sy.fixed_q] = 0.0
+    Cq = (sp.diags(mask) @ (sy.T.T @ C))[:, keep]
+    full = sp.bmat([[sy.A, Cq], [Cq.T, K_ww[keep][:, keep]]]).tocsc()
+    x = spla.spsolve(full, np.concatenate([B[:, 0] - sy.A @ Q[:, 0], r_w[keep]]))
+    assert d_th == pytest.approx(x[i_th], rel=1e-8) and x[i_th] > 0        # the compliance only rises
+    eh = pr.expand(sy, x[:nq])
+    ew = np.zeros(len(keep))
+    ew[keep] = x[nq:]
+    coef = ew.reshape(-1, 3)[num[0]] * num[1][..., None]
+    direct = float(np.einsum("ni,ni->", F[:, :, 0], eh) + dwr.gauge_indicators(mesh, [g], coef[:, :6], coef[:, 6:]).sum())
+    assert d_eps[0] == pytest.approx(direct, rel=1e-8)
+    # J(u⁺) − J(u_h) = J(e_W) − a(z_h, e_W): the P2 part of e⁺ enters only through the dual
+    V = np.concatenate([U[:, :, None], Z[:, :, None]], axis=2)
+    eta = dwr.energy_indicators(mesh, AL, V, coef[:, :6], coef[:, 6:]).sum(axis=0)
+    eta[1:] += dwr.gauge_indicators(mesh, [g], coef[:, :6], coef[:, 6:]).sum(axis=0)
+    assert eta[1] == pytest.approx(d_eps[0], rel=1e-6)
+    assert eta[0] == pytest.approx(d_th, rel=1e-6)                       # θ: R(u_h)(e_W) = a(e⁺, e⁺)
