@@ -125,37 +125,71 @@ def _strongest(nodes, dims, tags):
 
 
 def vertex_targets(tm: TaggedMesh):
-    """Every vertex on a tagged surface face (dim 2, the face's tag; one per vertex)."""
+    """Every vertex on a tagged surface face (dim 2, the face's tag) or curve edge (dim 1, the
+    edge's tag; a curve over a surface), one per vertex."""
     from flexure.mesh import TET_FACES
 
     e, f = np.nonzero(tm.face_tag > 0)
     nodes = tm.mesh.tets[e[:, None], TET_FACES[f]].astype(np.int64)           # (k,3)
     tags = np.repeat(tm.face_tag[e, f], 3)
-    return _strongest(nodes.ravel(), np.full(nodes.size, 2, np.int64), tags)
+    ce, cj = np.nonzero(tm.edge_tag > 0)
+    cnodes = tm.mesh.tets[ce[:, None], TET_EDGES[cj]].astype(np.int64)        # (j,2)
+    return _strongest(np.concatenate([nodes.ravel(), cnodes.ravel()]),
+                      np.concatenate([np.full(nodes.size, 2, np.int64), np.full(cnodes.size, 1, np.int64)]),
+                      np.concatenate([tags, np.repeat(tm.edge_tag[ce, cj], 2)]))
 
 
-def snap(tm: TaggedMesh, projector, vertices: bool = False) -> dict:
+#: bisection rounds of ``snap`` around the nodes its morph could not put on the geometry
+SETTLE_ROUNDS = 0
+
+
+def snap(tm: TaggedMesh, projector, vertices: bool = False, settle_rounds: int = SETTLE_ROUNDS) -> dict:
     """Put the first mesh on the true geometry (in place; ``morph``): every mid-edge node on a
     tagged curve or surface (isoparametric P2), and with ``vertices`` the boundary vertices too (a
     mesher that places them off the true surface, e.g. gmsh's re-parametrised STL patches; the mid
     nodes of their edges are then projected from between their moved ends). Nodes whose move would
-    still fold an element become ``pending``."""
-    return morph(tm, projector, vertices)
+    still fold an element (a mid node moved by δ toward the far side of an element of height h folds
+    it as δ → h/4: a chord on a concave fillet, into the part) have their elements bisected, then are
+    moved again (``bisect``: the children's δ/h falls with their size), ``settle_rounds`` times at most;
+    any left become ``pending``. So every level solves on the same domain, the STL's (measured on a
+    six-spoke designer STL: 63 nodes left partly moved by the morph alone, finished only at later
+    levels)."""
+    info = morph(tm, projector, vertices)
+    info["settle_bisections"] = 0
+    for _ in range(settle_rounds):
+        if len(tm.pending[0]) == 0:
+            break
+        near = np.flatnonzero(np.isin(tm.mesh.tets, tm.pending[0]).any(axis=1))
+        out, _, binfo = bisect(tm, near, rounds=1, projector=projector)
+        tm.mesh, tm.face_tag, tm.edge_tag, tm.pending = out.mesh, out.face_tag, out.edge_tag, out.pending
+        info["settle_bisections"] += binfo["bisections"]
+    info["pending"] = int(len(tm.pending[0]))
+    return info
 
 
-def _graph_laplacian(tets: np.ndarray, n: int):
-    """Graph Laplacian (n,n) of the P2 nodes, every pair of nodes of an element linked (weight 1)."""
-    from scipy.sparse import coo_matrix
+#: the morph's stiffening exponent χ: element weights (V_max / V_e)^χ (``_graph_laplacian``)
+STIFFENING = 1.0
+
+
+def _graph_laplacian(tets: np.ndarray, n: int, points: np.ndarray | None = None, chi: float = STIFFENING):
+    """Graph Laplacian (n,n) of the P2 nodes, every pair of nodes of an element linked. With ``points``,
+    each element's links weigh (V_max / V_e)^χ, summed over the elements that share them (Jacobian-based
+    stiffening, Tezduyar et al. 1992: the small elements along a boundary move nearly rigidly with it and
+    the large ones farther in take up the deformation); else each link weighs 1."""
+    from scipy.sparse import coo_matrix, diags
 
     t = tets.astype(np.int64)
     k = t.shape[1]
     i = np.repeat(t, k, axis=1).ravel()
     j = np.tile(t, (1, k)).ravel()
     off = i != j
-    A = coo_matrix((np.ones(int(off.sum())), (i[off], j[off])), shape=(n, n)).tocsr()
-    A.data[:] = 1.0                                                         # an edge once, however many elements share it
-    from scipy.sparse import diags
-
+    if points is None:
+        A = coo_matrix((np.ones(int(off.sum())), (i[off], j[off])), shape=(n, n)).tocsr()
+        A.data[:] = 1.0                                                     # an edge once, however many elements share it
+    else:
+        v = np.abs(_straight_det(points[t[:, :4]]))
+        w = (v.max() / np.maximum(v, 1e-30 * v.max())) ** chi
+        A = coo_matrix((np.repeat(w, k * k)[off], (i[off], j[off])), shape=(n, n)).tocsr()
     return diags(np.asarray(A.sum(axis=1)).ravel()) - A
 
 
@@ -189,11 +223,11 @@ def boundary_targets(tm: TaggedMesh, projector, vertices: bool = False):
     out = target[nodes]
     bad = ~np.isfinite(out).all(axis=1)
     out[bad] = X0[nodes[bad]]
-    return (nodes, np.concatenate([np.full(len(vn), 2, np.int64), md]), np.concatenate([vt, mt]), out)
+    return (nodes, np.concatenate([vd, md]), np.concatenate([vt, mt]), out)
 
 
 def morph(tm: TaggedMesh, projector, vertices: bool = False, tries: int = 8,
-          min_scaled_jacobian: float | None = None) -> dict:
+          min_scaled_jacobian: float | None = None, stiffen: bool = True) -> dict:
     """Move the boundary nodes onto the true geometry all at once and the interior nodes with them:
     boundary displacement d_B (vertices ``vertices``: their projection; mid nodes on a tagged curve
     or surface: the projection of the midpoint of their moved ends, or of themselves), interior
@@ -222,7 +256,7 @@ def morph(tm: TaggedMesh, projector, vertices: bool = False, tries: int = 8,
     fixed[mesh.boundary_nodes()] = True
     fixed[nodes] = True
     B, I = np.flatnonzero(fixed), np.flatnonzero(~fixed)
-    L = _graph_laplacian(t, mesh.n_nodes).tocsc()
+    L = _graph_laplacian(t, mesh.n_nodes, X0 if stiffen else None).tocsc()
     LII = splu(L[I][:, I].tocsc()) if len(I) else None
     LIB = L[I][:, B]
     before = _straight_det(X0[t[:, :4]])
@@ -245,9 +279,9 @@ def morph(tm: TaggedMesh, projector, vertices: bool = False, tries: int = 8,
             continue
         beta[back] = 0.0 if k >= tries - 1 else 0.5 * beta[back]
     mesh._cache.clear()
-    left = beta < 1.0
+    left = (beta < 1.0) & np.any(dB != 0, axis=1)             # a node with nothing to move is not pending
     tm.pending = (nodes[left], dims[left], tags[left])
-    info.update(projected=int((~left).sum()), projection_undone=int((beta == 0).sum()),
+    info.update(projected=int((~left).sum()), projection_undone=int(((beta == 0) & left).sum()),
                 projection_partial=int(((beta > 0) & left).sum()),
                 morphed_interior=int((np.linalg.norm(mesh.points[I] - X0[I], axis=1) > 0).sum()))
     return info
@@ -290,7 +324,7 @@ def _p2_weights(bary: np.ndarray) -> np.ndarray:
     return N
 
 
-def _bisect_pass(points, tets, face_tag, edge_tag, flag, marked_codes, fields):
+def _bisect_pass(points, tets, face_tag, edge_tag, flag, marked_codes, fields, closure_ratio: float = 1.0):
     """One pass: closure, then every element whose longest edge is marked is bisected.
     → (points, tets, face_tag, edge_tag, flag, marked_codes, fields, targets, n_bisected)."""
     codes = edge_codes(tets)
@@ -302,17 +336,23 @@ def _bisect_pass(points, tets, face_tag, edge_tag, flag, marked_codes, fields):
     emark = np.zeros(len(uc), bool)
     emark[at[uc[at] == marked_codes]] = True
     mk = emark[eid]
+    lo, hi = uc >> 32, uc & 0xFFFFFFFF
+    L = np.linalg.norm(points[hi] - points[lo], axis=1)[eid]                 # (m,6) edge lengths
+    Lmax = L[rows, le]
     while True:                                   # closure to a fixpoint
-        need = mk.any(axis=1) & ~mk[rows, le]
+        Lm = np.where(mk, L, -1.0)
+        cand = Lm.argmax(axis=1)
+        chosen = np.where(mk[rows, le] | (Lm[rows, cand] < closure_ratio * Lmax), le, cand)
+        need = mk.any(axis=1) & ~mk[rows, chosen]
         if not need.any():
             break
         emark[eid[need, le[need]]] = True
         mk = emark[eid]
     marked_codes = uc[emark]
-    B = np.flatnonzero(mk[rows, le])
+    B = np.flatnonzero(mk[rows, chosen])
     if len(B) == 0:
         return points, tets, face_tag, edge_tag, flag, marked_codes, fields, None, 0
-    e = le[B]
+    e = chosen[B]
     i, j = TET_EDGES[e, 0], TET_EDGES[e, 1]
     k, l = _OTHER[e, 0], _OTHER[e, 1]
     TB = tets[B].astype(np.int64)
@@ -392,7 +432,13 @@ def _bisect_pass(points, tets, face_tag, edge_tag, flag, marked_codes, fields):
     return points, tets, face_tag, edge_tag, flag, marked_codes, fields, targets, len(B)
 
 
-def bisect(tm: TaggedMesh, elements, fields=(), rounds: int = 1, projector=None, max_passes: int = 200):
+#: an element holding a marked edge at least this fraction of its longest edge is bisected at that edge
+#: (its longest marked one); otherwise its longest edge is marked (Rivara's closure, 1.0: always)
+CLOSURE_RATIO = 1.0
+
+
+def bisect(tm: TaggedMesh, elements, fields=(), rounds: int = 1, projector=None, max_passes: int = 200,
+           closure_ratio: float | None = None):
     """Bisect ``elements`` (indices or an (m,) bool mask) ``rounds`` times (each round bisects every
     descendant of theirs once at its longest edge; 3 rounds ≈ halving h), with closure.
 
@@ -415,7 +461,8 @@ def bisect(tm: TaggedMesh, elements, fields=(), rounds: int = 1, projector=None,
         marked = np.unique(codes[flag, longest_edge(points, tets[flag], codes[flag])])
         while True:
             points, tets, face_tag, edge_tag, flag, marked, fields, tgt, nb = _bisect_pass(
-                points, tets, face_tag, edge_tag, flag, marked, fields)
+                points, tets, face_tag, edge_tag, flag, marked, fields,
+                CLOSURE_RATIO if closure_ratio is None else closure_ratio)
             if nb == 0:
                 break
             passes += 1

@@ -139,3 +139,51 @@ def test_stl_projector_finds_the_closest_triangle_point():
         best = closest_point(tri, np.repeat(p[None], len(tri), axis=0))
         dist = np.linalg.norm(best - p, axis=1).min()
         assert np.linalg.norm(g - p) == pytest.approx(dist, rel=1e-9, abs=1e-15)
+
+
+def test_stl_sharp_edges_are_curves_and_project_onto_the_stl_edges():
+    """An STL box meshed: the mesh edges along the box's 12 edges (and only those) are tagged as
+    curves (project.stl_tagged), and a point near an edge goes onto that edge (dim 1), not onto
+    the nearer face (dim 2)."""
+    import trimesh
+
+    from flexure.geometry import Surface
+    from flexure.mesh import TET_EDGES
+    from flexure.project import StlProjector, stl_tagged
+
+    box = trimesh.creation.box((0.02, 0.01, 0.006))
+    proj = StlProjector(Surface(np.asarray(box.vertices), np.asarray(box.faces)))
+    mesh = to_quadratic(box_mesh(4, 3, 2, size=(0.02, 0.01, 0.006)))
+    mesh.points[:] -= np.array([0.01, 0.005, 0.003])
+    tm = stl_tagged(mesh, proj)
+    e, j = np.nonzero(tm.edge_tag > 0)
+    a, b = mesh.points[mesh.tets[e, TET_EDGES[j, 0]]], mesh.points[mesh.tets[e, TET_EDGES[j, 1]]]
+    half = np.array([0.01, 0.005, 0.003])
+    on_two = lambda x: (np.isclose(np.abs(x), half).sum(axis=1) >= 2)  # noqa: E731 (on a box edge)
+    assert len(e) and on_two(a).all() and on_two(b).all()
+    n_edges = len(np.unique(np.sort(np.stack([mesh.tets[e, TET_EDGES[j, 0]], mesh.tets[e, TET_EDGES[j, 1]]], 1), 1), axis=0))
+    assert n_edges == 4 * 4 + 4 * 3 + 4 * 2                                 # the box's edges, split 4, 3, 2 ways
+    p = np.array([[0.004, 0.0049, 0.0029], [0.004, 0.0049, 0.0029]])      # 0.1 mm inside, near the edge y = z = max
+    got = proj.project(p, np.array([1, 2]), np.array([1, 1]))
+    assert np.allclose(got[0], [0.004, 0.005, 0.003], atol=1e-12)
+    assert np.isclose(got[1, 1], 0.005) or np.isclose(got[1, 2], 0.003)
+    assert not np.allclose(got[1], got[0])
+
+
+def test_stl_facet_sagitta_is_the_polygon_chord_error():
+    """On a 48-gon annulus STL the facets' sagitta near the outer wall is w²/8R (w = 2R sin(π/48)), on
+    the flat caps 0 (project.StlProjector.facet_sagitta)."""
+    import trimesh
+
+    from flexure.geometry import Surface
+    from flexure.project import StlProjector
+
+    R = 0.01
+    ann = trimesh.creation.annulus(r_min=0.004, r_max=R, height=0.003, sections=48)
+    proj = StlProjector(Surface(np.asarray(ann.vertices), np.asarray(ann.faces)))
+    w = 2 * R * np.sin(np.pi / 48)
+    ang = np.linspace(0.1, 6.0, 7)
+    wall = np.column_stack([R * np.cos(ang), R * np.sin(ang), np.zeros(7)])
+    s = proj.facet_sagitta(wall)
+    assert np.allclose(s, w * w / (8 * R), rtol=0.05)
+    assert proj.facet_sagitta(np.array([[0.007, 0.0, 0.003]]))[0] == 0.0          # a flat cap
