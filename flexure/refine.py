@@ -7,16 +7,22 @@ by the parent's own (isoparametric) map at their reference points, so a child of
 reproduces its curved geometry exactly, and every nodal field handed in (a P2 solution) is
 prolongated by the parent's shape functions: the sequence of meshes and spaces is nested.
 
-Conformity (Rivara's longest-edge bisection): an edge to split is split in every element that
-contains it, and an element may only be split at its own longest edge, so the closure
+Conformity (after Rivara's longest-edge bisection): an edge to split is split in every element
+that contains it. An element holding a marked edge at least CLOSURE_RATIO of its longest edge is
+split at it (its longest marked edge); any other element holding a marked edge gets its longest edge
+marked, so the closure
 
-    element has a marked edge  ⇒  its longest edge is marked                        (to a fixpoint)
+    element has a marked edge shorter than CLOSURE_RATIO × its longest  ⇒  its longest edge is marked
 
-is applied before every pass, and passes (each bisects every element whose longest edge is marked)
-repeat until no marked edge is left. The longest edge is chosen by (length, vertex-pair code), one
-total order for all elements, so neighbours agree; the closure propagates along longest-edge paths
-and ends (edges grow along a path). Between passes the mesh has hanging nodes; after the last one
-it is conforming again (checked by ``check_conforming``).
+is applied before every pass (to a fixpoint), and passes (each bisects every element at its chosen
+marked edge) repeat until no marked edge is left. The longest edge is chosen by (length, vertex-pair
+code), one total order for all elements; the closure propagates along longest-edge paths and ends
+(edges grow along a path). Between passes the mesh has hanging nodes; after the last one it is
+conforming again (checked by ``check_conforming``). Rivara's own closure (CLOSURE_RATIO 1: split
+only at the longest edge) spreads far in 3-D, since an edge is split in all ~5 elements around it
+and each of those first at its own longest edge: 12 % of a six-spoke STL's start mesh marked
+(clustered, two rounds) made it 4.1× larger, 0.7 makes it 2.5× (three levels: 251 k against 108 k
+elements), the smallest dihedral angle after three levels 7.0° against 8.8° (tests/test_refine.py).
 
 Boundary: every element carries the geometric entity each of its faces (``face_tag`` (m,4): a
 surface tag > 0, 0 inside) and edges (``edge_tag`` (m,6): a curve tag > 0, e.g. a sharp CAD edge)
@@ -434,7 +440,7 @@ def _bisect_pass(points, tets, face_tag, edge_tag, flag, marked_codes, fields, c
 
 #: an element holding a marked edge at least this fraction of its longest edge is bisected at that edge
 #: (its longest marked one); otherwise its longest edge is marked (Rivara's closure, 1.0: always)
-CLOSURE_RATIO = 1.0
+CLOSURE_RATIO = 0.7
 
 
 def bisect(tm: TaggedMesh, elements, fields=(), rounds: int = 1, projector=None, max_passes: int = 200,

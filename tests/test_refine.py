@@ -187,3 +187,27 @@ def test_stl_facet_sagitta_is_the_polygon_chord_error():
     s = proj.facet_sagitta(wall)
     assert np.allclose(s, w * w / (8 * R), rtol=0.05)
     assert proj.facet_sagitta(np.array([[0.007, 0.0, 0.003]]))[0] == 0.0          # a flat cap
+
+
+def test_relaxed_closure_is_conforming_and_more_local_than_rivaras():
+    """bisect's closure_ratio (refine.CLOSURE_RATIO): splitting an element at a marked edge of at least
+    0.7 × its longest keeps the mesh conforming and nested, adds fewer elements than Rivara's closure
+    (ratio 1: only at the longest edge), and keeps the smallest dihedral angle within 20 % of it
+    (three levels of 12 % clustered marks on a 768-element annulus: 3419 against 6269 elements, 16.0° against 18.1°)."""
+    from flexure.mesh import element_shape_metrics
+
+    out = {}
+    for ratio in (1.0, 0.7):
+        rng = np.random.default_rng(5)
+        tm = TaggedMesh.untagged(to_quadratic(cylinder_mesh(0.004, 0.012, 0.003, 4, 16, 2)))
+        u = _quadratic(tm.mesh.points)
+        for _ in range(3):
+            c = tm.mesh.points[tm.mesh.corner_tets].mean(axis=1)
+            marks = np.argsort(np.linalg.norm(c - c[rng.integers(len(c))], axis=1))[: len(c) // 8]
+            tm, (u,), _ = bisect(tm, marks, [u], rounds=2, closure_ratio=ratio)
+            check_conforming(tm.mesh)
+            assert np.abs(u - _quadratic(tm.mesh.points)).max() < 1e-12
+        out[ratio] = (tm.mesh.n_elements,
+                      element_shape_metrics(tm.mesh.points, tm.mesh.corner_tets)["dihedral_deg"].min())
+    assert out[0.7][0] < 0.8 * out[1.0][0]
+    assert out[0.7][1] > 0.8 * out[1.0][1]
