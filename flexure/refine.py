@@ -145,36 +145,17 @@ def vertex_targets(tm: TaggedMesh):
                       np.concatenate([tags, np.repeat(tm.edge_tag[ce, cj], 2)]))
 
 
-#: bisection rounds of ``snap`` around the nodes its morph could not put on the geometry
-SETTLE_ROUNDS = 0
-
-
-def snap(tm: TaggedMesh, projector, vertices: bool = False, settle_rounds: int = SETTLE_ROUNDS) -> dict:
+def snap(tm: TaggedMesh, projector, vertices: bool = False) -> dict:
     """Put the first mesh on the true geometry (in place; ``morph``): every mid-edge node on a
     tagged curve or surface (isoparametric P2), and with ``vertices`` the boundary vertices too (a
     mesher that places them off the true surface, e.g. gmsh's re-parametrised STL patches; the mid
     nodes of their edges are then projected from between their moved ends). Nodes whose move would
-    still fold an element (a mid node moved by δ toward the far side of an element of height h folds
-    it as δ → h/4: a chord on a concave fillet, into the part) have their elements bisected, then are
-    moved again (``bisect``: the children's δ/h falls with their size), ``settle_rounds`` times at most;
-    any left become ``pending``. So every level solves on the same domain, the STL's (measured on a
-    six-spoke designer STL: 63 nodes left partly moved by the morph alone, finished only at later
-    levels)."""
+    still fold an element become ``pending`` (a mid node moved by δ toward the far side of an element
+    of height h folds it as δ → h/4: a chord on a concave fillet, moved into the part, over a flat
+    element along it; bisecting those elements makes new such nodes rather than fewer)."""
     info = morph(tm, projector, vertices)
-    info["settle_bisections"] = 0
-    for _ in range(settle_rounds):
-        if len(tm.pending[0]) == 0:
-            break
-        near = np.flatnonzero(np.isin(tm.mesh.tets, tm.pending[0]).any(axis=1))
-        out, _, binfo = bisect(tm, near, rounds=1, projector=projector)
-        tm.mesh, tm.face_tag, tm.edge_tag, tm.pending = out.mesh, out.face_tag, out.edge_tag, out.pending
-        info["settle_bisections"] += binfo["bisections"]
     info["pending"] = int(len(tm.pending[0]))
     return info
-
-
-#: the morph's stiffening exponent χ: element weights (V_max / V_e)^χ (``_graph_laplacian``)
-STIFFENING = 1.0
 
 
 def _graph_laplacian(tets: np.ndarray, n: int, points: np.ndarray | None = None, chi: float = STIFFENING):
@@ -293,6 +274,76 @@ def morph(tm: TaggedMesh, projector, vertices: bool = False, tries: int = 8,
     return info
 
 
+#: ``morph_local`` leaves no element below this smallest dihedral angle that was not already (slivers.SLIVER_DEG)
+MORPH_MIN_DIHEDRAL_DEG = 10.0
+
+
+def morph_local(mesh: Mesh, nodes, dims, tags, projector, rings: int = 2, tries: int = 6,
+                min_scaled_jacobian: float | None = None) -> dict:
+    """``morph`` on a patch: move boundary ``nodes`` onto their curve or surface and the interior nodes
+    of the elements within ``rings`` element layers of them by the (stiffened) harmonic extension of
+    that move, the patch's outer nodes held (in place). For the nodes a refinement left off the
+    geometry (``bisect``): moved alone they fold their elements where the interior does not follow.
+    → {"projected", "pending": (nodes, dims, tags)}"""
+    from scipy.sparse.linalg import splu
+
+    nodes, dims, tags = (np.asarray(a, np.int64) for a in (nodes, dims, tags))
+    msj = MIN_SCALED_JACOBIAN if min_scaled_jacobian is None else min_scaled_jacobian
+    if len(nodes) == 0:
+        return {"projected": 0, "pending": (nodes, dims, tags)}
+    t = mesh.tets
+    X0 = mesh.points.copy()
+    target = np.asarray(projector.project(X0[nodes], dims, tags), float)
+    ok = np.isfinite(target).all(axis=1)
+    target[~ok] = X0[nodes[~ok]]
+    dB = target - X0[nodes]
+    inside = np.zeros(mesh.n_nodes, bool)
+    inside[nodes] = True
+    for _ in range(rings + 1):
+        patch = inside[t].any(axis=1)
+        inside[t[patch]] = True
+    patch = np.flatnonzero(inside[t].any(axis=1) & inside[t].all(axis=1) | np.isin(t, nodes).any(axis=1))
+    pn = np.unique(t[patch])
+    outer = np.zeros(mesh.n_nodes, bool)
+    outer[t[np.setdiff1d(np.arange(len(t)), patch)]] = True                # shared with elements outside
+    outer[mesh.boundary_nodes()] = True
+    free = pn[~outer[pn]]
+    held = pn[outer[pn]]
+    loc = np.full(mesh.n_nodes, -1, np.int64)
+    loc[pn] = np.arange(len(pn))
+    L = _graph_laplacian(loc[t[patch]], len(pn), X0[pn]).tocsc()
+    fi, hi = loc[free], loc[held]
+    LII = splu(L[fi][:, fi].tocsc()) if len(free) else None
+    LIB = L[fi][:, hi]
+    from flexure.mesh import element_shape_metrics
+
+    angle = lambda: element_shape_metrics(mesh.points, t[patch, :4])["dihedral_deg"].min(axis=1)  # noqa: E731
+    before = _straight_det(X0[t[patch, :4]])
+    floor = np.minimum(angle(), MORPH_MIN_DIHEDRAL_DEG)       # no element made a sliver by the move
+    beta = np.ones(len(nodes))
+    where = np.full(mesh.n_nodes, -1, np.int64)
+    where[nodes] = np.arange(len(nodes))
+    for k in range(tries + 1):
+        D = np.zeros((mesh.n_nodes, 3))
+        D[nodes] = beta[:, None] * dB
+        if LII is not None:
+            D[free] = LII.solve(-(LIB @ D[held]))
+        mesh.points[pn] = X0[pn] + D[pn]
+        good = element_valid(mesh, patch, msj) & (_straight_det(mesh.points[t[patch, :4]]) >= MIN_VOLUME_SHARE * before)
+        good &= angle() >= floor - 1e-9
+        if good.all():
+            break
+        back = where[np.unique(t[patch[~good]])]
+        back = back[back >= 0]
+        if len(back) == 0:
+            beta[:] = 0.0
+            continue
+        beta[back] = 0.0 if k >= tries - 1 else 0.5 * beta[back]
+    mesh._cache.clear()
+    left = (beta < 1.0) & np.any(dB != 0, axis=1)
+    return {"projected": int((~left).sum()), "pending": (nodes[left], dims[left], tags[left])}
+
+
 def boundary_geometry_error(tm: TaggedMesh, projector):
     """Geometric error of the isoparametric P2 boundary, per boundary edge (a mid node on a tagged
     curve or surface): δ = the larger distance of its two quarter points x(¼), x(¾) (the P2 edge
@@ -345,10 +396,23 @@ def _bisect_pass(points, tets, face_tag, edge_tag, flag, marked_codes, fields, c
     lo, hi = uc >> 32, uc & 0xFFFFFFFF
     L = np.linalg.norm(points[hi] - points[lo], axis=1)[eid]                 # (m,6) edge lengths
     Lmax = L[rows, le]
+    corner = points[tets[:, :4]]
+    q_cache = {}                                  # (element, edge) → children's smallest dihedral angle
     while True:                                   # closure to a fixpoint
         Lm = np.where(mk, L, -1.0)
         cand = Lm.argmax(axis=1)
-        chosen = np.where(mk[rows, le] | (Lm[rows, cand] < closure_ratio * Lmax), le, cand)
+        alt = ~mk[rows, le] & (Lm[rows, cand] >= closure_ratio * Lmax)
+        if alt.any():                             # a shorter marked edge only where its children are as good
+            at = np.flatnonzero(alt)
+            key = at * 6 + cand[at]
+            new = np.array([k not in q_cache for k in key.tolist()], bool)
+            if new.any():
+                qa = _children_min_dihedral(corner[at[new]], cand[at[new]])
+                ql = _children_min_dihedral(corner[at[new]], le[at[new]])
+                ok = qa >= np.minimum(ql, QUALITY_FLOOR_DEG)
+                q_cache.update(zip(key[new].tolist(), ok.tolist()))
+            alt[at] = np.array([q_cache[k] for k in key.tolist()], bool)
+        chosen = np.where(alt, cand, le)
         need = mk.any(axis=1) & ~mk[rows, chosen]
         if not need.any():
             break
@@ -439,8 +503,27 @@ def _bisect_pass(points, tets, face_tag, edge_tag, flag, marked_codes, fields, c
 
 
 #: an element holding a marked edge at least this fraction of its longest edge is bisected at that edge
-#: (its longest marked one); otherwise its longest edge is marked (Rivara's closure, 1.0: always)
+#: (its longest marked one) if its children are as good as its longest edge's (``QUALITY_FLOOR_DEG``);
+#: otherwise its longest edge is marked (Rivara's closure, 1.0: always)
 CLOSURE_RATIO = 0.7
+#: ... as good: their smallest dihedral angle at least the longest-edge children's, or this
+QUALITY_FLOOR_DEG = 12.0
+
+
+def _children_min_dihedral(X4: np.ndarray, edge: np.ndarray) -> np.ndarray:
+    """Smallest dihedral angle (k,) of the two children of tetrahedra X4 (k,4,3) bisected at local edge
+    ``edge`` (k,) (TET_EDGES order)."""
+    from flexure.mesh import element_shape_metrics
+
+    r = np.arange(len(X4))
+    i, j = TET_EDGES[edge, 0], TET_EDGES[edge, 1]
+    m = 0.5 * (X4[r, i] + X4[r, j])
+    c1, c2 = X4.copy(), X4.copy()
+    c1[r, j], c2[r, i] = m, m
+    pts = np.vstack([c1, c2]).reshape(-1, 3)
+    tets = np.arange(len(pts)).reshape(-1, 4)
+    d = element_shape_metrics(pts, tets)["dihedral_deg"].min(axis=1)
+    return np.minimum(d[: len(X4)], d[len(X4):])
 
 
 def bisect(tm: TaggedMesh, elements, fields=(), rounds: int = 1, projector=None, max_passes: int = 200,
@@ -486,6 +569,10 @@ def bisect(tm: TaggedMesh, elements, fields=(), rounds: int = 1, projector=None,
                                          zip(tm.pending, (moved_nodes, moved_dim, moved_tag))])
         info.update(project_nodes(out.mesh, nodes, dims, tags, projector))
         out.pending = info.pop("pending")
+        if len(out.pending[0]):           # those left: moved again with the interior around them following
+            settled = morph_local(out.mesh, *out.pending, projector)
+            info["projected_by_morph"] = settled["projected"]
+            out.pending = settled["pending"]
     if projector is not None:
         info["straightened"] = straighten_invalid(out)
     return out, fields, info
@@ -544,12 +631,17 @@ def project_nodes(mesh: Mesh, nodes, dims, tags, projector, min_scaled_jacobian:
     where[nodes] = np.arange(len(nodes))
     touched = np.flatnonzero((where[mesh.tets] >= 0).any(axis=1))
     before = _straight_det(mesh.points[mesh.tets[touched, :4]])
+    from flexure.mesh import element_shape_metrics
+
+    angle = lambda: element_shape_metrics(mesh.points, mesh.tets[touched, :4])["dihedral_deg"].min(axis=1)  # noqa: E731
+    floor = np.minimum(angle(), MORPH_MIN_DIHEDRAL_DEG)
     for k in range(tries + 1):
         mesh.points[nodes] = old + beta[:, None] * (new - old)
         # valid, and not flattened: a move of vertices may not take a straight det below MIN_VOLUME_SHARE of
-        # its value before (four vertices put on one flat facet make a tet of zero volume)
+        # its value before (four vertices put on one flat facet make a tet of zero volume), nor make a sliver
         ok = element_valid(mesh, touched, min_scaled_jacobian)
         ok &= _straight_det(mesh.points[mesh.tets[touched, :4]]) >= MIN_VOLUME_SHARE * before
+        ok &= angle() >= floor - 1e-9
         bad = touched[~ok]
         if len(bad) == 0:
             break
