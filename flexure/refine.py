@@ -158,6 +158,10 @@ def snap(tm: TaggedMesh, projector, vertices: bool = False) -> dict:
     return info
 
 
+#: the morph's stiffening exponent χ: element weights (V_max / V_e)^χ (``_graph_laplacian``)
+STIFFENING = 1.0
+
+
 def _graph_laplacian(tets: np.ndarray, n: int, points: np.ndarray | None = None, chi: float = STIFFENING):
     """Graph Laplacian (n,n) of the P2 nodes, every pair of nodes of an element linked. With ``points``,
     each element's links weigh (V_max / V_e)^χ, summed over the elements that share them (Jacobian-based
