@@ -287,7 +287,11 @@ def _geometry_marks(tm, projector, rtol: float):
     """The geometry criterion: elements with a boundary edge whose isoparametric P2 curve is off the
     true surface by δ > GEOMETRY_SHARE · rtol · R (R its radius of curvature from the sagitta:
     refinement.boundary_geometry_error); a boundary moved by δ over a feature of size R changes
-    the goals by about δ/R, an error the residuals cannot see. → (elements, summary)"""
+    the goals by about δ/R, an error the residuals cannot see. On an STL, δ up to the facets' own
+    sagitta there (StlProjector.facet_sagitta, wφ/8) is facetting, not geometry: every fold between
+    facets looks like curvature, and a smooth P2 edge through points on them is off them by up to that
+    at any mesh size (six_spoke_thick: 2447 of 3125 such edges at the first level, its 0.6 mm fillets'
+    facets 8 µm off their circle). → (elements, summary)"""
     from flexure.refine import boundary_geometry_error
 
     if projector is None:
