@@ -290,7 +290,7 @@ def _geometry_marks(tm, projector, rtol: float):
     the goals by about δ/R, an error the residuals cannot see. On an STL, δ up to the facets' own
     sagitta there (StlProjector.facet_sagitta, wφ/8) is facetting, not geometry: every fold between
     facets looks like curvature, and a smooth P2 edge through points on them is off them by up to that
-    at any mesh size (six_spoke_thick: 2447 of 3125 such edges at the first level, its 0.6 mm fillets'
+    at any mesh size (six_spoke_thick: 2447 of 3253 edges over the threshold at the first level, its 0.6 mm fillets'
     facets 8 µm off their circle). → (elements, summary)"""
     from flexure.refine import boundary_geometry_error
 
