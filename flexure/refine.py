@@ -282,6 +282,17 @@ def morph(tm: TaggedMesh, projector, vertices: bool = False, tries: int = 8,
 MORPH_MIN_DIHEDRAL_DEG = 10.0
 
 
+def _angle_floor(before_deg: np.ndarray) -> np.ndarray:
+    """The smallest dihedral angle a move may leave each element: MORPH_MIN_DIHEDRAL_DEG, or for one
+    already below it, its own less ANGLE_SLACK_DEG (a move need not improve a poor element, only not
+    make it much worse)."""
+    return np.where(before_deg >= MORPH_MIN_DIHEDRAL_DEG, MORPH_MIN_DIHEDRAL_DEG, before_deg - ANGLE_SLACK_DEG)
+
+
+#: how much a move may lower the smallest dihedral angle of an element already below MORPH_MIN_DIHEDRAL_DEG
+ANGLE_SLACK_DEG = 0.5
+
+
 def morph_local(mesh: Mesh, nodes, dims, tags, projector, rings: int = 2, tries: int = 6,
                 min_scaled_jacobian: float | None = None) -> dict:
     """``morph`` on a patch: move boundary ``nodes`` onto their curve or surface and the interior nodes
@@ -323,7 +334,7 @@ def morph_local(mesh: Mesh, nodes, dims, tags, projector, rings: int = 2, tries:
 
     angle = lambda: element_shape_metrics(mesh.points, t[patch, :4])["dihedral_deg"].min(axis=1)  # noqa: E731
     before = _straight_det(X0[t[patch, :4]])
-    floor = np.minimum(angle(), MORPH_MIN_DIHEDRAL_DEG)       # no element made a sliver by the move
+    floor = _angle_floor(angle())                             # no element made a sliver by the move
     beta = np.ones(len(nodes))
     where = np.full(mesh.n_nodes, -1, np.int64)
     where[nodes] = np.arange(len(nodes))
@@ -638,7 +649,7 @@ def project_nodes(mesh: Mesh, nodes, dims, tags, projector, min_scaled_jacobian:
     from flexure.mesh import element_shape_metrics
 
     angle = lambda: element_shape_metrics(mesh.points, mesh.tets[touched, :4])["dihedral_deg"].min(axis=1)  # noqa: E731
-    floor = np.minimum(angle(), MORPH_MIN_DIHEDRAL_DEG)
+    floor = _angle_floor(angle())
     for k in range(tries + 1):
         mesh.points[nodes] = old + beta[:, None] * (new - old)
         # valid, and not flattened: a move of vertices may not take a straight det below MIN_VOLUME_SHARE of

@@ -211,3 +211,30 @@ def test_relaxed_closure_is_conforming_and_more_local_than_rivaras():
                       element_shape_metrics(tm.mesh.points, tm.mesh.corner_tets)["dihedral_deg"].min())
     assert out[0.7][0] < 0.8 * out[1.0][0]
     assert out[0.7][1] > 0.8 * out[1.0][1]
+
+
+def test_morph_local_puts_nodes_on_the_surface_with_the_interior_following():
+    """refine.morph_local (the second chance of bisect's projection): the outer mid nodes of a hollow
+    cylinder, put back on their chords, go onto r = R; interior nodes within two layers move with
+    them (harmonic extension), no element folds and none gets a new sliver."""
+    from flexure.mesh import TET_EDGES, TET_FACES, element_shape_metrics
+    from flexure.refine import _boundary_face_mask, mid_node_targets, morph_local
+
+    R = 1.0
+    mesh = to_quadratic(cylinder_mesh(0.5, R, 0.3, 3, 8, 2, order=1))
+    tm = TaggedMesh.untagged(mesh)
+    outer = np.hypot(*mesh.points[mesh.corner_tets][:, :, :2].transpose(2, 0, 1))[:, TET_FACES].min(axis=2) > R - 1e-9
+    tm.face_tag[_boundary_face_mask(mesh) & outer] = 1
+    t = mesh.tets
+    for j, (a, b) in enumerate(TET_EDGES.tolist()):
+        mesh.points[t[:, 4 + j]] = 0.5 * (mesh.points[t[:, a]] + mesh.points[t[:, b]])
+    before = mesh.points.copy()
+    angle0 = element_shape_metrics(mesh.points, mesh.corner_tets)["dihedral_deg"].min()
+    nodes, dims, tags = mid_node_targets(tm)
+    out = morph_local(mesh, nodes, dims, tags, _Cylinder(R))
+    assert out["projected"] == len(nodes) > 20 and len(out["pending"][0]) == 0
+    assert np.abs(np.hypot(mesh.points[nodes, 0], mesh.points[nodes, 1]) - R).max() < 1e-12
+    interior = np.setdiff1d(np.arange(mesh.n_nodes), mesh.boundary_nodes())
+    assert (np.linalg.norm(mesh.points[interior] - before[interior], axis=1) > 0).sum() > 10
+    assert quality(mesh)["n_inverted"] == 0
+    assert element_shape_metrics(mesh.points, mesh.corner_tets)["dihedral_deg"].min() >= min(angle0, 10.0) - 0.5
