@@ -89,6 +89,17 @@ def _size_field(gmsh, field, spots=None) -> None:
             h = min(h, float((spots[:, 3] + g * d).min()))
         return h
 
+    from flexure import gmsh_size
+
+    fast = gmsh_size.kernel()               # the same formula compiled (flexure.gmsh_size): µs a call
+    if fast is not None:
+        prm = np.array([h1, h0, r0, g], float)
+        cc, ee = np.ascontiguousarray(c, float), gmsh_size.pack_edges(e0, ev, ev2, he)
+        ss = np.ascontiguousarray(spots, float)
+
+        def size(dim, tag, x, y, z, lc):    # noqa: F811 (the numpy form above is the reference)
+            return fast(x, y, z, lc, prm, cc, ee, ss)
+
     gmsh.model.mesh.setSizeCallback(_INTERRUPT.wrap(size, 0.0))   # Ctrl-C: size 0 stops gmsh
     gmsh.option.setNumber("Mesh.LcIntegrationPrecision", LC_INTEGRATION_PRECISION)
     gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexure.mesh import TET_FACES, Mesh
+from flexure.mesh import TET_EDGES, TET_FACES, Mesh
 from flexure.refine import TaggedMesh, edge_codes
 
 MM = 1e3
@@ -77,6 +77,54 @@ class CadProjector:
         return out
 
 
+def stl_tagged(mesh: Mesh, projector: "StlProjector | None" = None, feature_deg: float = 40.0) -> TaggedMesh:
+    """An STL part's TaggedMesh: every boundary face on surface 1, and every boundary edge where the
+    mesh's two boundary faces fold by more than ``feature_deg`` (a sharp edge of the part, as the
+    STL's: meshing.EDGE_ANGLE_DEG, gmsh's classification angle) on curve 1, so that its mid node and
+    the nodes bisection puts on it go onto the STL's sharp-edge polyline (``StlProjector``, dim 1)
+    rather than onto the nearer of the two faces: a chord across a faceted convex corner (a fillet
+    meeting a cap) has its midpoint inside the part, nearer to either face than to the corner, and
+    projected onto a face its P2 edge bows sideways (measured on a six-spoke designer STL: 33 mid
+    nodes there could not be moved without folding an element)."""
+    from flexure.refine import _boundary_face_mask
+
+    tm = TaggedMesh.boundary_tagged(mesh)
+    e, f = np.nonzero(_boundary_face_mask(mesh))
+    if len(e) == 0:
+        return tm
+    tri = mesh.corner_tets[e[:, None], TET_FACES[f]].astype(np.int64)          # (k,3)
+    x = mesh.points[tri]
+    nrm = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
+    away = x.mean(axis=1) - mesh.points[mesh.corner_tets[e, f]]                   # from the opposite vertex: outward
+    nrm *= np.sign(np.einsum("ki,ki->k", nrm, away))[:, None]
+    nrm /= np.maximum(np.linalg.norm(nrm, axis=1), 1e-300)[:, None]
+    n = np.int64(mesh.n_nodes)
+    ends = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    code = np.minimum(ends[:, 0], ends[:, 1]) * n + np.maximum(ends[:, 0], ends[:, 1])
+    face = np.tile(np.arange(len(tri)), 3)
+    order = np.argsort(code, kind="stable")
+    code, face = code[order], face[order]
+    pair = np.flatnonzero(code[1:] == code[:-1])                                  # an edge's two faces
+    cos = np.einsum("ki,ki->k", nrm[face[pair]], nrm[face[pair + 1]])
+    fold = pair[cos < np.cos(np.deg2rad(feature_deg))]
+    if projector is not None and len(fold):
+        # ... and only where the STL has a sharp edge: both ends within a quarter of the edge's length
+        # of its sharp-edge polylines (a coarse mesh also folds across a tight fillet, which is a face)
+        lo, hi = code[fold] // n, code[fold] % n
+        L = np.linalg.norm(mesh.points[hi] - mesh.points[lo], axis=1)
+        ends = np.concatenate([lo, hi])
+        off = np.linalg.norm(projector.project_on_edges(mesh.points[ends]) - mesh.points[ends], axis=1)
+        fold = fold[(off.reshape(2, -1) <= 0.25 * L).all(axis=0)]
+    sharp = np.unique(code[fold])
+    if len(sharp) == 0:
+        return tm
+    a, b = mesh.corner_tets[:, TET_EDGES[:, 0]].astype(np.int64), mesh.corner_tets[:, TET_EDGES[:, 1]].astype(np.int64)
+    ecode = np.minimum(a, b) * n + np.maximum(a, b)
+    at = np.minimum(np.searchsorted(sharp, ecode), len(sharp) - 1)
+    tm.edge_tag[sharp[at] == ecode] = 1
+    return tm
+
+
 class StlProjector:
     """Closest points on a closed triangulation (``geometry.Surface``): candidates from a KD-tree of
     points sampled on every triangle (no farther apart than ``spacing`` × the median edge), then the
@@ -90,7 +138,7 @@ class StlProjector:
 
     snap_vertices = True
 
-    def __init__(self, surface, spacing: float = 0.5, candidates: int = 24):
+    def __init__(self, surface, spacing: float = 0.5, candidates: int = 24, feature_deg: float = 40.0):
         from scipy.spatial import cKDTree
 
         self.tri = surface.points[surface.faces]                           # (f,3,3)
@@ -111,9 +159,20 @@ class StlProjector:
         self.owner = np.concatenate(owner)
         self.tree = cKDTree(np.vstack(pts))
         self.candidates = candidates
+        self._edges = None
+        self.feature_deg = feature_deg
+        self.surface = surface
 
     def project(self, points: np.ndarray, dim=None, tag=None) -> np.ndarray:
+        """Closest points on the STL's triangles; those of ``dim`` 1 (a sharp edge, ``stl_tagged``)
+        on its sharp-edge polylines instead (folds above ``feature_deg``), where it has any."""
         points = np.asarray(points, float)
+        if dim is not None and len(points) and np.any(np.asarray(dim) == 1):
+            on_curve = np.asarray(dim) == 1
+            out = np.empty_like(points)
+            out[~on_curve] = self.project(points[~on_curve])
+            out[on_curve] = self.project_on_edges(points[on_curve])
+            return out
         if len(points) == 0:
             return points.copy()
         c = min(self.candidates, self.tree.n)
@@ -125,6 +184,58 @@ class StlProjector:
         for i in np.flatnonzero(ds[:, -1] < d + self.gap):
             near = self.tree.query_ball_point(points[i], d[i] + self.gap)
             cp[i], d[i] = (a[0] for a in self._closest(points[i:i + 1], np.unique(self.owner[near])[None]))
+        return cp
+
+    def facet_sagitta(self, points: np.ndarray) -> np.ndarray:
+        """The STL's own chord error near each point (k,) m: s = w φ / 8 over the folds of the facet
+        nearest to it that are gentler than ``feature_deg`` (φ the fold angle, w the facets' mean width
+        across it: a polygon of facets of width w on a circle of radius R = w/φ is off the circle by
+        w²/8R), the largest of its three; 0 on a flat facet. A smooth curve through points on the
+        facets (a P2 edge) is off them by up to about s however fine the mesh: below it the facets
+        cannot tell geometry from facetting."""
+        if getattr(self, "_sag", None) is None:
+            import trimesh
+
+            tm = trimesh.Trimesh(self.surface.points, self.surface.faces, process=False)
+            phi = tm.face_adjacency_angles
+            L = np.linalg.norm(np.diff(self.surface.points[tm.face_adjacency_edges], axis=1)[:, 0], axis=1)
+            w = tm.area_faces[tm.face_adjacency].sum(axis=1) / np.maximum(L, 1e-300)
+            s = np.where(phi < np.deg2rad(self.feature_deg), w * phi / 8.0, 0.0)
+            self._sag = np.zeros(len(self.surface.faces))
+            np.maximum.at(self._sag, tm.face_adjacency[:, 0], s)
+            np.maximum.at(self._sag, tm.face_adjacency[:, 1], s)
+        points = np.asarray(points, float)
+        if len(points) == 0:
+            return np.zeros(0)
+        _, idx = self.tree.query(points, k=1)
+        return self._sag[self.owner[np.asarray(idx).ravel()]]
+
+    def project_on_edges(self, points: np.ndarray) -> np.ndarray:
+        """Closest points on the STL's sharp edges (segments where its facets fold by more than
+        ``feature_deg``): candidates from a KD-tree of the segments' midpoints, certified by a ball
+        query of radius d + half the longest segment; the STL's triangles where it has none."""
+        from scipy.spatial import cKDTree
+
+        if self._edges is None:
+            import trimesh
+
+            tm = trimesh.Trimesh(self.surface.points, self.surface.faces, process=False)
+            sharp = tm.face_adjacency_angles > np.deg2rad(self.feature_deg)
+            seg = self.surface.points[tm.face_adjacency_edges[sharp]]                      # (s,2,3)
+            self._edges = (seg, cKDTree(seg.mean(axis=1)) if len(seg) else None,
+                           0.5 * float(np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1).max(initial=0.0)))
+        seg, tree, half = self._edges
+        points = np.asarray(points, float)
+        if tree is None or len(points) == 0:
+            return self.project(points)
+        c = min(8, len(seg))
+        _, idx = tree.query(points, k=c)
+        idx = idx.reshape(len(points), c)
+        cp, d = _closest_on_segments(points, seg[idx])
+        for i in range(len(points)):                  # certified: every segment whose midpoint is within d + half
+            near = tree.query_ball_point(points[i], d[i] + half)
+            if len(near) > c or not np.isin(near, idx[i]).all():
+                cp[i], d[i] = (a[0] for a in _closest_on_segments(points[i:i + 1], seg[np.asarray(near)][None]))
         return cp
 
     def _closest(self, points, cand):
@@ -140,4 +251,15 @@ class StlProjector:
         return cp[r, j], d[r, j]
 
 
-__all__ = ["classify", "CadProjector", "StlProjector"]
+def _closest_on_segments(points: np.ndarray, seg: np.ndarray):
+    """Closest points (k,3) and distances (k,) of ``points`` (k,3) on their candidate segments (k,c,2,3)."""
+    a, ab = seg[:, :, 0], seg[:, :, 1] - seg[:, :, 0]
+    t = np.einsum("kci,kci->kc", points[:, None] - a, ab) / np.maximum(np.einsum("kci,kci->kc", ab, ab), 1e-300)
+    q = a + np.clip(t, 0.0, 1.0)[..., None] * ab
+    d = np.linalg.norm(q - points[:, None], axis=2)
+    j = d.argmin(axis=1)
+    r = np.arange(len(points))
+    return q[r, j], d[r, j]
+
+
+__all__ = ["classify", "stl_tagged", "CadProjector", "StlProjector"]

@@ -47,8 +47,34 @@ def point_triangle_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.n
 
 def distance_to_surface(points: np.ndarray, surf_points: np.ndarray, faces: np.ndarray, tol: float) -> np.ndarray:
     """Distance of each point to the triangulation (surf_points, faces): exact where ≤ ``tol``,
-    inf where farther (module docstring)."""
+    inf where farther (module docstring). Searched at growing tolerances, from the median edge of the
+    triangulation up to ``tol`` (× GROWTH each time), each pass only for the points the last left at
+    inf: a grid binned at a tolerance far above the triangles' size puts most of them in every cell
+    (a re-meshed designer STL checked at 6 mm: 63 M point–triangle pairs, 20 CPU-s per attempt,
+    where nearly every vertex is within 0.1 mm of the other surface)."""
     points, x = np.asarray(points, float), np.asarray(surf_points, float)[np.asarray(faces)]
+    out = np.full(len(points), np.inf)
+    if len(points) == 0 or len(x) == 0:
+        return out
+    step = float(np.median(np.linalg.norm(x - x[:, [1, 2, 0]], axis=2)))
+    left = np.arange(len(points))
+    while len(left):
+        step = min(step, tol)
+        d = _distance_within(points[left], x, step)
+        out[left] = d
+        if step >= tol:
+            break
+        left = left[~np.isfinite(d)]
+        step *= GROWTH
+    return out
+
+
+#: the search tolerance's growth between passes of ``distance_to_surface``
+GROWTH = 4.0
+
+
+def _distance_within(points: np.ndarray, x: np.ndarray, tol: float) -> np.ndarray:
+    """``distance_to_surface`` at one tolerance: triangles x (f,3,3) binned by their grown boxes."""
     lo, hi = x.min(1) - tol, x.max(1) + tol
     origin = np.minimum(lo.min(0), points.min(0))
     cell = max(float(np.median((hi - lo).max(1))), 1e-12)

@@ -143,6 +143,52 @@ def test_surface_distance_is_exact_within_its_tolerance():
     assert np.allclose(d[near], brute[near], atol=1e-12) and np.isinf(d[~near]).all()
 
 
+def test_surface_distance_at_a_tolerance_far_above_the_facets_is_exact():
+    """Searched at growing tolerances (flexure.surface_distance): a tolerance 10× the facets still
+    gives brute force's distance to every point within it, inf beyond."""
+    tm = thin_tube(6.0, 0.8, 4.0, res=8)
+    pts, faces = np.asarray(tm.vertices), np.asarray(tm.faces)
+    rng = np.random.default_rng(2)
+    q = pts[rng.integers(0, len(pts), 300)] + rng.normal(0.0, 3.0, (300, 3))
+    x = pts[faces]
+    brute = np.array([point_triangle_distance(np.repeat(p[None], len(x), 0), x[:, 0], x[:, 1], x[:, 2]).min()
+                      for p in q])
+    d = distance_to_surface(q, pts, faces, 4.0)
+    near = brute <= 4.0
+    assert near.sum() > 100 and (~near).sum() > 5 and (brute[near] > 1.0).sum() > 20
+    assert np.allclose(d[near], brute[near], atol=1e-12) and np.isinf(d[~near]).all()
+
+
+def test_compiled_size_callback_equals_its_numpy_form(monkeypatch):
+    """gmsh's size callback (gmsh_mesh._size_field) gives the same size compiled (flexure.gmsh_size)
+    as in numpy, with gauges, re-entrant edges and spots."""
+    from estimator import compiled
+    from flexure import gmsh_size
+
+    if gmsh_size.kernel() is None:
+        pytest.skip("numba not installed")
+    rng = np.random.default_rng(3)
+    field = SizeField(4e-3, 0.5e-3, rng.uniform(-0.01, 0.01, (3, 3)), 1e-3, grading=0.6,
+                      edges=rng.uniform(-0.01, 0.01, (7, 2, 3)), h_edge=rng.uniform(0.5e-3, 2e-3, 7),
+                      spots=np.column_stack([rng.uniform(-0.01, 0.01, (50, 3)), rng.uniform(0.2e-3, 3e-3, 50)]))
+
+    class Fake:                                    # records the callback gmsh would be given
+        def __init__(self):
+            self.model = type("M", (), {})()
+            self.model.mesh = type("MM", (), {"setSizeCallback": lambda _, cb: setattr(self, "cb", cb)})()
+            self.option = type("O", (), {"setNumber": lambda *a: None})()
+
+    at = rng.uniform(-12, 12, (400, 3)).tolist()            # mm
+    lcs = rng.choice([0.7, 1e22], 400).tolist()
+    got = {}
+    for enabled in (True, False):
+        monkeypatch.setattr(compiled, "ENABLED", enabled)
+        g = Fake()
+        gmsh_mesh._size_field(g, field, spots=np.array([[1.0, 2.0, 0.5, 0.3]]))
+        got[enabled] = [g.cb(3, 1, *p, lc) for p, lc in zip(at, lcs)]
+    assert np.allclose(got[True], got[False], rtol=1e-12, atol=0) and len(set(np.round(got[True], 6))) > 50
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("part, h_mm", [
     ("six-spoke disc", 1.0),           # direct: 0.23°, 95 below 10°; re-parametrised 16.2°
