@@ -294,14 +294,18 @@ def analyze_with_error(design, size: str | None = None, order: int | None = None
     return res, fields
 
 
+#: the error method a design is analysed with unless one is asked for (``analyze_design``)
+DEFAULT_METHOD = "adaptive"
+
+
 def analyze_design(design, size: str | None = None, order: int | None = None, rtol: float | None = None,
-                   method: str = "levels", max_dofs: int | None = None, max_memory_gb: float | None = None,
+                   method: str | None = None, max_dofs: int | None = None, max_memory_gb: float | None = None,
                    progress: bool = False, max_elements: float | None = None):
-    """The analysis with its discretisation error estimates, by ``method``: "levels" (this module's
-    Richardson over gmsh mesh levels; the default) or "adaptive" (goal-oriented estimates on nested,
-    locally refined meshes, flexure.adaptive; opt-in: its effectivity is not yet established on
-    unseen parts, reports/fem_adaptive.md). P1 (order 1) always uses the levels (the refinement
-    works on P2 meshes), and says so. → (results, Fields)."""
+    """The analysis with its discretisation error estimates, by ``method`` (default DEFAULT_METHOD):
+    "adaptive" (goal-oriented estimates on nested, locally refined meshes, flexure.adaptive) or
+    "levels" (this module's Richardson over gmsh mesh levels, the cross-check). P1 (order 1) always
+    uses the levels (the refinement works on P2 meshes), and says so. → (results, Fields)."""
+    method = method or DEFAULT_METHOD
     eff_order = order or design.order
     if method == "adaptive" and eff_order != 2:
         res, fields = analyze_with_error(design, size, order, rtol, max_dofs=max_dofs or MAX_DOFS,
@@ -324,7 +328,7 @@ def analyze_design(design, size: str | None = None, order: int | None = None, rt
 
 
 def design_figures(path, overrides: dict | None = None, size: str | None = None, order: int | None = None,
-                   rtol: float | None = None, method: str = "levels") -> dict:
+                   rtol: float | None = None, method: str | None = None) -> dict:
     """For the pipeline: a design file (+ overrides) → gauge strain per N·m, torsional stiffness,
     safety factor, sensitivity, each with ``_error_estimate``/``_error_method``; the minimum
     detectable torque (1σ bridge noise; its relative error is the gauge strain's) and the largest

@@ -128,9 +128,9 @@ def test_order_1_falls_back_to_the_levels_and_says_so(tmp_path, monkeypatch):
     assert called["order"] == 1 and any("adaptive refinement works on order 2" in w for w in res["warnings"])
 
 
-def test_levels_are_the_default_and_adaptive_is_opt_in(tmp_path, monkeypatch):
-    """analyze_design: no method → the levels (adaptive's effectivity is not yet established on
-    unseen parts, reports/fem_adaptive.md); "adaptive" → flexure.adaptive; anything else → InputError."""
+def test_adaptive_is_the_default_and_the_levels_are_asked_for(tmp_path, monkeypatch):
+    """analyze_design: no method → flexure.adaptive (DEFAULT_METHOD); "levels" → the levels'
+    Richardson (the cross-check); anything else → InputError."""
     from flexure import convergence
     from userio.errors import InputError
 
@@ -140,9 +140,9 @@ def test_levels_are_the_default_and_adaptive_is_opt_in(tmp_path, monkeypatch):
                                                                            ({"warnings": []}, None)))
     monkeypatch.setattr(adaptive, "analyze_adaptive", lambda *a, **kw: (calls.append("adaptive") or
                                                                         ({"warnings": []}, None)))
-    assert convergence.analyze_design(d, order=2)[0]["error_method"] == "levels"
-    convergence.analyze_design(d, order=2, method="adaptive")
-    assert calls == ["levels", "adaptive"]
+    convergence.analyze_design(d, order=2)
+    assert convergence.analyze_design(d, order=2, method="levels")[0]["error_method"] == "levels"
+    assert calls == ["adaptive", "levels"]
     with pytest.raises(InputError, match="error method"):
         convergence.analyze_design(d, order=2, method="richardson")
 

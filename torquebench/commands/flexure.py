@@ -3,9 +3,10 @@
 One design: mesh (gmsh, P2 by default), six load cases with one solver set-up, gauge read-out,
 bridge output, stiffness, stress, cross-talk and minimum detectable torque; optional VTU (ParaView)
 and off-screen PNG of the strain or von Mises field with the gauges drawn. Each figure carries its
-discretisation error estimate: by default Richardson over three gmsh mesh levels (flexure.convergence);
-``--error-method adaptive`` (opt-in): goal-oriented (dual-weighted residuals) on a mesh refined where
-they say until --rtol (flexure.adaptive; its measured effectivity: reports/fem_adaptive.md).
+discretisation error estimate: by default goal-oriented adaptive refinement of nested meshes until every
+figure's estimate (the enriched-space difference, flexure.enriched) is below --rtol (flexure.adaptive; its
+measured effectivity: reports/fem_adaptive.md); ``--error-method levels``: Richardson over three gmsh
+mesh levels (flexure.convergence), the cross-check.
 ``--sweep PARAM=v1,v2,...`` (once or twice): the sensitivity–stiffness–stress trade-off table,
 and with ``--png`` the trade-off plot instead of the field picture.
 """
@@ -23,7 +24,8 @@ EXAMPLES = """\
 torquebench flexure
 torquebench flexure designs/paper_disc.toml --size medium --png out/disc_strain.png --json
 torquebench flexure --sweep spoke_width_mm=3,3.5,4 --order 2 --png out/spoke_sweep.png
-torquebench flexure tests/data/fem_reference/step_part.toml --error-method adaptive --rtol 0.01
+torquebench flexure tests/data/fem_reference/step_part.toml --rtol 0.01
+torquebench flexure designs/paper_disc.toml --error-method levels
 """
 HEADLINE = ("sensitivity_mV_per_V_per_Nm", "torsional_stiffness_Nm_per_rad", "max_von_mises_Pa",
             "safety_factor", "min_detectable_torque_Nm", "gauge_strain_per_Nm", "dofs", "solve_s")
@@ -44,12 +46,12 @@ def add_arguments(parser) -> None:
                         help="field drawn in --png: strain = max shear strain (what ±45° gauges read), von_mises = stress in Pa (default: %(default)s)")
     parser.add_argument("--rtol", type=float, default=None, metavar="R",
                         help="refine until every gauge strain's, the bridge strain's and the stiffness's error "
-                             "estimates are below R (relative; default: none, three levels; with --error-method adaptive "
-                             "0.02). The levels refine by h/√2 until R is met, the last one fitted under --max-dofs")
-    parser.add_argument("--error-method", choices=("levels", "adaptive"), default="levels",
-                        help="levels: Richardson over three gmsh mesh levels; adaptive (opt-in, experimental): "
-                             "goal-oriented (dual-weighted residual) estimates on locally refined nested meshes "
-                             "(order 2 only; P1 always uses the levels) (default: %(default)s)")
+                             "estimates are below R (relative; default 0.02 for the adaptive method; none for the levels: "
+                             "three of them). The levels refine by h/√2 until R is met, the last one fitted under --max-dofs")
+    parser.add_argument("--error-method", choices=("adaptive", "levels"), default="adaptive",
+                        help="adaptive: goal-oriented refinement of nested meshes, each figure's error estimated "
+                             "in the enriched space P2 + cubic surplus (order 2 only; P1 uses the levels); levels: "
+                             "Richardson over three gmsh mesh levels, the cross-check (default: %(default)s)")
     parser.add_argument("--max-dofs", type=int, default=None, metavar="N",
                         help="DOF budget of the refinement: stop before a level would exceed N (default: 2,000,000)")
     parser.add_argument("--max-memory-gb", type=float, default=None, metavar="GB",
