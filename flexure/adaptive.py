@@ -192,7 +192,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
     bar = _bar(progress)
     hist, kappas = [], {}
     prev_rel = None
-    x0 = ref0 = None
+    x0 = ref0 = projector = None
     stopped = None
     try:
         bar.set_description("flexure: meshing")
@@ -220,7 +220,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             sol.solver = sol.system = None     # not needed again (the last mesh's load cases: goal_cases): free them
             vals = goal_values(design, sol)
             td = time.perf_counter()
-            eta_v = indicators(design, mesh, sol)
+            eta_v = indicators(design, mesh, sol, None if enr is None else enr.pop("weight"))
             dwr_s = time.perf_counter() - td
             eta = eta_v.sum(axis=0)
             rec = {"level": lv, "dofs": int(mesh.n_dofs), "elements": int(mesh.n_elements),
@@ -285,6 +285,8 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             rec["projection"] = {k: rinfo.get(k, 0) for k in ("projected", "projection_partial", "projection_undone")}
     finally:
         bar.close()
+        if hasattr(projector, "close"):
+            projector.close()          # the CAD projector's gmsh session
     # the final mesh: all six load cases, the figures as analysis.analyze gives them
     mesh = tm.mesh
     report = mesh_report(mesh, mres.report["size"], "gmsh+bisection", None, _field(mres), mres.surface)

@@ -13,7 +13,7 @@ import numpy as np
 from userio.errors import CallbackInterrupt, InputError
 
 from flexure.geometry import Surface, check_watertight
-from flexure.gmsh_session import LC_INTEGRATION_PRECISION, _quiet_stdout
+from flexure.gmsh_session import LC_INTEGRATION_PRECISION, _quiet_stdout, open_session
 
 _INTERRUPT = CallbackInterrupt()     # Ctrl-C inside gmsh's size callback → KeyboardInterrupt after it
 
@@ -43,7 +43,7 @@ def load_step(path: str | Path, size_for=None, where: str = "geometry.file",
         import gmsh
     except ImportError:
         raise InputError(f"{where}: {path}: STEP files need gmsh (pip install torquebench[step])") from None
-    gmsh.initialize(interruptible=False)
+    open_session(gmsh)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         with _quiet_stdout():

@@ -266,7 +266,7 @@ def primal_weight(mesh: Mesh, u: np.ndarray, constrained: np.ndarray, material=N
 
 
 def dual_weighted_residuals(mesh: Mesh, material, u: np.ndarray, duals: np.ndarray, gauges,
-                            constrained: np.ndarray):
+                            constrained: np.ndarray, weight=None):
     """Vertex indicators (n, 1 + g) of the goals: column 0 the load case's own compliance goal
     (u's work-conjugate, e.g. the hub rotation θ under a unit torque: J = F(u), dual z = u),
 
@@ -278,8 +278,9 @@ def dual_weighted_residuals(mesh: Mesh, material, u: np.ndarray, duals: np.ndarr
 
     all weighted with the one recovered primal surplus w ≈ u − I_h u: the primal field is smooth
     at the gauges, where their duals are singular (line loads along the grid's edges). Σ_a η_a
-    estimates J(u) − J(u_h)."""
-    ce, cf = primal_weight(mesh, u, constrained, material)
+    estimates J(u) − J(u_h). ``weight``: (ce, cf) of w if known (the enriched solve's surplus part,
+    flexure.enriched), else ``primal_weight``'s."""
+    ce, cf = weight if weight is not None else primal_weight(mesh, u, constrained, material)
     V = np.concatenate([np.asarray(u, float).reshape(-1, 3, 1), duals], axis=2)
     eta = energy_indicators(mesh, material, V, ce, cf)
     eta[:, 1:] += gauge_indicators(mesh, gauges, ce, cf)

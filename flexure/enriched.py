@@ -78,16 +78,25 @@ def assemble(mesh: Mesh, material, u: np.ndarray, constrained: np.ndarray, tract
     n = 3 * len(free)
     dof = (3 * G[:, :, None] + np.arange(3)).reshape(-1, 30)                 # (m,30): (b, i) → 3b + i
     s30 = np.repeat(sign, 3, axis=1)
-    K = sp.csr_matrix((n, n))
+    parts = []
     r = np.zeros(n)
     for sl, A, rr, kk in element_blocks(mesh, material, u, constrained, traction):
         d, s = dof[sl], s30[sl]
         A = np.where(kk[:, :, None] & kk[:, None, :], A, 0.0) * s[:, :, None] * s[:, None, :]
-        rows = np.broadcast_to(d[:, :, None], A.shape).ravel()
-        cols = np.broadcast_to(d[:, None, :], A.shape).ravel()
-        K = K + sp.csr_matrix((A.ravel(), (rows, cols)), shape=(n, n))
+        parts.append(sp.csr_matrix((A.ravel(), (np.broadcast_to(d[:, :, None], A.shape).ravel(),
+                                                np.broadcast_to(d[:, None, :], A.shape).ravel())), shape=(n, n)))
         np.add.at(r, d.ravel(), (rr * s).ravel())
-    return K, r, (G, sign, free)
+    return _sum(parts, (n, n)), r, (G, sign, free)
+
+
+def _sum(parts, shape):
+    """Σ of sparse matrices, pairwise (each addition costs the size of its operands: a running sum
+    over k chunks would cost k × the final size)."""
+    import scipy.sparse as sp
+
+    while len(parts) > 1:
+        parts = [parts[i] + parts[i + 1] if i + 1 < len(parts) else parts[i] for i in range(0, len(parts), 2)]
+    return parts[0] if parts else sp.csr_matrix(shape)
 
 
 def coupling_matrix(mesh: Mesh, material, numbering, chunk: int = 4000):
@@ -105,7 +114,7 @@ def coupling_matrix(mesh: Mesh, material, numbering, chunk: int = 4000):
     _, dN2 = tet_shape(2, xi)
     _, dBs = surplus_basis(xi)
     n, nW = 3 * mesh.n_nodes, 3 * (int(G.max()) + 1)
-    K = sp.csr_matrix((n, nW))
+    parts = []
     for s in range(0, mesh.n_elements, chunk):
         sl = slice(s, min(mesh.n_elements, s + chunk))
         t = mesh.tets[sl].astype(np.int64)
@@ -116,17 +125,17 @@ def coupling_matrix(mesh: Mesh, material, numbering, chunk: int = 4000):
         A = A.transpose(0, 1, 3, 2, 4).reshape(-1, 30, 30) * np.repeat(sign[sl], 3, axis=1)[:, None, :]
         rows = (3 * t[:, :, None] + np.arange(3)).reshape(-1, 30)
         cols = (3 * G[sl][:, :, None] + np.arange(3)).reshape(-1, 30)
-        K = K + sp.csr_matrix((A.ravel(), (np.broadcast_to(rows[:, :, None], A.shape).ravel(),
-                                           np.broadcast_to(cols[:, None, :], A.shape).ravel())), shape=(n, nW))
-    return K
+        parts.append(sp.csr_matrix((A.ravel(), (np.broadcast_to(rows[:, :, None], A.shape).ravel(),
+                                                np.broadcast_to(cols[:, None, :], A.shape).ravel())), shape=(n, nW)))
+    return _sum(parts, (n, nW))
 
 
 def _block_jacobi(K):
     """The inverse 3 × 3 diagonal blocks (n/3,3,3) of K (rows 3g + i)."""
-    n = K.shape[0]
-    idx = np.arange(n).reshape(-1, 3)
-    D = np.stack([np.stack([np.asarray(K[idx[:, i], idx[:, j]]).ravel() for j in range(3)], -1)
-                  for i in range(3)], -2)
+    C = K.tocoo()
+    on = C.row // 3 == C.col // 3
+    D = np.zeros((K.shape[0] // 3, 3, 3))
+    np.add.at(D, (C.row[on] // 3, C.row[on] % 3, C.col[on] % 3), C.data[on])
     return np.linalg.inv(D)
 
 
@@ -159,6 +168,7 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
     mask = np.ones(nq)
     mask[system.fixed_q] = 0.0
     Cq = C if system.T is None else system.T.T @ C
+    del C
     Cq = (sp.diags(mask) @ Cq)[:, keep].tocsr()
     b = np.zeros(nq) if theta_index is None else np.eye(1, nq, theta_index).ravel()
     rh = (system.b if theta_index is None else b) - A @ q0
@@ -167,7 +177,7 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
     Dinv = _block_jacobi(Kww)
     t1 = time.perf_counter()
 
-    CqT = Cq.T.tocsr()
+    CqT = Cq.T                                   # a CSC view: no second copy of the coupling
 
     def matvec(x):
         xh, xw = x[:nq], x[nq:]
@@ -211,8 +221,10 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
 
 def goal_errors(design, mesh, sol) -> dict | None:
     """J(u⁺) − J(u_h) of the goals of one level (flexure.goals.GoalSolution ``sol``, its system and
-    prepared solver still held): the hub rotation θ and each gauge → {"theta", "gauges" (g,), "info"};
-    None where the enriched solve is not set up (the distributed coupling: its traction on W)."""
+    prepared solver still held): the hub rotation θ and each gauge → {"theta", "gauges" (g,), "info",
+    "weight"}: ``weight`` the surplus part e_W of the enriched error as element coefficients (edges
+    (m,6,3), faces (m,4,3)), the DWR weight w ≈ u − I_h u (flexure.dwr, for the marking). None where
+    the enriched solve is not set up (the distributed coupling: its traction on W)."""
     if design.coupling != "rigid" or sol.system is None:
         return None
     system = sol.system
@@ -223,5 +235,6 @@ def goal_errors(design, mesh, sol) -> dict | None:
     d_eps, d_theta, info = enriched_solve(system, mesh, design.material, design.gauges, sol.U[:, :, 0],
                                           sol.q[:, 0], sol.constrained, precond,
                                           theta_index=system.ref_slices[0].start + 5)
-    info.pop("coef")
-    return {"theta": d_theta, "gauges": np.asarray(d_eps), "info": info}
+    coef = info.pop("coef")
+    return {"theta": d_theta, "gauges": np.asarray(d_eps), "info": info,
+            "weight": (coef[:, :6], coef[:, 6:])}

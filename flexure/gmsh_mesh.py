@@ -34,7 +34,7 @@ import numpy as np
 
 from userio.errors import CallbackInterrupt, InputError
 
-from flexure.gmsh_session import LC_INTEGRATION_PRECISION, _quiet_stdout
+from flexure.gmsh_session import LC_INTEGRATION_PRECISION, _quiet_stdout, open_session
 from flexure.sizing import edge_size
 
 MM = 1e3                        # metres → gmsh units (mm)
@@ -310,7 +310,7 @@ def _one_pass(build, field, where: str, order: int, curved: bool, spots):
     gmsh's curved mid-edge nodes or None, the boundary's classification (``_entities``))."""
     import gmsh
 
-    gmsh.initialize(interruptible=False)
+    open_session(gmsh)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         with _quiet_stdout():

@@ -14,6 +14,14 @@ from contextlib import contextmanager
 LC_INTEGRATION_PRECISION = 1e-4
 
 
+def open_session(gmsh) -> None:
+    """``gmsh.initialize`` on a clean slate: a session left open (flexure.project.CadProjector keeps
+    its CAD model open between projections) is finalized first, so that no other model is current."""
+    if gmsh.isInitialized():
+        gmsh.finalize()
+    gmsh.initialize(interruptible=False)
+
+
 @contextmanager
 def _quiet_stdout():
     """OpenCASCADE prints its transfer statistics on file descriptor 1: keep them off stdout

@@ -64,6 +64,14 @@ def kernel():
     return _KERNEL
 
 
+def warm() -> None:
+    """Compile the kernel once (run.sh, at install) on the argument types gmsh's callback passes it
+    (gmsh_mesh._size_field): Python floats and C-contiguous float64 arrays."""
+    k = kernel()
+    if k is not None:
+        k(0.0, 0.0, 0.0, 1.0, np.ones(4), np.zeros((1, 3)), np.zeros((1, 8)), np.zeros((1, 4)))
+
+
 def pack_edges(e0: np.ndarray, ev: np.ndarray, ev2: np.ndarray, he: np.ndarray) -> np.ndarray:
     """(e,8) rows of ``_size_py``'s edges: start (3), direction (3), |direction|², h_edge (mm)."""
     return np.ascontiguousarray(np.column_stack([e0, ev, ev2, he]).reshape(-1, 8), float)

@@ -146,13 +146,15 @@ def solve_goals(design, mesh, x0_fields=None, x0_ref=None, rtol: float | None = 
     return GoalSolution(U, theta, eps, constrained, q, info, traction, None, solver, system)
 
 
-def indicators(design, mesh, sol: GoalSolution) -> np.ndarray:
+def indicators(design, mesh, sol: GoalSolution, weight=None) -> np.ndarray:
     """Vertex DWR indicators (n, 1 + g) of θ and the gauge readings (flexure.dwr), with the
-    distributed coupling's traction term F(w ψ_a) added to θ's column."""
+    distributed coupling's traction term F(w ψ_a) added to θ's column. ``weight``: the primal
+    weight's surplus coefficients (ce, cf) if already known (flexure.enriched's e_W), else the
+    Bank–Weiser local problems'."""
     from flexure import dwr
 
     eta = dwr.dual_weighted_residuals(mesh, design.material, sol.U[:, :, 0], sol.U[:, :, 1:],
-                                      design.gauges, sol.constrained)
+                                      design.gauges, sol.constrained, weight=weight)
     if sol.traction:
         ce, cf = dwr.primal_weight(mesh, sol.U[:, :, 0], sol.constrained)
         for faces, ref in sol.traction:

@@ -45,8 +45,9 @@ def explain(n: int, total: int, worst_deg: float, attempts: list | None = None) 
                  + (f"; {len(attempts) - len(ran)} failed" if len(ran) < len(attempts) else "") + ")")
     return (f"sliver_elements: {n} of {total} tetrahedra have a dihedral angle below {SLIVER_DEG:g}° (worst "
             f"{worst_deg:.2g}°{tried}): such flat elements are ill-conditioned and the strains and stresses "
-            "around them unreliable, so every figure's ± is widened to the spread over the mesh levels; remove "
-            "thin walls and long, needle-like triangles from the part's surface (or try --size medium)")
+            "around them unreliable (the levels' estimate widens every figure's ± to the spread of its mesh "
+            "levels; each ±'s method says what it covers); remove thin walls and long, needle-like triangles "
+            "from the part's surface (or try --size medium)")
 
 
 def annotate(warnings: list[str], mesh, report: dict) -> list[str]:

@@ -100,6 +100,10 @@ def test_gmsh_projector_on_a_cad_cylinder():
     proj = CadProjector(build)
     import gmsh
     rng = np.random.default_rng(0)
+    first = proj.project(np.array([[2.1e-3, 0.0, 2.5e-3]]), np.array([2]), np.array([1]))
+    assert proj._open and gmsh.isInitialized()             # the model is kept for the next call
+    proj.close()
+    assert not gmsh.isInitialized() and np.isfinite(first).all()
     a = rng.uniform(0, 2 * np.pi, 20)
     z = rng.uniform(0.5e-3, 4.5e-3, 20)
     pts = np.column_stack([2.1e-3 * np.cos(a), 2.1e-3 * np.sin(a), z])
@@ -117,6 +121,7 @@ def test_gmsh_projector_on_a_cad_cylinder():
     edge = np.column_stack([1.9e-3 * np.cos(a), 1.9e-3 * np.sin(a), np.full(20, 0.1e-3)])
     bottom = [c for c in circles if proj.project(edge[:1], np.array([1]), np.array([c]))[0, 2] < 1e-9]
     out = proj.project(edge, np.full(20, 1), np.full(20, bottom[0]))
+    proj.close()
     assert np.abs(np.hypot(out[:, 0], out[:, 1]) - 2e-3).max() < 1e-9 and np.abs(out[:, 2]).max() < 1e-9
 
 
