@@ -3,56 +3,18 @@ their algebraic-error bound of a direct solve (flexure.goals: dual-corrected val
 sizing of flexure.adaptive_sizing (rates, targets, the memory budget above the baseline), and a
 sized refinement that lands near its DOF target and reaches --rtol on a small part. No timings."""
 
-import math
-
 import numpy as np
 import pytest
 
 from flexure import adaptive_sizing as sizing
-from flexure.design import load_design
-
-PART = """\
-name = "skew_annulus"
-[geometry]
-kind = "stl"
-file = "annulus.stl"
-[gauges]
-grid_length_mm = 1.5
-grid_width_mm = 1.0
-{gauges}
-[loads]
-rated_torque_Nm = 2.0
-load_radius_max_mm = 3.02
-fixed_radius_min_mm = {fixed_min}
-[mesh]
-size = "coarse"
-order = 2
-"""
-
-
-def _skew_annulus(tmp, sections: int = 48, fixed_min_mm: float = 9.9):
-    """A 2 mm annulus (r 3 … 10 mm, polygons of ``sections`` sides) STL, four gauges at unequal radii
-    with skewed axes (no symmetry), clamped at r ≥ ``fixed_min_mm``."""
-    import trimesh
-
-    tm = trimesh.creation.annulus(r_min=3.0, r_max=10.0, height=2.0, sections=sections)
-    tm.apply_translation((0, 0, 1.0))
-    tm.export(tmp / "annulus.stl")
-    gauges = []
-    for arm, (r, ang, off) in enumerate([(5.0, 17.0, 30.0), (6.0, 131.0, 55.0), (7.0, 208.0, -40.0),
-                                         (8.0, 303.0, -65.0)], start=1):
-        a, o = math.radians(ang), math.radians(ang + off)
-        gauges.append(f"[[gauges.gauge]]\ncentre_mm = [{r * math.cos(a):.6f}, {r * math.sin(a):.6f}, 2.0]\n"
-                      f"axis = [{math.cos(o):.9f}, {math.sin(o):.9f}, 0.0]\narm = {arm}")
-    (tmp / "skew.toml").write_text(PART.format(gauges="\n".join(gauges), fixed_min=fixed_min_mm))
-    return load_design(tmp / "skew.toml")
+from skew_annulus import skew_annulus
 
 
 @pytest.fixture(scope="module")
 def mesh_and_design(tmp_path_factory):
     from flexure.analysis import build_mesh
 
-    design = _skew_annulus(tmp_path_factory.mktemp("speed"))
+    design = skew_annulus(tmp_path_factory.mktemp("speed"))
     return design, build_mesh(design, "coarse", 2, 2.0)
 
 
@@ -125,7 +87,7 @@ def test_sized_refinement_lands_near_its_target_and_reaches_rtol(tmp_path):
     run stops at rtol (measured: 25.6k → 75.7k DOFs for a target of 72.5k, worst estimate 0.18 %)."""
     from flexure.adaptive import analyze_adaptive
 
-    design = _skew_annulus(tmp_path, sections=8, fixed_min_mm=9.2)
+    design = skew_annulus(tmp_path, sections=8, fixed_min_mm=9.2)
     res, _ = analyze_adaptive(design, rtol=0.002)
     lv = res["discretization_levels"]
     assert res["stopped_by"] == "rtol" and len(lv) >= 2

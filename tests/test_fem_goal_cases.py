@@ -2,53 +2,21 @@
 under the five off-axis load cases from the gauges' duals, ε_g(j) = z_gᵀ b_j, equals reading the
 solved load case (symmetric A), for both hub couplings; so the last mesh needs no six-case solve."""
 
-import math
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from flexure.design import load_design
-
-PART = """\
-name = "skew_annulus"
-[geometry]
-kind = "stl"
-file = "annulus.stl"
-[gauges]
-grid_length_mm = 1.5
-grid_width_mm = 1.0
-{gauges}
-[loads]
-rated_torque_Nm = 2.0
-load_radius_max_mm = 3.02
-fixed_radius_min_mm = 9.9
-[mesh]
-size = "coarse"
-order = 2
-"""
+from skew_annulus import skew_annulus
 
 
 @pytest.fixture(scope="module")
 def mesh_and_design(tmp_path_factory):
     """A 2 mm annulus (r 3 … 10 mm) as an STL with four gauges at unequal radii and skewed axes
     (no symmetry: the off-axis loads give every gauge a reading), meshed coarsely (P2)."""
-    import trimesh
-
     from flexure.analysis import build_mesh
 
-    tmp = tmp_path_factory.mktemp("goal_cases")
-    tm = trimesh.creation.annulus(r_min=3.0, r_max=10.0, height=2.0, sections=48)
-    tm.apply_translation((0, 0, 1.0))
-    tm.export(tmp / "annulus.stl")
-    gauges = []
-    for arm, (r, ang, off) in enumerate([(5.0, 17.0, 30.0), (6.0, 131.0, 55.0), (7.0, 208.0, -40.0),
-                                         (8.0, 303.0, -65.0)], start=1):
-        a, o = math.radians(ang), math.radians(ang + off)
-        gauges.append(f"[[gauges.gauge]]\ncentre_mm = [{r * math.cos(a):.6f}, {r * math.sin(a):.6f}, 2.0]\n"
-                      f"axis = [{math.cos(o):.9f}, {math.sin(o):.9f}, 0.0]\narm = {arm}")
-    (tmp / "skew.toml").write_text(PART.format(gauges="\n".join(gauges)))
-    design = load_design(tmp / "skew.toml")
+    design = skew_annulus(tmp_path_factory.mktemp("goal_cases"))
     return design, build_mesh(design, "coarse", 2, 2.0)
 
 
