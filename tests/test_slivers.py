@@ -30,7 +30,7 @@ def test_warning_names_count_worst_angle_meaning_and_remedy():
     line = [w for w in warnings if w.startswith("sliver_elements")]
     assert len(line) == 1 and "\n" not in line[0]
     assert f"{n} of {len(mesh.corner_tets)} tetrahedra" in line[0] and f"{worst:.2g}°" in line[0]
-    assert "below 10°" in line[0] and "widened" in line[0] and "needle" in line[0]
+    assert "below 10°" in line[0] and "widens" in line[0] and "needle" in line[0]
     assert "large_residual" in warnings and "sliver_elements" not in warnings
 
 
