@@ -1,11 +1,11 @@
 """The measurements behind reports/error_vs_runtime.md, as one JSON document on stdout.
 
     python benchmarks/bench_accuracy.py [--quick] [--only NAME ...] [--write-report DIR]
-    python benchmarks/bench_accuracy.py --only fem [--fem-meshers gmsh tetgen scikit-fem]
+    python benchmarks/bench_accuracy.py --only fem [--fem-meshers gmsh tetgen adaptive scikit-fem]
                                         [--fem-rows OLD.json ...] [--splice-fem-section FILE.md]
 
 Runs every error-vs-run-time sweep (simulators, calibration, uncertainty propagation, the flexure
-FEM: gmsh P1 × 6 and P2 × 5 mesh levels and tetgen P2 × 4 on 2 geometries, scikit-fem P2 × 2 on
+FEM: gmsh P1 × 6 and P2 × 5 mesh levels, tetgen P2 × 4 and the adaptive default at 3–4 --rtol on 2 geometries, scikit-fem P2 × 2 on
 the paper disc and × 1 on the thick one, ≈ 17 min measured on a loaded 2-core machine) and prints the rows (setting, wall time, error) of
 each; --write-report also writes reports/error_vs_runtime.md with every section (which runs the
 sweeps again). --splice-fem-section replaces only the flexure FEM section of an existing
@@ -53,7 +53,7 @@ def main(argv=None) -> int:
                     help="run only these sweeps")
     ap.add_argument("--write-report", type=Path, default=None, metavar="DIR",
                     help="also write error_vs_runtime.md + PNGs into DIR")
-    ap.add_argument("--fem-meshers", nargs="+", default=None, choices=("gmsh", "tetgen", "scikit-fem"),
+    ap.add_argument("--fem-meshers", nargs="+", default=None, choices=("gmsh", "tetgen", "adaptive", "scikit-fem"),
                     help="FEM sweep: only these meshers (default: all)")
     ap.add_argument("--fem-rows", nargs="+", type=Path, default=(), metavar="JSON",
                     help="FEM sweep: add the rows of earlier runs' JSON output")

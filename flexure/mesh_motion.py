@@ -96,25 +96,19 @@ def morph_local(mesh: Mesh, nodes, dims, tags, projector, rings: int = 2, tries:
     angle = lambda: element_shape_metrics(mesh.points, t[patch, :4])["dihedral_deg"].min(axis=1)  # noqa: E731
     before = _straight_det(X0[t[patch, :4]])
     floor = _angle_floor(angle())                             # no element made a sliver by the move
-    beta = np.ones(len(nodes))
-    where = np.full(mesh.n_nodes, -1, np.int64)
-    where[nodes] = np.arange(len(nodes))
-    for k in range(tries + 1):
+
+    def move(beta):
         D = np.zeros((mesh.n_nodes, 3))
         D[nodes] = beta[:, None] * dB
         if LII is not None:
             D[free] = LII.solve(-(LIB @ D[held]))
         mesh.points[pn] = X0[pn] + D[pn]
+
+    def invalid():
         good = element_valid(mesh, patch, msj) & (_straight_det(mesh.points[t[patch, :4]]) >= MIN_VOLUME_SHARE * before)
-        good &= angle() >= floor - 1e-9
-        if good.all():
-            break
-        back = where[np.unique(t[patch[~good]])]
-        back = back[back >= 0]
-        if len(back) == 0:
-            beta[:] = 0.0
-            continue
-        beta[back] = 0.0 if k >= tries - 1 else 0.5 * beta[back]
+        return ~(good & (angle() >= floor - 1e-9))
+
+    beta = halve_until_valid(nodes, t[patch], mesh.n_nodes, move, invalid, tries)
     mesh._cache.clear()
     left = (beta < 1.0) & np.any(dB != 0, axis=1)
     return {"projected": int((~left).sum()), "pending": (nodes[left], dims[left], tags[left])}
@@ -190,3 +184,25 @@ def element_valid(mesh: Mesh, elements: np.ndarray, min_scaled: float = 0.05) ->
     _, dN = tet_shape(2, np.vstack([TET_QUAD[2][0], REF_NODES]))
     det = np.linalg.det(np.einsum("eai,qak->eqik", X, dN))
     return (straight > 0) & (det >= min_scaled * straight[:, None]).all(axis=1)
+
+
+def halve_until_valid(nodes, tets, n_nodes: int, move, invalid, tries: int) -> np.ndarray:
+    """Back off the moves of ``nodes`` until every element of ``tets`` is valid: ``move(β)`` applies
+    them scaled by β (one per node; interior motion included), ``invalid()`` → bool per row of
+    ``tets``. The moved nodes of an invalid element are halved, ``tries`` times, then undone (β = 0);
+    if no moved node touches the invalid elements, every move is undone. → β (len(nodes),)"""
+    beta = np.ones(len(nodes))
+    where = np.full(n_nodes, -1, np.int64)
+    where[nodes] = np.arange(len(nodes))
+    for k in range(tries + 1):
+        move(beta)
+        bad = invalid()
+        if not bad.any():
+            break
+        back = where[np.unique(tets[bad])]
+        back = back[back >= 0]
+        if len(back) == 0:                                                 # folded by the interior alone: no move
+            beta[:] = 0.0
+            continue
+        beta[back] = 0.0 if k >= tries - 1 else 0.5 * beta[back]
+    return beta

@@ -39,7 +39,7 @@ import numpy as np
 
 from flexure.mesh import TET_EDGES, Mesh
 from flexure.mesh_motion import (MIN_SCALED_JACOBIAN, MIN_VOLUME_SHARE, _graph_laplacian, _straight_det,  # noqa: F401
-                                 element_valid, morph_local, project_nodes)
+                                 element_valid, halve_until_valid, morph_local, project_nodes)
 
 #: for edge t = (p, q): the two other local vertices (increasing)
 _OTHER = np.array([[v for v in range(4) if v not in e] for e in TET_EDGES.tolist()], dtype=np.int64)
@@ -227,24 +227,19 @@ def morph(tm: TaggedMesh, projector, vertices: bool = False, tries: int = 8,
     LII = splu(L[I][:, I].tocsc()) if len(I) else None
     LIB = L[I][:, B]
     before = _straight_det(X0[t[:, :4]])
-    beta = np.ones(len(nodes))
-    where = np.full(mesh.n_nodes, -1, np.int64)
-    where[nodes] = np.arange(len(nodes))
-    for k in range(tries + 1):
+
+    def move(beta):
         D = np.zeros((mesh.n_nodes, 3))
         D[nodes] = beta[:, None] * dB
         if LII is not None:
             D[I] = LII.solve(-(LIB @ D[B]))
         mesh.points[:] = X0 + D
-        ok = element_valid(mesh, np.arange(len(t)), msj) & (_straight_det(mesh.points[t[:, :4]]) >= MIN_VOLUME_SHARE * before)
-        if ok.all():
-            break
-        back = where[np.unique(t[~ok])]
-        back = back[back >= 0]
-        if len(back) == 0:                                                 # folded by the interior alone: no move
-            beta[:] = 0.0
-            continue
-        beta[back] = 0.0 if k >= tries - 1 else 0.5 * beta[back]
+
+    def invalid():
+        return ~(element_valid(mesh, np.arange(len(t)), msj)
+                 & (_straight_det(mesh.points[t[:, :4]]) >= MIN_VOLUME_SHARE * before))
+
+    beta = halve_until_valid(nodes, t, mesh.n_nodes, move, invalid, tries)
     mesh._cache.clear()
     left = (beta < 1.0) & np.any(dB != 0, axis=1)             # a node with nothing to move is not pending
     tm.pending = (nodes[left], dims[left], tags[left])

@@ -148,3 +148,27 @@ def test_splicing_the_fem_section_leaves_the_other_sections_alone(tmp_path):
     assert "stale" not in text and "9.0 s" not in text and text.endswith("_(section built in 42.0 s)_\n\n## Z\n\nkeep Z\n")
     assert "measured in 2 separate runs" in text and "| P2 tetgen, h × 1 ★ |" in text
     assert "| scikit-fem P2 (same mesh), h × 1 | 20,000 |" in text
+
+
+def test_fem_section_lists_the_adaptive_default_with_its_own_estimate(tmp_path):
+    """Adaptive rows (the default run at a --rtol) are a setting of ours: in the tables and on the
+    front like the mesh levels, with their own relative ± beside their true error against the gmsh
+    P2 reference (the adaptive rows never enter the reference)."""
+    from torquebench.reports.fem import fem_section
+
+    def fig(n):
+        return {"gauge_strain_per_Nm": 5.0 + 0.3 * (n / 4e4) ** (-2 / 3), "torsional_stiffness_Nm_per_rad": 1700.0 + n / 1e4}
+
+    rows = [{"geometry": "paper disc", "mesher": "gmsh", "order": 2, "h_factor": f, "dofs": int(n), "time_s": t, **fig(n)}
+            for f, n, t in ((2.0, 1e4, 10.0), (1.0, 2e4, 20.0), (0.5, 4e4, 40.0))]
+    rows.append({"geometry": "paper disc", "mesher": "adaptive", "order": 2, "h_factor": 0.02, "dofs": 30000,
+                 "time_s": 5.0, "stopped_by": "rtol", "gauge_strain_per_Nm_estimate": 0.004,
+                 "torsional_stiffness_Nm_per_rad_estimate": 0.011, **fig(3e4)})
+    lines, pngs = fem_section(rows, tmp_path)
+    text = "\n".join(lines)
+    ad = [ln for ln in lines if ln.startswith("| P2 adaptive, --rtol 0.02")]
+    assert len(ad) == 2 and all("★" in ln for ln in ad)              # fastest of the four: on both fronts
+    assert any("0.004 (stopped by rtol)" in ln for ln in ad) and any("0.011 (stopped by rtol)" in ln for ln in ad)
+    assert "--rtol = 0.02" in text and all(p.exists() for p in pngs)
+    gm = [ln for ln in lines if ln.startswith("| P2, h × 2 ")]
+    assert gm and all(ln.rstrip().endswith("| — |") for ln in gm)

@@ -176,15 +176,21 @@ FEM_FACTORS = {1: (4.0, 2.0, math.sqrt(2.0), 1.0, 1 / math.sqrt(2.0), 0.5),
                2: (2.0, math.sqrt(2.0), 1.0, 1 / math.sqrt(2.0), 0.5)}
 #: the meshers compared: "gmsh" (the default: the exact OpenCASCADE solid), "tetgen" (the design's
 #: ``mesher = "tetgen"``: the polygonal profile's surface, graded from it) and "scikit-fem" (an outside
-#: point: benchmarks/fem_reference.py, scikit-fem's own P2 assembly, BCs and AMG-CG on our gmsh P1 mesh)
-MESHERS = ("gmsh", "tetgen", "scikit-fem")
+#: point: benchmarks/fem_reference.py, scikit-fem's own P2 assembly, BCs and AMG-CG on our gmsh P1 mesh);
+#: "adaptive" (the default run: nested goal-oriented refinement; its plan entries are --rtol values)
+MESHERS = ("gmsh", "tetgen", "adaptive", "scikit-fem")
+#: "adaptive": flexure.adaptive.analyze_adaptive (the default ``torquebench flexure`` run) at each
+#: --rtol of the plan in place of an h factor: one gmsh mesh, nested goal-oriented refinement
+ADAPTIVE = "adaptive"
 #: geometry → (mesher, order) → h factors; the reference of every figure is the gmsh P2 levels' limit
 FEM_PLAN = {
     "paper disc": {("gmsh", 1): FEM_FACTORS[1], ("gmsh", 2): FEM_FACTORS[2],
                    ("tetgen", 2): (2.0, math.sqrt(2.0), 1.0, 1 / math.sqrt(2.0)),
+                   (ADAPTIVE, 2): (0.05, 0.02, 0.01, 0.005),
                    ("scikit-fem", 2): (1.0, 1 / math.sqrt(2.0))},
     "thick disc, 0.5 mm gauges": {("gmsh", 1): FEM_FACTORS[1], ("gmsh", 2): FEM_FACTORS[2],
                                   ("tetgen", 2): (2.0, math.sqrt(2.0), 1.0, 1 / math.sqrt(2.0)),
+                                  (ADAPTIVE, 2): (0.05, 0.02, 0.01),
                                   ("scikit-fem", 2): (1.0,)},
 }
 #: the tests' quick plan. gmsh P1 from h × 2: at h × 4 the curvature sizing leaves 3 elements per turn,
@@ -209,6 +215,17 @@ def _scikit_fem_row(design, h_factor: float) -> dict:
             "cg_iterations": int(ref["cg_iterations"]), **{k: float(ref[k]) for k in FEM_FIGURES}}
 
 
+def _adaptive_row(design, rtol: float) -> dict:
+    """The default (adaptive) analysis at ``rtol``: its figures, wall time (meshing, every level, the
+    final six load cases) and its own relative error estimate of each figure."""
+    from flexure.adaptive import analyze_adaptive
+
+    res, _ = analyze_adaptive(design, rtol=rtol)
+    return {"dofs": int(res["dofs"]), "time_s": float(res["total_s"]), "warnings": list(res["warnings"]),
+            "stopped_by": res["stopped_by"], **{k: float(res[k]) for k in FEM_FIGURES},
+            **{f"{k}_estimate": float(res[f"{k}_error_estimate"] / abs(res[k])) for k in FEM_FIGURES}}
+
+
 def fem_levels(quick: bool = False, progress: bool = True, on_row=None, meshers=MESHERS) -> list[dict]:
     """Analyse every geometry × mesher × element order × mesh level of the plan (only ``meshers``):
     one row per analysis with its wall time (``analyze``'s total: meshing, assembly, the six load
@@ -230,6 +247,8 @@ def fem_levels(quick: bool = False, progress: bool = True, on_row=None, meshers=
         scene, overrides = FEM_GEOMETRIES[g]
         if mesher == OUTSIDE:
             row = _scikit_fem_row(load_design(REPO_ROOT / "designs" / scene, overrides), f)
+        elif mesher == ADAPTIVE:
+            row = _adaptive_row(load_design(REPO_ROOT / "designs" / scene, overrides), f)
         else:
             design = load_design(REPO_ROOT / "designs" / scene, {**overrides, "mesh.mesher": mesher})
             res, _ = analyze(design, order=order, h_factor=f)
@@ -308,6 +327,8 @@ def _setting(r: dict) -> tuple[str, str]:
         return f"scikit-fem P{r['order']} (same mesh), h × {r['h_factor']:.3g}", f"scikit-fem P{r['order']} (outside point)"
     if m == "gmsh":
         return f"P{r['order']}, h × {r['h_factor']:.3g}", f"P{r['order']}"
+    if m == ADAPTIVE:
+        return f"P{r['order']} adaptive, --rtol {r['h_factor']:.3g}", f"P{r['order']} adaptive (the default)"
     return f"P{r['order']} {m}, h × {r['h_factor']:.3g}", f"P{r['order']} {m}"
 
 
@@ -320,14 +341,20 @@ def fem_section(rows: list[dict], out_dir: Path, quick: bool = False) -> tuple[l
     tet = sorted({r["h_factor"] for r in rows if r.get("mesher") == "tetgen"}, reverse=True)
     sk = sorted({r["h_factor"] for r in rows if r.get("mesher") == OUTSIDE}, reverse=True)
     gm = sorted({r["h_factor"] for r in rows if r.get("mesher", "gmsh") == "gmsh"}, reverse=True)
-    lines = ["## Flexure FEM (P1 and P2 × mesh size × mesher; two geometries; scikit-fem as an outside point)", "",
+    ad = sorted({r["h_factor"] for r in rows if r.get("mesher") == ADAPTIVE}, reverse=True)
+    lines = ["## Flexure FEM (P1 and P2 × mesh size × mesher, and the adaptive default; two geometries; scikit-fem as "
+             "an outside point)", "",
              "`flexure.analysis.analyze` on the design's mesh with every element size × f, "
              "P1 (4-node) and P2 (10-node) tetrahedra. Meshers: gmsh (the default; the exact OpenCASCADE "
              f"solid with true circles and fillets; f = {', '.join(f'{f:.3g}' for f in gm)})"
              + (f" and tetgen (the design with `mesher = \"tetgen\"`: the polygonal profile, "
                 "3 segments per quarter circle at the design's size `coarse`, meshed from its surface; "
                 f"f = {', '.join(f'{f:.3g}' for f in tet)}; its error against the gmsh reference includes "
-                "the polygon's geometry error, which no mesh refinement removes)" if tet else "") + ". "
+                "the polygon's geometry error, which no mesh refinement removes)" if tet else "")
+             + (" and adaptive (the default `torquebench flexure` run, `flexure.adaptive`: one gmsh mesh, then "
+                "nested goal-oriented refinement until every goal's own error estimate is below --rtol; "
+                f"--rtol = {', '.join(f'{f:.3g}' for f in ad)}; its own relative ± is listed beside its true "
+                "error)" if ad else "") + ". "
              "Wall time = the whole analysis a user waits for "
              "(meshing, assembly, the six load cases, gauge read-out). Geometries: `designs/paper_disc.toml` "
              "(2.2 mm, fillets, 1.5 mm gauges) and the same disc 5 mm thick without fillets with 0.5 mm "
@@ -373,6 +400,9 @@ def fem_section(rows: list[dict], out_dir: Path, quick: bool = False) -> tuple[l
             setting, family = _setting(r)
             row = {"setting": setting, "family": family, "time_s": r["time_s"], "error": abs(r[key] / R - 1),
                    "dofs": r["dofs"], "value": r[key]}
+            if any(q.get("mesher") == ADAPTIVE for q in rows):
+                row["its own ± (adaptive)"] = (f"{r[key + '_estimate']:.3g} (stopped by {r['stopped_by']})"
+                                               if r.get("mesher") == ADAPTIVE else "—")
             (outside if r.get("mesher") == OUTSIDE else srows).append((r, row))
         slug = "fem_" + ("paper" if g.startswith("paper") else "thick") + ("_strain" if "strain" in key else "_stiffness")
         title = f"Flexure FEM, {g}: {FEM_FIGURES[key]}"
