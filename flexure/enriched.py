@@ -167,7 +167,8 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
     mask = np.ones(nq)
     mask[system.fixed_q] = 0.0
     if enriched_assembly.available():            # compiled: C kept on the nodal rows, T and the mask applied
-        Kww, rW, C, Dinv, num = enriched_assembly.assemble_enriched(mesh, material, U0, constrained)
+        Kww, rW, C, Dinv, num = enriched_assembly.assemble_enriched(
+            mesh, material, U0, surplus_numbering(mesh, np.asarray(constrained, bool)))
         G, sign, free = num
         keep = np.repeat(free, 3)
         T, TT, CT = system.T, None if system.T is None else system.T.T.tocsr(), C.T

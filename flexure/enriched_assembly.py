@@ -34,19 +34,17 @@ def _csr(bptr, bcol, n_rows: int, n_cols: int):
     return M
 
 
-def assemble_enriched(mesh: Mesh, material, u: np.ndarray, constrained: np.ndarray, traction=None):
-    """The enriched system on the free surplus functions (numbering: flexure.enriched.surplus_numbering):
+def assemble_enriched(mesh: Mesh, material, u: np.ndarray, numbering, traction=None):
+    """The enriched system on the free surplus functions of ``numbering`` (G, sign, free: flexure.enriched.surplus_numbering):
     → (K_WW (3 n_free square CSR, rows 3k + i, k the free functions in order), r_W (3 n_free,),
     K_hW (3 n_nodes × 3 n_free CSR, the full nodal rows: no coupling or Dirichlet reduction), the
     inverse 3 × 3 diagonal blocks of K_WW (n_free,3,3), the numbering (G, sign, free))."""
     from flexure import _enriched_kernels as ek
     from flexure.bank_weiser import face_rhs
-    from flexure.enriched import surplus_numbering
     from flexure.fem import tet_shape
     from flexure.surplus import surplus_basis, tet_rule_degree5
 
-    constrained = np.asarray(constrained, bool)
-    G, sign, free = surplus_numbering(mesh, constrained)
+    G, sign, free = numbering
     kept = np.cumsum(free) - 1
     nk = int(free.sum())
     Gk = np.where(free[G], kept[G], -1).astype(np.int64)
