@@ -13,9 +13,12 @@ the largest relative difference of J(u⁺) − J(u_h) (θ and the gauges; the sa
 the CG to RTOL). The machine's 1-minute load is printed with every line: timings on a shared machine
 are noisy, the ratio less so.
 
-Measured 2026-11-26 (paper_disc, h-factor 2.0: 48 687 P2 dofs, 142 470 enriched; 2 cores, load
-4.4): set-up 6.2 s numpy → 2.4 s compiled (0.39 ×), CG 10.1 / 10.3 s (43 iterations both), the
-estimates equal to 1e-12.
+Measured 2026-11-26 (2 cores shared, load 8.3): paper_disc h-factor 4.0 (22 809 P2 dofs, 66 978
+enriched): set-up 6.89 s numpy → 3.96 s compiled (0.58 ×; the rest is bank_weiser.face_rhs, still
+numpy), peak RSS growth 0.17 → 0.08 GB, estimates equal to 6e-13. In whole adaptive runs (torquebench
+flexure, CPU seconds, load 10–12): paper_disc default 43.3 → 25.1 CPU-s with the looser enriched CG
+(enriched.RTOL 1e-2), peak 0.98 → 0.76 GB, the same levels; at 194 k/265 k P2 dofs (thick_disc) the
+enriched set-up is 26/22 s of 78/57 s at load ~9.
 """
 
 from __future__ import annotations
