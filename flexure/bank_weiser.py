@@ -97,6 +97,45 @@ def element_blocks(mesh: Mesh, material, u: np.ndarray, constrained: np.ndarray,
     u = np.asarray(u, float).reshape(-1, 3)
     m = mesh.n_elements
     t = mesh.tets
+    lmb, mu = material.lame_lambda_Pa, material.shear_modulus_Pa
+    rhs = face_rhs(mesh, material, u, traction, chunk)
+    # pass 2: element matrices, −a_K(u_h, φ), solve
+    xi, wq = tet_rule_degree5()
+    _, dN2 = tet_shape(2, xi)
+    _, dBs = surplus_basis(xi)
+    keep = np.ones((m, 10), bool)
+    keep[:, :6] = ~constrained[t[:, 4:]]
+    keep[:, 6:] = ~constrained[t[:, TET_FACES_P2]].all(axis=2)
+    diag = np.arange(30)
+    for s in range(0, m, chunk):
+        sl = slice(s, min(m, s + chunk))
+        X = mesh.points[t[sl]]
+        e = len(X)
+        det, Jinv = point_jacobians(X, dN2)
+        sig = _stress(u[t[sl]], np.matmul(dN2[None], Jinv), lmb, mu)
+        gB = np.matmul(dBs[None], Jinv)                                          # (e,q,b,j)
+        dv = wq[None, :] * det
+        r = rhs[sl] - np.einsum("eq,eqij,eqbj->ebi", dv, sig, gB, optimize=True)
+        P = np.einsum("eq,eqbi,eqcj->ebcij", dv, gB, gB, optimize=True)          # (e,10,10,3,3)
+        A = lmb * P + mu * P.swapaxes(-1, -2)
+        A += mu * np.trace(P, axis1=-2, axis2=-1)[..., None, None] * np.eye(3)
+        A = A.transpose(0, 1, 3, 2, 4).reshape(e, 30, 30)
+        kk = np.repeat(keep[sl], 3, axis=1)                                      # (e,30)
+        A = np.where(kk[:, :, None] & kk[:, None, :], A, 0.0)
+        A[:, diag, diag] = np.where(kk, A[:, diag, diag], 1.0)
+        r = np.where(kk, r.reshape(e, 30), 0.0)
+        yield sl, A, r, kk
+
+
+def face_rhs(mesh: Mesh, material, u: np.ndarray, traction=None, chunk: int = 4000) -> np.ndarray:
+    """The face term ∫_∂K t̂ · φ_b dA of the local problems (module docstring) of the P2 displacement
+    u (n,3): → (m,10,3), rows (b, i)."""
+    from flexure.fem import tet_shape
+    from flexure.surplus import surplus_basis
+
+    u = np.asarray(u, float).reshape(-1, 3)
+    m = mesh.n_elements
+    t = mesh.tets
     t4 = mesh.corner_tets.astype(np.int64)
     lmb, mu = material.lame_lambda_Pa, material.shear_modulus_Pa
     xi_f, wq_f, T = _face_rule()
@@ -147,30 +186,4 @@ def element_blocks(mesh: Mesh, material, u: np.ndarray, constrained: np.ndarray,
     that_c = np.take_along_axis(that, inv_perm[..., None], axis=2)
     rhs = np.einsum("mf,q,mfqi,fqb->mbi", 2.0 * area, wq_f, that_c, Bf, optimize=True)
     del that, that_c
-    # pass 2: element matrices, −a_K(u_h, φ), solve
-    xi, wq = tet_rule_degree5()
-    _, dN2 = tet_shape(2, xi)
-    _, dBs = surplus_basis(xi)
-    keep = np.ones((m, 10), bool)
-    keep[:, :6] = ~constrained[t[:, 4:]]
-    keep[:, 6:] = ~constrained[t[:, TET_FACES_P2]].all(axis=2)
-    diag = np.arange(30)
-    for s in range(0, m, chunk):
-        sl = slice(s, min(m, s + chunk))
-        X = mesh.points[t[sl]]
-        e = len(X)
-        det, Jinv = point_jacobians(X, dN2)
-        sig = _stress(u[t[sl]], np.matmul(dN2[None], Jinv), lmb, mu)
-        gB = np.matmul(dBs[None], Jinv)                                          # (e,q,b,j)
-        dv = wq[None, :] * det
-        r = rhs[sl] - np.einsum("eq,eqij,eqbj->ebi", dv, sig, gB, optimize=True)
-        P = np.einsum("eq,eqbi,eqcj->ebcij", dv, gB, gB, optimize=True)          # (e,10,10,3,3)
-        A = lmb * P + mu * P.swapaxes(-1, -2)
-        A += mu * np.trace(P, axis1=-2, axis2=-1)[..., None, None] * np.eye(3)
-        A = A.transpose(0, 1, 3, 2, 4).reshape(e, 30, 30)
-        kk = np.repeat(keep[sl], 3, axis=1)                                      # (e,30)
-        A = np.where(kk[:, :, None] & kk[:, None, :], A, 0.0)
-        A[:, diag, diag] = np.where(kk, A[:, diag, diag], 1.0)
-        r = np.where(kk, r.reshape(e, 30), 0.0)
-        yield sl, A, r, kk
-
+    return rhs

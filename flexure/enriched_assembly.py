@@ -1,0 +1,66 @@
+"""The enriched system of flexure.enriched assembled by compiled loops (flexure._enriched_kernels):
+each element's surplus stiffness, coupling and residual computed once and added straight into CSR
+arrays whose pattern comes from the numbering (no per-chunk COO → CSR, no sparse sums, the
+constrained surplus functions never assembled). The numpy form (flexure.enriched ``assemble`` and
+``coupling_matrix``) is the reference it is tested against and the path without numba."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from flexure.mesh import Mesh
+
+
+def available() -> bool:
+    """True where the compiled assembly runs (numba installed and estimator.compiled enabled)."""
+    from estimator import compiled
+
+    return compiled.available()
+
+
+def _csr(bptr, bcol, n_rows: int, n_cols: int):
+    """An all-zero scalar CSR (3 n_rows × 3 n_cols) of the block pattern (bptr, bcol)."""
+    import scipy.sparse as sp
+
+    from flexure import _enriched_kernels as ek
+
+    nnz = 9 * int(bptr[-1])
+    idx = np.int32 if max(nnz, 3 * n_cols) < 2 ** 31 - 1 else np.int64
+    indptr = np.empty(3 * n_rows + 1, idx)
+    indices = np.empty(nnz, idx)
+    ek.scalar_csr(bptr, bcol, indptr, indices)
+    M = sp.csr_matrix((3 * n_rows, 3 * n_cols))
+    M.data, M.indices, M.indptr = np.zeros(nnz), indices, indptr        # sorted, canonical by construction
+    return M
+
+
+def assemble_enriched(mesh: Mesh, material, u: np.ndarray, numbering, traction=None):
+    """The enriched system on the free surplus functions of ``numbering`` (G, sign, free: flexure.enriched.surplus_numbering):
+    → (K_WW (3 n_free square CSR, rows 3k + i, k the free functions in order), r_W (3 n_free,),
+    K_hW (3 n_nodes × 3 n_free CSR, the full nodal rows: no coupling or Dirichlet reduction), the
+    inverse 3 × 3 diagonal blocks of K_WW (n_free,3,3), the numbering (G, sign, free))."""
+    from flexure import _enriched_kernels as ek
+    from flexure.bank_weiser import face_rhs
+    from flexure.fem import tet_shape
+    from flexure.surplus import surplus_basis, tet_rule_degree5
+
+    G, sign, free = numbering
+    kept = np.cumsum(free) - 1
+    nk = int(free.sum())
+    Gk = np.where(free[G], kept[G], -1).astype(np.int64)
+    tets = np.ascontiguousarray(mesh.tets, dtype=np.int64)
+    kb, kc = ek.block_pattern(Gk, Gk, nk, nk)
+    K = _csr(kb, kc, nk, nk)
+    cb, cc = ek.block_pattern(tets, Gk, mesh.n_nodes, nk)
+    C = _csr(cb, cc, mesh.n_nodes, nk)
+    rhs = face_rhs(mesh, material, u, traction)
+    xi, wq = tet_rule_degree5()
+    _, dN = tet_shape(2, xi)
+    _, dB = surplus_basis(xi)
+    r = np.zeros(3 * nk)
+    D = np.zeros((nk, 3, 3))
+    ek.assemble(np.ascontiguousarray(mesh.points, float), tets, np.ascontiguousarray(np.asarray(u, float).reshape(-1, 3)),
+                np.ascontiguousarray(rhs), Gk, np.ascontiguousarray(sign), np.ascontiguousarray(dN),
+                np.ascontiguousarray(dB), np.ascontiguousarray(wq), float(material.lame_lambda_Pa),
+                float(material.shear_modulus_Pa), kb, kc, K.data, cb, cc, C.data, r, D)
+    return K, r, C, np.linalg.inv(D), (G, sign, free)
