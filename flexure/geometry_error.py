@@ -80,7 +80,7 @@ def normal_offset(projector, x: np.ndarray, n: np.ndarray, tags=None) -> np.ndar
     projector's; an STL's ignores them)."""
     flat = x.reshape(-1, 3)
     if tags is None:
-        p = projector.project(flat)
+        p = projector.project(flat, certified=False) if hasattr(projector, "facet_sagitta") else projector.project(flat)
     else:
         p = projector.project(flat, np.full(len(flat), 2), np.repeat(tags, x.shape[1]))
     return np.einsum("...i,...i->...", p.reshape(x.shape) - x, n)
