@@ -15,7 +15,7 @@ and the rest, the compliance rises. On a Dirichlet face ∇(u − g) = ∂_n(u �
 rigid motion (ε(g) = 0), so (σ(u)n)·∂_n(z − g_z) = σ(u):ε(z) there too). σ:ε = λ tr ε(u) tr ε(z) +
 2μ ε(u):ε(z). A gauge whose footprint lies on a moved face also reads at the moved surface; that
 footprint term, ∫_S w V_n ∂_n ε_aa(u), is not included (the footprints of the parts measured here lie
-on flat faces that are on the true surface: V_n = 0 there; ``footprint_offset`` reports it).
+on flat faces that are on the true surface: V_n = 0 there).
 
 δJ estimates J(true domain) − J(Γ_h) at a fixed discretization: the error of the discrete domain,
 which no estimate of the discretization error on it (flexure.enriched) can see. Checked against

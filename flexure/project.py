@@ -195,7 +195,7 @@ class StlProjector:
         if dim is not None and len(points) and np.any(np.asarray(dim) == 1):
             on_curve = np.asarray(dim) == 1
             out = np.empty_like(points)
-            out[~on_curve] = self.project(points[~on_curve])
+            out[~on_curve] = self.project(points[~on_curve], certified=certified)
             out[on_curve] = self.project_on_edges(points[on_curve])
             return out
         if len(points) == 0:
