@@ -31,16 +31,22 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 
 def run(part: str, sections: int, rtol: float, deep: float | None = None) -> dict:
+    """``part``: an annulus of fem_annulus.PARTS as an N-gon STL, or a design file (.toml: needs ``deep``)."""
     from fem_annulus import PARTS, make_part, stiffness_exact
 
     from flexure.adaptive import ARM_SIGN, ENRICHED_FACTOR, analyze_adaptive
+    from flexure.design import load_design
     from flexure.exact import annulus_gauge_exact
 
     with tempfile.TemporaryDirectory() as tmp:
-        d = make_part(Path(tmp), part, "stl", sections=sections)
-        exact = annulus_gauge_exact(d, thickness_m=PARTS[part]["t"] * 1e-3)
-        c = math.pi ** 2 / (3 * sections ** 2)
-        k_ref = stiffness_exact(part, d.material.shear_modulus_Pa) * (1 - c) ** 2
+        if part.endswith(".toml"):
+            d = load_design(Path(part))
+            exact, k_ref = np.full(len(d.gauges), np.nan), np.nan
+        else:
+            d = make_part(Path(tmp), part, "stl", sections=sections)
+            exact = annulus_gauge_exact(d, thickness_m=PARTS[part]["t"] * 1e-3)
+            c = math.pi ** 2 / (3 * sections ** 2)
+            k_ref = stiffness_exact(part, d.material.shear_modulus_Pa) * (1 - c) ** 2
         t0 = time.perf_counter()
         res, _ = analyze_adaptive(d, rtol=rtol)
         wall = time.perf_counter() - t0
