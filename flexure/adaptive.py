@@ -14,7 +14,10 @@ Geometry and boundary conditions, the same problem on every level. The first mes
 vertices (an STL's: gmsh puts them off the facets) and boundary mid-edge nodes are put on the true
 surface (isoparametric P2; refine.snap), new boundary nodes too at every refinement; boundary edges
 whose P2 curve is still off the surface by δ > GEOMETRY_SHARE · rtol · R (R the edge's radius of
-curvature) are marked as well, a geometric error the residuals do not see. The load and fixed
+curvature) are marked as well, a geometric error the residuals do not see. On an STL that error of each
+goal is also estimated, as the shape derivative of the P2 boundary moved onto the facets,
+δJ ≈ Σ s_f ∫ V_n σ(u):ε(z) dΓ (flexure.geometry_error; s_f −1 on free faces, +1 on held ones), and
+added, signed, to the enriched goal change (``_with_geometry``): 2 |J(u⁺) + δJ − J(u_h)|. The load and fixed
 node sets are chosen once, by the radius bands on the first mesh, and handed down by prolongating
 their indicators (``_nested_selections``): re-selecting by the bands on every level would move
 the edge of the Dirichlet set as it is refined.
