@@ -165,7 +165,7 @@ def round_annulus_run(tmp_path_factory):
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason=(
-    "measured 2026-11-26 17:40-18:40 UTC (benchmarks/fem_geometry_error.py round, load 5-8): --rtol 0.01 stops at "
+    "measured 2026-11-26 17:40-18:00 UTC (benchmarks/fem_geometry_error.py round, load 5-8): --rtol 0.01 stops at "
     "7.1 k dofs; every boundary node on the STL (0 pending), the P2 faces within 1.3 um of the facets; the goals' "
     "geometric error (shape derivative, flexure.geometry_error) 0.0001-0.014 %, added to the estimate. Arms' "
     "effectivities 2.03 (k), 1.97, 14.9, 1.72, 1.95, bridge 1.94 against the polygon's own reference (the circle's "
