@@ -14,7 +14,10 @@ Geometry and boundary conditions, the same problem on every level. The first mes
 vertices (an STL's: gmsh puts them off the facets) and boundary mid-edge nodes are put on the true
 surface (isoparametric P2; refine.snap), new boundary nodes too at every refinement; boundary edges
 whose P2 curve is still off the surface by δ > GEOMETRY_SHARE · rtol · R (R the edge's radius of
-curvature) are marked as well, a geometric error the residuals do not see. The load and fixed
+curvature) are marked as well, a geometric error the residuals do not see. On an STL that error of each
+goal is also estimated, as the shape derivative of the P2 boundary moved onto the facets,
+δJ ≈ Σ s_f ∫ V_n σ(u):ε(z) dΓ (flexure.geometry_error; s_f −1 on free faces, +1 on held ones), and
+added, signed, to the enriched goal change (``_with_geometry``): 2 |J(u⁺) + δJ − J(u_h)|. The load and fixed
 node sets are chosen once, by the radius bands on the first mesh, and handed down by prolongating
 their indicators (``_nested_selections``): re-selecting by the bands on every level would move
 the edge of the Dirichlet set as it is refined.
@@ -237,7 +240,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
                    "enriched_s": enriched_s,
                    "min_dihedral_deg": float(quality(mesh)["min_dihedral_deg"]), "pending_nodes": int(len(tm.pending[0]))}
             tg = time.perf_counter()
-            geo_marked, rec["geometry"] = _geometry_marks(tm, projector, rtol)
+            geo_marked, rec["geometry"] = _geometry_marks(tm, projector, rtol, design, sol)
             rec["geometry"]["s"] = time.perf_counter() - tg
             rec.update(_estimates(rec, hist[-1] if hist else None, kappas, design))
             hist.append(rec)
@@ -322,7 +325,7 @@ def _nested_selections(mesh, ind: np.ndarray):
     return np.flatnonzero(on[:, 0]), np.flatnonzero(on[:, 1])
 
 
-def _geometry_marks(tm, projector, rtol: float):
+def _geometry_marks(tm, projector, rtol: float, design=None, sol=None):
     """The geometry criterion: elements with a boundary edge whose isoparametric P2 curve is off the
     true surface by δ > GEOMETRY_SHARE · rtol · R (R its radius of curvature from the sagitta:
     refinement.boundary_geometry_error); a boundary moved by δ over a feature of size R changes
@@ -330,7 +333,13 @@ def _geometry_marks(tm, projector, rtol: float):
     sagitta there (StlProjector.facet_sagitta, wφ/8) is facetting, not geometry: every fold between
     facets looks like curvature, and a smooth P2 edge through points on them is off them by up to that
     at any mesh size (six_spoke_thick: 2447 of 3253 edges over the threshold at the first level, its 0.6 mm fillets'
-    facets 8 µm off their circle). → (elements, summary)"""
+    facets 8 µm off their circle).
+
+    On an STL (``design`` and the level's GoalSolution ``sol`` given) also the goals' geometric error, the
+    shape derivative δJ of the discrete boundary moved onto the facets (flexure.geometry_error; summary
+    ``error``: δθ, δε per gauge, the bridge's, the boundary's offsets), which the estimate adds
+    (``_with_geometry``); where a goal's |δJ| exceeds GEOMETRY_SHARE · rtol of its scale, the boundary
+    elements carrying the larger half of the weighted Σ|δJ_face| are marked too. → (elements, summary)"""
     from flexure.refine import boundary_geometry_error
 
     if projector is None:
@@ -350,8 +359,37 @@ def _geometry_marks(tm, projector, rtol: float):
         facetting = int((~real).sum())
         over[np.flatnonzero(over)[~real]] = False
     bad = np.unique(e[over])
-    return bad, {"max_rel": float(rel.max(initial=0.0)), "max_m": float(dist.max(initial=0.0)), "marked": int(len(bad)),
-                 "facetting_edges": facetting}
+    summary = {"max_rel": float(rel.max(initial=0.0)), "max_m": float(dist.max(initial=0.0)), "marked": int(len(bad)),
+               "facetting_edges": facetting}
+    if sol is not None and design is not None and design.kind == "stl":
+        from flexure.geometry_error import goal_geometry_errors
+
+        sign = np.array([ARM_SIGN.get(g.arm, 0.0) for g in design.gauges])
+        err, elems, terms = goal_geometry_errors(tm.mesh, projector, design.material, sol.U, sol.constrained, sign)
+        w = np.r_[1.0 / max(abs(sol.theta), 1e-300), 1.0 / _strain_scales(sol.eps)]
+        rel_goal = np.abs(np.r_[err["theta"], err["gauges"]]) * w
+        err["marked"] = 0
+        if rel_goal.max(initial=0.0) > GEOMETRY_SHARE * rtol:
+            score = np.abs(terms) @ w
+            order = np.argsort(score)[::-1]
+            n = int(np.searchsorted(np.cumsum(score[order]), 0.5 * score.sum())) + 1
+            geo = np.unique(elems[order[:n]])
+            err["marked"] = int(len(geo))
+            bad = np.union1d(bad, geo)
+        summary["error"] = err
+    return bad, summary
+
+
+def _with_geometry(rec: dict) -> dict:
+    """The enriched goal changes J(u⁺) − J(u_h) plus the goals' geometric error δJ where it was estimated
+    (``_geometry_marks``), signed: J(u⁺) + δJ approximates the goal on the true part, so the estimate
+    2 |J(u⁺) + δJ − J(u_h)| brackets as the enriched one does wherever |J − J(u⁺) − δJ| ≤ ½ |J − J(u_h)|."""
+    d = rec["enriched"]
+    g = (rec.get("geometry") or {}).get("error")
+    if not g:
+        return d
+    return {**d, "theta": d["theta"] + g["theta"], "gauges": (np.asarray(d["gauges"]) + g["gauges"]).tolist(),
+            "eps_ref": d["eps_ref"] + g["eps_ref"]}
 
 
 def _safety_factor(design, mesh, u_unit) -> float:
@@ -411,7 +449,7 @@ def _estimates(rec: dict, prev: dict | None, kappas: dict, design) -> dict:
 def _enriched_estimates(rec: dict) -> dict:
     """e = ENRICHED_FACTOR · |J(u⁺) − J(u_h)| of every goal (module docstring), absolute, in the goals'
     units: θ (then k), each gauge, the bridge strain (its own linear goal)."""
-    d = rec["enriched"]
+    d = _with_geometry(rec)                       # + the STL's geometric error (geo6's hook)
     e_theta = ENRICHED_FACTOR * abs(d["theta"])
     arms = [ENRICHED_FACTOR * abs(x) for x in d["gauges"]]
     k_est = e_theta / abs(rec["theta"]) * rec["torsional_stiffness_Nm_per_rad"]

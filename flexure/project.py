@@ -186,14 +186,16 @@ class StlProjector:
         self.feature_deg = feature_deg
         self.surface = surface
 
-    def project(self, points: np.ndarray, dim=None, tag=None) -> np.ndarray:
+    def project(self, points: np.ndarray, dim=None, tag=None, certified: bool = True) -> np.ndarray:
         """Closest points on the STL's triangles; those of ``dim`` 1 (a sharp edge, ``stl_tagged``)
-        on its sharp-edge polylines instead (folds above ``feature_deg``), where it has any."""
+        on its sharp-edge polylines instead (folds above ``feature_deg``), where it has any.
+        ``certified`` False: the closest of the nearest samples' triangles only, no ball query (points
+        within a sample gap of the surface, e.g. the mesh's own boundary: flexure.geometry_error)."""
         points = np.asarray(points, float)
         if dim is not None and len(points) and np.any(np.asarray(dim) == 1):
             on_curve = np.asarray(dim) == 1
             out = np.empty_like(points)
-            out[~on_curve] = self.project(points[~on_curve])
+            out[~on_curve] = self.project(points[~on_curve], certified=certified)
             out[on_curve] = self.project_on_edges(points[on_curve])
             return out
         if len(points) == 0:
@@ -204,7 +206,7 @@ class StlProjector:
         cp, d = self._closest(points, self.owner[idx])
         # certified where every sample within d + gap (the farthest a triangle holding a closer point
         # can have its nearest sample) was a candidate; else a ball query of that radius
-        for i in np.flatnonzero(ds[:, -1] < d + self.gap):
+        for i in np.flatnonzero(ds[:, -1] < d + self.gap) if certified else ():
             near = self.tree.query_ball_point(points[i], d[i] + self.gap)
             cp[i], d[i] = (a[0] for a in self._closest(points[i:i + 1], np.unique(self.owner[near])[None]))
         return cp

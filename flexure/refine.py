@@ -268,7 +268,9 @@ def boundary_geometry_error(tm: TaggedMesh, projector):
     _, first, inv = np.unique(t[e, 4 + j], return_index=True, return_inverse=True)   # each edge once
     d, g = dims[e, j][first], tags[e, j][first]
     Q = np.vstack([q1[first], q3[first]])
-    proj = projector.project(Q, np.concatenate([d, d]), np.concatenate([g, g]))
+    # points on the mesh's own boundary: an STL's nearest samples' triangles suffice (StlProjector)
+    kw = {"certified": False} if hasattr(projector, "facet_sagitta") else {}
+    proj = projector.project(Q, np.concatenate([d, d]), np.concatenate([g, g]), **kw)
     dist = np.linalg.norm(proj - Q, axis=1).reshape(2, -1).max(axis=0)[inv.ravel()]
     L2 = np.einsum("ki,ki->k", xb - xa, xb - xa)
     s = np.linalg.norm(xm - 0.5 * (xa + xb), axis=1)
