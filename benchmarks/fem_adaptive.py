@@ -95,15 +95,17 @@ def _series(lv: list[dict], goal: str, enriched: bool) -> list[float]:
 
 def reference(lv: list[dict], goal: str) -> dict:
     """A goal's reference from the nested levels: the extrapolation of J⁺ = J(u⁺) where the levels carry
-    the enriched difference (it converges faster than J_h), its allowance the larger of its own size and
-    its distance from the extrapolation of J_h (two sequences that must agree); J_h's alone otherwise."""
+    the enriched difference (it converges faster than J_h), its allowance the largest of its own size, its
+    distance from the extrapolation of J_h (two sequences that must agree) and the last level's enriched
+    difference |d_L| (|J − J⁺_L| = q |d_L|/(1 − q) ≤ |d_L| for q ≤ ½); J_h's alone otherwise."""
     h = extrapolate(_series(lv, goal, False))
     if not all(x.get("enriched") for x in lv):
         return h
     p = extrapolate(_series(lv, goal, True))
-    a = max(p["allowance"], abs(p["value"] - h["value"]))
+    d_last = abs(_series(lv[-1:], goal, True)[0] - _series(lv[-1:], goal, False)[0])
+    a = max(p["allowance"], abs(p["value"] - h["value"]), d_last)
     return {"value": p["value"], "allowance": a, "how": f"J⁺: {p['how']}; J_h: {h['how']} ({h['value']:.9g}); "
-            "allowance the larger of J⁺'s extrapolation and the two limits' distance"}
+            "allowance the largest of J⁺'s extrapolation, the two limits' distance and the last |d|"}
 
 
 def references(run: dict) -> dict:
