@@ -40,6 +40,12 @@ Why a large step (MIN_DROP 0.4). q is not quite the same on both levels: with E_
 its effectivity in [1.0, 2.6] for r ≤ 0.5, [0.92, 3.0] at r = 0.6, [0.82, 3.9] at r = 0.7; d falls with
 about the error, d_(ℓ+1)/d_ℓ = r (1 − q_(ℓ+1))/(1 − q_ℓ), so a fall of d by 40 % keeps r near or below 0.6.
 The enriched CG's accuracy (relative residual 1e-3, about 1 % of d) is then far below the difference.
+
+Measured (2026-11-26, benchmarks/fem_effectivity.py against deep nested references): q̂ 0.35–0.52 on every
+goal of the re-entrant part, 0.1–0.4 on three_spoke_thin. On the re-entrant part q still drifts upwards
+with the refinement (the gauges' J⁺ sequence converges at a ratio 0.75–0.78 per level against J_h's 0.55:
+the singular part's share grows), so q̂ of the last step is low and the gauges stay at 0.6–1.3 at
+--rtol 0.01 (2|d|: 0.5–0.98). A first level has no q̂ at all.
 """
 
 from __future__ import annotations
