@@ -1,18 +1,21 @@
-"""Effectivity of the adaptive FEM's error estimates, and its wall time, at a stated --rtol:
+"""Effectivity of the adaptive FEM's error estimates per goal, against converged references:
 
-    python benchmarks/fem_effectivity.py [--rtol R] [--out FILE.json] NAME [NAME ...]
+    python benchmarks/fem_effectivity.py run [--rtol R] [--before] NAME [NAME ...]   # runs → RUNS json
+    python benchmarks/fem_effectivity.py table                                      # the markdown table
+    python benchmarks/fem_effectivity.py replay NAME                               # a deep run's levels
 
-For each design (names as benchmarks/fem_adaptive.py: the five reference parts, or an unseen part of
-tests/data/fem_unseen) run flexure.adaptive.analyze_adaptive at ``rtol`` and compare every goal's
-estimate e with its true error E = |J − J∞| against a converged reference J∞ ± a:
+``run``: flexure.adaptive.analyze_adaptive on each design (names as benchmarks/fem_adaptive.py: the five
+reference parts, or an unseen part of tests/data/fem_unseen) at ``rtol``; every level's goals, enriched
+differences and estimates, the wall time and the 1-minute load go to RUNS (one entry per design, rtol
+and mode). ``--before``: the estimate as main 383f4e5 made it, 2 |J(u⁺) − J(u_h)| on every level (the
+saturation ratio never measured, flexure.saturation), the same code otherwise.
 
-* the reference parts: tests/data/fem_reference/levels.json (fine gmsh levels + extrapolation;
-  bridge strain and stiffness);
-* the unseen parts: the deep adaptive run of benchmarks/fem_adaptive.py (tests/data/fem_reference/
-  adaptive/NAME.json; bridge strain, stiffness and each gauge).
+``table``: each run's last level against the design's reference J∞ ± a (the deep nested run
+tests/data/fem_reference/adaptive/NAME.json where it exists, else tests/data/fem_reference/levels.json):
+effectivity e/E, E = |J − J∞|, with its range over the allowance, E ∈ [max(E − a, 0), E + a].
 
-effectivity = e / E, with its range over the reference's allowance, E ∈ [max(|J − J∞| − a, 0), |J − J∞| + a].
-An estimate brackets its error when e ≥ E. Wall times are of a shared machine: state its load.
+``replay``: the deep run's own levels, before (2|d|) and after (flexure.saturation) — the early levels
+are judged fairly; the last ones are those the reference extrapolates from.
 """
 
 from __future__ import annotations
@@ -27,31 +30,57 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
+RUNS = ROOT / "reports" / "fem_adaptive_effectivity.json"
+GOALS = ("torsional_stiffness_Nm_per_rad", "gauge_strain_per_Nm")
+KEEP = ("level", "dofs", "theta", "torsional_stiffness_Nm_per_rad", "gauge_strain_per_Nm", "gauge_strains",
+        "enriched", "estimate", "kappa", "kappa_how", "goal_algebraic_error", "level_s", "peak_rss_gb")
 
 
-def _references(name: str) -> dict:
-    """{goal: (value, allowance)} of a design's converged reference."""
+def references(name: str) -> dict:
+    """{goal: (value, allowance, source)}: the deep nested run's where it has one (the same discrete problem as
+    the adaptive runs: its load and fixed sets chosen on the same first mesh), else levels.json's (gmsh levels,
+    the bands re-selected on each mesh: reentrant's stiffness limit is 0.3 % off the nested one)."""
     import fem_adaptive as fa
 
-    levels = json.loads((fa.DATA / "levels.json").read_text())["references"]
-    if name in levels:
-        return {k: (v["value"], v["allowance"]) for k, v in levels[name].items()}
-    deep = json.loads((fa.OUT / f"{name}.json").read_text())["references"]
-    return {k: (v["value"], v["allowance"]) for k, v in deep.items() if isinstance(v, dict)}
+    out = {}
+    levels = json.loads((fa.DATA / "levels.json").read_text())["references"].get(name, {})
+    for k, v in levels.items():
+        out[k] = (v["value"], v["allowance"], "levels.json")
+    p = fa.OUT / f"{name}.json"
+    if p.exists():
+        for k, v in json.loads(p.read_text()).get("references", {}).items():
+            if isinstance(v, dict) and math.isfinite(v["allowance"]):
+                out[k] = (v["value"], v["allowance"], f"adaptive/{name}.json")
+    return out
 
 
-def _goals(res: dict) -> dict:
-    """{goal: (value, estimate)} of an adaptive result (the last level's goal values)."""
-    last = res["discretization_levels"][-1]
-    est = last["estimate"]
-    out = {"torsional_stiffness_Nm_per_rad": (last["torsional_stiffness_Nm_per_rad"], est["torsional_stiffness_Nm_per_rad"]),
-           "gauge_strain_per_Nm": (last["gauge_strain_per_Nm"], est["gauge_strain_per_Nm"])}
-    for i, (v, e) in enumerate(zip(last["gauge_strains"], est["gauge_strains"])):
+def goals_of(level: dict) -> dict:
+    """{goal: (value, estimate)} of one level record."""
+    est = level["estimate"]
+    out = {g: (level[g], est[g]) for g in GOALS}
+    for i, (v, e) in enumerate(zip(level["gauge_strains"], est["gauge_strains"])):
         out[f"gauge{i}"] = (v, e)
     return out
 
 
-def measure(name: str, rtol: float) -> dict:
+def effectivity(J: float, e: float, ref: tuple) -> dict:
+    value, a = ref[0], ref[1]
+    E = abs(J - value)
+    lo, hi = max(E - a, 0.0), E + a
+    return {"value": J, "estimate_rel": e / abs(J), "true_error_rel": E / abs(value), "allowance_rel": a / abs(value),
+            "effectivity": e / E if E > 0 else math.inf,
+            "effectivity_range": [e / hi if hi > 0 else math.inf, e / lo if lo > 0 else math.inf],
+            "reference": ref[2] if len(ref) > 2 else ""}
+
+
+def before_mode():
+    """main's estimate, 2|d| on every level: the saturation ratio is never a measurement."""
+    from flexure import saturation
+
+    saturation.saturation_ratio = lambda *a, **k: (math.nan, "not measured (before: main 383f4e5)")
+
+
+def run(name: str, rtol: float, before: bool) -> dict:
     import fem_adaptive as fa
     from flexure.adaptive import analyze_adaptive
     from flexure.design import load_design
@@ -59,49 +88,98 @@ def measure(name: str, rtol: float) -> dict:
     t0 = time.perf_counter()
     res, _ = analyze_adaptive(load_design(fa.design_path(name)), rtol=rtol)
     wall = time.perf_counter() - t0
-    refs = _references(name)
-    rows = {}
-    for goal, (J, e) in _goals(res).items():
-        if goal not in refs:
-            continue
-        ref, a = refs[goal]
-        E = abs(J - ref)
-        lo, hi = max(E - a, 0.0), E + a
-        rows[goal] = {"value": J, "estimate_rel": e / abs(J), "true_error_rel": E / abs(ref),
-                      "allowance_rel": a / abs(ref), "effectivity": e / E if E > 0 else math.inf,
-                      "effectivity_range": [e / hi if hi > 0 else math.inf, e / lo if lo > 0 else math.inf],
-                      "brackets": e >= E}
-    return {"design": name, "rtol": rtol, "wall_s": wall, "load_1min": os.getloadavg()[0],
-            "dofs": res["dofs"], "levels": len(res["discretization_levels"]), "stopped_by": res["stopped_by"],
-            "peak_rss_gb": max(x.get("peak_rss_gb") or 0 for x in res["discretization_levels"]), "goals": rows}
+    lv = res["discretization_levels"]
+    return {"design": name, "rtol": rtol, "mode": "before" if before else "after", "wall_s": wall,
+            "load_1min": os.getloadavg()[0], "dofs": res["dofs"], "levels": [{k: x.get(k) for k in KEEP} for x in lv],
+            "stopped_by": res["stopped_by"], "peak_rss_gb": max(x.get("peak_rss_gb") or 0 for x in lv)}
+
+
+def replay(levels: list[dict], before: bool) -> list[dict]:
+    """The levels' estimates recomputed from their J and d (flexure.adaptive._enriched_estimates)."""
+    from flexure import adaptive, saturation
+
+    saved = saturation.saturation_ratio
+    if before:
+        before_mode()
+    try:
+        out, prev, seen = [], None, {}
+        for x in levels:
+            out.append({**x, **adaptive._enriched_estimates(x, prev, seen)})
+            prev = x
+    finally:
+        saturation.saturation_ratio = saved
+    return out
+
+
+def _fmt(g: str, x: dict) -> str:
+    lo, hi = x["effectivity_range"]
+    ok = "" if 1 <= lo and hi <= 3 else (" **out**" if x["effectivity"] < 1 or x["effectivity"] > 3 else " (range)")
+    return (f"{g} | {x['estimate_rel']:.3%} | {x['true_error_rel']:.3%} ± {x['allowance_rel']:.3%} | "
+            f"{x['effectivity']:.2f} [{lo:.2f}, {hi:.2f}]{ok}")
+
+
+def table(runs: list[dict]) -> str:
+    rows = ["| part | rtol | mode | levels (DOFs) | wall s (load) | goal | estimate | true error ± a | effectivity [range] |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    for r in runs:
+        refs = references(r["design"])
+        last = r["levels"][-1]
+        dofs = ", ".join(f"{x['dofs'] / 1e3:.0f}k" for x in r["levels"])
+        head = (f"| {r['design']} | {r['rtol']:g} | {r['mode']} | {len(r['levels'])} ({dofs}) | "
+                f"{r['wall_s']:.0f} ({r['load_1min']:.1f}) | ")
+        for g, (J, e) in goals_of(last).items():
+            if g in refs:
+                rows.append(head + _fmt(g, effectivity(J, e, refs[g])) + " |")
+                head = "| | | | | | "
+    return "\n".join(rows)
 
 
 def main(argv: list[str]) -> int:
-    rtol, out, names = 0.02, None, []
-    it = iter(argv)
-    for a in it:
-        if a == "--rtol":
-            rtol = float(next(it))
-        elif a == "--out":
-            out = Path(next(it))
-        else:
-            names.append(a)
-    if not names:
+    if not argv:
         print(__doc__)
         return 2
-    runs = []
-    for name in names:
-        r = measure(name, rtol)
-        runs.append(r)
-        print(f"{name}: {r['wall_s']:.0f} s wall (load {r['load_1min']:.1f}), {r['dofs']} dofs, {r['levels']} levels, "
-              f"stopped by {r['stopped_by']}, peak {r['peak_rss_gb']:.2f} GB", flush=True)
-        for g, x in r["goals"].items():
-            print(f"  {g:32s} est {x['estimate_rel']:.3%}  true {x['true_error_rel']:.3%} ± {x['allowance_rel']:.3%}  "
-                  f"eff {x['effectivity']:.2f} [{x['effectivity_range'][0]:.2f}, {x['effectivity_range'][1]:.2f}]"
-                  f"{'' if x['brackets'] else '  UNDER'}", flush=True)
-        if out is not None:
-            out.write_text(json.dumps(runs, indent=1) + "\n")
-    return 0
+    cmd, rest = argv[0], argv[1:]
+    runs = json.loads(RUNS.read_text()) if RUNS.exists() else []
+    runs = [r for r in runs if "mode" in r]          # this format only
+    if cmd == "run":
+        rtol, before, names = 0.02, False, []
+        it = iter(rest)
+        for a in it:
+            if a == "--rtol":
+                rtol = float(next(it))
+            elif a == "--before":
+                before = True
+            else:
+                names.append(a)
+        if before:
+            before_mode()
+        for name in names:
+            r = run(name, rtol, before)
+            runs = [x for x in runs if (x["design"], x["rtol"], x["mode"]) != (name, rtol, r["mode"])] + [r]
+            RUNS.write_text(json.dumps(runs, indent=1) + "\n")
+            print(f"{name} rtol {rtol:g} {r['mode']}: {r['wall_s']:.0f} s (load {r['load_1min']:.1f}), "
+                  f"{[x['dofs'] for x in r['levels']]}, stopped by {r['stopped_by']}", flush=True)
+        return 0
+    if cmd == "table":
+        runs.sort(key=lambda r: (r["design"], r["rtol"], r["mode"] != "before"))
+        print(table(runs))
+        return 0
+    if cmd == "replay":
+        import fem_adaptive as fa
+
+        deep = json.loads((fa.OUT / f"{rest[0]}.json").read_text())
+        refs = references(rest[0])
+        for before in (True, False):
+            print("before (2|d|)" if before else "after (flexure.saturation)")
+            for x in replay(deep["levels"], before):
+                for g, (J, e) in goals_of(x).items():
+                    if g in refs:
+                        key = {GOALS[0]: "theta", GOALS[1]: "eps_ref"}.get(g, "g" + g[5:])
+                        print(f"  L{x['level']} {x['dofs']:>8} {_fmt(g, effectivity(J, e, refs[g]))}  "
+                              f"q̂ {x['kappa'].get(key, math.nan):.2f}")
+        return 0
+    print(__doc__)
+    return 2
 
 
 if __name__ == "__main__":

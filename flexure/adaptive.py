@@ -33,8 +33,12 @@ enriched goal error is at most half the P2 one (saturation, |J − J(u⁺)| ≤ 
 
 whatever the signs: no calibration, hence MIN_LEVELS = 1. Measured q (benchmarks/fem_annulus.py,
 exact torsion field on exact circles): 0.01–0.12 on every goal at 5–60 k dofs, except where the
-P2 error itself is ~0.003 % (a sign change). The estimate does not see the geometry: the discrete
-boundary against the CAD/STL surface (an STL polygon's annulus against the circle: 0.02–0.1 %).
+P2 error itself is ~0.003 % (a sign change). Next to re-entrant edges V⁺ only about halves the error
+(q 0.3–0.55): from the second level on, q̂ = (J⁺_ℓ − J⁺_(ℓ−1))/(J_ℓ − J_(ℓ−1)) of each goal is measured
+between the nested levels (same q on both) and e = max(2, 1.5/(1 − q̂)) |J(u⁺) − J(u_h)|
+(flexure.saturation: its derivation, and where q̂ is not a measurement). On an STL, d = J(u⁺) − J(u_h)
+includes the geometric error δJ above; a CAD/STEP part's P2 boundary is isoparametric on the exact
+surface and gets no geometric term.
 The distributed coupling (its traction on W not assembled yet) keeps the calibrated DWR estimate:
 the raw DWR sum η_ℓ (Bank–Weiser primal weight, flexure.bank_weiser) divided by its effectivity
 measured over the last refinement step,
@@ -61,6 +65,7 @@ import numpy as np
 from userio.errors import InputError
 from flexure import adaptive_sizing as sizing
 from flexure import blas
+from flexure import saturation
 
 DEFAULT_RTOL = 0.02
 #: the first mesh: the design's size function × this, its curved faces resolved as at
@@ -78,8 +83,9 @@ GEOMETRY_SHARE = 0.1
 KAPPA_MIN = 0.25
 MIN_DROP = 0.25
 MIN_LEVELS = 1
-#: the enriched estimate's factor: 2 |J(u⁺) − J(u_h)| brackets within [1, 3] when |J − J(u⁺)| ≤ ½ |J − J(u_h)|
-ENRICHED_FACTOR = 2.0
+#: the enriched estimate's first-level factor: 2 |J(u⁺) − J(u_h)| brackets within [1, 3] when
+#: |J − J(u⁺)| ≤ ½ |J − J(u_h)|; later levels: flexure.saturation
+ENRICHED_FACTOR = saturation.FLAT
 MAX_LEVELS = 14
 MAX_DOFS = 2_000_000
 MAX_MEMORY_GB = 3.0
@@ -90,10 +96,13 @@ METHOD = ("goal-oriented (dual-weighted residual) estimate on nested adaptively 
           "over the last refinement step ({kappa}) and × {safety}; a bound-like figure, not 1σ")
 
 METHOD_ENRICHED = ("goal-oriented estimate on nested adaptively refined meshes ({levels} levels, {dofs} dofs): "
-                   "{factor:g} × |J(u⁺) − J(u_h)|, u⁺ the solution in the enriched space P2 ⊕ cubic surplus on "
-                   "the last mesh (one global solve, flexure.enriched); brackets the error within [1, 3]× where "
-                   "the enriched solution's error is at most half the P2 one's; a bound-like figure, not 1σ; it "
-                   "does not see the geometry (the discrete boundary against the CAD/STL surface)")
+                   "max({factor:g}, 1.5/(1 − q̂)) × |J(u⁺) − J(u_h)|, u⁺ the solution in the enriched space P2 ⊕ "
+                   "cubic surplus on the last mesh (one global solve, flexure.enriched), q̂ the ratio of the enriched "
+                   "to the P2 error measured between the last two nested levels (flexure.saturation; {factor:g} on "
+                   "one level); brackets the error within [1, 3]× where q̂ is the ratio on the last level within "
+                   "[⅔, 2] of (1 − q), or, on one level, the enriched error is at most half the P2 one; a bound-like "
+                   "figure, not 1σ; on an STL, J(u⁺) includes the P2 boundary's geometric error against the facets "
+                   "(flexure.geometry_error)")
 
 
 def _rss_gb() -> float:
@@ -417,7 +426,7 @@ def _estimates(rec: dict, prev: dict | None, kappas: dict, design) -> dict:
     """Calibrated error estimates of this level's goals (module docstring), absolute, in the
     goals' units: θ (then k), each gauge, ε_ref."""
     if rec.get("enriched"):
-        return _enriched_estimates(rec)
+        return _enriched_estimates(rec, prev, kappas)
     eta = rec["eta"]
     J = {"theta": rec["theta"], "eps_ref": rec["gauge_strain_per_Nm"],
          **{f"g{i}": e for i, e in enumerate(rec["gauge_strains"])}}
@@ -446,18 +455,50 @@ def _estimates(rec: dict, prev: dict | None, kappas: dict, design) -> dict:
             "kappa": {k: v[0] for k, v in how.items()}, "kappa_how": {k: v[1] for k, v in how.items()}}
 
 
-def _enriched_estimates(rec: dict) -> dict:
-    """e = ENRICHED_FACTOR · |J(u⁺) − J(u_h)| of every goal (module docstring), absolute, in the goals'
-    units: θ (then k), each gauge, the bridge strain (its own linear goal)."""
-    d = _with_geometry(rec)                       # + the STL's geometric error (geo6's hook)
-    e_theta = ENRICHED_FACTOR * abs(d["theta"])
-    arms = [ENRICHED_FACTOR * abs(x) for x in d["gauges"]]
-    k_est = e_theta / abs(rec["theta"]) * rec["torsional_stiffness_Nm_per_rad"]
-    how = "enriched: 2 |J(u⁺) − J(u_h)|"
-    keys = ["theta", "eps_ref"] + [f"g{i}" for i in range(len(arms))]
-    return {"estimate": {"torsional_stiffness_Nm_per_rad": k_est,
-                         "gauge_strain_per_Nm": ENRICHED_FACTOR * abs(d["eps_ref"]), "gauge_strains": arms},
-            "kappa": {k: math.nan for k in keys}, "kappa_how": {k: how for k in keys}}
+def _enriched_estimates(rec: dict, prev: dict | None = None, q_seen: dict | None = None) -> dict:
+    """Every goal's estimate from its enriched difference d = J(u⁺) − J(u_h) (flexure.saturation):
+    2|d| on the first level, max(2, 1.5/(1 − q̂))|d| once the saturation ratio q̂ is measured between
+    this nested level and ``prev``; absolute, in the goals' units: θ (then k), each gauge, the bridge
+    strain (its own linear goal). ``q_seen`` {goal: last measured q̂}, updated."""
+    from flexure.saturation import goal_estimate
+
+    q_seen = {} if q_seen is None else q_seen
+    vals, diffs = _goal_table(rec)
+    pv, pd = _goal_table(prev) if prev and prev.get("enriched") else (None, None)
+    noise = _algebraic_noise(rec, vals) + (_algebraic_noise(prev, pv) if pv is not None else 0.0)
+    est, q, how = {}, {}, {}
+    for i, key in enumerate(_goal_keys(len(vals))):
+        est[key], q[key], how[key] = goal_estimate(vals[i], diffs[i], None if pv is None else (pv[i], pd[i]),
+                                                   noise[i], q_seen.get(key, math.nan))
+        if "measured over" in how[key]:
+            q_seen[key] = q[key]
+    arms = [est[f"g{i}"] for i in range(len(vals) - 2)]
+    k_est = est["theta"] / abs(rec["theta"]) * rec["torsional_stiffness_Nm_per_rad"]
+    return {"estimate": {"torsional_stiffness_Nm_per_rad": k_est, "gauge_strain_per_Nm": est["eps_ref"],
+                         "gauge_strains": arms},
+            "kappa": q, "kappa_how": how}
+
+
+def _goal_keys(n: int) -> list[str]:
+    return ["theta", "eps_ref"] + [f"g{i}" for i in range(n - 2)]
+
+
+def _goal_table(rec: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(J, d) of a level's goals in the order of ``_goal_keys``: θ, the bridge strain, each gauge; d the
+    enriched change plus the STL's geometric error where estimated (``_with_geometry``)."""
+    d = _with_geometry(rec)
+    J = np.array([rec["theta"], rec["gauge_strain_per_Nm"], *rec["gauge_strains"]], float)
+    return J, np.array([d["theta"], d["eps_ref"], *d["gauges"]], float)
+
+
+def _algebraic_noise(rec: dict, J: np.ndarray) -> np.ndarray:
+    """Absolute algebraic error of each goal of a level: its solve's relative goal error (flexure.goals,
+    against |θ| and the strains' scales) × the scale, and round-off."""
+    rel = rec.get("goal_algebraic_error")
+    rel = 1e-8 if rel is None or not math.isfinite(rel) else float(rel)
+    scale = np.abs(J)
+    scale[1:] = np.maximum(scale[1:], np.abs(J[2:]).mean() if len(J) > 2 else 0.0)
+    return (rel + 1e-12) * scale
 
 
 def _strain_scales(eps) -> np.ndarray:

@@ -21,7 +21,9 @@ one primal solve serves every goal.
 
 Bracketing (why ``adaptive`` reports 2 |J⁺ − J_h|): if the enriched goal error |J − J⁺| ≤ q |J − J_h|
 (saturation) with q ≤ ½, then |J⁺ − J_h| ∈ [(1 − q), (1 + q)] |J − J_h|, and 2 |J⁺ − J_h| has an
-effectivity in [2(1 − q), 2(1 + q)] ⊂ [1, 3] whatever the signs.
+effectivity in [2(1 − q), 2(1 + q)] ⊂ [1, 3] whatever the signs. Where V⁺ saturates less (q up to
+0.55 next to re-entrant edges), q is measured between nested levels and the factor raised to
+1.5/(1 − q̂) (flexure.saturation).
 """
 
 from __future__ import annotations

@@ -3,6 +3,7 @@ calibration of the estimate, and the output contract, on a small annulus STL (fa
 
 import math
 
+import numpy as np
 import pytest
 
 from flexure import adaptive
@@ -256,6 +257,36 @@ def test_bridge_estimate_bounds_through_its_arms():
     arms = out["estimate"]["gauge_strains"]
     assert arms == pytest.approx([adaptive.SAFETY * 2e-8] * 4)
     assert out["estimate"]["gauge_strain_per_Nm"] == pytest.approx(sum(arms) / 4) and sum(arms) > 0
+
+
+def test_enriched_estimate_measures_the_saturation_ratio_between_levels():
+    """Synthetic nested levels with known errors: the P2 errors E_ℓ (θ, bridge, four arms), the enriched
+    ones q E_ℓ with q = 0.5 (re-entrant: V⁺ only halves the error). Level 0 reports 2|d| = 2(1 − q)|E|
+    = |E| (the flat estimate just brackets); level 1 measures q̂ = 0.5 per goal and reports
+    max(2, 1.5/(1 − q̂))|d| = 1.5 |E|; an arm whose enriched difference changed sign keeps 2|d|."""
+    q, J = 0.5, np.array([1e-3, 1e-5, 1e-5, -1e-5, 1e-5, -1e-5])      # θ, bridge, arms (exact)
+    E0 = np.array([2e-5, 1e-7, 3e-7, -2e-7, 1e-7, -2e-7])
+    E1 = 0.4 * E0
+    E1[5] = 1e-9                                                       # arm 4 crosses zero
+
+    def level(E):
+        Jh, d = J - E, (1 - q) * E
+        return {"theta": Jh[0], "torsional_stiffness_Nm_per_rad": 1 / Jh[0], "gauge_strain_per_Nm": Jh[1],
+                "gauge_strains": Jh[2:].tolist(), "goal_algebraic_error": 1e-8,
+                "enriched": {"theta": d[0], "eps_ref": d[1], "gauges": d[2:].tolist()}}
+
+    l0, l1 = level(E0), level(E1)
+    seen = {}
+    e0 = adaptive._enriched_estimates(l0, None, seen)
+    assert e0["estimate"]["gauge_strains"] == pytest.approx(np.abs(E0[2:]).tolist())
+    e1 = adaptive._enriched_estimates(l1, l0, seen)
+    assert e1["kappa"]["theta"] == pytest.approx(q) and e1["kappa"]["g0"] == pytest.approx(q)
+    assert e1["estimate"]["gauge_strain_per_Nm"] == pytest.approx(1.5 * abs(E1[1]))
+    assert e1["estimate"]["gauge_strains"][:3] == pytest.approx((1.5 * np.abs(E1[2:5])).tolist())
+    assert e1["estimate"]["gauge_strains"][3] == pytest.approx(2 * (1 - q) * abs(E1[5]))
+    assert "changed sign" in e1["kappa_how"]["g3"] and set(seen) == {"theta", "eps_ref", "g0", "g1", "g2"}
+    k_rel = e1["estimate"]["torsional_stiffness_Nm_per_rad"] / l1["torsional_stiffness_Nm_per_rad"]
+    assert k_rel == pytest.approx(1.5 * abs(E1[0]) / abs(l1["theta"]))
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,80 @@
+"""The saturation-aware goal estimate (flexure.saturation) on synthetic nested sequences: the
+measured ratio q̂, the estimate's effectivity where its assumptions hold, and each failure mode."""
+
+import math
+
+import numpy as np
+import pytest
+
+from flexure import saturation as sat
+from flexure.saturation import goal_estimate, saturation_ratio
+
+
+def levels(J_exact: float, E0: float, r: float, q0: float, q1: float):
+    """Two nested levels of a goal: P2 errors E0, r·E0; enriched errors q0·E0, q1·r·E0 → (J, d) each."""
+    E1 = r * E0
+    return (J_exact - E0, (1 - q0) * E0), (J_exact - E1, (1 - q1) * E1), E1
+
+
+@pytest.mark.parametrize("q", [-0.3, 0.0, 0.2, 0.5, 0.6])
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_constant_q_is_measured_exactly(q, sign):
+    """Same q on both levels: q̂ = (J⁺_1 − J⁺_0)/(J_1 − J_0) = q, whatever the error's sign, and the
+    estimate max(2, 1.5/(1 − q̂))|d| has the effectivity max(2(1 − q), 1.5)."""
+    prev, cur, E1 = levels(3.0, sign * 1e-3, 0.5, q, q)
+    qh, how = saturation_ratio(*prev, *cur, noise=1e-12)
+    assert how == "measured" and qh == pytest.approx(q, abs=1e-9)
+    e, q_used, _ = goal_estimate(*cur, prev, 1e-12)
+    assert e / abs(E1) == pytest.approx(max(2 * (1 - q), 1.5), rel=1e-9)
+
+
+def test_bracket_within_one_to_three_where_q_drifts_little():
+    """q ∈ [−0.3, 0.6], changing by ≤ 0.1 between levels whose error falls by r ≤ 0.5: every
+    effectivity in [1, 3] (the docstring's range, 1.0–2.6); the flat 2|d| misses at q = 0.6."""
+    effs, flat = [], []
+    for r in np.linspace(0.2, 0.5, 7):
+        for q0 in np.linspace(-0.3, 0.6, 19):
+            for dq in np.linspace(-0.1, 0.1, 5):
+                q1 = q0 + dq
+                if not -0.3 <= q1 <= 0.6:
+                    continue
+                prev, cur, E1 = levels(1.0, 2e-3, r, q0, q1)
+                effs.append(goal_estimate(*cur, prev, 1e-12)[0] / E1)
+                flat.append(2 * abs(cur[1]) / E1)
+    assert 1.0 - 1e-9 <= min(effs) and max(effs) <= 2.6 + 1e-9
+    assert min(flat) < 0.9                                       # the case the measurement is for
+
+
+def test_first_level_is_the_flat_estimate():
+    e, q, how = goal_estimate(1.0, -3e-4, None, 0.0)
+    assert e == pytest.approx(6e-4) and math.isnan(q) and "first level" in how
+
+
+@pytest.mark.parametrize("prev, cur, noise, why", [
+    ((1.0 - 1e-3, 5e-4), (1.0 - 5e-4, -2e-4), 1e-12, "changed sign"),        # d crossed zero
+    ((1.0 - 1e-3, 5e-4), (1.0 - 5e-4, 4e-4), 1e-12, "fell by less"),         # d barely fell: r near 1
+    ((1.0 - 1e-3, 5e-4), (1.0 - 1e-3 + 1e-9, 2e-4), 1e-9, "algebraic"),      # the level change is noise
+    ((1.0 - 1e-3, 5e-4), (1.0 - 1.2e-3, 2e-4), 1e-12, "q̂ ≥ 1"),               # J moved away while d fell
+    ((1.0, 0.0), (1.0 - 1e-4, 2e-4), 1e-12, "changed sign"),                  # d = 0: no ratio
+])
+def test_no_measurement_falls_back(prev, cur, noise, why):
+    """Where (2) is noise, q̂ is nan and the estimate is 2|d| (or an earlier step's q̂)."""
+    q, how = saturation_ratio(*prev, *cur, noise)
+    assert math.isnan(q) and why in how
+    e, q_used, how = goal_estimate(*cur, prev, noise)
+    assert e == pytest.approx(2 * abs(cur[1])) and math.isnan(q_used) and why in how
+    e, q_used, how = goal_estimate(*cur, prev, noise, q_prev=0.5)
+    assert e == pytest.approx(3 * abs(cur[1])) and q_used == 0.5 and "earlier step" in how
+
+
+def test_weak_saturation_is_capped_and_said():
+    """q̂ above Q_MAX is used as Q_MAX (factor 1.5/(1 − Q_MAX) = 7.5) and the method says so."""
+    prev, cur, E1 = levels(1.0, 1e-3, 0.3, 0.9, 0.9)
+    e, q, how = goal_estimate(*cur, prev, 1e-12)
+    assert q == pytest.approx(0.9) and f"used as {sat.Q_MAX:g}" in how
+    assert e == pytest.approx(sat.SAFETY / (1 - sat.Q_MAX) * abs(cur[1]))
+    assert e / E1 == pytest.approx(0.75)                               # a floor, not a bracket, there
+
+
+def test_not_finite_is_not_a_measurement():
+    assert math.isnan(saturation_ratio(1.0, math.nan, 1.0, 1e-4, 0.0)[0])
