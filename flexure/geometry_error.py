@@ -74,15 +74,11 @@ def face_points(mesh: Mesh, elems: np.ndarray, faces: np.ndarray):
     return x, nA / dA[..., None], w[None, :] * dA, G
 
 
-def normal_offset(projector, x: np.ndarray, n: np.ndarray, tags=None) -> np.ndarray:
-    """V_n = (p(x) − x)·n of points x (k, q, 3) with outward normals n: the true surface's signed
-    distance along the normal, outward positive; ``tags`` (k,) the faces' surface tags (a CAD
-    projector's; an STL's ignores them)."""
-    flat = x.reshape(-1, 3)
-    if tags is None:
-        p = projector.project(flat, certified=False) if hasattr(projector, "facet_sagitta") else projector.project(flat)
-    else:
-        p = projector.project(flat, np.full(len(flat), 2), np.repeat(tags, x.shape[1]))
+def normal_offset(projector, x: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """V_n = (p(x) − x)·n of points x (k, q, 3) with outward normals n: the STL's (``projector``, a
+    flexure.project.StlProjector) signed distance along the normal, outward positive. The points lie
+    on the mesh's own boundary, within a sample gap of the STL: its uncertified projection suffices."""
+    p = projector.project(x.reshape(-1, 3), certified=False)
     return np.einsum("...i,...i->...", p.reshape(x.shape) - x, n)
 
 

@@ -74,7 +74,9 @@ class CadProjector:
         self._open = True
         return gmsh
 
-    def project(self, points: np.ndarray, dim: np.ndarray, tag: np.ndarray) -> np.ndarray:
+    def project(self, points: np.ndarray, dim: np.ndarray, tag: np.ndarray, certified: bool = True) -> np.ndarray:
+        """Closest points on the CAD curves (``dim`` 1) or surfaces (2) ``tag`` (gmsh's exact closest point:
+        ``certified`` has no effect, it is the projectors' common signature, StlProjector.project)."""
         from flexure.gmsh_session import _quiet_stdout
 
         out = np.array(points, float)

@@ -269,8 +269,7 @@ def boundary_geometry_error(tm: TaggedMesh, projector):
     d, g = dims[e, j][first], tags[e, j][first]
     Q = np.vstack([q1[first], q3[first]])
     # points on the mesh's own boundary: an STL's nearest samples' triangles suffice (StlProjector)
-    kw = {"certified": False} if hasattr(projector, "facet_sagitta") else {}
-    proj = projector.project(Q, np.concatenate([d, d]), np.concatenate([g, g]), **kw)
+    proj = projector.project(Q, np.concatenate([d, d]), np.concatenate([g, g]), certified=False)
     dist = np.linalg.norm(proj - Q, axis=1).reshape(2, -1).max(axis=0)[inv.ravel()]
     L2 = np.einsum("ki,ki->k", xb - xa, xb - xa)
     s = np.linalg.norm(xm - 0.5 * (xa + xb), axis=1)

@@ -53,7 +53,7 @@ class _Cylinder:
     def __init__(self, R):
         self.R = R
 
-    def project(self, points, dim, tag):
+    def project(self, points, dim, tag, certified=True):
         p = np.array(points, float)
         r = np.hypot(p[:, 0], p[:, 1])
         p[:, :2] *= (self.R / r)[:, None]
