@@ -34,9 +34,14 @@ enriched goal error is at most half the P2 one (saturation, |J − J(u⁺)| ≤ 
 whatever the signs: no calibration, hence MIN_LEVELS = 1. Measured q (benchmarks/fem_annulus.py,
 exact torsion field on exact circles): 0.01–0.12 on every goal at 5–60 k dofs, except where the
 P2 error itself is ~0.003 % (a sign change). Next to re-entrant edges V⁺ only about halves the error
-(q 0.3–0.55): from the second level on, q̂ = (J⁺_ℓ − J⁺_(ℓ−1))/(J_ℓ − J_(ℓ−1)) of each goal is measured
-between the nested levels (same q on both) and e = max(2, 1.5/(1 − q̂)) |J(u⁺) − J(u_h)|
-(flexure.saturation: its derivation, and where q̂ is not a measurement). On an STL, d = J(u⁺) − J(u_h)
+(q 0.3–0.6): from the second level on, q̂ = (J⁺_ℓ − J⁺_(ℓ−1))/(J_ℓ − J_(ℓ−1)) of each goal is measured
+between the nested levels (same q on both) and e = max(2, 1.5/(1 − q̂)) |J(u⁺) − J(u_h)|; where q̂ is not
+measured (the first level), q = 4/9 of a re-entrant edge's singular exponent ½, e = 2.7 |J(u⁺) − J(u_h)|
+(flexure.saturation: the derivations, and where q̂ is not a measurement). The bridge strain is its own
+linear goal, its estimate not below the largest |Σ s_i E_i| / 4 its arms' estimates allow (each E_i between
+sign(d_i) e_i / 3 and sign(d_i) e_i, ``_bridge``): a single q̂ of the bridge's d undercounts where the arms
+saturate differently and their errors partly cancel.
+On an STL, d = J(u⁺) − J(u_h) includes the geometric error δJ above; a CAD/STEP part's P2 boundary is
 includes the geometric error δJ above; a CAD/STEP part's P2 boundary is isoparametric on the exact
 surface and gets no geometric term.
 The distributed coupling (its traction on W not assembled yet) keeps the calibrated DWR estimate:
@@ -98,9 +103,10 @@ METHOD = ("goal-oriented (dual-weighted residual) estimate on nested adaptively 
 METHOD_ENRICHED = ("goal-oriented estimate on nested adaptively refined meshes ({levels} levels, {dofs} dofs): "
                    "max({factor:g}, 1.5/(1 − q̂)) × |J(u⁺) − J(u_h)|, u⁺ the solution in the enriched space P2 ⊕ "
                    "cubic surplus on the last mesh (one global solve, flexure.enriched), q̂ the ratio of the enriched "
-                   "to the P2 error measured between the last two nested levels (flexure.saturation; {factor:g} on "
-                   "one level); brackets the error within [1, 3]× where q̂ is the ratio on the last level within "
-                   "[⅔, 2] of (1 − q), or, on one level, the enriched error is at most half the P2 one; a bound-like "
+                   "to the P2 error measured between the last two nested levels (flexure.saturation; where it is not "
+                   "measured, as on one level, q̂ = 4/9, a re-entrant edge's: 2.7×); brackets the error within "
+                   "[1, 3]× where q̂ is the ratio on the last level within [⅔, 2] of (1 − q) (unmeasured: "
+                   "q ∈ [−0.11, 0.63]); the bridge not below the largest error its arms' estimates allow; a bound-like "
                    "figure, not 1σ; on an STL, J(u⁺) includes the P2 boundary's geometric error against the facets "
                    "(flexure.geometry_error)")
 
@@ -426,7 +432,7 @@ def _estimates(rec: dict, prev: dict | None, kappas: dict, design) -> dict:
     """Calibrated error estimates of this level's goals (module docstring), absolute, in the
     goals' units: θ (then k), each gauge, ε_ref."""
     if rec.get("enriched"):
-        return _enriched_estimates(rec, prev, kappas)
+        return _enriched_estimates(rec, prev, kappas, [ARM_SIGN.get(g.arm, 0.0) for g in design.gauges])
     eta = rec["eta"]
     J = {"theta": rec["theta"], "eps_ref": rec["gauge_strain_per_Nm"],
          **{f"g{i}": e for i, e in enumerate(rec["gauge_strains"])}}
@@ -455,11 +461,13 @@ def _estimates(rec: dict, prev: dict | None, kappas: dict, design) -> dict:
             "kappa": {k: v[0] for k, v in how.items()}, "kappa_how": {k: v[1] for k, v in how.items()}}
 
 
-def _enriched_estimates(rec: dict, prev: dict | None = None, q_seen: dict | None = None) -> dict:
+def _enriched_estimates(rec: dict, prev: dict | None = None, q_seen: dict | None = None,
+                        signs=None) -> dict:
     """Every goal's estimate from its enriched difference d = J(u⁺) − J(u_h) (flexure.saturation):
-    2|d| on the first level, max(2, 1.5/(1 − q̂))|d| once the saturation ratio q̂ is measured between
-    this nested level and ``prev``; absolute, in the goals' units: θ (then k), each gauge, the bridge
-    strain (its own linear goal). ``q_seen`` {goal: last measured q̂}, updated."""
+    max(2, 1.5/(1 − q̂))|d|, q̂ measured between this nested level and ``prev``, else the goal's last
+    measured one, else a re-entrant edge's; absolute, in the goals' units: θ (then k), each gauge, the
+    bridge strain (its own linear goal, but not below what its arms' estimates allow, ``_bridge``).
+    ``q_seen`` {goal: last measured q̂}, updated; ``signs`` the bridge's arm signs s_i."""
     from flexure.saturation import goal_estimate
 
     q_seen = {} if q_seen is None else q_seen
@@ -468,15 +476,31 @@ def _enriched_estimates(rec: dict, prev: dict | None = None, q_seen: dict | None
     noise = _algebraic_noise(rec, vals) + (_algebraic_noise(prev, pv) if pv is not None else 0.0)
     est, q, how = {}, {}, {}
     for i, key in enumerate(_goal_keys(len(vals))):
-        est[key], q[key], how[key] = goal_estimate(vals[i], diffs[i], None if pv is None else (pv[i], pd[i]),
-                                                   noise[i], q_seen.get(key, math.nan))
-        if "measured over" in how[key]:
-            q_seen[key] = q[key]
+        g = goal_estimate(vals[i], diffs[i], None if pv is None else (pv[i], pd[i]), noise[i],
+                          q_seen.get(key, math.nan))
+        est[key], q[key], how[key] = g.e, g.q, g.how
+        if g.measured:
+            q_seen[key] = g.q
     arms = [est[f"g{i}"] for i in range(len(vals) - 2)]
+    if signs is not None:
+        comb = _bridge(np.asarray(signs, float), diffs[2:], np.array(arms))
+        if comb > est["eps_ref"]:
+            est["eps_ref"], how["eps_ref"] = comb, how["eps_ref"] + "; raised to what its arms' estimates allow"
     k_est = est["theta"] / abs(rec["theta"]) * rec["torsional_stiffness_Nm_per_rad"]
     return {"estimate": {"torsional_stiffness_Nm_per_rad": k_est, "gauge_strain_per_Nm": est["eps_ref"],
                          "gauge_strains": arms},
             "kappa": q, "kappa_how": how}
+
+
+def _bridge(signs: np.ndarray, d: np.ndarray, e: np.ndarray) -> float:
+    """The largest bridge error |E_ref| = |Σ s_i E_i| / 4 its arms allow where each arm's estimate brackets
+    within [1, 3] in the direction of its enriched change: E_i between sign(d_i) e_i / 3 and sign(d_i) e_i.
+    With a_i = s_i sign(d_i) e_i / 4 the sum's extremes are Σ⁺ a + Σ⁻ a / 3 and Σ⁺ a / 3 + Σ⁻ a (Σ⁺, Σ⁻ over
+    the positive and negative a_i): arms whose errors add are counted whole, those that cancel them only
+    by a third. Never above the triangle inequality Σ e_i / 4, so never a reason to refine beyond the arms."""
+    a = signs * np.sign(d) * e / 4.0
+    pos, neg = a[a > 0].sum(), a[a < 0].sum()
+    return float(max(abs(pos + neg / 3.0), abs(pos / 3.0 + neg)))
 
 
 def _goal_keys(n: int) -> list[str]:

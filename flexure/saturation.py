@@ -8,8 +8,19 @@ Then, exactly,
     E_ℓ = d_ℓ / (1 − q_ℓ).                                                          (1)
 
 One level: if |q| ≤ ½ (saturation), 2|d| has the effectivity 2|1 − q| ∈ [1, 3] whatever the signs
-(the flat estimate; measured q 0.01–0.12 on exact-geometry annuli). Next to a re-entrant edge the
-enriched space only about halves the error (q 0.3–0.55), and 2|d| can fall below |E|.
+(measured q 0.01–0.12 on exact-geometry annuli). Next to a re-entrant edge the enriched space only
+about halves the error (q 0.3–0.6), and 2|d| can fall below |E|. Where q is not measured (a first level;
+a step whose d changed sign and no earlier q̂), the estimate (3) takes the q of a re-entrant edge,
+
+    Q_PRIOR = (2/3)^(4 λ_min) = 4/9,   λ_min = ½,                                                 (4)
+
+from the p-version's rate at a singularity u ~ r^λ (Babuška–Suri): the energy error on the elements at
+the edge falls as p^(−2λ), so a goal's error (primal × dual energy error, both singular there) as
+p^(−4λ), and P3 over P2 leaves q ≈ (2/3)^(4λ); λ_min = ½ is the crack limit (interior angle → 2π), the
+smallest exponent of any re-entrant edge in either mode (270°: 0.54 in-plane, 2/3 anti-plane: q 0.41,
+0.34). The factor SAFETY/(1 − Q_PRIOR) = 2.7 brackets for q ∈ [−0.11, 0.63]; a part whose first-level q is
+negative (V⁺ overshooting; measured −0.27 on one arm of cross_frame) gets up to 3.4, a safe side. No
+single factor can do better: measured first-level q spans −0.27 … 0.62 (1 − q a ratio of 3.3 > 3).
 
 Two nested levels. If q is the same on both (q_ℓ = q_(ℓ+1) = q: the ratio is set by how the singular
 and smooth parts of the error are shared, which a mesh step barely changes), then
@@ -45,18 +56,33 @@ Measured (2026-11-26, benchmarks/fem_effectivity.py against deep nested referenc
 goal of the re-entrant part, 0.1–0.4 on three_spoke_thin. On the re-entrant part q still drifts upwards
 with the refinement (the gauges' J⁺ sequence converges at a ratio 0.75–0.78 per level against J_h's 0.55:
 the singular part's share grows), so q̂ of the last step is low and the gauges stay at 0.6–1.3 at
---rtol 0.01 (2|d|: 0.5–0.98). A first level has no q̂ at all.
+--rtol 0.01 (2|d|: 0.5–0.98). A q̂ over all levels does not help there: q̂ of older steps is lower still,
+and on the thin parts one goal's q̂ jumps between steps (−1.03 → 0.13 on an arm whose error crosses zero).
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 FLAT = 2.0
 SAFETY = 1.5
 Q_MAX = 0.8
 MIN_DROP = 0.4
 NOISE = 10.0
+#: the smallest singular exponent of a re-entrant edge (the crack limit, interior angle → 2π) and the
+#: saturation ratio it gives where none is measured: Q_PRIOR = (2/3)^(4 λ_min) (module docstring)
+LAMBDA_MIN = 0.5
+Q_PRIOR = (2.0 / 3.0) ** (4.0 * LAMBDA_MIN)
+
+
+class GoalEstimate(NamedTuple):
+    """One goal's estimate on a level: e, the q̂ it used, how (a sentence), and whether q̂ was measured
+    over this level's step."""
+    e: float
+    q: float
+    how: str
+    measured: bool
 
 
 def saturation_ratio(J_prev: float, d_prev: float, J: float, d: float, noise: float) -> tuple[float, str]:
@@ -85,16 +111,20 @@ def saturation_estimate(d: float, q_hat: float) -> float:
 
 
 def goal_estimate(J: float, d: float, prev: tuple[float, float] | None, noise: float,
-                  q_prev: float = math.nan) -> tuple[float, float, str]:
-    """One goal's estimate on a level: (e, q̂ used, how). ``prev`` (J, d) of the previous nested level
-    or None; ``q_prev`` the goal's last measured q̂ (nan if none), used where this step's is not one."""
+                  q_prev: float = math.nan) -> GoalEstimate:
+    """One goal's estimate on a level (``GoalEstimate``). ``prev`` (J, d) of the previous nested level
+    or None; ``q_prev`` the goal's last measured q̂ (nan if none), used where this step's is not one;
+    with neither, the re-entrant edge's Q_PRIOR."""
+    fac = max(FLAT, SAFETY / (1.0 - Q_PRIOR))
     if prev is None:
-        return FLAT * abs(d), math.nan, f"first level: {FLAT:g} |J(u⁺) − J(u_h)|"
+        return GoalEstimate(fac * abs(d), Q_PRIOR, f"first level: {fac:.2g} |J(u⁺) − J(u_h)| (q = {Q_PRIOR:.2f}, "
+                            "a re-entrant edge's)", False)
     q, why = saturation_ratio(prev[0], prev[1], J, d, noise)
-    if math.isfinite(q):
+    measured = math.isfinite(q)
+    if measured:
         how = f"q̂ = {q:.3f} measured over the last step" + (f", used as {Q_MAX:g}" if q > Q_MAX else "")
     elif math.isfinite(q_prev):
         q, how = q_prev, f"q̂ = {q_prev:.3f} of an earlier step ({why} over the last one)"
     else:
-        how = f"{FLAT:g} |J(u⁺) − J(u_h)|: q̂ not measured ({why})"
-    return saturation_estimate(d, q), q, how
+        q, how = Q_PRIOR, f"{fac:.2g} |J(u⁺) − J(u_h)| (q = {Q_PRIOR:.2f}, a re-entrant edge's): q̂ not measured ({why})"
+    return GoalEstimate(saturation_estimate(d, q), q, how, measured)
