@@ -143,7 +143,7 @@ def run(name: str, rtol: float, exact_bands: bool = False) -> dict:
                      "kappa": lv.get("kappa"),
                      "record": {k: lv.get(k) for k in ("level", "dofs", "theta", "torsional_stiffness_Nm_per_rad",
                                                        "gauge_strain_per_Nm", "gauge_strains", "enriched",
-                                                       "geometry", "goal_algebraic_error")}})
+                                                       "geometry", "goal_algebraic_error", "q_unmeasured")}})
     return {"name": name, "rtol": rtol, "exact_bands": exact_bands, "wall_s": wall, "exact_gauges": exact.tolist(),
             "exact_stiffness": k_ex, "stopped_by": res["stopped_by"],
             "peak_rss_gb": res["discretization_levels"][-1].get("peak_rss_gb"), "levels": rows,

@@ -36,7 +36,8 @@ exact torsion field on exact circles): 0.01–0.12 on every goal at 5–60 k dof
 P2 error itself is ~0.003 % (a sign change). Next to re-entrant edges V⁺ only about halves the error
 (q 0.3–0.6): from the second level on, q̂ = (J⁺_ℓ − J⁺_(ℓ−1))/(J_ℓ − J_(ℓ−1)) of each goal is measured
 between the nested levels (same q on both) and e = max(2, 1.5/(1 − q̂)) |J(u⁺) − J(u_h)|; where q̂ is not
-measured (the first level), q = 4/9 of a re-entrant edge's singular exponent ½, e = 2.7 |J(u⁺) − J(u_h)|
+measured (the first level), on a part with a sharp re-entrant edge (flexure.reentrant) q = 4/9 of its
+singular exponent ½, e = 2.7 |J(u⁺) − J(u_h)|, on others the flat 2 |J(u⁺) − J(u_h)|
 (flexure.saturation: the derivations, and where q̂ is not a measurement). The bridge strain is its own
 linear goal, its estimate not below the largest |Σ s_i E_i| / 4 its arms' estimates allow (each E_i between
 sign(d_i) e_i / 3 and sign(d_i) e_i, ``_bridge``): a single q̂ of the bridge's d undercounts where the arms
@@ -70,7 +71,7 @@ import numpy as np
 from userio.errors import InputError
 from flexure import adaptive_sizing as sizing
 from flexure import blas
-from flexure import saturation
+from flexure import reentrant, saturation
 
 DEFAULT_RTOL = 0.02
 #: the first mesh: the design's size function × this, its curved faces resolved as at
@@ -104,7 +105,7 @@ METHOD_ENRICHED = ("goal-oriented estimate on nested adaptively refined meshes (
                    "max({factor:g}, 1.5/(1 − q̂)) × |J(u⁺) − J(u_h)|, u⁺ the solution in the enriched space P2 ⊕ "
                    "cubic surplus on the last mesh (one global solve, flexure.enriched), q̂ the ratio of the enriched "
                    "to the P2 error measured between the last two nested levels (flexure.saturation; where it is not "
-                   "measured, as on one level, q̂ = 4/9, a re-entrant edge's: 2.7×); brackets the error within "
+                   "measured, as on one level, q̂ = 4/9 on a part with a sharp re-entrant edge: 2.7×); brackets the error within "
                    "[1, 3]× where q̂ is the ratio on the last level within [⅔, 2] of (1 − q) (unmeasured: "
                    "q ∈ [−0.11, 0.63]); the bridge not below the largest error its arms' estimates allow; a bound-like "
                    "figure, not 1σ; on an STL, J(u⁺) includes the P2 boundary's geometric error against the facets "
@@ -218,6 +219,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
         tm, projector = geometry(design, mres)
         snapped = snap(tm, projector, getattr(projector, "snap_vertices", False)) if projector is not None else {}
         bands = _band_indicator(tm.mesh, _selections(design, tm.mesh))
+        q_unmeasured = saturation.unmeasured_ratio(reentrant.has_sharp_reentrant_edge(tm.mesh))   # flexure.saturation (4)
         mesh_s = time.perf_counter() - t0
         base_gb = _rss_now_gb()
         bar.set_description(f"flexure: mesh {tm.mesh.n_dofs} dofs ({mesh_s:.0f} s)")
@@ -244,6 +246,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             rec = {"level": lv, "dofs": int(mesh.n_dofs), "elements": int(mesh.n_elements),
                    "theta": vals["theta"], "torsional_stiffness_Nm_per_rad": 1.0 / vals["theta"],
                    "gauge_strain_per_Nm": vals["eps_ref"], "gauge_strains": vals["eps"].tolist(),
+                   "q_unmeasured": q_unmeasured,
                    "eta": {"theta": float(eta[0]), "gauges": eta[1:].tolist(),
                            "eps_ref": float(vals["sign"] @ eta[1:] / 4.0)},
                    "safety_factor": None,      # below: only where the run goes on (the last level's: the final figures')
@@ -477,7 +480,7 @@ def _enriched_estimates(rec: dict, prev: dict | None = None, q_seen: dict | None
     est, q, how = {}, {}, {}
     for i, key in enumerate(_goal_keys(len(vals))):
         g = goal_estimate(vals[i], diffs[i], None if pv is None else (pv[i], pd[i]), noise[i],
-                          q_seen.get(key, math.nan))
+                          q_seen.get(key, math.nan), rec.get("q_unmeasured"))
         est[key], q[key], how[key] = g.e, g.q, g.how
         if g.measured:
             q_seen[key] = g.q

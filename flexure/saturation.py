@@ -18,9 +18,12 @@ from the p-version's rate at a singularity u ~ r^λ (Babuška–Suri): the energ
 the edge falls as p^(−2λ), so a goal's error (primal × dual energy error, both singular there) as
 p^(−4λ), and P3 over P2 leaves q ≈ (2/3)^(4λ); λ_min = ½ is the crack limit (interior angle → 2π), the
 smallest exponent of any re-entrant edge in either mode (270°: 0.54 in-plane, 2/3 anti-plane: q 0.41,
-0.34). The factor SAFETY/(1 − Q_PRIOR) = 2.7 brackets for q ∈ [−0.11, 0.63]; a part whose first-level q is
-negative (V⁺ overshooting; measured −0.27 on one arm of cross_frame) gets up to 3.4, a safe side. No
-single factor can do better: measured first-level q spans −0.27 … 0.62 (1 − q a ratio of 3.3 > 3).
+0.34). The factor SAFETY/(1 − Q_PRIOR) = 2.7 brackets for q ∈ [−0.11, 0.63]. It is taken on parts with a
+sharp re-entrant edge (flexure.reentrant: an interior angle ≥ 240° on the first mesh's boundary); on the
+others λ ≥ 1, q ≤ Q_SMOOTH = (2/3)^4 ≈ 0.2 and (3) is the flat 2|d| (exact-geometry annuli: first-level q
+−0.35 … 0.12, where 2.7|d| would give up to 3.6). No single factor can serve both: measured first-level q
+spans −0.35 … 0.62 (1 − q a ratio of 3.5 > 3); a sharp part whose first-level q is negative (V⁺
+overshooting; −0.27 on one arm of cross_frame) gets up to 3.4, the safe side.
 
 Two nested levels. If q is the same on both (q_ℓ = q_(ℓ+1) = q: the ratio is set by how the singular
 and smooth parts of the error are shared, which a mesh step barely changes), then
@@ -74,6 +77,9 @@ NOISE = 10.0
 #: saturation ratio it gives where none is measured: Q_PRIOR = (2/3)^(4 λ_min) (module docstring)
 LAMBDA_MIN = 0.5
 Q_PRIOR = (2.0 / 3.0) ** (4.0 * LAMBDA_MIN)
+#: the same for a part without a sharp re-entrant edge (flexure.reentrant): λ ≥ 1, q ≤ (2/3)^4 ≈ 0.2, and
+#: (3) is the flat FLAT |d|
+Q_SMOOTH = (2.0 / 3.0) ** 4.0
 
 
 class GoalEstimate(NamedTuple):
@@ -110,15 +116,21 @@ def saturation_estimate(d: float, q_hat: float) -> float:
     return max(FLAT, SAFETY / (1.0 - min(q_hat, Q_MAX))) * abs(d)
 
 
+def unmeasured_ratio(sharp_reentrant_edge: bool) -> float:
+    """q where none is measured (4): Q_PRIOR on a part with a sharp re-entrant edge, else Q_SMOOTH."""
+    return Q_PRIOR if sharp_reentrant_edge else Q_SMOOTH
+
+
 def goal_estimate(J: float, d: float, prev: tuple[float, float] | None, noise: float,
-                  q_prev: float = math.nan) -> GoalEstimate:
+                  q_prev: float = math.nan, q_unmeasured: float | None = None) -> GoalEstimate:
     """One goal's estimate on a level (``GoalEstimate``). ``prev`` (J, d) of the previous nested level
     or None; ``q_prev`` the goal's last measured q̂ (nan if none), used where this step's is not one;
-    with neither, the re-entrant edge's Q_PRIOR."""
-    fac = max(FLAT, SAFETY / (1.0 - Q_PRIOR))
+    with neither, ``q_unmeasured`` (``unmeasured_ratio``; default Q_PRIOR, the safe side)."""
+    q0 = Q_PRIOR if q_unmeasured is None else q_unmeasured
+    fac = max(FLAT, SAFETY / (1.0 - q0))
+    what = "a re-entrant edge's" if q0 >= Q_PRIOR else "no sharp re-entrant edge"
     if prev is None:
-        return GoalEstimate(fac * abs(d), Q_PRIOR, f"first level: {fac:.2g} |J(u⁺) − J(u_h)| (q = {Q_PRIOR:.2f}, "
-                            "a re-entrant edge's)", False)
+        return GoalEstimate(fac * abs(d), q0, f"first level: {fac:.2g} |J(u⁺) − J(u_h)| (q = {q0:.2f}, {what})", False)
     q, why = saturation_ratio(prev[0], prev[1], J, d, noise)
     measured = math.isfinite(q)
     if measured:
@@ -126,5 +138,5 @@ def goal_estimate(J: float, d: float, prev: tuple[float, float] | None, noise: f
     elif math.isfinite(q_prev):
         q, how = q_prev, f"q̂ = {q_prev:.3f} of an earlier step ({why} over the last one)"
     else:
-        q, how = Q_PRIOR, f"{fac:.2g} |J(u⁺) − J(u_h)| (q = {Q_PRIOR:.2f}, a re-entrant edge's): q̂ not measured ({why})"
+        q, how = q0, f"{fac:.2g} |J(u⁺) − J(u_h)| (q = {q0:.2f}, {what}): q̂ not measured ({why})"
     return GoalEstimate(saturation_estimate(d, q), q, how, measured)
