@@ -1,6 +1,6 @@
 """Effectivity of the adaptive FEM's error estimates per goal, against converged references:
 
-    python benchmarks/fem_effectivity.py run [--rtol R] [--before] NAME [NAME ...]   # runs → RUNS json
+    python benchmarks/fem_effectivity.py run [--rtol R] [--before | --main] NAME ...  # runs → RUNS json
     python benchmarks/fem_effectivity.py table                                      # the markdown table
     python benchmarks/fem_effectivity.py replay NAME                               # a deep run's levels
     python benchmarks/fem_effectivity.py summary [NAME ...]                         # effectivity distributions
@@ -8,8 +8,8 @@
 ``run``: flexure.adaptive.analyze_adaptive on each design (names as benchmarks/fem_adaptive.py: the five
 reference parts, or an unseen part of tests/data/fem_unseen) at ``rtol``; every level's goals, enriched
 differences and estimates, the wall time and the 1-minute load go to RUNS (one entry per design, rtol
-and mode). ``--before``: the estimate as main 383f4e5 made it, 2 |J(u⁺) − J(u_h)| on every level (the
-saturation ratio never measured, flexure.saturation), the same code otherwise.
+and mode; entries of mode "main 36a66ca" were made by that commit's code). ``--before``: the estimate as main 383f4e5 made it, 2 |J(u⁺) − J(u_h)| on every level (the
+saturation ratio never measured, flexure.saturation), the same code otherwise; ``--main``: as main 36a66ca (q̂ measured, 2|d| where not).
 
 ``table``: each run's last level against the design's reference J∞ ± a (the deep nested run
 tests/data/fem_reference/adaptive/NAME.json where it exists, else tests/data/fem_reference/levels.json):
@@ -128,7 +128,7 @@ def summary(names: list[str], runs: list[dict]) -> str:
 
     names = names or sorted(p.stem for p in fa.OUT.glob("*.json"))
     sources = [(n, json.loads((fa.OUT / f"{n}.json").read_text())["levels"], False) for n in names]
-    sources += [(r["design"], r["levels"], True) for r in runs if r["mode"] == "after" and (not names or r["design"] in names)]
+    sources += [(r["design"], r["levels"], True) for r in runs if r["mode"] != "before" and (not names or r["design"] in names)]
     rows = ["| estimate | goals judged | in [1, 3] | min / median / max | allowance range < 1 | > 3 |", "|---|---|---|---|---|---|"]
     for mode in MODES:
         eff, below, above = [], 0, 0
@@ -200,26 +200,34 @@ def main(argv: list[str]) -> int:
     runs = json.loads(RUNS.read_text()) if RUNS.exists() else []
     runs = [r for r in runs if "mode" in r]          # this format only
     if cmd == "run":
-        rtol, before, names = 0.02, False, []
+        rtol, before, main36, names = 0.02, False, False, []
         it = iter(rest)
         for a in it:
             if a == "--rtol":
                 rtol = float(next(it))
             elif a == "--before":
                 before = True
+            elif a == "--main":
+                main36 = True
             else:
                 names.append(a)
         if before:
             before_mode()
+        if main36:                      # main 36a66ca's estimate: q̂ measured, 2|d| where not (the sizing sees it)
+            from flexure import saturation
+
+            saturation.Q_PRIOR = 0.0
         for name in names:
             r = run(name, rtol, before)
+            if main36:
+                r["mode"] = "main 36a66ca"
             runs = [x for x in runs if (x["design"], x["rtol"], x["mode"]) != (name, rtol, r["mode"])] + [r]
             RUNS.write_text(json.dumps(runs, indent=1) + "\n")
             print(f"{name} rtol {rtol:g} {r['mode']}: {r['wall_s']:.0f} s (load {r['load_1min']:.1f}), "
                   f"{[x['dofs'] for x in r['levels']]}, stopped by {r['stopped_by']}", flush=True)
         return 0
     if cmd == "table":
-        runs.sort(key=lambda r: (r["design"], r["rtol"], r["mode"] != "before"))
+        runs.sort(key=lambda r: (r["design"], r["rtol"], r["mode"] != "before", r["mode"] == "after"))
         print(table(runs))
         return 0
     if cmd == "summary":

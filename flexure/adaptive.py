@@ -39,9 +39,9 @@ between the nested levels (same q on both) and e = max(2, 1.5/(1 − q̂)) |J(u�
 measured (the first level), on a part with a sharp re-entrant edge (flexure.reentrant) q = 4/9 of its
 singular exponent ½, e = 2.7 |J(u⁺) − J(u_h)|, on others the flat 2 |J(u⁺) − J(u_h)|
 (flexure.saturation: the derivations, and where q̂ is not a measurement). The bridge strain is its own
-linear goal, its estimate not below the largest |Σ s_i E_i| / 4 its arms' estimates allow (each E_i between
-sign(d_i) e_i / 3 and sign(d_i) e_i, ``_bridge``): a single q̂ of the bridge's d undercounts where the arms
-saturate differently and their errors partly cancel.
+linear goal, its estimate f_ref |d_ref| plus Σ |s_i d_i| |f_i − f_ref| / 4 (f the factors max(2, 1.5/(1 − q̂)) of
+the bridge and of each arm, ``_bridge``): a single q̂ of the bridge's d undercounts where the arms saturate
+differently and their errors partly cancel.
 On an STL, d = J(u⁺) − J(u_h) includes the geometric error δJ above; a CAD/STEP part's P2 boundary is
 includes the geometric error δJ above; a CAD/STEP part's P2 boundary is isoparametric on the exact
 surface and gets no geometric term.
@@ -107,7 +107,7 @@ METHOD_ENRICHED = ("goal-oriented estimate on nested adaptively refined meshes (
                    "to the P2 error measured between the last two nested levels (flexure.saturation; where it is not "
                    "measured, as on one level, q̂ = 4/9 on a part with a sharp re-entrant edge: 2.7×); brackets the error within "
                    "[1, 3]× where q̂ is the ratio on the last level within [⅔, 2] of (1 − q) (unmeasured: "
-                   "q ∈ [−0.11, 0.63]); the bridge not below the largest error its arms' estimates allow; a bound-like "
+                   "q ∈ [−0.11, 0.63]); the bridge's plus what its arms' different q̂ may add; a bound-like "
                    "figure, not 1σ; on an STL, J(u⁺) includes the P2 boundary's geometric error against the facets "
                    "(flexure.geometry_error)")
 
@@ -469,7 +469,7 @@ def _enriched_estimates(rec: dict, prev: dict | None = None, q_seen: dict | None
     """Every goal's estimate from its enriched difference d = J(u⁺) − J(u_h) (flexure.saturation):
     max(2, 1.5/(1 − q̂))|d|, q̂ measured between this nested level and ``prev``, else the goal's last
     measured one, else a re-entrant edge's; absolute, in the goals' units: θ (then k), each gauge, the
-    bridge strain (its own linear goal, but not below what its arms' estimates allow, ``_bridge``).
+    bridge strain (its own linear goal, plus what its arms' different saturation may add, ``_bridge``).
     ``q_seen`` {goal: last measured q̂}, updated; ``signs`` the bridge's arm signs s_i."""
     from flexure.saturation import goal_estimate
 
@@ -486,24 +486,27 @@ def _enriched_estimates(rec: dict, prev: dict | None = None, q_seen: dict | None
             q_seen[key] = g.q
     arms = [est[f"g{i}"] for i in range(len(vals) - 2)]
     if signs is not None:
-        comb = _bridge(np.asarray(signs, float), diffs[2:], np.array(arms))
+        comb = _bridge(np.asarray(signs, float), diffs[2:], np.array(arms), diffs[1], est["eps_ref"])
         if comb > est["eps_ref"]:
-            est["eps_ref"], how["eps_ref"] = comb, how["eps_ref"] + "; raised to what its arms' estimates allow"
+            est["eps_ref"], how["eps_ref"] = comb, how["eps_ref"] + "; + its arms' saturation differences"
     k_est = est["theta"] / abs(rec["theta"]) * rec["torsional_stiffness_Nm_per_rad"]
     return {"estimate": {"torsional_stiffness_Nm_per_rad": k_est, "gauge_strain_per_Nm": est["eps_ref"],
                          "gauge_strains": arms},
             "kappa": q, "kappa_how": how}
 
 
-def _bridge(signs: np.ndarray, d: np.ndarray, e: np.ndarray) -> float:
-    """The largest bridge error |E_ref| = |Σ s_i E_i| / 4 its arms allow where each arm's estimate brackets
-    within [1, 3] in the direction of its enriched change: E_i between sign(d_i) e_i / 3 and sign(d_i) e_i.
-    With a_i = s_i sign(d_i) e_i / 4 the sum's extremes are Σ⁺ a + Σ⁻ a / 3 and Σ⁺ a / 3 + Σ⁻ a (Σ⁺, Σ⁻ over
-    the positive and negative a_i): arms whose errors add are counted whole, those that cancel them only
-    by a third. Never above the triangle inequality Σ e_i / 4, so never a reason to refine beyond the arms."""
-    a = signs * np.sign(d) * e / 4.0
-    pos, neg = a[a > 0].sum(), a[a < 0].sum()
-    return float(max(abs(pos + neg / 3.0), abs(pos / 3.0 + neg)))
+def _bridge(signs: np.ndarray, d: np.ndarray, e: np.ndarray, d_ref: float, e_ref: float) -> float:
+    """The bridge strain's estimate with its arms' saturation: each arm's error is E_i ≈ f_i d_i (f_i = e_i/|d_i|
+    its factor, from its own q̂), so E_ref = Σ s_i E_i / 4 = f_ref d_ref + Σ s_i (f_i − f_ref) d_i / 4, and
+
+        e_ref ← e_ref + Σ |s_i d_i| |f_i − f_ref| / 4   ≥   |Σ s_i f_i d_i| / 4,
+
+    the bridge's own estimate (f_ref from its own q̂) where its arms saturate alike, more by what their
+    differences may add where they do not: the bridge's q̂ is a mix of its arms', and where their errors
+    partly cancel it can undercount those that saturate worst (flexure.saturation)."""
+    f = e / np.maximum(np.abs(d), 1e-300)
+    f_ref = e_ref / max(abs(d_ref), 1e-300)
+    return float(e_ref + np.abs(signs * d) @ np.abs(f - f_ref) / 4.0)
 
 
 def _goal_keys(n: int) -> list[str]:
