@@ -107,6 +107,8 @@ def replay_mode(levels: list[dict], mode: str, signs) -> list[dict]:
     try:
         out, prev, seen = [], None, {}
         for x in levels:
+            if q0 is not None:           # the record's own unmeasured ratio is the current code's
+                x = {**x, "q_unmeasured": q0}
             out.append({**x, **adaptive._enriched_estimates(x, prev, seen, signs if bridge else None)})
             prev = x
     finally:

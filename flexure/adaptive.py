@@ -39,12 +39,11 @@ between the nested levels (same q on both) and e = max(2, 1.5/(1 − q̂)) |J(u�
 measured (the first level), on a part with a sharp re-entrant edge (flexure.reentrant) q = 4/9 of its
 singular exponent ½, e = 2.7 |J(u⁺) − J(u_h)|, on others the flat 2 |J(u⁺) − J(u_h)|
 (flexure.saturation: the derivations, and where q̂ is not a measurement). The bridge strain is its own
-linear goal, its estimate f_ref |d_ref| plus Σ |s_i d_i| |f_i − f_ref| / 4 (f the factors max(2, 1.5/(1 − q̂)) of
-the bridge and of each arm, ``_bridge``): a single q̂ of the bridge's d undercounts where the arms saturate
-differently and their errors partly cancel.
+linear goal, its estimate f_ref |d_ref| + Σ |s_i d_i| |f_i − f_ref| / 4 (f the factors max(2, 1.5/(1 − q̂)) of
+the bridge and of each arm, saturation.bridge_estimate): a single q̂ of the bridge's d undercounts where
+the arms saturate differently and their errors partly cancel.
 On an STL, d = J(u⁺) − J(u_h) includes the geometric error δJ above; a CAD/STEP part's P2 boundary is
-includes the geometric error δJ above; a CAD/STEP part's P2 boundary is isoparametric on the exact
-surface and gets no geometric term.
+isoparametric on the exact surface and gets no geometric term.
 The distributed coupling (its traction on W not assembled yet) keeps the calibrated DWR estimate:
 the raw DWR sum η_ℓ (Bank–Weiser primal weight, flexure.bank_weiser) divided by its effectivity
 measured over the last refinement step,
@@ -469,9 +468,9 @@ def _enriched_estimates(rec: dict, prev: dict | None = None, q_seen: dict | None
     """Every goal's estimate from its enriched difference d = J(u⁺) − J(u_h) (flexure.saturation):
     max(2, 1.5/(1 − q̂))|d|, q̂ measured between this nested level and ``prev``, else the goal's last
     measured one, else a re-entrant edge's; absolute, in the goals' units: θ (then k), each gauge, the
-    bridge strain (its own linear goal, plus what its arms' different saturation may add, ``_bridge``).
+    bridge strain (its own linear goal, + what its arms' different q̂ may add: saturation.bridge_estimate).
     ``q_seen`` {goal: last measured q̂}, updated; ``signs`` the bridge's arm signs s_i."""
-    from flexure.saturation import goal_estimate
+    from flexure.saturation import bridge_estimate, goal_estimate
 
     q_seen = {} if q_seen is None else q_seen
     vals, diffs = _goal_table(rec)
@@ -486,27 +485,13 @@ def _enriched_estimates(rec: dict, prev: dict | None = None, q_seen: dict | None
             q_seen[key] = g.q
     arms = [est[f"g{i}"] for i in range(len(vals) - 2)]
     if signs is not None:
-        comb = _bridge(np.asarray(signs, float), diffs[2:], np.array(arms), diffs[1], est["eps_ref"])
+        comb = bridge_estimate(np.asarray(signs, float), diffs[2:], np.array(arms), diffs[1], est["eps_ref"])
         if comb > est["eps_ref"]:
             est["eps_ref"], how["eps_ref"] = comb, how["eps_ref"] + "; + its arms' saturation differences"
     k_est = est["theta"] / abs(rec["theta"]) * rec["torsional_stiffness_Nm_per_rad"]
     return {"estimate": {"torsional_stiffness_Nm_per_rad": k_est, "gauge_strain_per_Nm": est["eps_ref"],
                          "gauge_strains": arms},
             "kappa": q, "kappa_how": how}
-
-
-def _bridge(signs: np.ndarray, d: np.ndarray, e: np.ndarray, d_ref: float, e_ref: float) -> float:
-    """The bridge strain's estimate with its arms' saturation: each arm's error is E_i ≈ f_i d_i (f_i = e_i/|d_i|
-    its factor, from its own q̂), so E_ref = Σ s_i E_i / 4 = f_ref d_ref + Σ s_i (f_i − f_ref) d_i / 4, and
-
-        e_ref ← e_ref + Σ |s_i d_i| |f_i − f_ref| / 4   ≥   |Σ s_i f_i d_i| / 4,
-
-    the bridge's own estimate (f_ref from its own q̂) where its arms saturate alike, more by what their
-    differences may add where they do not: the bridge's q̂ is a mix of its arms', and where their errors
-    partly cancel it can undercount those that saturate worst (flexure.saturation)."""
-    f = e / np.maximum(np.abs(d), 1e-300)
-    f_ref = e_ref / max(abs(d_ref), 1e-300)
-    return float(e_ref + np.abs(signs * d) @ np.abs(f - f_ref) / 4.0)
 
 
 def _goal_keys(n: int) -> list[str]:

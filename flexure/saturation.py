@@ -68,6 +68,8 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import numpy as np
+
 FLAT = 2.0
 SAFETY = 1.5
 Q_MAX = 0.8
@@ -140,3 +142,19 @@ def goal_estimate(J: float, d: float, prev: tuple[float, float] | None, noise: f
     else:
         q, how = q0, f"{fac:.2g} |J(u⁺) − J(u_h)| (q = {q0:.2f}, {what}): q̂ not measured ({why})"
     return GoalEstimate(saturation_estimate(d, q), q, how, measured)
+
+
+def bridge_estimate(signs, d, e, d_ref: float, e_ref: float) -> float:
+    """The bridge strain's estimate with its arms' saturation (``signs`` s_i, ``d`` the arms' d_i, ``e`` their
+    estimates; ``d_ref``, ``e_ref`` the bridge's own): each arm's error is E_i ≈ f_i d_i (f_i = e_i/|d_i| its
+    factor, from its own q̂), so E_ref = Σ s_i E_i / 4 = f_ref d_ref + Σ s_i (f_i − f_ref) d_i / 4, and
+
+        e_ref ← e_ref + Σ |s_i d_i| |f_i − f_ref| / 4   ≥   |Σ s_i f_i d_i| / 4,
+
+    the bridge's own estimate (f_ref from its own q̂) where its arms saturate alike, more by what their
+    differences may add where they do not: the bridge's q̂ is a mix of its arms', and where their errors
+    partly cancel it can undercount those that saturate worst."""
+    s, d, e = (np.asarray(x, float) for x in (signs, d, e))
+    f = e / np.maximum(np.abs(d), 1e-300)
+    f_ref = e_ref / max(abs(d_ref), 1e-300)
+    return float(e_ref + np.abs(s * d) @ np.abs(f - f_ref) / 4.0)

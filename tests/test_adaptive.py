@@ -293,7 +293,7 @@ def test_enriched_estimate_measures_the_saturation_ratio_between_levels():
 def test_bridge_estimate_adds_its_arms_saturation_differences():
     """Bridge ε_ref = Σ s_i ε_i / 4 with arms whose enriched spaces saturate differently (q_i ∈ [−0.3, 0.6],
     drifting by ≤ 0.1, errors falling by r_i ∈ [0.2, 0.5] per level, random signs): the bridge's own q̂ mixes
-    the arms' and misses (< 1) on a share of them; adding Σ |s_i d_i| |f_i − f_ref| / 4 (``_bridge``) it is never
+    the arms' and misses (< 1) on a share of them; adding Σ |s_i d_i| |f_i − f_ref| / 4 (saturation.bridge_estimate) it is never
     below the arms' estimates combined with their signs, |Σ s_i f_i d_i| / 4, and misses far less often.
     Where every arm has the bridge's factor (one level: the same unmeasured q) it is the bridge's own."""
     rng = np.random.default_rng(7)
