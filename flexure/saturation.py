@@ -59,8 +59,14 @@ Measured (2026-11-26, benchmarks/fem_effectivity.py against deep nested referenc
 goal of the re-entrant part, 0.1–0.4 on three_spoke_thin. On the re-entrant part q still drifts upwards
 with the refinement (the gauges' J⁺ sequence converges at a ratio 0.75–0.78 per level against J_h's 0.55:
 the singular part's share grows), so q̂ of the last step is low and the gauges stay at 0.6–1.3 at
---rtol 0.01 (2|d|: 0.5–0.98). A q̂ over all levels does not help there: q̂ of older steps is lower still,
-and on the thin parts one goal's q̂ jumps between steps (−1.03 → 0.13 on an arm whose error crosses zero).
+--rtol 0.01 (2|d|: 0.5–0.98); over a small step (57 k → 73 k DOFs) one arm's q rose from 0.72 to ~0.85 and
+q̂ = 0.28 gave 0.30. A q̂ over all levels does not help there: q̂ of older steps is lower still, and on the
+thin parts one goal's q̂ jumps between steps (−1.03 → 0.13 on an arm whose error crosses zero); nor does a
+floor from the fastest rate a P2 goal converges at, |J_ℓ − J_(ℓ−1)| ρ/(1 − ρ), ρ = (N_(ℓ−1)/N_ℓ)^(4/3): the
+arms' errors cross zero, and it was over 3× on six goals where it lifted two above 1.
+Replayed on every level of the four deep references (``fem_effectivity.py summary``, goals whose reference
+resolves the error): 97 of 114 in [1, 3] (median 1.69), 4 wholly below 1 over the reference's allowance,
+against 92 (1.37) and 9 with 2|d| where q̂ is not measured; annuli without sharp edges unchanged.
 """
 
 from __future__ import annotations
