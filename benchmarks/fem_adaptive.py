@@ -59,7 +59,7 @@ def deep(name: str, rtol: float = 2e-3, max_dofs: int = 700_000, max_memory_gb: 
         adaptive_sizing.MAX_GROWTH = saved
     keep = ("level", "dofs", "elements", "theta", "torsional_stiffness_Nm_per_rad", "gauge_strain_per_Nm",
             "gauge_strains", "eta", "enriched", "estimate", "kappa", "kappa_how", "min_dihedral_deg", "level_s",
-            "peak_rss_gb", "pending_nodes", "goal_algebraic_error")
+            "peak_rss_gb", "pending_nodes", "goal_algebraic_error", "q_unmeasured")
     return {"design": name, "rtol": rtol, "growth": growth, "stopped_by": res["stopped_by"],
             "wall_s": time.perf_counter() - t0, "load_1min_end": os.getloadavg()[0],
             "how": f"benchmarks/fem_adaptive.py deep {name} (rtol {rtol:g}, ≤ {growth:g}× DOFs per level, "

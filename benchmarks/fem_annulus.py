@@ -140,8 +140,12 @@ def run(name: str, rtol: float, exact_bands: bool = False) -> dict:
                      "level_s": lv.get("level_s"), "solve_s": lv.get("solve_s"), "dwr_s": lv.get("dwr_s"),
                      "refine_s": lv.get("refine_s"), "geom": lv.get("geometry"),
                      "eta_pct": (100 * np.array(lv["eta"]["gauges"]) / np.abs(exact)).tolist(),
-                     "kappa": lv.get("kappa")})
-    return {"name": name, "rtol": rtol, "exact_bands": exact_bands, "wall_s": wall, "stopped_by": res["stopped_by"],
+                     "kappa": lv.get("kappa"),
+                     "record": {k: lv.get(k) for k in ("level", "dofs", "theta", "torsional_stiffness_Nm_per_rad",
+                                                       "gauge_strain_per_Nm", "gauge_strains", "enriched",
+                                                       "geometry", "goal_algebraic_error", "q_unmeasured")}})
+    return {"name": name, "rtol": rtol, "exact_bands": exact_bands, "wall_s": wall, "exact_gauges": exact.tolist(),
+            "exact_stiffness": k_ex, "stopped_by": res["stopped_by"],
             "peak_rss_gb": res["discretization_levels"][-1].get("peak_rss_gb"), "levels": rows,
             "load": float(open("/proc/loadavg").read().split()[0])}
 
@@ -177,7 +181,7 @@ def main(argv: list[str]) -> None:
         show(r)
         results.append(r)
     if out:
-        Path(out).write_text(json.dumps(results, indent=1))
+        Path(out).write_text(json.dumps(results, indent=1, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
 
 
 if __name__ == "__main__":

@@ -34,11 +34,16 @@ enriched goal error is at most half the P2 one (saturation, |J − J(u⁺)| ≤ 
 whatever the signs: no calibration, hence MIN_LEVELS = 1. Measured q (benchmarks/fem_annulus.py,
 exact torsion field on exact circles): 0.01–0.12 on every goal at 5–60 k dofs, except where the
 P2 error itself is ~0.003 % (a sign change). Next to re-entrant edges V⁺ only about halves the error
-(q 0.3–0.55): from the second level on, q̂ = (J⁺_ℓ − J⁺_(ℓ−1))/(J_ℓ − J_(ℓ−1)) of each goal is measured
-between the nested levels (same q on both) and e = max(2, 1.5/(1 − q̂)) |J(u⁺) − J(u_h)|
-(flexure.saturation: its derivation, and where q̂ is not a measurement). On an STL, d = J(u⁺) − J(u_h)
-includes the geometric error δJ above; a CAD/STEP part's P2 boundary is isoparametric on the exact
-surface and gets no geometric term.
+(q 0.3–0.6): from the second level on, q̂ = (J⁺_ℓ − J⁺_(ℓ−1))/(J_ℓ − J_(ℓ−1)) of each goal is measured
+between the nested levels (same q on both) and e = max(2, 1.5/(1 − q̂)) |J(u⁺) − J(u_h)|; where q̂ is not
+measured (the first level), on a part with a sharp re-entrant edge (flexure.reentrant) q = 4/9 of its
+singular exponent ½, e = 2.7 |J(u⁺) − J(u_h)|, on others the flat 2 |J(u⁺) − J(u_h)|
+(flexure.saturation: the derivations, and where q̂ is not a measurement). The bridge strain is its own
+linear goal, its estimate f_ref |d_ref| + Σ |s_i d_i| |f_i − f_ref| / 4 (f the factors max(2, 1.5/(1 − q̂)) of
+the bridge and of each arm, saturation.bridge_estimate): a single q̂ of the bridge's d undercounts where
+the arms saturate differently and their errors partly cancel.
+On an STL, d = J(u⁺) − J(u_h) includes the geometric error δJ above; a CAD/STEP part's P2 boundary is
+isoparametric on the exact surface and gets no geometric term.
 The distributed coupling (its traction on W not assembled yet) keeps the calibrated DWR estimate:
 the raw DWR sum η_ℓ (Bank–Weiser primal weight, flexure.bank_weiser) divided by its effectivity
 measured over the last refinement step,
@@ -65,7 +70,7 @@ import numpy as np
 from userio.errors import InputError
 from flexure import adaptive_sizing as sizing
 from flexure import blas
-from flexure import saturation
+from flexure import reentrant, saturation
 
 DEFAULT_RTOL = 0.02
 #: the first mesh: the design's size function × this, its curved faces resolved as at
@@ -98,9 +103,10 @@ METHOD = ("goal-oriented (dual-weighted residual) estimate on nested adaptively 
 METHOD_ENRICHED = ("goal-oriented estimate on nested adaptively refined meshes ({levels} levels, {dofs} dofs): "
                    "max({factor:g}, 1.5/(1 − q̂)) × |J(u⁺) − J(u_h)|, u⁺ the solution in the enriched space P2 ⊕ "
                    "cubic surplus on the last mesh (one global solve, flexure.enriched), q̂ the ratio of the enriched "
-                   "to the P2 error measured between the last two nested levels (flexure.saturation; {factor:g} on "
-                   "one level); brackets the error within [1, 3]× where q̂ is the ratio on the last level within "
-                   "[⅔, 2] of (1 − q), or, on one level, the enriched error is at most half the P2 one; a bound-like "
+                   "to the P2 error measured between the last two nested levels (flexure.saturation; where it is not "
+                   "measured, as on one level, q̂ = 4/9 on a part with a sharp re-entrant edge: 2.7×); brackets the error within "
+                   "[1, 3]× where q̂ is the ratio on the last level within [⅔, 2] of (1 − q) (unmeasured: "
+                   "q ∈ [−0.11, 0.63]); the bridge's plus what its arms' different q̂ may add; a bound-like "
                    "figure, not 1σ; on an STL, J(u⁺) includes the P2 boundary's geometric error against the facets "
                    "(flexure.geometry_error)")
 
@@ -212,6 +218,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
         tm, projector = geometry(design, mres)
         snapped = snap(tm, projector, getattr(projector, "snap_vertices", False)) if projector is not None else {}
         bands = _band_indicator(tm.mesh, _selections(design, tm.mesh))
+        q_unmeasured = saturation.unmeasured_ratio(reentrant.has_sharp_reentrant_edge(tm.mesh))   # flexure.saturation (4)
         mesh_s = time.perf_counter() - t0
         base_gb = _rss_now_gb()
         bar.set_description(f"flexure: mesh {tm.mesh.n_dofs} dofs ({mesh_s:.0f} s)")
@@ -238,6 +245,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             rec = {"level": lv, "dofs": int(mesh.n_dofs), "elements": int(mesh.n_elements),
                    "theta": vals["theta"], "torsional_stiffness_Nm_per_rad": 1.0 / vals["theta"],
                    "gauge_strain_per_Nm": vals["eps_ref"], "gauge_strains": vals["eps"].tolist(),
+                   "q_unmeasured": q_unmeasured,
                    "eta": {"theta": float(eta[0]), "gauges": eta[1:].tolist(),
                            "eps_ref": float(vals["sign"] @ eta[1:] / 4.0)},
                    "safety_factor": None,      # below: only where the run goes on (the last level's: the final figures')
@@ -426,7 +434,7 @@ def _estimates(rec: dict, prev: dict | None, kappas: dict, design) -> dict:
     """Calibrated error estimates of this level's goals (module docstring), absolute, in the
     goals' units: θ (then k), each gauge, ε_ref."""
     if rec.get("enriched"):
-        return _enriched_estimates(rec, prev, kappas)
+        return _enriched_estimates(rec, prev, kappas, [ARM_SIGN.get(g.arm, 0.0) for g in design.gauges])
     eta = rec["eta"]
     J = {"theta": rec["theta"], "eps_ref": rec["gauge_strain_per_Nm"],
          **{f"g{i}": e for i, e in enumerate(rec["gauge_strains"])}}
@@ -455,12 +463,14 @@ def _estimates(rec: dict, prev: dict | None, kappas: dict, design) -> dict:
             "kappa": {k: v[0] for k, v in how.items()}, "kappa_how": {k: v[1] for k, v in how.items()}}
 
 
-def _enriched_estimates(rec: dict, prev: dict | None = None, q_seen: dict | None = None) -> dict:
+def _enriched_estimates(rec: dict, prev: dict | None = None, q_seen: dict | None = None,
+                        signs=None) -> dict:
     """Every goal's estimate from its enriched difference d = J(u⁺) − J(u_h) (flexure.saturation):
-    2|d| on the first level, max(2, 1.5/(1 − q̂))|d| once the saturation ratio q̂ is measured between
-    this nested level and ``prev``; absolute, in the goals' units: θ (then k), each gauge, the bridge
-    strain (its own linear goal). ``q_seen`` {goal: last measured q̂}, updated."""
-    from flexure.saturation import goal_estimate
+    max(2, 1.5/(1 − q̂))|d|, q̂ measured between this nested level and ``prev``, else the goal's last
+    measured one, else a re-entrant edge's; absolute, in the goals' units: θ (then k), each gauge, the
+    bridge strain (its own linear goal, + what its arms' different q̂ may add: saturation.bridge_estimate).
+    ``q_seen`` {goal: last measured q̂}, updated; ``signs`` the bridge's arm signs s_i."""
+    from flexure.saturation import bridge_estimate, goal_estimate
 
     q_seen = {} if q_seen is None else q_seen
     vals, diffs = _goal_table(rec)
@@ -468,11 +478,16 @@ def _enriched_estimates(rec: dict, prev: dict | None = None, q_seen: dict | None
     noise = _algebraic_noise(rec, vals) + (_algebraic_noise(prev, pv) if pv is not None else 0.0)
     est, q, how = {}, {}, {}
     for i, key in enumerate(_goal_keys(len(vals))):
-        est[key], q[key], how[key] = goal_estimate(vals[i], diffs[i], None if pv is None else (pv[i], pd[i]),
-                                                   noise[i], q_seen.get(key, math.nan))
-        if "measured over" in how[key]:
-            q_seen[key] = q[key]
+        g = goal_estimate(vals[i], diffs[i], None if pv is None else (pv[i], pd[i]), noise[i],
+                          q_seen.get(key, math.nan), rec.get("q_unmeasured"))
+        est[key], q[key], how[key] = g.e, g.q, g.how
+        if g.measured:
+            q_seen[key] = g.q
     arms = [est[f"g{i}"] for i in range(len(vals) - 2)]
+    if signs is not None:
+        comb = bridge_estimate(np.asarray(signs, float), diffs[2:], np.array(arms), diffs[1], est["eps_ref"])
+        if comb > est["eps_ref"]:
+            est["eps_ref"], how["eps_ref"] = comb, how["eps_ref"] + "; + its arms' saturation differences"
     k_est = est["theta"] / abs(rec["theta"]) * rec["torsional_stiffness_Nm_per_rad"]
     return {"estimate": {"torsional_stiffness_Nm_per_rad": k_est, "gauge_strain_per_Nm": est["eps_ref"],
                          "gauge_strains": arms},

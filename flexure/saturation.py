@@ -8,8 +8,22 @@ Then, exactly,
     E_ℓ = d_ℓ / (1 − q_ℓ).                                                          (1)
 
 One level: if |q| ≤ ½ (saturation), 2|d| has the effectivity 2|1 − q| ∈ [1, 3] whatever the signs
-(the flat estimate; measured q 0.01–0.12 on exact-geometry annuli). Next to a re-entrant edge the
-enriched space only about halves the error (q 0.3–0.55), and 2|d| can fall below |E|.
+(measured q 0.01–0.12 on exact-geometry annuli). Next to a re-entrant edge the enriched space only
+about halves the error (q 0.3–0.6), and 2|d| can fall below |E|. Where q is not measured (a first level;
+a step whose d changed sign and no earlier q̂), the estimate (3) takes the q of a re-entrant edge,
+
+    Q_PRIOR = (2/3)^(4 λ_min) = 4/9,   λ_min = ½,                                                 (4)
+
+from the p-version's rate at a singularity u ~ r^λ (Babuška–Suri): the energy error on the elements at
+the edge falls as p^(−2λ), so a goal's error (primal × dual energy error, both singular there) as
+p^(−4λ), and P3 over P2 leaves q ≈ (2/3)^(4λ); λ_min = ½ is the crack limit (interior angle → 2π), the
+smallest exponent of any re-entrant edge in either mode (270°: 0.54 in-plane, 2/3 anti-plane: q 0.41,
+0.34). The factor SAFETY/(1 − Q_PRIOR) = 2.7 brackets for q ∈ [−0.11, 0.63]. It is taken on parts with a
+sharp re-entrant edge (flexure.reentrant: an interior angle ≥ 240° on the first mesh's boundary); on the
+others λ ≥ 1, q ≤ Q_SMOOTH = (2/3)^4 ≈ 0.2 and (3) is the flat 2|d| (exact-geometry annuli: first-level q
+−0.35 … 0.12, where 2.7|d| would give up to 3.6). No single factor can serve both: measured first-level q
+spans −0.35 … 0.62 (1 − q a ratio of 3.5 > 3); a sharp part whose first-level q is negative (V⁺
+overshooting; −0.27 on one arm of cross_frame) gets up to 3.4, the safe side.
 
 Two nested levels. If q is the same on both (q_ℓ = q_(ℓ+1) = q: the ratio is set by how the singular
 and smooth parts of the error are shared, which a mesh step barely changes), then
@@ -45,18 +59,44 @@ Measured (2026-11-26, benchmarks/fem_effectivity.py against deep nested referenc
 goal of the re-entrant part, 0.1–0.4 on three_spoke_thin. On the re-entrant part q still drifts upwards
 with the refinement (the gauges' J⁺ sequence converges at a ratio 0.75–0.78 per level against J_h's 0.55:
 the singular part's share grows), so q̂ of the last step is low and the gauges stay at 0.6–1.3 at
---rtol 0.01 (2|d|: 0.5–0.98). A first level has no q̂ at all.
+--rtol 0.01 (2|d|: 0.5–0.98); over a small step (57 k → 73 k DOFs) one arm's q rose from 0.72 to ~0.85 and
+q̂ = 0.28 gave 0.30. A q̂ over all levels does not help there: q̂ of older steps is lower still, and on the
+thin parts one goal's q̂ jumps between steps (−1.03 → 0.13 on an arm whose error crosses zero); nor does a
+floor from the fastest rate a P2 goal converges at, |J_ℓ − J_(ℓ−1)| ρ/(1 − ρ), ρ = (N_(ℓ−1)/N_ℓ)^(4/3): the
+arms' errors cross zero, and it was over 3× on six goals where it lifted two above 1.
+Replayed on every level of the four deep references (``fem_effectivity.py summary``, goals whose reference
+resolves the error): 97 of 114 in [1, 3] (median 1.69), 4 wholly below 1 over the reference's allowance,
+against 92 (1.37) and 9 with 2|d| where q̂ is not measured; annuli without sharp edges unchanged.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
+
+import numpy as np
 
 FLAT = 2.0
 SAFETY = 1.5
 Q_MAX = 0.8
 MIN_DROP = 0.4
 NOISE = 10.0
+#: the smallest singular exponent of a re-entrant edge (the crack limit, interior angle → 2π) and the
+#: saturation ratio it gives where none is measured: Q_PRIOR = (2/3)^(4 λ_min) (module docstring)
+LAMBDA_MIN = 0.5
+Q_PRIOR = (2.0 / 3.0) ** (4.0 * LAMBDA_MIN)
+#: the same for a part without a sharp re-entrant edge (flexure.reentrant): λ ≥ 1, q ≤ (2/3)^4 ≈ 0.2, and
+#: (3) is the flat FLAT |d|
+Q_SMOOTH = (2.0 / 3.0) ** 4.0
+
+
+class GoalEstimate(NamedTuple):
+    """One goal's estimate on a level: e, the q̂ it used, how (a sentence), and whether q̂ was measured
+    over this level's step."""
+    e: float
+    q: float
+    how: str
+    measured: bool
 
 
 def saturation_ratio(J_prev: float, d_prev: float, J: float, d: float, noise: float) -> tuple[float, str]:
@@ -84,17 +124,43 @@ def saturation_estimate(d: float, q_hat: float) -> float:
     return max(FLAT, SAFETY / (1.0 - min(q_hat, Q_MAX))) * abs(d)
 
 
+def unmeasured_ratio(sharp_reentrant_edge: bool) -> float:
+    """q where none is measured (4): Q_PRIOR on a part with a sharp re-entrant edge, else Q_SMOOTH."""
+    return Q_PRIOR if sharp_reentrant_edge else Q_SMOOTH
+
+
 def goal_estimate(J: float, d: float, prev: tuple[float, float] | None, noise: float,
-                  q_prev: float = math.nan) -> tuple[float, float, str]:
-    """One goal's estimate on a level: (e, q̂ used, how). ``prev`` (J, d) of the previous nested level
-    or None; ``q_prev`` the goal's last measured q̂ (nan if none), used where this step's is not one."""
+                  q_prev: float = math.nan, q_unmeasured: float | None = None) -> GoalEstimate:
+    """One goal's estimate on a level (``GoalEstimate``). ``prev`` (J, d) of the previous nested level
+    or None; ``q_prev`` the goal's last measured q̂ (nan if none), used where this step's is not one;
+    with neither, ``q_unmeasured`` (``unmeasured_ratio``; default Q_PRIOR, the safe side)."""
+    q0 = Q_PRIOR if q_unmeasured is None else q_unmeasured
+    fac = max(FLAT, SAFETY / (1.0 - q0))
+    what = "a re-entrant edge's" if q0 >= Q_PRIOR else "no sharp re-entrant edge"
     if prev is None:
-        return FLAT * abs(d), math.nan, f"first level: {FLAT:g} |J(u⁺) − J(u_h)|"
+        return GoalEstimate(fac * abs(d), q0, f"first level: {fac:.2g} |J(u⁺) − J(u_h)| (q = {q0:.2f}, {what})", False)
     q, why = saturation_ratio(prev[0], prev[1], J, d, noise)
-    if math.isfinite(q):
+    measured = math.isfinite(q)
+    if measured:
         how = f"q̂ = {q:.3f} measured over the last step" + (f", used as {Q_MAX:g}" if q > Q_MAX else "")
     elif math.isfinite(q_prev):
         q, how = q_prev, f"q̂ = {q_prev:.3f} of an earlier step ({why} over the last one)"
     else:
-        how = f"{FLAT:g} |J(u⁺) − J(u_h)|: q̂ not measured ({why})"
-    return saturation_estimate(d, q), q, how
+        q, how = q0, f"{fac:.2g} |J(u⁺) − J(u_h)| (q = {q0:.2f}, {what}): q̂ not measured ({why})"
+    return GoalEstimate(saturation_estimate(d, q), q, how, measured)
+
+
+def bridge_estimate(signs, d, e, d_ref: float, e_ref: float) -> float:
+    """The bridge strain's estimate with its arms' saturation (``signs`` s_i, ``d`` the arms' d_i, ``e`` their
+    estimates; ``d_ref``, ``e_ref`` the bridge's own): each arm's error is E_i ≈ f_i d_i (f_i = e_i/|d_i| its
+    factor, from its own q̂), so E_ref = Σ s_i E_i / 4 = f_ref d_ref + Σ s_i (f_i − f_ref) d_i / 4, and
+
+        e_ref ← e_ref + Σ |s_i d_i| |f_i − f_ref| / 4   ≥   |Σ s_i f_i d_i| / 4,
+
+    the bridge's own estimate (f_ref from its own q̂) where its arms saturate alike, more by what their
+    differences may add where they do not: the bridge's q̂ is a mix of its arms', and where their errors
+    partly cancel it can undercount those that saturate worst."""
+    s, d, e = (np.asarray(x, float) for x in (signs, d, e))
+    f = e / np.maximum(np.abs(d), 1e-300)
+    f_ref = e_ref / max(abs(d_ref), 1e-300)
+    return float(e_ref + np.abs(s * d) @ np.abs(f - f_ref) / 4.0)

@@ -261,9 +261,9 @@ def test_bridge_estimate_bounds_through_its_arms():
 
 def test_enriched_estimate_measures_the_saturation_ratio_between_levels():
     """Synthetic nested levels with known errors: the P2 errors E_ℓ (θ, bridge, four arms), the enriched
-    ones q E_ℓ with q = 0.5 (re-entrant: V⁺ only halves the error). Level 0 reports 2|d| = 2(1 − q)|E|
-    = |E| (the flat estimate just brackets); level 1 measures q̂ = 0.5 per goal and reports
-    max(2, 1.5/(1 − q̂))|d| = 1.5 |E|; an arm whose enriched difference changed sign keeps 2|d|."""
+    ones q E_ℓ with q = 0.5 (re-entrant: V⁺ only halves the error). Level 0 reports 2.7|d| = 2.7(1 − q)|E|
+    (q unmeasured: a re-entrant edge's 4/9); level 1 measures q̂ = 0.5 per goal and reports
+    max(2, 1.5/(1 − q̂))|d| = 1.5 |E|; an arm whose enriched difference changed sign keeps 2.7|d|."""
     q, J = 0.5, np.array([1e-3, 1e-5, 1e-5, -1e-5, 1e-5, -1e-5])      # θ, bridge, arms (exact)
     E0 = np.array([2e-5, 1e-7, 3e-7, -2e-7, 1e-7, -2e-7])
     E1 = 0.4 * E0
@@ -278,15 +278,52 @@ def test_enriched_estimate_measures_the_saturation_ratio_between_levels():
     l0, l1 = level(E0), level(E1)
     seen = {}
     e0 = adaptive._enriched_estimates(l0, None, seen)
-    assert e0["estimate"]["gauge_strains"] == pytest.approx(np.abs(E0[2:]).tolist())
+    assert e0["estimate"]["gauge_strains"] == pytest.approx((2.7 * (1 - q) * np.abs(E0[2:])).tolist())
+    assert seen == {}                                  # nothing measured on a first level
     e1 = adaptive._enriched_estimates(l1, l0, seen)
     assert e1["kappa"]["theta"] == pytest.approx(q) and e1["kappa"]["g0"] == pytest.approx(q)
     assert e1["estimate"]["gauge_strain_per_Nm"] == pytest.approx(1.5 * abs(E1[1]))
     assert e1["estimate"]["gauge_strains"][:3] == pytest.approx((1.5 * np.abs(E1[2:5])).tolist())
-    assert e1["estimate"]["gauge_strains"][3] == pytest.approx(2 * (1 - q) * abs(E1[5]))
+    assert e1["estimate"]["gauge_strains"][3] == pytest.approx(2.7 * (1 - q) * abs(E1[5]))
     assert "changed sign" in e1["kappa_how"]["g3"] and set(seen) == {"theta", "eps_ref", "g0", "g1", "g2"}
     k_rel = e1["estimate"]["torsional_stiffness_Nm_per_rad"] / l1["torsional_stiffness_Nm_per_rad"]
     assert k_rel == pytest.approx(1.5 * abs(E1[0]) / abs(l1["theta"]))
+
+
+def test_bridge_estimate_adds_its_arms_saturation_differences():
+    """Bridge ε_ref = Σ s_i ε_i / 4 with arms whose enriched spaces saturate differently (q_i ∈ [−0.3, 0.6],
+    drifting by ≤ 0.1, errors falling by r_i ∈ [0.2, 0.5] per level, random signs): the bridge's own q̂ mixes
+    the arms' and misses (< 1) on a share of them; adding Σ |s_i d_i| |f_i − f_ref| / 4 (saturation.bridge_estimate) it is never
+    below the arms' estimates combined with their signs, |Σ s_i f_i d_i| / 4, and misses far less often.
+    Where every arm has the bridge's factor (one level: the same unmeasured q) it is the bridge's own."""
+    rng = np.random.default_rng(7)
+    signs, Je = np.array([1.0, -1.0, 1.0, -1.0]), np.array([1e-5, -1e-5, 1e-5, -1e-5])
+
+    def level(E, q):
+        Jh, d = Je - E, (1 - q) * E
+        return {"theta": 1e-3, "torsional_stiffness_Nm_per_rad": 1e3, "gauge_strain_per_Nm": float(signs @ Jh / 4),
+                "gauge_strains": Jh.tolist(), "goal_algebraic_error": 1e-8,
+                "enriched": {"theta": 1e-6, "eps_ref": float(signs @ d / 4), "gauges": d.tolist()}}
+
+    own, new = [], []
+    for _ in range(1000):
+        E0, q0, r = rng.normal(size=4) * 1e-7, rng.uniform(-0.3, 0.6, 4), rng.uniform(0.2, 0.5, 4)
+        q1 = np.clip(q0 + rng.uniform(-0.1, 0.1, 4), -0.3, 0.6)
+        l0, l1 = level(E0, q0), level(r * E0, q1)
+        first, first_own = (adaptive._enriched_estimates(l0, None, {}, s)["estimate"] for s in (signs, None))
+        assert first["gauge_strain_per_Nm"] == pytest.approx(first_own["gauge_strain_per_Nm"])
+        E_ref = abs(signs @ (r * E0)) / 4
+        if E_ref < 0.1 * np.abs(r * E0).mean():
+            continue                                            # a bridge whose arms' errors cancel
+        seen = {}
+        adaptive._enriched_estimates(l0, None, seen, signs)
+        own.append(adaptive._enriched_estimates(l1, l0, dict(seen))["estimate"]["gauge_strain_per_Nm"] / E_ref)
+        out = adaptive._enriched_estimates(l1, l0, dict(seen), signs)["estimate"]
+        new.append(out["gauge_strain_per_Nm"] / E_ref)
+        d = np.array(l1["enriched"]["gauges"])
+        assert out["gauge_strain_per_Nm"] >= abs(signs @ (np.sign(d) * np.array(out["gauge_strains"]))) / 4 * (1 - 1e-12)
+    own, new = np.array(own), np.array(new)
+    assert np.mean(own < 1) > 0.04 and np.mean(new < 1) < 0.02 and np.all(new >= own * (1 - 1e-12))
 
 
 @pytest.fixture(scope="module")

@@ -24,7 +24,8 @@ def test_constant_q_is_measured_exactly(q, sign):
     prev, cur, E1 = levels(3.0, sign * 1e-3, 0.5, q, q)
     qh, how = saturation_ratio(*prev, *cur, noise=1e-12)
     assert how == "measured" and qh == pytest.approx(q, abs=1e-9)
-    e, q_used, _ = goal_estimate(*cur, prev, 1e-12)
+    e, q_used, _, measured = goal_estimate(*cur, prev, 1e-12)
+    assert measured and q_used == pytest.approx(q, abs=1e-9)
     assert e / abs(E1) == pytest.approx(max(2 * (1 - q), 1.5), rel=1e-9)
 
 
@@ -45,9 +46,20 @@ def test_bracket_within_one_to_three_where_q_drifts_little():
     assert min(flat) < 0.9                                       # the case the measurement is for
 
 
-def test_first_level_is_the_flat_estimate():
-    e, q, how = goal_estimate(1.0, -3e-4, None, 0.0)
-    assert e == pytest.approx(6e-4) and math.isnan(q) and "first level" in how
+def test_first_level_takes_a_reentrant_edges_ratio():
+    """No q̂ on a first level: q = Q_PRIOR = (2/3)^(4·½) = 4/9, e = 1.5/(1 − 4/9)|d| = 2.7|d|, not a measurement."""
+    e, q, how, measured = goal_estimate(1.0, -3e-4, None, 0.0)
+    assert sat.Q_PRIOR == pytest.approx(4 / 9) and q == sat.Q_PRIOR and not measured and "first level" in how
+    assert e == pytest.approx(2.7 * 3e-4)
+
+
+@pytest.mark.parametrize("q", [-0.11, 0.0, 0.12, 0.3, 0.45, 0.62])
+def test_unmeasured_estimate_brackets_over_the_first_level_range(q):
+    """The unmeasured factor 2.7 has the effectivity 2.7(1 − q) ∈ [1, 3] for q ∈ [−0.11, 0.63]: smooth
+    parts (q 0.01–0.12) and re-entrant edges (q 0.3–0.62) alike; the flat 2|d| misses q > ½."""
+    E = 1e-4
+    e = goal_estimate(1.0 - E, (1 - q) * E, None, 0.0).e
+    assert 1.0 <= e / E <= 3.0
 
 
 @pytest.mark.parametrize("prev, cur, noise, why", [
@@ -58,20 +70,20 @@ def test_first_level_is_the_flat_estimate():
     ((1.0, 0.0), (1.0 - 1e-4, 2e-4), 1e-12, "changed sign"),                  # d = 0: no ratio
 ])
 def test_no_measurement_falls_back(prev, cur, noise, why):
-    """Where (2) is noise, q̂ is nan and the estimate is 2|d| (or an earlier step's q̂)."""
+    """Where (2) is noise, q̂ is nan and the estimate takes Q_PRIOR (2.7|d|), or an earlier step's q̂."""
     q, how = saturation_ratio(*prev, *cur, noise)
     assert math.isnan(q) and why in how
-    e, q_used, how = goal_estimate(*cur, prev, noise)
-    assert e == pytest.approx(2 * abs(cur[1])) and math.isnan(q_used) and why in how
-    e, q_used, how = goal_estimate(*cur, prev, noise, q_prev=0.5)
-    assert e == pytest.approx(3 * abs(cur[1])) and q_used == 0.5 and "earlier step" in how
+    e, q_used, how, measured = goal_estimate(*cur, prev, noise)
+    assert e == pytest.approx(2.7 * abs(cur[1])) and q_used == sat.Q_PRIOR and why in how and not measured
+    e, q_used, how, measured = goal_estimate(*cur, prev, noise, q_prev=0.5)
+    assert e == pytest.approx(3 * abs(cur[1])) and q_used == 0.5 and "earlier step" in how and not measured
 
 
 def test_weak_saturation_is_capped_and_said():
     """q̂ above Q_MAX is used as Q_MAX (factor 1.5/(1 − Q_MAX) = 7.5) and the method says so."""
     prev, cur, E1 = levels(1.0, 1e-3, 0.3, 0.9, 0.9)
-    e, q, how = goal_estimate(*cur, prev, 1e-12)
-    assert q == pytest.approx(0.9) and f"used as {sat.Q_MAX:g}" in how
+    e, q, how, measured = goal_estimate(*cur, prev, 1e-12)
+    assert measured and q == pytest.approx(0.9) and f"used as {sat.Q_MAX:g}" in how
     assert e == pytest.approx(sat.SAFETY / (1 - sat.Q_MAX) * abs(cur[1]))
     assert e / E1 == pytest.approx(0.75)                               # a floor, not a bracket, there
 
