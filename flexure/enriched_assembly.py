@@ -1,8 +1,11 @@
 """The enriched system of flexure.enriched assembled by compiled loops (flexure._enriched_kernels):
 each element's surplus stiffness, coupling and residual computed once and added straight into CSR
 arrays whose pattern comes from the numbering (no per-chunk COO → CSR, no sparse sums, the
-constrained surplus functions never assembled). The numpy form (flexure.enriched ``assemble`` and
-``coupling_matrix``) is the reference it is tested against and the path without numba."""
+constrained surplus functions never assembled). The element loop runs colour by colour on
+flexure.threads' threads (flexure._enriched_kernels.colour_elements: no two elements of a colour
+share a node, so their additions never collide, and the sums do not depend on the thread count).
+The numpy form (flexure.enriched ``assemble`` and ``coupling_matrix``) is the reference it is tested
+against and the path without numba."""
 
 from __future__ import annotations
 
@@ -28,7 +31,7 @@ def _csr(bptr, bcol, n_rows: int, n_cols: int):
     idx = np.int32 if max(nnz, 3 * n_cols) < 2 ** 31 - 1 else np.int64
     indptr = np.empty(3 * n_rows + 1, idx)
     indices = np.empty(nnz, idx)
-    ek.scalar_csr(bptr, bcol, indptr, indices)
+    ek.scalar_csr(bptr, bcol, indptr, indices)            # parallel rows: thread count set by the caller
     M = sp.csr_matrix((3 * n_rows, 3 * n_cols))
     M.data, M.indices, M.indptr = np.zeros(nnz), indices, indptr        # sorted, canonical by construction
     return M
@@ -40,6 +43,7 @@ def assemble_enriched(mesh: Mesh, material, u: np.ndarray, numbering, traction=N
     K_hW (3 n_nodes × 3 n_free CSR, the full nodal rows: no coupling or Dirichlet reduction), the
     inverse 3 × 3 diagonal blocks of K_WW (n_free,3,3), the numbering (G, sign, free))."""
     from flexure import _enriched_kernels as ek
+    from flexure import threads
     from flexure.bank_weiser import face_rhs
     from flexure.fem import tet_shape
     from flexure.surplus import surplus_basis, tet_rule_degree5
@@ -49,9 +53,10 @@ def assemble_enriched(mesh: Mesh, material, u: np.ndarray, numbering, traction=N
     nk = int(free.sum())
     Gk = np.where(free[G], kept[G], -1).astype(np.int64)
     tets = np.ascontiguousarray(mesh.tets, dtype=np.int64)
-    kb, kc = ek.block_pattern(Gk, Gk, nk, nk)
+    nt = threads.use()
+    kb, kc = ek.block_pattern(Gk, Gk, nk, nk, nt)
     K = _csr(kb, kc, nk, nk)
-    cb, cc = ek.block_pattern(tets, Gk, mesh.n_nodes, nk)
+    cb, cc = ek.block_pattern(tets, Gk, mesh.n_nodes, nk, nt)
     C = _csr(cb, cc, mesh.n_nodes, nk)
     rhs = face_rhs(mesh, material, u, traction)
     xi, wq = tet_rule_degree5()
@@ -62,5 +67,6 @@ def assemble_enriched(mesh: Mesh, material, u: np.ndarray, numbering, traction=N
     ek.assemble(np.ascontiguousarray(mesh.points, float), tets, np.ascontiguousarray(np.asarray(u, float).reshape(-1, 3)),
                 np.ascontiguousarray(rhs), Gk, np.ascontiguousarray(sign), np.ascontiguousarray(dN),
                 np.ascontiguousarray(dB), np.ascontiguousarray(wq), float(material.lame_lambda_Pa),
-                float(material.shear_modulus_Pa), kb, kc, K.data, cb, cc, C.data, r, D)
+                float(material.shear_modulus_Pa), kb, kc, K.data, cb, cc, C.data, r, D,
+                *ek.colour_elements(np.ascontiguousarray(tets[:, :4]), mesh.n_nodes), nt)
     return K, r, C, np.linalg.inv(D), (G, sign, free)
