@@ -13,7 +13,7 @@ def csr_matvec(indptr, indices, data, x, y):
     for i in numba.prange(len(indptr) - 1):
         s = 0.0
         for p in range(indptr[i], indptr[i + 1]):
-            s += data[p] * x[indices[p]]
+            s += data[p] * x[np.uint64(indices[p])]          # unsigned: no negative-index wrap test
         y[i] = s
 
 
@@ -27,7 +27,7 @@ def csr_rmatvec(indptr, indices, data, x, y, nchunk):
         for i in range(n * t // nchunk, n * (t + 1) // nchunk):
             xi = x[i]
             for p in range(indptr[i], indptr[i + 1]):
-                part[t, indices[p]] += data[p] * xi
+                part[t, np.uint64(indices[p])] += data[p] * xi
     for j in numba.prange(m):
         s = part[0, j]
         for t in range(1, nchunk):

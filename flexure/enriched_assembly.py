@@ -64,9 +64,11 @@ def assemble_enriched(mesh: Mesh, material, u: np.ndarray, numbering, traction=N
     _, dB = surplus_basis(xi)
     r = np.zeros(3 * nk)
     D = np.zeros((nk, 3, 3))
-    ek.assemble(np.ascontiguousarray(mesh.points, float), tets, np.ascontiguousarray(np.asarray(u, float).reshape(-1, 3)),
-                np.ascontiguousarray(rhs), Gk, np.ascontiguousarray(sign), np.ascontiguousarray(dN),
-                np.ascontiguousarray(dB), np.ascontiguousarray(wq), float(material.lame_lambda_Pa),
-                float(material.shear_modulus_Pa), kb, kc, K.data, cb, cc, C.data, r, D,
-                *ek.colour_elements(np.ascontiguousarray(tets[:, :4]), mesh.n_nodes), nt)
+    nt = threads.use()
+    with threads.dynamic():                  # colour chunks handed out as threads come free
+        ek.assemble(np.ascontiguousarray(mesh.points, float), tets, np.ascontiguousarray(np.asarray(u, float).reshape(-1, 3)),
+                    np.ascontiguousarray(rhs), Gk, np.ascontiguousarray(sign), np.ascontiguousarray(dN),
+                    np.ascontiguousarray(dB), np.ascontiguousarray(wq), float(material.lame_lambda_Pa),
+                    float(material.shear_modulus_Pa), kb, kc, K.data, cb, cc, C.data, r, D,
+                    *ek.colour_elements(np.ascontiguousarray(tets[:, :4]), mesh.n_nodes), 1 if nt == 1 else 8 * nt)
     return K, r, C, np.linalg.inv(D), (G, sign, free)

@@ -1,11 +1,17 @@
 """Threads of the FEM's compiled kernels (numba ``prange`` loops): one setting.
 
-``THREADS`` is read once from the environment variable ``TORQUEBENCH_THREADS`` (a positive integer;
-unset or invalid: the machine's cores, ``os.cpu_count()``), capped by numba's own pool size
-(``NUMBA_NUM_THREADS``). ``use()`` applies it before a parallel kernel runs (numba's setting is per
-calling thread); ``limited(n)`` runs a block with ``n`` threads (tests and benchmarks compare 1 and N).
-Every parallel kernel gives results independent of the thread count or equal to round-off
-(flexure._parallel_kernels says which). BLAS stays at one thread (flexure.blas explains why).
+``THREADS`` comes from the environment variable ``TORQUEBENCH_THREADS``: a positive integer fixes
+the count; unset (or ``auto``) the kernels use the cores no other process is running on at the
+call, between 1 and the machine's cores (``os.sched_getaffinity``): the kernel regions are short
+(10 ms – 2 s) and a thread waiting at their end for a partner descheduled by another process's
+work is slower than one thread (measured on the shared 2-core machine at load 3: the enriched
+assembly 1.4 s with 1 thread, 1.7 s with 2; a CSR product 55 ms against 92 ms). "Busy" is the
+kernel's instantaneous count of runnable tasks (/proc/stat ``procs_running``, this one excluded).
+Everything is capped by numba's pool (``NUMBA_NUM_THREADS``). ``use()`` applies the count before a
+parallel kernel runs (numba's setting is per calling thread); ``limited(n)`` fixes ``n`` within a
+block (tests and benchmarks compare 1 and N). The kernels' results do not depend on the count, or
+only to round-off (flexure._enriched_kernels and flexure._sparse_kernels say which). BLAS stays at
+one thread (flexure.blas explains why).
 """
 
 from __future__ import annotations
@@ -14,25 +20,52 @@ import contextlib
 import os
 
 
-def _from_env() -> int:
+def _cores() -> int:
     try:
-        n = int(os.environ.get("TORQUEBENCH_THREADS", ""))
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def _from_env() -> int | None:
+    v = os.environ.get("TORQUEBENCH_THREADS", "").strip().lower()
+    try:
+        n = int(v)
     except ValueError:
-        n = 0
-    return n if n > 0 else (os.cpu_count() or 1)
+        return None
+    return n if n > 0 else None
 
 
-#: threads of the FEM's parallel kernels (env TORQUEBENCH_THREADS; default the machine's cores)
-THREADS: int = _from_env()
+#: threads of the FEM's parallel kernels (env TORQUEBENCH_THREADS); None: the idle cores at each call
+THREADS: int | None = _from_env()
+CORES: int = _cores()
 _override: int | None = None
 
 
+def _others_running() -> int:
+    """Runnable tasks on the machine besides this one (/proc/stat procs_running − 1; 0 if unknown)."""
+    try:
+        with open("/proc/stat", "rb") as f:
+            for line in f:
+                if line.startswith(b"procs_running"):
+                    return max(0, int(line.split()[1]) - 1)
+    except OSError:
+        pass
+    return 0
+
+
 def count() -> int:
-    """The threads the parallel kernels use now (``limited``'s, else THREADS), within numba's pool."""
+    """The threads the parallel kernels use now: ``limited``'s, else THREADS, else the idle cores."""
     import numba
 
-    n = THREADS if _override is None else _override
-    return max(1, min(int(n), numba.config.NUMBA_NUM_THREADS))
+    if _override is not None:
+        n = _override
+    elif THREADS is not None:
+        n = THREADS
+    else:
+        n = CORES - _others_running()
+    return max(1, min(int(n), CORES if THREADS is None and _override is None else n,
+                      numba.config.NUMBA_NUM_THREADS))
 
 
 def use() -> int:
@@ -43,6 +76,17 @@ def use() -> int:
     if numba.get_num_threads() != n:
         numba.set_num_threads(n)
     return n
+
+
+@contextlib.contextmanager
+def dynamic(chunk: int = 1):
+    """Within the block numba hands a ``prange``'s iterations out ``chunk`` at a time to whichever
+    thread is free (not in equal static shares: a descheduled thread delays the region by one chunk,
+    not by its whole share)."""
+    import numba
+
+    with numba.parallel_chunksize(chunk):
+        yield
 
 
 @contextlib.contextmanager
