@@ -149,8 +149,19 @@ def stiffness_matrix(mesh: Mesh, material, chunk_elements: int | None = None,
     """Global stiffness K (n_dofs × n_dofs, symmetric), CSR (or BSR 3×3 with ``fmt="bsr"``).
 
     Node-block assembly: the 9 components of every element's 3×3 node-pair blocks are summed into
-    the unique node-pair pattern with bincount; chunks of elements bound temporary memory.
+    the unique node-pair pattern with bincount; chunks of elements bound temporary memory. With
+    numba, CSR is assembled in place by a compiled element loop (flexure.stiffness_assembly; the
+    same matrix to round-off); this numpy form is its reference and the path without numba.
     """
+    from flexure import stiffness_assembly
+
+    if fmt == "csr" and chunk_elements is None and stiffness_assembly.available():
+        return stiffness_assembly.stiffness_csr(mesh, material)
+    return _stiffness_numpy(mesh, material, chunk_elements, fmt)
+
+
+def _stiffness_numpy(mesh: Mesh, material, chunk_elements: int | None = None, fmt: str = "csr"):
+    """``stiffness_matrix`` by numpy (node-block bincount assembly)."""
     lam, mu = material.lame_lambda_Pa, material.shear_modulus_Pa
     n = mesh.n_nodes
     m = mesh.n_elements

@@ -95,3 +95,21 @@ def test_threads_setting_is_within_numbas_pool():
     assert 1 <= threads.count() <= numba.config.NUMBA_NUM_THREADS
     with threads.limited(1):
         assert threads.count() == 1 and numba.get_num_threads() == 1
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_compiled_stiffness_equals_numpy_with_one_and_two_threads(order):
+    from flexure import fem
+
+    mesh, _ = _curved_box()
+    if order == 1:
+        mesh = to_linear(mesh)
+    K0 = fem._stiffness_numpy(mesh, AL)
+    out = {}
+    for n in (1, 2):
+        with threads.limited(n):
+            out[n] = fem.stiffness_matrix(mesh, AL)
+    for K in out.values():
+        assert np.array_equal(K.indptr, K0.indptr) and np.array_equal(K.indices, K0.indices)
+        assert np.abs(K.data - K0.data).max() <= 1e-12 * np.abs(K0.data).max()
+    assert np.abs(out[1].data - out[2].data).max() <= 1e-12 * np.abs(K0.data).max()

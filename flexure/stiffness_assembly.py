@@ -1,0 +1,51 @@
+"""The global stiffness assembled by a compiled element loop (flexure._stiffness_kernels): the node-block
+pattern from the element table (flexure._enriched_kernels.block_pattern), its scalar CSR (rows 3r + i,
+the layout of flexure.fem.stiffness_matrix's BSR → CSR), each element's 3nn × 3nn matrix computed at
+the quadrature points and added in place, colour by colour on flexure.threads' threads. The numpy
+form (flexure.fem.stiffness_matrix without numba) is the reference it is tested against."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from flexure.mesh import Mesh
+
+
+def available() -> bool:
+    """True where the compiled assembly runs (numba installed and estimator.compiled enabled)."""
+    from estimator import compiled
+
+    return compiled.available()
+
+
+def stiffness_csr(mesh: Mesh, material):
+    """K (3n × 3n CSR, canonical, int32 indices where they fit). InputError on an element with
+    det J ≤ 0 at a quadrature point (inverted or degenerate), as flexure.fem.physical_gradients."""
+    from flexure import _enriched_kernels as ek
+    from flexure import _stiffness_kernels as sk
+    from flexure import threads
+    from flexure.enriched_assembly import _csr
+    from flexure.fem import TET_QUAD, tet_shape
+    from userio.errors import InputError
+
+    tets = np.ascontiguousarray(mesh.tets, dtype=np.int64)
+    n = mesh.n_nodes
+    nt = threads.use()
+    bptr, bcol = ek.block_pattern(tets, tets, n, n, nt)
+    K = _csr(bptr, bcol, n, n)
+    xi, wq = TET_QUAD[mesh.order]
+    _, dN = tet_shape(mesh.order, xi)
+    det = np.empty(len(tets))
+    cptr, order = ek.colour_elements(np.ascontiguousarray(tets[:, :4]), n)
+    nt = threads.use()
+    with threads.dynamic():
+        sk.assemble(np.ascontiguousarray(mesh.points, float), tets, np.ascontiguousarray(dN),
+                    np.ascontiguousarray(wq, float), float(material.lame_lambda_Pa),
+                    float(material.shear_modulus_Pa), bptr, bcol, K.data, det, cptr, order,
+                    1 if nt == 1 else 8 * nt)
+    bad = ~(det > 0)
+    if np.any(bad):
+        idx = int(np.flatnonzero(bad)[0])
+        raise InputError(f"mesh: element {idx} is inverted or degenerate "
+                         f"(det J = {float(det[idx]):.3e}); fix the mesh")
+    return K
