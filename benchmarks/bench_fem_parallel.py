@@ -2,6 +2,7 @@
 cores) in the same process, interleaved, on the first mesh of an adaptive run.
 
     python benchmarks/bench_fem_parallel.py [DESIGN.toml] [--h-factor F] [--threads N] [--reps R]
+    python benchmarks/bench_fem_parallel.py --cold     # numba's first-call cost, empty and filled cache
 
 Per kernel: the best of R runs with 1 thread and with N (alternating, so a load change hits both),
 the ratio t_1/t_N, and the machine's 1-minute load before and after. On a shared machine the
@@ -66,6 +67,11 @@ def bench(path: str, h_factor: float | None, nt: int, reps: int) -> None:
     Gk = np.where(free[G], kept[G], -1).astype(np.int64)
     tets = np.ascontiguousarray(mesh.tets, dtype=np.int64)
     V = np.ascontiguousarray(tets[:, :4])
+    from flexure import fem
+    pair("fem.stiffness_matrix (compiled)", lambda: fem.stiffness_matrix(mesh, design.material), nt, reps)
+    t = time.perf_counter()
+    fem._stiffness_numpy(mesh, design.material)
+    print(f"  numpy anchor: fem._stiffness_numpy {time.perf_counter() - t:.3f} s (load {_load():.1f})", flush=True)
     pair("enriched: assemble_enriched (all)", lambda: enriched_assembly.assemble_enriched(
         mesh, design.material, U0, num), nt, reps)
     from flexure import threads
@@ -90,6 +96,40 @@ def bench(path: str, h_factor: float | None, nt: int, reps: int) -> None:
                   f"({out[2]['pcg_iterations']} it; load {_load():.1f}); θ error {out[1]:.6e}", flush=True)
 
 
+_COLD = """
+import time, numpy as np
+t0 = time.perf_counter()
+from flexure import enriched, enriched_assembly, fem, sparse_parallel, threads
+from flexure.material import Material
+from flexure.mesh import box_mesh, to_quadratic
+m = to_quadratic(box_mesh(2, 2, 2)); mat = Material(70e9, 0.33, 270e6, 'al')
+t1 = time.perf_counter()
+K = fem.stiffness_matrix(m, mat)
+t2 = time.perf_counter()
+out = enriched_assembly.assemble_enriched(m, mat, np.zeros((m.n_nodes, 3)),
+                                          enriched.surplus_numbering(m, np.zeros(m.n_nodes, bool)))
+t3 = time.perf_counter()
+with threads.limited(2):
+    sparse_parallel.matvec(K, np.ones(K.shape[0])); sparse_parallel.rmatvec(out[2], np.ones(out[2].shape[0]))
+t4 = time.perf_counter()
+print(f"stiffness {t2 - t1:.1f} s, enriched assembly {t3 - t2:.1f} s, CSR products {t4 - t3:.1f} s")
+"""
+
+
+def cold() -> None:
+    """First-call cost of the parallel kernels in a fresh process: with an empty numba cache (the
+    compilation a user's first run pays) and then with that cache filled (every later run)."""
+    import subprocess
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        env = dict(os.environ, NUMBA_CACHE_DIR=d)
+        for what in ("empty cache (compile)", "cache filled (load)"):
+            r = subprocess.run([sys.executable, "-c", _COLD], env=env, cwd=ROOT, capture_output=True, text=True)
+            print(f"  first calls, {what}: {r.stdout.strip() or r.stderr.strip()[-300:]} (load {_load():.1f})",
+                  flush=True)
+
+
 def _best(fn, reps: int) -> float:
     best = np.inf
     for _ in range(reps):
@@ -107,7 +147,11 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--h-factor", type=float, default=None)
     ap.add_argument("--threads", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--reps", type=int, default=3)
+    ap.add_argument("--cold", action="store_true", help="only the first-call (numba compile) cost")
     a = ap.parse_args(argv)
+    if a.cold:
+        cold()
+        return
     bench(a.design, a.h_factor, a.threads, a.reps)
 
 

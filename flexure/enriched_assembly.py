@@ -21,22 +21,6 @@ def available() -> bool:
     return compiled.available()
 
 
-def _csr(bptr, bcol, n_rows: int, n_cols: int):
-    """An all-zero scalar CSR (3 n_rows × 3 n_cols) of the block pattern (bptr, bcol)."""
-    import scipy.sparse as sp
-
-    from flexure import _enriched_kernels as ek
-
-    nnz = 9 * int(bptr[-1])
-    idx = np.int32 if max(nnz, 3 * n_cols) < 2 ** 31 - 1 else np.int64
-    indptr = np.empty(3 * n_rows + 1, idx)
-    indices = np.empty(nnz, idx)
-    ek.scalar_csr(bptr, bcol, indptr, indices)            # parallel rows: thread count set by the caller
-    M = sp.csr_matrix((3 * n_rows, 3 * n_cols))
-    M.data, M.indices, M.indptr = np.zeros(nnz), indices, indptr        # sorted, canonical by construction
-    return M
-
-
 def assemble_enriched(mesh: Mesh, material, u: np.ndarray, numbering, traction=None):
     """The enriched system on the free surplus functions of ``numbering`` (G, sign, free: flexure.enriched.surplus_numbering):
     → (K_WW (3 n_free square CSR, rows 3k + i, k the free functions in order), r_W (3 n_free,),
@@ -45,6 +29,7 @@ def assemble_enriched(mesh: Mesh, material, u: np.ndarray, numbering, traction=N
     from flexure import _enriched_kernels as ek
     from flexure import threads
     from flexure.bank_weiser import face_rhs
+    from flexure.stiffness_assembly import block_csr as _csr
     from flexure.fem import tet_shape
     from flexure.surplus import surplus_basis, tet_rule_degree5
 

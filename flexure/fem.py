@@ -156,7 +156,8 @@ def stiffness_matrix(mesh: Mesh, material, chunk_elements: int | None = None,
     from flexure import stiffness_assembly
 
     if fmt == "csr" and chunk_elements is None and stiffness_assembly.available():
-        return stiffness_assembly.stiffness_csr(mesh, material)
+        xi, w = TET_QUAD[mesh.order]
+        return stiffness_assembly.stiffness_csr(mesh, material, tet_shape(mesh.order, xi)[1], w)
     return _stiffness_numpy(mesh, material, chunk_elements, fmt)
 
 

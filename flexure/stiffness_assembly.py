@@ -18,23 +18,37 @@ def available() -> bool:
     return compiled.available()
 
 
-def stiffness_csr(mesh: Mesh, material):
-    """K (3n × 3n CSR, canonical, int32 indices where they fit). InputError on an element with
-    det J ≤ 0 at a quadrature point (inverted or degenerate), as flexure.fem.physical_gradients."""
+def block_csr(bptr, bcol, n_rows: int, n_cols: int):
+    """An all-zero scalar CSR (3 n_rows × 3 n_cols) of the block pattern (bptr, bcol): rows 3r + i,
+    each block row's blocks in order, 3 columns each; int32 indices where they fit."""
+    import scipy.sparse as sp
+
+    from flexure import _enriched_kernels as ek
+
+    nnz = 9 * int(bptr[-1])
+    idx = np.int32 if max(nnz, 3 * n_cols) < 2 ** 31 - 1 else np.int64
+    indptr = np.empty(3 * n_rows + 1, idx)
+    indices = np.empty(nnz, idx)
+    ek.scalar_csr(bptr, bcol, indptr, indices)            # parallel rows: thread count set by the caller
+    M = sp.csr_matrix((3 * n_rows, 3 * n_cols))
+    M.data, M.indices, M.indptr = np.zeros(nnz), indices, indptr        # sorted, canonical by construction
+    return M
+
+
+def stiffness_csr(mesh: Mesh, material, dN: np.ndarray, wq: np.ndarray):
+    """K (3n × 3n CSR, canonical, int32 indices where they fit) with the quadrature's reference shape
+    gradients dN (q,nn,3) and weights wq (q,). InputError on an element with det J ≤ 0 at a
+    quadrature point (inverted or degenerate), as flexure.fem.physical_gradients."""
     from flexure import _enriched_kernels as ek
     from flexure import _stiffness_kernels as sk
     from flexure import threads
-    from flexure.enriched_assembly import _csr
-    from flexure.fem import TET_QUAD, tet_shape
     from userio.errors import InputError
 
     tets = np.ascontiguousarray(mesh.tets, dtype=np.int64)
     n = mesh.n_nodes
     nt = threads.use()
     bptr, bcol = ek.block_pattern(tets, tets, n, n, nt)
-    K = _csr(bptr, bcol, n, n)
-    xi, wq = TET_QUAD[mesh.order]
-    _, dN = tet_shape(mesh.order, xi)
+    K = block_csr(bptr, bcol, n, n)
     det = np.empty(len(tets))
     cptr, order = ek.colour_elements(np.ascontiguousarray(tets[:, :4]), n)
     nt = threads.use()
@@ -49,3 +63,4 @@ def stiffness_csr(mesh: Mesh, material):
         raise InputError(f"mesh: element {idx} is inverted or degenerate "
                          f"(det J = {float(det[idx]):.3e}); fix the mesh")
     return K
+
