@@ -72,3 +72,48 @@ def assemble(points, tets, dN, wq, lmb, mu, bptr, bcol, data, det_min, cptr, ord
                 for a in range(nn):
                     for b in range(nn):
                         _add_block(data, bptr, bcol, tets[e, a], tets[e, b], A, 3 * a, 3 * b, 1.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def _jacobian(X, e, dN, q, J):
+    for i in range(3):
+        for k in range(3):
+            s = 0.0
+            for a in range(dN.shape[1]):
+                s += X[e, a, i] * dN[q, a, k]
+            J[i, k] = s
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def jacobians(X, dN, det, Jinv, nchunk):
+    """det J (e,q) and J⁻¹ (e,q,3,3) into det, Jinv: J_ik = Σ_a X_ai ∂N_a/∂ξ_k at every point
+    (elements X (e,nn,3) in ``nchunk`` parallel ranges; each element on its own)."""
+    m = X.shape[0]
+    for t in numba.prange(nchunk):
+        J = np.empty((3, 3))
+        Ji = np.empty((3, 3))
+        for e in range(m * t // nchunk, m * (t + 1) // nchunk):
+            for q in range(dN.shape[0]):
+                _jacobian(X, e, dN, q, J)
+                det[e, q] = _inv3(J, Ji)
+                Jinv[e, q, :, :] = Ji
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def gradients(X, dN, G, det, nchunk):
+    """∂N_a/∂x_i = Σ_k ∂N_a/∂ξ_k J⁻¹_ki into G (e,q,nn,3) and det J into det (e,q) (``jacobians``)."""
+    m = X.shape[0]
+    nn = dN.shape[1]
+    for t in numba.prange(nchunk):
+        J = np.empty((3, 3))
+        Ji = np.empty((3, 3))
+        for e in range(m * t // nchunk, m * (t + 1) // nchunk):
+            for q in range(dN.shape[0]):
+                _jacobian(X, e, dN, q, J)
+                det[e, q] = _inv3(J, Ji)
+                for a in range(nn):
+                    for i in range(3):
+                        s = 0.0
+                        for k in range(3):
+                            s += dN[q, a, k] * Ji[k, i]
+                        G[e, q, a, i] = s

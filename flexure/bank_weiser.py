@@ -48,8 +48,12 @@ def _face_rule():
 def point_jacobians(X: np.ndarray, dN: np.ndarray):
     """det J (e,q) and J⁻¹ (e,q,3,3) (J⁻¹[k,i] = ∂ξ_k/∂x_i) of P2 elements with nodes X (e,10,3) at
     reference points with shape gradients dN (q,10,3); straight elements (mid nodes at their edges'
-    midpoints) are done once per element."""
+    midpoints) are done once per element; with numba every point by a compiled loop."""
+    from flexure import stiffness_assembly
     from flexure.mesh import TET_EDGES
+
+    if stiffness_assembly.available():
+        return stiffness_assembly.jacobians(X, dN)
 
     nq = dN.shape[0]
     mid = 0.5 * (X[:, TET_EDGES[:, 0]] + X[:, TET_EDGES[:, 1]])

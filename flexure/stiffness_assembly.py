@@ -64,3 +64,39 @@ def stiffness_csr(mesh: Mesh, material, dN: np.ndarray, wq: np.ndarray):
                          f"(det J = {float(det[idx]):.3e}); fix the mesh")
     return K
 
+
+
+def _chunks() -> int:
+    from flexure import threads
+
+    n = threads.use()
+    return 1 if n == 1 else 8 * n
+
+
+def jacobians(X: np.ndarray, dN: np.ndarray):
+    """det J (e,q) and J⁻¹ (e,q,3,3) (J⁻¹[k,i] = ∂ξ_k/∂x_i) of elements with nodes X (e,nn,3) at
+    points with reference shape gradients dN (q,nn,3), compiled (flexure._stiffness_kernels)."""
+    from flexure import _stiffness_kernels as sk
+    from flexure import threads
+
+    X = np.ascontiguousarray(X, dtype=float)
+    det = np.empty((len(X), dN.shape[0]))
+    Jinv = np.empty((len(X), dN.shape[0], 3, 3))
+    n = _chunks()
+    with threads.dynamic():
+        sk.jacobians(X, np.ascontiguousarray(dN, dtype=float), det, Jinv, n)
+    return det, Jinv
+
+
+def gradients(X: np.ndarray, dN: np.ndarray):
+    """∂N_a/∂x_i (e,q,nn,3) and det J (e,q) (``jacobians``), compiled."""
+    from flexure import _stiffness_kernels as sk
+    from flexure import threads
+
+    X = np.ascontiguousarray(X, dtype=float)
+    G = np.empty((len(X), dN.shape[0], dN.shape[1], 3))
+    det = np.empty((len(X), dN.shape[0]))
+    n = _chunks()
+    with threads.dynamic():
+        sk.gradients(X, np.ascontiguousarray(dN, dtype=float), G, det, n)
+    return G, det

@@ -113,3 +113,25 @@ def test_compiled_stiffness_equals_numpy_with_one_and_two_threads(order):
         assert np.array_equal(K.indptr, K0.indptr) and np.array_equal(K.indices, K0.indices)
         assert np.abs(K.data - K0.data).max() <= 1e-12 * np.abs(K0.data).max()
     assert np.abs(out[1].data - out[2].data).max() <= 1e-12 * np.abs(K0.data).max()
+
+
+def test_compiled_jacobians_and_gradients_equal_the_numpy_forms(monkeypatch):
+    from estimator import compiled
+    from flexure import bank_weiser, fem
+
+    mesh, _ = _curved_box()
+    X = mesh.points[mesh.tets]
+    xi, _ = fem.TET_QUAD[2]
+    dN = fem.tet_shape(2, xi)[1]
+    got = {}
+    for n in (1, 2):
+        with threads.limited(n):
+            got[n] = (fem.physical_gradients(X, dN), bank_weiser.point_jacobians(X, dN))
+    monkeypatch.setattr(compiled, "ENABLED", False)
+    (G0, d0), (dj0, Ji0) = fem.physical_gradients(X, dN), bank_weiser.point_jacobians(X, dN)
+    for (G, d), (dj, Ji) in got.values():
+        assert np.abs(G - G0).max() <= 1e-12 * np.abs(G0).max()
+        assert np.abs(d - d0).max() <= 1e-12 * np.abs(d0).max()
+        assert np.abs(dj - dj0).max() <= 1e-12 * np.abs(dj0).max()
+        assert np.abs(Ji - Ji0).max() <= 1e-12 * np.abs(Ji0).max()
+    assert np.array_equal(got[1][0][0], got[2][0][0])                # each element on its own: same bits
