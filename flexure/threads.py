@@ -6,7 +6,8 @@ call, between 1 and the machine's cores (``os.sched_getaffinity``): the kernel r
 (10 ms – 2 s) and a thread waiting at their end for a partner descheduled by another process's
 work is slower than one thread (measured on the shared 2-core machine at load 3: the enriched
 assembly 1.4 s with 1 thread, 1.7 s with 2; a CSR product 55 ms against 92 ms). "Busy" is the
-kernel's instantaneous count of runnable tasks (/proc/stat ``procs_running``, this one excluded).
+kernel's instantaneous count of runnable tasks (/proc/stat ``procs_running``) less this process's
+own (its numba workers may still be spinning after the last region).
 Everything is capped by numba's pool (``NUMBA_NUM_THREADS``). ``use()`` applies the count before a
 parallel kernel runs (numba's setting is per calling thread); ``limited(n)`` fixes ``n`` within a
 block (tests and benchmarks compare 1 and N). The kernels' results do not depend on the count, or
@@ -42,16 +43,26 @@ CORES: int = _cores()
 _override: int | None = None
 
 
+def _running(line_of_stat: bytes) -> bool:
+    return line_of_stat.rsplit(b")", 1)[-1].split()[0] == b"R"
+
+
 def _others_running() -> int:
-    """Runnable tasks on the machine besides this one (/proc/stat procs_running − 1; 0 if unknown)."""
+    """Runnable tasks on the machine that are not this process's own threads (/proc/stat
+    ``procs_running`` minus this process's tasks in state R, /proc/self/task/*/stat; 0 if unknown)."""
     try:
         with open("/proc/stat", "rb") as f:
-            for line in f:
-                if line.startswith(b"procs_running"):
-                    return max(0, int(line.split()[1]) - 1)
+            total = next((int(line.split()[1]) for line in f if line.startswith(b"procs_running")), 0)
+        own = 0
+        for tid in os.listdir("/proc/self/task"):
+            try:
+                with open(f"/proc/self/task/{tid}/stat", "rb") as f:
+                    own += _running(f.read())
+            except OSError:
+                pass
     except OSError:
-        pass
-    return 0
+        return 0
+    return max(0, total - max(own, 1))
 
 
 def count() -> int:
@@ -64,8 +75,7 @@ def count() -> int:
         n = THREADS
     else:
         n = CORES - _others_running()
-    return max(1, min(int(n), CORES if THREADS is None and _override is None else n,
-                      numba.config.NUMBA_NUM_THREADS))
+    return max(1, min(int(n), numba.config.NUMBA_NUM_THREADS))
 
 
 def use() -> int:
