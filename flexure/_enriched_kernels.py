@@ -6,6 +6,10 @@ r_W of each element and adds them straight into those CSR arrays (flexure.enrich
 import numba
 import numpy as np
 
+from flexure import threads
+
+threads.select_layer()                 # before any parallel loop runs (flexure.threads: fork safety)
+
 
 @numba.njit(cache=True, nogil=True)
 def _incidence(R, n_rows):

@@ -6,6 +6,10 @@ the same bits as scipy's one-thread loop whatever the thread count), and y = Aáµ
 import numba
 import numpy as np
 
+from flexure import threads
+
+threads.select_layer()                 # before any parallel loop runs (flexure.threads: fork safety)
+
 
 @numba.njit(cache=True, nogil=True, parallel=True)
 def csr_matvec(indptr, indices, data, x, y):

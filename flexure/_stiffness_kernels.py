@@ -5,7 +5,10 @@ colour by colour (flexure._enriched_kernels.colour_elements), each colour's chun
 import numba
 import numpy as np
 
+from flexure import threads
 from flexure._enriched_kernels import _add_block, _inv3
+
+threads.select_layer()                 # before any parallel loop runs (flexure.threads: fork safety)
 
 
 @numba.njit(cache=True, nogil=True)

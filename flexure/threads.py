@@ -78,10 +78,30 @@ def count() -> int:
     return max(1, min(int(n), numba.config.NUMBA_NUM_THREADS))
 
 
+_LAYER_SET = False
+
+
+def select_layer() -> None:
+    """numba's threading layer: ``workqueue`` unless NUMBA_THREADING_LAYER says otherwise. GNU
+    OpenMP (numba's default where present) kills a process forked after it ran ("fork() called
+    from a process already using GNU OpenMP"): torquebench.sweep forks its workers after the first
+    point ran in the parent. workqueue is fork-safe and its idle workers sleep instead of spinning
+    on a shared machine; it must not launch kernels from two threads at once (the FEM calls them
+    from one)."""
+    global _LAYER_SET
+    if not _LAYER_SET:
+        import numba
+
+        if "NUMBA_THREADING_LAYER" not in os.environ:
+            numba.config.THREADING_LAYER = "workqueue"
+        _LAYER_SET = True
+
+
 def use() -> int:
     """Set numba's thread count for this calling thread to ``count()``; → that count."""
     import numba
 
+    select_layer()
     n = count()
     if numba.get_num_threads() != n:
         numba.set_num_threads(n)

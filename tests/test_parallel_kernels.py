@@ -135,3 +135,22 @@ def test_compiled_jacobians_and_gradients_equal_the_numpy_forms(monkeypatch):
         assert np.abs(dj - dj0).max() <= 1e-12 * np.abs(dj0).max()
         assert np.abs(Ji - Ji0).max() <= 1e-12 * np.abs(Ji0).max()
     assert np.array_equal(got[1][0][0], got[2][0][0])                # each element on its own: same bits
+
+
+def _parallel_product(_=None):
+    import scipy.sparse as sp
+
+    A = (sp.identity(3000, format="csr") * 2.0).tocsr()
+    A.indices, A.indptr = A.indices.astype(np.int32), A.indptr.astype(np.int32)
+    with threads.limited(2):
+        return float(sparse_parallel.matvec(A, np.ones(3000)).sum())
+
+
+def test_a_process_forked_after_a_parallel_kernel_can_run_them():
+    """torquebench.sweep forks its workers after the first point ran in the parent: the threading
+    layer (flexure.threads.select_layer) must survive that (GNU OpenMP's kills the child)."""
+    import multiprocessing as mp
+
+    assert _parallel_product() == 6000.0
+    with mp.get_context("fork").Pool(1) as pool:
+        assert pool.map(_parallel_product, [0], chunksize=1) == [6000.0]
