@@ -16,7 +16,8 @@ enriched assembly 0.72, a CSR product 0.6–0.75, a pure compute loop 1.0–1.1 
 idle core all session, so the 2-core gain could not be shown; flexure.threads' auto mode therefore
 takes 1 thread whenever another process runs). Single-thread gains of the compiled forms: the
 stiffness 0.36 s against numpy's 0.74 s (load 7.6; 206 k dofs 1.4–1.6 s against 4.2–6.6 s at load
-5). Cold start: --cold, empty numba cache 30 s (stiffness, incl. the shared pattern/colouring
+5); physical_gradients on 63 888 curved P2 elements 0.09 s against 1.42 s, point_jacobians (14
+points) 0.23 s against 2.51 s (load 3.2). Cold start: --cold, empty numba cache 30 s (stiffness, incl. the shared pattern/colouring
 loops) + 14 s (enriched assembly) + 9 s (CSR products) at load 4, paid once at install by run.sh
 (flexure.kernels_warm); with the cache filled 2.2 + 0.2 + 0.1 s.
 """
