@@ -48,8 +48,12 @@ def _face_rule():
 def point_jacobians(X: np.ndarray, dN: np.ndarray):
     """det J (e,q) and J⁻¹ (e,q,3,3) (J⁻¹[k,i] = ∂ξ_k/∂x_i) of P2 elements with nodes X (e,10,3) at
     reference points with shape gradients dN (q,10,3); straight elements (mid nodes at their edges'
-    midpoints) are done once per element."""
+    midpoints) are done once per element; with numba every point by a compiled loop."""
+    from flexure import stiffness_assembly
     from flexure.mesh import TET_EDGES
+
+    if stiffness_assembly.available():
+        return stiffness_assembly.jacobians(X, dN)
 
     nq = dN.shape[0]
     mid = 0.5 * (X[:, TET_EDGES[:, 0]] + X[:, TET_EDGES[:, 1]])
@@ -164,10 +168,13 @@ def face_rhs(mesh: Mesh, material, u: np.ndarray, traction=None, chunk: int = 40
         tc = np.einsum("efqij,efj->efqi", sig, nhat[sl])
         tau[sl] = np.take_along_axis(tc, perm[sl][..., None], axis=2)
     key = np.sort(glob, axis=2).reshape(-1, 3)
-    _, finv, fcnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    nn = np.int64(mesh.n_nodes)                    # one int64 code per face (its sorted vertices)
+    code = (key[:, 0] * nn + key[:, 1]) * nn + key[:, 2] if mesh.n_nodes < 2_000_000 else key
+    _, finv, fcnt = np.unique(code, axis=0 if code.ndim == 2 else None, return_inverse=True, return_counts=True)
     finv = finv.reshape(m, 4)
-    tot = np.zeros((len(fcnt), nq, 3))
-    np.add.at(tot, finv.ravel(), tau.reshape(-1, nq, 3))
+    flat = tau.reshape(-1, nq * 3)                 # Σ over a face's (≤ 2) elements, in element order
+    tot = np.column_stack([np.bincount(finv.ravel(), flat[:, k], len(fcnt))
+                           for k in range(nq * 3)]).reshape(-1, nq, 3)
     interior = fcnt[finv] == 2
     # t̂ = ½(τ_K − τ_K') = τ_K − ½(τ_K + τ_K') on an interior face; 0 on a free one
     that = np.where(interior[..., None, None], tau - 0.5 * tot[finv], 0.0)

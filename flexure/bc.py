@@ -256,7 +256,7 @@ class Problem:
         f = self.load_vector()
         if not kin:
             T = None
-            A = K.tocsr()
+            A = K.tocsr(copy=True)                                       # the caller's K kept
             b = f
             fixed_q = np.flatnonzero(self.fixed.ravel())
             g = self.fixed_value_m.ravel()[fixed_q]
@@ -302,7 +302,6 @@ class Problem:
             fixed_q = fixed_nodes_dofs
             g = self.fixed_value_m[free_nodes].ravel()[fixed_q]
         # symmetric Dirichlet: b −= A[:, F] g; zero rows/cols F; diagonal = scale; b_F = scale·g
-        A = A.tocsr(copy=True)
         if len(fixed_q):
             if np.any(g != 0):
                 gq = np.zeros(A.shape[0]); gq[fixed_q] = g

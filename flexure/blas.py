@@ -1,6 +1,7 @@
 """BLAS threads while the FEM runs: one.
 
-The FEM's hot loops are sparse (scipy, numba: one thread each); the BLAS calls inside it are
+The FEM's hot loops are sparse (scipy: one thread; numba: the element loops and CSR products on
+flexure.threads' threads, which leaves BLAS alone); the BLAS calls inside it are
 level-1/2 on vectors of 10⁴–10⁶ entries (norms and dot products, the triangular solves of the coarse
 LU, small batched solves), where threads only add their hand-over — and on a machine whose cores
 are busy with other processes, a BLAS thread waiting for a descheduled partner: measured on the

@@ -161,7 +161,7 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
     from flexure import dwr
     from flexure.gauges import functionals
 
-    from flexure import enriched_assembly
+    from flexure import enriched_assembly, sparse_parallel
 
     t0 = time.perf_counter()
     A = system.A
@@ -173,15 +173,15 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
             mesh, material, U0, surplus_numbering(mesh, np.asarray(constrained, bool)))
         G, sign, free = num
         keep = np.repeat(free, 3)
-        T, TT, CT = system.T, None if system.T is None else system.T.T.tocsr(), C.T
+        T, TT = system.T, None if system.T is None else system.T.T.tocsr()
 
         def coupling(xw):                        # mask Tᵀ C x_W
-            y = C @ xw
+            y = sparse_parallel.matvec(C, xw)
             return mask * (y if TT is None else TT @ y)
 
         def coupling_t(xh):                      # Cᵀ T (mask x_h)
             y = mask * xh
-            return CT @ (y if T is None else T @ y)
+            return sparse_parallel.rmatvec(C, y if T is None else T @ y)
     else:
         Kww, rW, num = assemble(mesh, material, U0, constrained)
         G, sign, free = num
@@ -203,7 +203,8 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
 
     def matvec(x):
         xh, xw = x[:nq], x[nq:]
-        return np.concatenate([A @ xh + coupling(xw), coupling_t(xh) + Kww @ xw])
+        return np.concatenate([sparse_parallel.matvec(A, xh) + coupling(xw),
+                               coupling_t(xh) + sparse_parallel.matvec(Kww, xw)])
 
     def prec(r):
         zh = np.asarray(precond_h(np.ascontiguousarray(r[:nq, None])))[:, 0]

@@ -1,8 +1,11 @@
 """The enriched system of flexure.enriched assembled by compiled loops (flexure._enriched_kernels):
 each element's surplus stiffness, coupling and residual computed once and added straight into CSR
 arrays whose pattern comes from the numbering (no per-chunk COO → CSR, no sparse sums, the
-constrained surplus functions never assembled). The numpy form (flexure.enriched ``assemble`` and
-``coupling_matrix``) is the reference it is tested against and the path without numba."""
+constrained surplus functions never assembled). The element loop runs colour by colour on
+flexure.threads' threads (flexure._enriched_kernels.colour_elements: no two elements of a colour
+share a node, so their additions never collide, and the sums do not depend on the thread count).
+The numpy form (flexure.enriched ``assemble`` and ``coupling_matrix``) is the reference it is tested
+against and the path without numba."""
 
 from __future__ import annotations
 
@@ -18,29 +21,15 @@ def available() -> bool:
     return compiled.available()
 
 
-def _csr(bptr, bcol, n_rows: int, n_cols: int):
-    """An all-zero scalar CSR (3 n_rows × 3 n_cols) of the block pattern (bptr, bcol)."""
-    import scipy.sparse as sp
-
-    from flexure import _enriched_kernels as ek
-
-    nnz = 9 * int(bptr[-1])
-    idx = np.int32 if max(nnz, 3 * n_cols) < 2 ** 31 - 1 else np.int64
-    indptr = np.empty(3 * n_rows + 1, idx)
-    indices = np.empty(nnz, idx)
-    ek.scalar_csr(bptr, bcol, indptr, indices)
-    M = sp.csr_matrix((3 * n_rows, 3 * n_cols))
-    M.data, M.indices, M.indptr = np.zeros(nnz), indices, indptr        # sorted, canonical by construction
-    return M
-
-
 def assemble_enriched(mesh: Mesh, material, u: np.ndarray, numbering, traction=None):
     """The enriched system on the free surplus functions of ``numbering`` (G, sign, free: flexure.enriched.surplus_numbering):
     → (K_WW (3 n_free square CSR, rows 3k + i, k the free functions in order), r_W (3 n_free,),
     K_hW (3 n_nodes × 3 n_free CSR, the full nodal rows: no coupling or Dirichlet reduction), the
     inverse 3 × 3 diagonal blocks of K_WW (n_free,3,3), the numbering (G, sign, free))."""
     from flexure import _enriched_kernels as ek
+    from flexure import threads
     from flexure.bank_weiser import face_rhs
+    from flexure.stiffness_assembly import block_csr as _csr
     from flexure.fem import tet_shape
     from flexure.surplus import surplus_basis, tet_rule_degree5
 
@@ -49,9 +38,10 @@ def assemble_enriched(mesh: Mesh, material, u: np.ndarray, numbering, traction=N
     nk = int(free.sum())
     Gk = np.where(free[G], kept[G], -1).astype(np.int64)
     tets = np.ascontiguousarray(mesh.tets, dtype=np.int64)
-    kb, kc = ek.block_pattern(Gk, Gk, nk, nk)
+    nt = threads.use()
+    kb, kc = ek.block_pattern(Gk, Gk, nk, nk, nt)
     K = _csr(kb, kc, nk, nk)
-    cb, cc = ek.block_pattern(tets, Gk, mesh.n_nodes, nk)
+    cb, cc = ek.block_pattern(tets, Gk, mesh.n_nodes, nk, nt)
     C = _csr(cb, cc, mesh.n_nodes, nk)
     rhs = face_rhs(mesh, material, u, traction)
     xi, wq = tet_rule_degree5()
@@ -59,8 +49,11 @@ def assemble_enriched(mesh: Mesh, material, u: np.ndarray, numbering, traction=N
     _, dB = surplus_basis(xi)
     r = np.zeros(3 * nk)
     D = np.zeros((nk, 3, 3))
-    ek.assemble(np.ascontiguousarray(mesh.points, float), tets, np.ascontiguousarray(np.asarray(u, float).reshape(-1, 3)),
-                np.ascontiguousarray(rhs), Gk, np.ascontiguousarray(sign), np.ascontiguousarray(dN),
-                np.ascontiguousarray(dB), np.ascontiguousarray(wq), float(material.lame_lambda_Pa),
-                float(material.shear_modulus_Pa), kb, kc, K.data, cb, cc, C.data, r, D)
+    nt = threads.use()
+    with threads.dynamic():                  # colour chunks handed out as threads come free
+        ek.assemble(np.ascontiguousarray(mesh.points, float), tets, np.ascontiguousarray(np.asarray(u, float).reshape(-1, 3)),
+                    np.ascontiguousarray(rhs), Gk, np.ascontiguousarray(sign), np.ascontiguousarray(dN),
+                    np.ascontiguousarray(dB), np.ascontiguousarray(wq), float(material.lame_lambda_Pa),
+                    float(material.shear_modulus_Pa), kb, kc, K.data, cb, cc, C.data, r, D,
+                    *ek.colour_elements(np.ascontiguousarray(tets[:, :4]), mesh.n_nodes), 1 if nt == 1 else 8 * nt)
     return K, r, C, np.linalg.inv(D), (G, sign, free)

@@ -68,8 +68,14 @@ def physical_gradients(X: np.ndarray, dN_ref: np.ndarray, first_element: int = 0
     J_ik = Σ_a X_ai ∂N_a/∂ξ_k;  ∇_x N = J⁻ᵀ ∇_ξ N. Straight-sided (affine) elements use one J per
     element; curved (isoparametric) P2 elements one per point. InputError on det J ≤ 0 (inverted).
     """
+    from flexure import stiffness_assembly
+
     e, nn = X.shape[:2]
     nq = dN_ref.shape[0]
+    if stiffness_assembly.available():                     # compiled: J at every point, one pass
+        G, det = stiffness_assembly.gradients(X, dN_ref)
+        _check_inverted(det, e, first_element)
+        return G, det
     affine = nn == 4 or _is_affine(X)
     if affine:
         V = X[:, :4]
@@ -78,16 +84,20 @@ def physical_gradients(X: np.ndarray, dN_ref: np.ndarray, first_element: int = 0
     else:
         J = np.einsum("eai,qak->eqik", X, dN_ref)
         det = np.linalg.det(J)
-    bad = ~(det > 0)
-    if np.any(bad):
-        idx = np.flatnonzero(bad.reshape(e, -1).any(axis=1))[0]
-        raise InputError(f"mesh: element {int(idx) + first_element} is inverted or degenerate "
-                         f"(det J = {float(det.reshape(e, -1)[idx].min()):.3e}); fix the mesh")
+    _check_inverted(det, e, first_element)
     Jinv = np.linalg.inv(J)
     if affine:
         G = np.matmul(dN_ref.reshape(1, nq * nn, 3), Jinv).reshape(e, nq, nn, 3)
         return G, np.repeat(det[:, None], nq, axis=1)
     return np.einsum("qak,eqki->eqai", dN_ref, Jinv), det
+
+
+def _check_inverted(det: np.ndarray, e: int, first_element: int) -> None:
+    bad = ~(det > 0)
+    if np.any(bad):
+        idx = np.flatnonzero(bad.reshape(e, -1).any(axis=1))[0]
+        raise InputError(f"mesh: element {int(idx) + first_element} is inverted or degenerate "
+                         f"(det J = {float(det.reshape(e, -1)[idx].min()):.3e}); fix the mesh")
 
 
 def _is_affine(X: np.ndarray, rtol: float = 1e-10) -> bool:
@@ -149,8 +159,20 @@ def stiffness_matrix(mesh: Mesh, material, chunk_elements: int | None = None,
     """Global stiffness K (n_dofs × n_dofs, symmetric), CSR (or BSR 3×3 with ``fmt="bsr"``).
 
     Node-block assembly: the 9 components of every element's 3×3 node-pair blocks are summed into
-    the unique node-pair pattern with bincount; chunks of elements bound temporary memory.
+    the unique node-pair pattern with bincount; chunks of elements bound temporary memory. With
+    numba, CSR is assembled in place by a compiled element loop (flexure.stiffness_assembly; the
+    same matrix to round-off); this numpy form is its reference and the path without numba.
     """
+    from flexure import stiffness_assembly
+
+    if fmt == "csr" and chunk_elements is None and stiffness_assembly.available():
+        xi, w = TET_QUAD[mesh.order]
+        return stiffness_assembly.stiffness_csr(mesh, material, tet_shape(mesh.order, xi)[1], w)
+    return _stiffness_numpy(mesh, material, chunk_elements, fmt)
+
+
+def _stiffness_numpy(mesh: Mesh, material, chunk_elements: int | None = None, fmt: str = "csr"):
+    """``stiffness_matrix`` by numpy (node-block bincount assembly)."""
     lam, mu = material.lame_lambda_Pa, material.shear_modulus_Pa
     n = mesh.n_nodes
     m = mesh.n_elements

@@ -1,0 +1,28 @@
+"""The install-time compile of the FEM's parallel loops (run.sh calls ``warm``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def warm() -> bool:
+    """Compile (and cache) the FEM's parallel loops on a tiny mesh — the stiffness, the enriched
+    assembly, the CSR products — so that the first analysis does not pay numba's compile time
+    (measured 30 + 14 + 9 s at load 4: benchmarks/bench_fem_parallel.py --cold); False without numba."""
+    from flexure import stiffness_assembly
+
+    if not stiffness_assembly.available():
+        return False
+    from flexure import enriched, enriched_assembly, fem, sparse_parallel, threads
+    from flexure.material import Material
+    from flexure.mesh import box_mesh, to_quadratic
+
+    m = to_quadratic(box_mesh(1, 1, 1))
+    mat = Material(70e9, 0.33, 270e6, "warm-up")
+    K = fem.stiffness_matrix(m, mat)
+    C = enriched_assembly.assemble_enriched(m, mat, np.zeros((m.n_nodes, 3)),
+                                            enriched.surplus_numbering(m, np.zeros(m.n_nodes, bool)))[2]
+    with threads.limited(2):
+        sparse_parallel.matvec(K, np.ones(K.shape[0]))
+        sparse_parallel.rmatvec(C, np.ones(C.shape[0]))
+    return True
