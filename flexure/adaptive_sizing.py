@@ -135,8 +135,8 @@ def next_dofs(n_dofs: int, want: int, cap: int, min_grow: float) -> int:
         return 0
     if want <= cap:
         return int(cap) if cap < min_grow * want else int(want)
-    if cap >= min_grow ** 2 * n_dofs:
-        return int(math.sqrt(n_dofs * cap))
+    if cap > min_grow ** 2 * n_dofs:          # N → m → cap, m not below cap/min_grow²: two steps, not more
+        return int(max(math.sqrt(n_dofs * cap), math.ceil(cap / min_grow ** 2)))
     return int(cap)
 
 
