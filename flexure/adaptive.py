@@ -295,7 +295,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             tr = time.perf_counter()
             from flexure.dwr import element_indicators
             marked, rec["sizing"]["marks"] = sizing.marks_for(tm, element_indicators(mesh, eta_v) @ w, nxt, ROUNDS,
-                                                              geo_marked, gain=gain)
+                                                              geo_marked, gain=gain, limit=min(max_dofs, mem_cap))
             gain = rec["sizing"]["marks"]["gain"] or gain
             rec["safety_factor"] = _safety_factor(design, mesh, sol.U[:, :, 0])
             ref0 = sol.q[-6:] if design.coupling == "rigid" else None

@@ -159,7 +159,7 @@ def memory_dofs(base_gb: float, per_dof_gb: float, budget_gb: float) -> int:
 
 
 def marks_for(tm, comb: np.ndarray, target: int, rounds: int, forced=(), tries: int = 3,
-              gain: float | None = None) -> tuple[np.ndarray, dict]:
+              gain: float | None = None, limit: int | None = None) -> tuple[np.ndarray, dict]:
     """The elements to bisect so that the refined mesh has about ``target`` DOFs: the ``forced`` ones
     (the geometry criterion's) and the n largest of the combined indicators ``comb`` (one per element),
     n from topology-only trial bisections (module docstring): N(n) ≈ N_f + g n, N_f the DOFs with the
@@ -167,7 +167,8 @@ def marks_for(tm, comb: np.ndarray, target: int, rounds: int, forced=(), tries: 
     its DOFs per mark g (about the same from level to level: closure adds a similar neighbourhood to a
     marked element at every size), else at TRIAL_SHARE of the elements; then corrected by a secant step
     (closure makes N(n) slightly non-linear) while a trial is more than 10 % off. → (elements,
-    info: the trials (marks, DOFs), the DOFs per mark ``gain`` of the chosen one)."""
+    info: the trials (marks, DOFs), the DOFs per mark ``gain`` of the chosen one). No trial above
+    ``limit`` (a budget's cap) is chosen: where every one is, the marks are scaled down to it (more trials)."""
     from flexure.refine import TaggedMesh, bisect
 
     mesh = tm.mesh
@@ -196,6 +197,16 @@ def marks_for(tm, comb: np.ndarray, target: int, rounds: int, forced=(), tries: 
             break
         n = n_new
     n, N = min(pts, key=lambda p: abs(p[1] - target))
+    for _ in range(tries):
+        if limit is None or N <= limit:
+            break
+        under = [p for p in pts if p[1] <= limit and p[0] > 0]
+        if under:
+            n, N = max(under, key=lambda p: p[1])
+            break
+        n = int(n * (limit - pts[0][1]) / max(N - pts[0][1], 1) * 0.9)
+        N = dofs(n)
+        pts.append((n, N))
     return np.union1d(order[:n], forced), {"trials": [list(map(int, p)) for p in pts], "marks": int(n),
                                             "predicted_dofs": int(N), "target_dofs": int(target),
                                             "gain": (N - pts[0][1]) / n if n > 0 and N > pts[0][1] else None}

@@ -97,3 +97,22 @@ def test_raw_relative_removes_each_goals_own_factor():
     rel = {"torsional_stiffness_Nm_per_rad": 0.04, "arms": [0.01, 0.02]}
     assert sz.raw_relative(rec, rel, d) == pytest.approx([0.02, 0.01 / 2.6, 0.02 / 2.6])
     assert sz.raw_relative(rec, rel, None) == [0.04, 0.01, 0.02]
+
+
+def test_marks_hit_the_target_and_never_exceed_the_limit():
+    """Topology-only trials on a box mesh: the marks give about the target's DOFs (the bisection with
+    them gives exactly the predicted count), and a limit below the target is not exceeded."""
+    from flexure.mesh import box_mesh, to_quadratic
+    from flexure.refine import TaggedMesh, bisect
+
+    tm = TaggedMesh.untagged(to_quadratic(box_mesh(6, 6, 6)))
+    comb = np.random.default_rng(0).random(tm.mesh.n_elements)
+    n0 = tm.mesh.n_dofs
+    marked, info = sz.marks_for(tm, comb, int(1.8 * n0), rounds=2)
+    assert bisect(tm, marked, rounds=2)[0].mesh.n_dofs == info["predicted_dofs"]
+    assert abs(info["predicted_dofs"] - 1.8 * n0) <= 0.1 * 1.8 * n0
+    assert info["gain"] > 0
+    again, info2 = sz.marks_for(tm, comb, int(1.8 * n0), rounds=2, gain=info["gain"])
+    assert len(info2["trials"]) == 2                               # one trial from the measured gain
+    _, capped = sz.marks_for(tm, comb, int(1.8 * n0), rounds=2, limit=int(1.4 * n0))
+    assert n0 < capped["predicted_dofs"] <= 1.4 * n0
