@@ -112,9 +112,18 @@ def _rss_gb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
 
 
-def _rss_now_gb() -> float:
-    """Resident memory of this process now (GB; Linux /proc, else the peak so far)."""
+def _rss_now_gb(trim: bool = False) -> float:
+    """Resident memory of this process now (GB; Linux /proc, else the peak so far); ``trim``: after
+    returning the allocator's free heap pages to the system (glibc malloc_trim), which RSS counts
+    although the next allocations reuse them (the memory model's baseline: flexure.adaptive_sizing)."""
     import os
+
+    if trim:
+        try:
+            import ctypes
+            ctypes.CDLL("libc.so.6").malloc_trim(0)
+        except (OSError, AttributeError):
+            pass
 
     try:
         with open("/proc/self/statm") as f:
@@ -215,7 +224,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
         snapped = snap(tm, projector, getattr(projector, "snap_vertices", False)) if projector is not None else {}
         bands = _band_indicator(tm.mesh, _selections(design, tm.mesh))
         mesh_s = time.perf_counter() - t0
-        base_gb = _rss_now_gb()
+        base_gb = _rss_now_gb(trim=True)
         bar.set_description(f"flexure: mesh {tm.mesh.n_dofs} dofs ({mesh_s:.0f} s)")
         for lv in range(MAX_LEVELS):
             mesh = tm.mesh
@@ -301,6 +310,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             ref0 = sol.q[-6:] if design.coupling == "rigid" else None
             tm, (x0, bands), rinfo = bisect(tm, marked, [sol.U, bands], rounds=ROUNDS, projector=projector)
             sol = None                                       # free the old level's matrix and hierarchy
+            _rss_now_gb(trim=True)                           # ... and give the freed heap back to the system
             rec["refine_s"] = time.perf_counter() - tr
             predicted_gb = sizing.predicted_peak_gb(tm.mesh.n_dofs, base_gb, mem_per)
             rec["marked"] = int(len(marked))
