@@ -286,7 +286,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             rise = sizing.FACTOR_RISE if rec.get("enriched") and prev_rel is None else 1.0
             want = sizing.target_dofs(mesh.n_dofs, goals_rel["rel"], sizing.rates(prev_rel, goals_rel), rtol, grow,
                                       rise)
-            mem_per = sizing.peak_per_dof(mesh.n_dofs, base_gb, level_peak, mem_per)
+            mem_per = sizing.peak_per_dof(mesh.n_dofs, base_gb, level_peak, mem_per, rec["peak_rss_gb"] > peak_before)
             mem_cap = sizing.memory_dofs(base_gb, mem_per, max_memory_gb)
             nxt = sizing.next_dofs(mesh.n_dofs, want, min(max_dofs, mem_cap), grow)
             rec["sizing"] = {"target_dofs": int(want), "memory_cap_dofs": int(mem_cap), "base_rss_gb": base_gb,

@@ -45,10 +45,11 @@ def test_next_dofs_never_leaves_a_level_stranded_below_the_cap():
         assert 130 <= nxt <= 1000
 
 
-def test_memory_model_is_linear_with_its_margin_and_never_forgets_a_larger_level():
+def test_memory_model_is_linear_with_its_margin_and_keeps_the_last_measured_level():
     per = sz.peak_per_dof(100_000, 0.3, 0.9)
     assert per == pytest.approx(6e-6)
-    assert sz.peak_per_dof(200_000, 0.3, 1.0, per) == per            # a level that read low keeps the larger
+    assert sz.peak_per_dof(200_000, 0.3, 1.0, per, measured=False) == per   # a sampled peak: not below the last
+    assert sz.peak_per_dof(200_000, 0.3, 1.0, per) == pytest.approx(3.5e-6)  # a measured one: its own
     cap = sz.memory_dofs(0.3, per, 3.0)
     assert sz.predicted_peak_gb(cap, 0.3, per) == pytest.approx(3.0, rel=1e-4)
     assert sz.predicted_peak_gb(cap, 0.3, per) - 0.3 == pytest.approx(sz.MEMORY_MARGIN * per * cap)
