@@ -22,9 +22,12 @@ budgets (the peak memory predicted above the process baseline, ``memory_dofs``).
 
 First step. The first level's estimates carry the flat factor 2; the next level's, with q̂ measured,
 up to 3 within the saturation the first bracket assumes (q ≤ ½). A first step sized for 2 needs a third
-level wherever q̂ comes out large (the thick disc: 84 k → 194 k DOFs at 3.0 %, then 413 k); one sized for 3
-overshoots by 1.5^(1/r) where q is small. The first step is sized for their geometric mean,
-e_g · FACTOR_RISE, FACTOR_RISE = √(3/2), as RATE_PRIOR is the geometric mean of its range.
+level wherever q̂ comes out large (the thick disc: 84 k → 194 k DOFs at 3.0 %, then 413 k); one sized for
+more overshoots where q is small. Sized for the geometric mean, e_g · √(3/2) (FACTOR_RISE_MEAN), measured
+2026-11-26 (load 4–7): the paper disc 48.7 k → 87.8 k at 2 % (was 68.3 k; 0.99 % against 1.33 %) and
+→ 163 k at 1 % (was 128 k), +28 % DOFs and no level saved; the thick disc at 2 % still three levels
+(84 k, 231 k, 345 k against 84 k, 194 k, 413 k: its q̂ 0.43 and rate 0.87 need ≈ 1.6× at level 0). Not
+worth it without a per-part prior of q: FACTOR_RISE = 1 (the allowance stays a parameter).
 
 Last step. A step after which no measurable step (× MIN_GROWTH) fits under the DOF or memory budget is
 the last one: it goes to the budget's cap (``next_dofs``), the level most likely to reach rtol. Where
@@ -85,8 +88,10 @@ def min_growth(min_drop: float) -> float:
 MAX_GROWTH = 6.0
 #: the first level's estimates carry the flat factor FLAT = 2; once q̂ is measured the factor is
 #: max(FLAT, SAFETY/(1 − q̂)), up to 3 within the saturation the first level's bracket assumes
-#: (q ≤ ½): the first step is sized for the geometric mean of that rise, √(3/2) (module docstring)
-FACTOR_RISE = math.sqrt(SAT_SAFETY / (1.0 - 0.5) / SAT_FLAT)
+#: (q ≤ ½): the geometric mean of that rise, √(3/2), measured as the first step's allowance and
+#: not kept (module docstring, "First step"): 1, no allowance
+FACTOR_RISE_MEAN = math.sqrt(SAT_SAFETY / (1.0 - 0.5) / SAT_FLAT)
+FACTOR_RISE = 1.0
 #: the predicted peak's margin over the largest measured peak per DOF (module docstring, "Memory")
 MEMORY_MARGIN = 1.1
 

@@ -24,9 +24,9 @@ def test_target_reaches_rtol_at_the_rate_and_the_first_step_allows_for_the_facto
     n = 50_000
     want = sz.target_dofs(n, [0.04, 0.01], np.array([1.0, 1.0]), 0.02, 1.3)
     assert want == pytest.approx(2 * n, abs=1)                   # (0.04/0.02)^(1/1)
-    first = sz.target_dofs(n, [0.04, 0.01], np.array([1.0, 1.0]), 0.02, 1.3, rise=sz.FACTOR_RISE)
-    assert first == pytest.approx(2 * sz.FACTOR_RISE * n, abs=1)
-    assert 1.0 < sz.FACTOR_RISE < 1.5                                 # within the factor's range [2, 3] / 2
+    first = sz.target_dofs(n, [0.04, 0.01], np.array([1.0, 1.0]), 0.02, 1.3, rise=sz.FACTOR_RISE_MEAN)
+    assert first == pytest.approx(2 * sz.FACTOR_RISE_MEAN * n, abs=1)
+    assert 1.0 < sz.FACTOR_RISE_MEAN < 1.5                            # within the factor's range [2, 3] / 2
     assert sz.target_dofs(n, [0.001], np.array([1.0]), 0.02, 1.3) == int(1.3 * n)
     assert sz.target_dofs(n, [10.0], np.array([1.0]), 0.02, 1.3) == int(sz.MAX_GROWTH * n)
 
