@@ -31,9 +31,9 @@ worth it without a per-part prior of q: FACTOR_RISE = 1 (the allowance stays a p
 
 Last step. A step after which no measurable step (× MIN_GROWTH) fits under the DOF or memory budget is
 the last one: it goes to the budget's cap (``next_dofs``), the level most likely to reach rtol. Where
-rtol is beyond the cap by the prediction, the run steps to √(N · cap) first and then to the cap: the
-second marking uses the indicators of a finer mesh, so the stop is at a better level than one jump
-there (six_spoke_thick at 1 %: one jump 100 k → 451 k stopped at ± 1.76 %, three levels had reached
+rtol is beyond the cap by the prediction, the run steps once to about √(N · cap) first (leaving room for
+a measurable last step), then to the cap: the second marking uses the indicators of a finer mesh, so the
+stop is at a better level than one jump there (six_spoke_thick at 1 %: one jump 100 k → 451 k stopped at ± 1.76 %, three levels had reached
 ± 1.15 % before the enriched system got lighter).
 
 Memory. The peak of a level is dominated by its enriched solve (V⁺ has about 3.2× the P2 DOFs; the P2
@@ -137,19 +137,27 @@ def target_dofs(n_dofs: int, rel: np.ndarray, rate: np.ndarray, rtol: float, min
     return int(min(max(need, min_grow * n_dofs), MAX_GROWTH * n_dofs))
 
 
-def next_dofs(n_dofs: int, want: int, cap: int, min_grow: float) -> int:
+#: the landing slack of a step (marks_for lands within 10 % of its target)
+LANDING = 1.1
+
+
+def next_dofs(n_dofs: int, want: int, cap: int, min_grow: float, split: bool = True) -> int:
     """The next level's DOFs under a budget ``cap`` (the DOF and memory budgets' smaller): ``want``
     while a measurable step (× min_grow) still fits after it; else the step is the last one and
-    goes to the cap, the level most likely to reach rtol; where ``want`` is beyond the cap (rtol
-    not reachable by the prediction) a step to √(N · cap) first, when a measurable last step to the
-    cap still fits after it: an adaptive sequence reaches a smaller error at the cap in two steps than
-    in one (the second marks with the indicators of a finer mesh). 0 where no measurable step fits."""
+    goes to the cap, the level most likely to reach rtol. Where ``want`` is beyond the cap (rtol
+    not reachable by the prediction) and ``split``, one intermediate step m first: an adaptive
+    sequence reaches a smaller error at the cap in two steps than in one (the second marks with the
+    indicators of a finer mesh); m = √(N · cap) within [cap/(LANDING min_grow²), cap/(LANDING min_grow)],
+    so that from m, landed up to LANDING above it, the measurable last step to the cap still fits, and
+    only where that leaves m a measurable step above N. 0 where no measurable step fits."""
     if cap < min_grow * n_dofs:
         return 0
     if want <= cap:
         return int(cap) if cap < min_grow * want else int(want)
-    if cap > min_grow ** 2 * n_dofs:          # N → m → cap, m not below cap/min_grow²: two steps, not more
-        return int(max(math.sqrt(n_dofs * cap), math.ceil(cap / min_grow ** 2)))
+    lo, hi = cap / (LANDING * min_grow ** 2), cap / (LANDING * min_grow)
+    m = min(max(math.sqrt(n_dofs * cap), lo), hi)
+    if split and m >= min_grow * n_dofs:
+        return int(m)
     return int(cap)
 
 

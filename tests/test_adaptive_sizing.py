@@ -35,9 +35,11 @@ def test_next_dofs_never_leaves_a_level_stranded_below_the_cap():
     g = 1.3
     assert sz.next_dofs(100, 200, 1000, g) == 200                    # room for another step after it
     assert sz.next_dofs(100, 900, 1000, g) == 1000                   # the last step: to the cap
-    m = sz.next_dofs(100, 600, 500, g)                               # rtol out of reach: two steps,
-    assert m == max(int(np.sqrt(100 * 500)), int(np.ceil(500 / g ** 2)))  # the second from m to the cap
-    assert 130 <= m < 500 and sz.next_dofs(m, 5000, 500, g) == 500
+    m = sz.next_dofs(100, 600, 500, g)                               # rtol out of reach: one step
+    assert m == int(min(max(np.sqrt(100 * 500), 500 / (sz.LANDING * g ** 2)), 500 / (sz.LANDING * g)))
+    assert 130 <= m and sz.LANDING * m * g <= 500                    # ... leaving room for the last one
+    assert sz.next_dofs(m, 5000, 500, g, split=False) == 500         # ... which goes to the cap
+    assert sz.next_dofs(300, 5000, 500, g) == 500                    # no room for two: straight to the cap
     assert sz.next_dofs(100, 5000, 150, g) == 150                    # only one measurable step left
     assert sz.next_dofs(100, 5000, 120, g) == 0                      # none: the budget stops the run
     for want in (140, 300, 800, 1000, 3000):                          # never above the cap, never a step
