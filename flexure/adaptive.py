@@ -118,9 +118,18 @@ def _rss_gb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
 
 
-def _rss_now_gb() -> float:
-    """Resident memory of this process now (GB; Linux /proc, else the peak so far)."""
+def _rss_now_gb(trim: bool = False) -> float:
+    """Resident memory of this process now (GB; Linux /proc, else the peak so far); ``trim``: after
+    returning the allocator's free heap pages to the system (glibc malloc_trim), which RSS counts
+    although the next allocations reuse them (the memory model's baseline: flexure.adaptive_sizing)."""
     import os
+
+    if trim:
+        try:
+            import ctypes
+            ctypes.CDLL("libc.so.6").malloc_trim(0)
+        except (OSError, AttributeError):
+            pass
 
     try:
         with open("/proc/self/statm") as f:
@@ -209,7 +218,9 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
     t0 = time.perf_counter()
     bar = _bar(progress)
     hist, kappas = [], {}
-    prev_rel = None
+    prev_rel = predicted_gb = None
+    mem_per = 0.0
+    gain, split_done = None, False       # DOFs per mark of the last refinement (marks_for); next_dofs's split
     x0 = ref0 = projector = None
     stopped = None
     try:
@@ -220,7 +231,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
         bands = _band_indicator(tm.mesh, _selections(design, tm.mesh))
         q_unmeasured = saturation.unmeasured_ratio(reentrant.has_sharp_reentrant_edge(tm.mesh))   # flexure.saturation (4)
         mesh_s = time.perf_counter() - t0
-        base_gb = _rss_now_gb()
+        base_gb = _rss_now_gb(trim=True)
         bar.set_description(f"flexure: mesh {tm.mesh.n_dofs} dofs ({mesh_s:.0f} s)")
         for lv in range(MAX_LEVELS):
             mesh = tm.mesh
@@ -267,6 +278,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             bar.set_description(f"flexure: level {lv} {mesh.n_dofs} dofs, worst error ±{worst:.2%}")
             rec["level_s"] = time.perf_counter() - tl
             rec["peak_rss_gb"] = _rss_gb()
+            rec["predicted_peak_gb"] = predicted_gb        # by the level before (None on the first)
             # this level's peak: the process's if the level raised it, else the largest sampled RSS
             level_peak = max(rss_level, _rss_now_gb(), rec["peak_rss_gb"] if rec["peak_rss_gb"] > peak_before else 0.0)
             if worst <= rtol and lv + 1 >= MIN_LEVELS:
@@ -276,15 +288,21 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
                 stopped = "max_levels"
                 break
             # the next level: sized to just reach rtol, within the budgets (flexure.adaptive_sizing)
-            goals_rel = {"dofs": rec["dofs"], "rel": [rel["torsional_stiffness_Nm_per_rad"], *rel["arms"]]}
+            goals_rel = {"dofs": rec["dofs"], "rel": [rel["torsional_stiffness_Nm_per_rad"], *rel["arms"]],
+                         "raw": sizing.raw_relative(rec, rel, _with_geometry(rec) if rec.get("enriched") else None)}
             grow = sizing.min_growth(MIN_DROP)
-            want = sizing.target_dofs(mesh.n_dofs, goals_rel["rel"], sizing.rates(prev_rel, goals_rel), rtol, grow)
-            mem_cap = sizing.memory_dofs(mesh.n_dofs, base_gb, level_peak, max_memory_gb)
-            nxt = min(want, max_dofs, mem_cap)
+            rise = sizing.FACTOR_RISE if rec.get("enriched") and prev_rel is None else 1.0
+            want = sizing.target_dofs(mesh.n_dofs, goals_rel["rel"], sizing.rates(prev_rel, goals_rel), rtol, grow,
+                                      rise)
+            mem_per = sizing.peak_per_dof(mesh.n_dofs, base_gb, level_peak, mem_per, rec["peak_rss_gb"] > peak_before)
+            mem_cap = sizing.memory_dofs(base_gb, mem_per, max_memory_gb)
+            nxt = sizing.next_dofs(mesh.n_dofs, want, min(max_dofs, mem_cap), grow, split=not split_done)
+            split_done = split_done or min(max_dofs, mem_cap) < want       # one split per run
             rec["sizing"] = {"target_dofs": int(want), "memory_cap_dofs": int(mem_cap), "base_rss_gb": base_gb,
-                            "level_peak_gb": level_peak}
+                            "level_peak_gb": level_peak, "peak_per_dof_gb": mem_per, "next_dofs": int(nxt),
+                            "factor_rise": rise}
             prev_rel = goals_rel
-            if nxt < want and nxt < grow * mesh.n_dofs:        # a budget leaves no measurable step
+            if nxt == 0:                                       # a budget leaves no measurable step
                 stopped = "max_dofs" if max_dofs <= mem_cap else "memory"
                 break
             weights = np.array([1.0 / max(abs(rec["theta"]), 1e-300)]
@@ -295,12 +313,15 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             tr = time.perf_counter()
             from flexure.dwr import element_indicators
             marked, rec["sizing"]["marks"] = sizing.marks_for(tm, element_indicators(mesh, eta_v) @ w, nxt, ROUNDS,
-                                                              geo_marked)
+                                                              geo_marked, gain=gain, limit=min(max_dofs, mem_cap))
+            gain = rec["sizing"]["marks"]["gain"] or gain
             rec["safety_factor"] = _safety_factor(design, mesh, sol.U[:, :, 0])
             ref0 = sol.q[-6:] if design.coupling == "rigid" else None
             tm, (x0, bands), rinfo = bisect(tm, marked, [sol.U, bands], rounds=ROUNDS, projector=projector)
             sol = None                                       # free the old level's matrix and hierarchy
+            _rss_now_gb(trim=True)                           # ... and give the freed heap back to the system
             rec["refine_s"] = time.perf_counter() - tr
+            predicted_gb = sizing.predicted_peak_gb(tm.mesh.n_dofs, base_gb, mem_per)
             rec["marked"] = int(len(marked))
             rec["projection"] = {k: rinfo.get(k, 0) for k in ("projected", "projection_partial", "projection_undone")}
     finally:

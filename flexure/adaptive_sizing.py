@@ -10,11 +10,45 @@ DOFs where 128 k reach it (measured 2026-11-26: 95 → 40 s wall), while cross_f
 converges at 0.79, needs a third level with either. Once two levels exist, each goal's own
 observed rate r_g = ln(e_g,ℓ−1 / e_g,ℓ) / ln(N_ℓ / N_ℓ−1), clipped to [RATE_MIN, RATE_MAX].
 
+The rate is read from the raw enriched differences |d_g| (the estimate without its factor): where q̂
+gets measured on the second level the factor rises from FLAT = 2 to max(2, 1.5/(1 − q̂)), and the
+estimate's own ratio would read that rise as a slow rate (thick disc: 0.55 against |d|'s 0.87).
+
 Target. Every goal still above rtol (relative estimate e_g > rtol) needs N_g = N (e_g / rtol)^(1/r_g);
 the next level aims at max_g N_g, at least MIN_GROWTH × N (a step whose estimates fall by less than
 the calibration's MIN_DROP cannot measure their effectivity: (1 − MIN_DROP)^(−1/RATE_PRIOR)) and at
 most MAX_GROWTH × N (one noisy estimate does not buy a huge level), and within the DOF and memory
 budgets (the peak memory predicted above the process baseline, ``memory_dofs``).
+
+First step. The first level's estimates carry the flat factor 2; the next level's, with q̂ measured,
+up to 3 within the saturation the first bracket assumes (q ≤ ½). A first step sized for 2 needs a third
+level wherever q̂ comes out large (the thick disc: 84 k → 194 k DOFs at 3.0 %, then 413 k); one sized for
+more overshoots where q is small. Sized for the geometric mean, e_g · √(3/2) (FACTOR_RISE_MEAN), measured
+2026-11-26 (load 4–7): the paper disc 48.7 k → 87.8 k at 2 % (was 68.3 k; 0.99 % against 1.33 %) and
+→ 163 k at 1 % (was 128 k), +28 % DOFs and no level saved; the thick disc at 2 % still three levels
+(84 k, 231 k, 345 k against 84 k, 194 k, 413 k: its q̂ 0.43 and rate 0.87 need ≈ 1.6× at level 0). Not
+worth it without a per-part prior of q: FACTOR_RISE = 1 (the allowance stays a parameter).
+
+Last step. A step after which no measurable step (× MIN_GROWTH) fits under the DOF or memory budget is
+the last one: it goes to the budget's cap (``next_dofs``), the level most likely to reach rtol. Where
+rtol is beyond the cap by the prediction, the run steps once to about √(N · cap) first (leaving room for
+a measurable last step), then to the cap: the second marking uses the indicators of a finer mesh, so the
+stop is at a better level than one jump there (six_spoke_thick at 1 %: one jump 100 k → 451 k stopped at ± 1.76 %, three levels had reached
+± 1.15 % before the enriched system got lighter).
+
+Memory. The peak of a level is dominated by its enriched solve (V⁺ has about 3.2× the P2 DOFs; the P2
+solve, the DWR indicators and the final six-case figures after the loop stay below it: measured per
+phase on the paper and thick discs), so peak(N) = base + per · N with per = (peak − base)/N of the last
+level (``peak_per_dof``; the previous level's where the last one did not raise the process's peak, so
+was only sampled), and the next level is predicted at base + MEMORY_MARGIN · per · N
+(``predicted_peak_gb``), base the resident memory before the first level with the allocator's free
+pages returned (malloc_trim: up to 50 MB of an STL's meshing, which the first level reuses and would
+read as its own; with them in the base, the STL disc's second level came out 1.16–1.21× its
+prediction). Measured with the trimmed base (2026-11-26, paper, thick and STL thick discs): per falls
+as N grows (the first level carries one-off costs), each level's peak 0.92–0.98 of the prediction from
+the level before; MEMORY_MARGIN = 1.1 is the allowance for what those four steps did not show. The peak
+is the enriched solve's in every level (the final six-case figures after the loop did not raise the
+process's peak in any of those runs).
 
 Marks. Longest-edge bisection with closure adds about the same DOFs per marked element on a given
 mesh (measured on the paper disc at 48.7 k DOFs, 2 rounds: 70–80 DOFs per marked element from 2 % to
@@ -37,6 +71,8 @@ import math
 
 import numpy as np
 
+from flexure.saturation import FLAT as SAT_FLAT, SAFETY as SAT_SAFETY
+
 RATE_PRIOR = 1.0
 RATE_MIN = 1.0 / 3.0
 RATE_MAX = 4.0 / 3.0
@@ -50,46 +86,111 @@ def min_growth(min_drop: float) -> float:
 
 
 MAX_GROWTH = 6.0
+#: the first level's estimates carry the flat factor FLAT = 2; once q̂ is measured the factor is
+#: max(FLAT, SAFETY/(1 − q̂)), up to 3 within the saturation the first level's bracket assumes
+#: (q ≤ ½): the geometric mean of that rise, √(3/2), measured as the first step's allowance and
+#: not kept (module docstring, "First step"): 1, no allowance
+FACTOR_RISE_MEAN = math.sqrt(SAT_SAFETY / (1.0 - 0.5) / SAT_FLAT)
+FACTOR_RISE = 1.0
+#: the predicted peak's margin over the largest measured peak per DOF (module docstring, "Memory")
+MEMORY_MARGIN = 1.1
 
 
 def rates(prev: dict | None, cur: dict) -> np.ndarray:
-    """Per goal (stiffness, then each gauge): the observed convergence rate of its relative estimate
-    between two levels ({"dofs", "rel": [...]}) clipped to [RATE_MIN, RATE_MAX]; RATE_PRIOR without a
-    previous level or where an estimate is not positive."""
-    e = np.asarray(cur["rel"], float)
+    """Per goal (stiffness, then each gauge): the observed convergence rate between two levels
+    ({"dofs", "rel": [...], "raw": [...]}) of its raw relative estimate ("raw": the enriched
+    difference |d|, without the estimate's factor, which changes where q̂ gets measured; else "rel"),
+    clipped to [RATE_MIN, RATE_MAX]; RATE_PRIOR without a previous level or where it is not positive."""
+    key = "raw" if "raw" in cur and prev is not None and "raw" in prev else "rel"
+    e = np.asarray(cur[key], float)
     if prev is None or prev["dofs"] >= cur["dofs"]:
         return np.full(len(e), RATE_PRIOR)
-    ep = np.asarray(prev["rel"], float)
+    ep = np.asarray(prev[key], float)
     with np.errstate(divide="ignore", invalid="ignore"):
         r = np.log(ep / e) / math.log(cur["dofs"] / prev["dofs"])
     r = np.where(np.isfinite(r), r, RATE_PRIOR)
     return np.clip(r, RATE_MIN, RATE_MAX)
 
 
-def target_dofs(n_dofs: int, rel: np.ndarray, rate: np.ndarray, rtol: float, min_grow: float) -> int:
-    """DOFs of the next level: max over the goals above ``rtol`` of N (e_g/rtol)^(1/r_g), within
-    [min_grow, MAX_GROWTH] × N (``min_grow`` alone where every goal is below rtol)."""
+def raw_relative(rec: dict, rel: dict, d: dict | None) -> list:
+    """A level's relative estimates (flexure.adaptive._relative: stiffness, each arm) without their
+    factor, × |d|/e with d the enriched differences (+ geometric error) in the goals' units; the
+    estimates themselves where ``d`` is None (the calibrated DWR estimate)."""
+    e_rel = [rel["torsional_stiffness_Nm_per_rad"], *rel["arms"]]
+    if d is None:
+        return e_rel
+    est = rec["estimate"]
+    e_theta = est["torsional_stiffness_Nm_per_rad"] / rec["torsional_stiffness_Nm_per_rad"] * abs(rec["theta"])
+    share = [abs(d["theta"]) / max(e_theta, 1e-300)] + [abs(x) / max(e, 1e-300) for x, e in
+                                                         zip(d["gauges"], est["gauge_strains"])]
+    return [r * min(f, 1.0) for r, f in zip(e_rel, share)]
+
+
+def target_dofs(n_dofs: int, rel: np.ndarray, rate: np.ndarray, rtol: float, min_grow: float,
+                rise: float = 1.0) -> int:
+    """DOFs of the next level: max over the goals above ``rtol`` of N (rise · e_g/rtol)^(1/r_g), within
+    [min_grow, MAX_GROWTH] × N (``min_grow`` alone where every goal is below rtol); ``rise`` the
+    expected rise of the estimates' factor on the next level (FACTOR_RISE on the first)."""
     rel = np.asarray(rel, float)
     open_ = rel > rtol
-    need = n_dofs * np.max((rel[open_] / rtol) ** (1.0 / np.asarray(rate)[open_]), initial=min_grow)
+    need = n_dofs * np.max((rise * rel[open_] / rtol) ** (1.0 / np.asarray(rate)[open_]), initial=min_grow)
     return int(min(max(need, min_grow * n_dofs), MAX_GROWTH * n_dofs))
 
 
-def memory_dofs(n_dofs: int, base_gb: float, peak_gb: float, budget_gb: float) -> int:
-    """The most DOFs whose peak stays within ``budget_gb``, the peak above the process's baseline
-    ``base_gb`` (its resident memory before the first level: interpreter, libraries, the CAD kernel)
-    taken proportional to the DOFs: peak(N) = base + (peak − base) N / n_dofs."""
-    per = max(peak_gb - base_gb, 1e-9) / n_dofs
-    return int(max(budget_gb - base_gb, 0.0) / per)
+#: the landing slack of a step (marks_for lands within 10 % of its target)
+LANDING = 1.1
 
 
-def marks_for(tm, comb: np.ndarray, target: int, rounds: int, forced=(), tries: int = 3) -> tuple[np.ndarray, dict]:
+def next_dofs(n_dofs: int, want: int, cap: int, min_grow: float, split: bool = True) -> int:
+    """The next level's DOFs under a budget ``cap`` (the DOF and memory budgets' smaller): ``want``
+    while a measurable step (× min_grow) still fits after it; else the step is the last one and
+    goes to the cap, the level most likely to reach rtol. Where ``want`` is beyond the cap (rtol
+    not reachable by the prediction) and ``split``, one intermediate step m first: an adaptive
+    sequence reaches a smaller error at the cap in two steps than in one (the second marks with the
+    indicators of a finer mesh); m = √(N · cap) within [cap/(LANDING min_grow²), cap/(LANDING min_grow)],
+    so that from m, landed up to LANDING above it, the measurable last step to the cap still fits, and
+    only where that leaves m a measurable step above N. 0 where no measurable step fits."""
+    if cap < min_grow * n_dofs:
+        return 0
+    if want <= cap:
+        return int(cap) if cap < min_grow * want else int(want)
+    lo, hi = cap / (LANDING * min_grow ** 2), cap / (LANDING * min_grow)
+    m = min(max(math.sqrt(n_dofs * cap), lo), hi)
+    if split and m >= min_grow * n_dofs:
+        return int(m)
+    return int(cap)
+
+
+def peak_per_dof(n_dofs: int, base_gb: float, peak_gb: float, seen_gb: float = 0.0, measured: bool = True) -> float:
+    """A level's peak memory per DOF above the process's baseline ``base_gb`` (its resident memory
+    before the first level: interpreter, libraries, the CAD kernel), (peak − base)/N; where the
+    level's peak is only sampled (``measured`` False: it did not raise the process's peak) not below
+    ``seen_gb``, the previous level's."""
+    per = (peak_gb - base_gb) / n_dofs
+    return max(per if measured else max(per, seen_gb), 1e-15)
+
+
+def predicted_peak_gb(n_dofs: int, base_gb: float, per_dof_gb: float) -> float:
+    """peak(N) = base + MEMORY_MARGIN · per · N (module docstring, "Memory")."""
+    return base_gb + MEMORY_MARGIN * per_dof_gb * n_dofs
+
+
+def memory_dofs(base_gb: float, per_dof_gb: float, budget_gb: float) -> int:
+    """The most DOFs whose predicted peak (``predicted_peak_gb``) stays within ``budget_gb``."""
+    return int(max(budget_gb - base_gb, 0.0) / (MEMORY_MARGIN * per_dof_gb))
+
+
+def marks_for(tm, comb: np.ndarray, target: int, rounds: int, forced=(), tries: int = 3,
+              gain: float | None = None, limit: int | None = None) -> tuple[np.ndarray, dict]:
     """The elements to bisect so that the refined mesh has about ``target`` DOFs: the ``forced`` ones
     (the geometry criterion's) and the n largest of the combined indicators ``comb`` (one per element),
     n from topology-only trial bisections (module docstring): N(n) ≈ N_f + g n, N_f the DOFs with the
-    forced ones alone, g measured by a trial at TRIAL_SHARE of the elements, then corrected by a secant
-    step (closure makes N(n) slightly non-linear) while a trial is more than 10 % off. → (elements,
-    info: the trials (marks, DOFs))."""
+    forced ones alone; the first trial at n = (target − N_f)/``gain`` where the previous level measured
+    its DOFs per mark g (about the same from level to level: closure adds a similar neighbourhood to a
+    marked element at every size), else at TRIAL_SHARE of the elements; then corrected by a secant step
+    (closure makes N(n) slightly non-linear) while a trial is more than 10 % off. → (elements,
+    info: the trials (marks, DOFs), the DOFs per mark ``gain`` of the chosen one). No trial above
+    ``limit`` (a budget's cap) is chosen: where every one is, the marks are scaled down to it (more trials)."""
     from flexure.refine import TaggedMesh, bisect
 
     mesh = tm.mesh
@@ -105,7 +206,7 @@ def marks_for(tm, comb: np.ndarray, target: int, rounds: int, forced=(), tries: 
         return out.mesh.n_dofs
 
     pts = [(0, dofs(0))]
-    n = max(1, int(TRIAL_SHARE * n_el))
+    n = max(1, int(TRIAL_SHARE * n_el) if not gain else min(int((target - pts[0][1]) / gain), n_el))
     for _ in range(tries):
         N = dofs(n)
         pts.append((n, N))
@@ -118,5 +219,16 @@ def marks_for(tm, comb: np.ndarray, target: int, rounds: int, forced=(), tries: 
             break
         n = n_new
     n, N = min(pts, key=lambda p: abs(p[1] - target))
+    for _ in range(tries):
+        if limit is None or N <= limit:
+            break
+        under = [p for p in pts if p[1] <= limit and p[0] > 0]
+        if under:
+            n, N = max(under, key=lambda p: p[1])
+            break
+        n = int(n * (limit - pts[0][1]) / max(N - pts[0][1], 1) * 0.9)
+        N = dofs(n)
+        pts.append((n, N))
     return np.union1d(order[:n], forced), {"trials": [list(map(int, p)) for p in pts], "marks": int(n),
-                                            "predicted_dofs": int(N), "target_dofs": int(target)}
+                                            "predicted_dofs": int(N), "target_dofs": int(target),
+                                            "gain": (N - pts[0][1]) / n if n > 0 and N > pts[0][1] else None}

@@ -103,9 +103,13 @@ def longest_edge(points: np.ndarray, tets: np.ndarray, codes: np.ndarray | None 
 def _longest(points, codes, uc, eid):
     lo, hi = uc >> 32, uc & 0xFFFFFFFF
     d = points[hi] - points[lo]
-    L = np.einsum("ei,ei->e", d, d)[eid]
-    best = L.max(axis=1)
-    return np.where(L == best[:, None], codes, -1).argmax(axis=1)
+    return _longest_of(np.einsum("ei,ei->e", d, d)[eid], codes)
+
+
+def _longest_of(L2: np.ndarray, codes: np.ndarray) -> np.ndarray:
+    """Local index of the longest of each row's edges (squared lengths L2 (m,6)), ties by the larger code."""
+    best = L2.max(axis=1)
+    return np.where(L2 == best[:, None], codes, -1).argmax(axis=1)
 
 
 def _edge_targets(face_tag: np.ndarray, edge_tag: np.ndarray):
@@ -287,20 +291,23 @@ def _p2_weights(bary: np.ndarray) -> np.ndarray:
     return N
 
 
-def _bisect_pass(points, tets, face_tag, edge_tag, flag, marked_codes, fields, closure_ratio: float = 1.0):
-    """One pass: closure, then every element whose longest edge is marked is bisected.
-    → (points, tets, face_tag, edge_tag, flag, marked_codes, fields, targets, n_bisected)."""
+def _bisect_pass(points, tets, face_tag, edge_tag, flag, emark, fields, closure_ratio: float = 1.0):
+    """One pass: closure, then every element whose longest edge is marked is bisected. An edge is
+    named by its mid node (one per edge, conforming or between passes alike: an edge keeps its node
+    until it is split, a new edge gets one), so ``emark`` is a (n,) bool over the nodes and no pass
+    needs a global sort of the edges. → (points, tets, face_tag, edge_tag, flag, emark, fields,
+    targets, n_bisected)."""
     codes = edge_codes(tets)
-    uc, inv = np.unique(codes.ravel(), return_inverse=True)
-    eid = inv.reshape(codes.shape)
-    le = _longest(points, codes, uc, eid)
+    eid = tets[:, 4:]                                                        # (m,6) each edge's mid node
+    n = len(points)
+    code = np.zeros(n, np.int64)
+    code[eid] = codes                                                        # every mid node's vertex pair
+    lo, hi = code >> 32, code & 0xFFFFFFFF
+    d = points[hi] - points[lo]
+    le = _longest_of(np.einsum("ei,ei->e", d, d)[eid], codes)
     rows = np.arange(len(tets))
-    at = np.minimum(np.searchsorted(uc, marked_codes), len(uc) - 1)
-    emark = np.zeros(len(uc), bool)
-    emark[at[uc[at] == marked_codes]] = True
     mk = emark[eid]
-    lo, hi = uc >> 32, uc & 0xFFFFFFFF
-    L = np.linalg.norm(points[hi] - points[lo], axis=1)[eid]                 # (m,6) edge lengths
+    L = np.linalg.norm(d, axis=1)[eid]                                       # (m,6) edge lengths
     Lmax = L[rows, le]
     corner = points[tets[:, :4]]
     q_cache = {}                                  # (element, edge) → children's smallest dihedral angle
@@ -324,10 +331,9 @@ def _bisect_pass(points, tets, face_tag, edge_tag, flag, marked_codes, fields, c
             break
         emark[eid[need, le[need]]] = True
         mk = emark[eid]
-    marked_codes = uc[emark]
     B = np.flatnonzero(mk[rows, chosen])
     if len(B) == 0:
-        return points, tets, face_tag, edge_tag, flag, marked_codes, fields, None, 0
+        return points, tets, face_tag, edge_tag, flag, emark, fields, None, 0
     e = chosen[B]
     i, j = TET_EDGES[e, 0], TET_EDGES[e, 1]
     k, l = _OTHER[e, 0], _OTHER[e, 1]
@@ -347,25 +353,35 @@ def _bisect_pass(points, tets, face_tag, edge_tag, flag, marked_codes, fields, c
     fk, fl = face_tag[B, k], face_tag[B, l]          # faces opposite k (contains i j l), opposite l
     # an edge's target (curve > surface > none) over every element that holds it: an element that
     # touches the boundary only along the edge does not know it
-    edim, etag = _edge_targets(face_tag, edge_tag)
-    order = np.lexsort((_PRIORITY[edim.ravel()], eid.ravel()))
-    best_dim = np.zeros(len(uc), np.int64)
-    best_tag = np.zeros(len(uc), np.int64)
-    best_dim[eid.ravel()[order]] = edim.ravel()[order]
-    best_tag[eid.ravel()[order]] = etag.ravel()[order]
-    dim_e, tag_e = best_dim[eid[B, e]], best_tag[eid[B, e]]
+    split = np.zeros(n, bool)
+    split[m] = True
+    hold = np.flatnonzero(split[eid.ravel()])     # the element edges (flat (m,6) index) that are split
+    edim, etag = _edge_targets(face_tag[hold // 6], edge_tag[hold // 6])
+    edim, etag = edim[np.arange(len(hold)), hold % 6], etag[np.arange(len(hold)), hold % 6]
+    order = np.lexsort((_PRIORITY[edim], eid.ravel()[hold]))
+    best_dim = np.zeros(n, np.int64)
+    best_tag = np.zeros(n, np.int64)
+    best_dim[eid.ravel()[hold][order]] = edim[order]
+    best_tag[eid.ravel()[hold][order]] = etag[order]
+    dim_e, tag_e = best_dim[m], best_tag[m]
     dims = np.concatenate([dim_e, dim_e, np.where(fl > 0, 2, 0), np.where(fk > 0, 2, 0)])
     tags = np.concatenate([tag_e, tag_e, fl, fk])
     parent = np.tile(B, 4)
     # existing edges keep their node; each new one gets one node (placed by its first parent)
-    ex_codes = uc
-    ex_nodes = np.empty(len(uc), np.int64)
-    ex_nodes[eid.ravel()] = tets[:, 4:].ravel()
+    # (every new edge holds m: it can exist already only where m is a vertex, split by a neighbour before)
+    ismid = np.zeros(n, bool)
+    ismid[eid] = True
+    cand_nodes = np.flatnonzero(ismid & (split[lo] | split[hi]))
+    order = np.argsort(code[cand_nodes], kind="stable")
+    ex_codes, ex_nodes = code[cand_nodes][order], cand_nodes[order]
     uniq, first, inv = np.unique(new_codes, return_index=True, return_inverse=True)
-    pos = np.minimum(np.searchsorted(ex_codes, uniq), len(ex_codes) - 1)
-    exists = ex_codes[pos] == uniq
-    n = len(points)
-    node_of = np.where(exists, ex_nodes[pos], 0)
+    if len(ex_codes):
+        pos = np.minimum(np.searchsorted(ex_codes, uniq), len(ex_codes) - 1)
+        exists = ex_codes[pos] == uniq
+        node_of = np.where(exists, ex_nodes[pos], 0)
+    else:
+        exists = np.zeros(len(uniq), bool)
+        node_of = np.zeros(len(uniq), np.int64)
     fresh = np.flatnonzero(~exists)
     node_of[fresh] = n + np.arange(len(fresh))
     src = first[fresh]                            # occurrence that places each fresh node
@@ -405,7 +421,8 @@ def _bisect_pass(points, tets, face_tag, edge_tag, flag, marked_codes, fields, c
     face_tag = np.vstack([face_tag[keep], children[0][1], children[1][1]])
     edge_tag = np.vstack([edge_tag[keep], children[0][2], children[1][2]])
     flag = np.concatenate([flag[keep], flag[B], flag[B]])
-    return points, tets, face_tag, edge_tag, flag, marked_codes, fields, targets, len(B)
+    emark = np.concatenate([emark, np.zeros(len(points) - n, bool)])
+    return points, tets, face_tag, edge_tag, flag, emark, fields, targets, len(B)
 
 
 #: an element holding a marked edge at least this fraction of its longest edge is bisected at that edge
@@ -455,8 +472,8 @@ def bisect(tm: TaggedMesh, elements, fields=(), rounds: int = 1, projector=None,
     moved_nodes, moved_dim, moved_tag = [], [], []
     passes = bisections = 0
     for _ in range(rounds):
-        codes = edge_codes(tets)
-        marked = np.unique(codes[flag, longest_edge(points, tets[flag], codes[flag])])
+        marked = np.zeros(len(points), bool)
+        marked[tets[flag, 4 + longest_edge(points, tets[flag])]] = True
         while True:
             points, tets, face_tag, edge_tag, flag, marked, fields, tgt, nb = _bisect_pass(
                 points, tets, face_tag, edge_tag, flag, marked, fields,

@@ -74,9 +74,11 @@ def test_sizing_rules():
     assert sizing.target_dofs(1000, [1.0, 0.005], np.array([0.5, 1.0]), 0.02, 1.5) == 1000 * sizing.MAX_GROWTH
     # the step that can measure a drop of 25 % at the a-priori rate: 0.75^(-1/RATE_PRIOR)
     assert sizing.min_growth(0.25) == pytest.approx(0.75 ** (-1.0 / sizing.RATE_PRIOR))
-    # memory: the peak above the baseline scales with the DOFs (1 GB base, 0.5 GB at 100k → 4 GB at 600k)
-    assert sizing.memory_dofs(100_000, 1.0, 1.5, 4.0) == pytest.approx(600_000, rel=1e-9)
-    assert sizing.memory_dofs(100_000, 1.0, 1.5, 0.9) == 0
+    # memory: the peak above the baseline scales with the DOFs (1 GB base, 0.5 GB at 100k → 4 GB at
+    # 600k), with the margin MEMORY_MARGIN
+    per = sizing.peak_per_dof(100_000, 1.0, 1.5)
+    assert sizing.memory_dofs(1.0, per, 4.0) == pytest.approx(600_000 / sizing.MEMORY_MARGIN, rel=1e-6)
+    assert sizing.memory_dofs(1.0, per, 0.9) == 0
 
 
 @pytest.mark.slow
