@@ -69,7 +69,7 @@ import numpy as np
 
 from userio.errors import InputError
 from flexure import adaptive_sizing as sizing
-from flexure import blas
+from flexure import blas, rss
 from flexure import reentrant, saturation
 
 DEFAULT_RTOL = 0.02
@@ -109,33 +109,6 @@ METHOD_ENRICHED = ("goal-oriented estimate on nested adaptively refined meshes (
                    "q ∈ [−0.11, 0.63]); the bridge's plus what its arms' different q̂ may add; a bound-like "
                    "figure, not 1σ; on an STL, J(u⁺) includes the P2 boundary's geometric error against the facets "
                    "(flexure.geometry_error)")
-
-
-def _rss_gb() -> float:
-    """Peak resident memory of this process so far (GB)."""
-    import resource
-
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
-
-
-def _rss_now_gb(trim: bool = False) -> float:
-    """Resident memory of this process now (GB; Linux /proc, else the peak so far); ``trim``: after
-    returning the allocator's free heap pages to the system (glibc malloc_trim), which RSS counts
-    although the next allocations reuse them (the memory model's baseline: flexure.adaptive_sizing)."""
-    import os
-
-    if trim:
-        try:
-            import ctypes
-            ctypes.CDLL("libc.so.6").malloc_trim(0)
-        except (OSError, AttributeError):
-            pass
-
-    try:
-        with open("/proc/self/statm") as f:
-            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1024 / 1e6   # as ru_maxrss (KB) / 1e6
-    except (OSError, ValueError, IndexError):
-        return _rss_gb()
 
 
 def geometry(design, mres):
@@ -231,12 +204,12 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
         bands = _band_indicator(tm.mesh, _selections(design, tm.mesh))
         q_unmeasured = saturation.unmeasured_ratio(reentrant.has_sharp_reentrant_edge(tm.mesh))   # flexure.saturation (4)
         mesh_s = time.perf_counter() - t0
-        base_gb = _rss_now_gb(trim=True)
+        base_gb = rss.now_gb(trim=True)
         bar.set_description(f"flexure: mesh {tm.mesh.n_dofs} dofs ({mesh_s:.0f} s)")
         for lv in range(MAX_LEVELS):
             mesh = tm.mesh
             tl = time.perf_counter()
-            peak_before = _rss_gb()
+            peak_before = rss.peak_gb()
             # CG tied to --rtol; the goals dual-corrected and their algebraic error held below a share of it
             sol = solve_goals(design, mesh, x0, ref0, selections=_nested_selections(mesh, bands),
                               rtol=cg_rtol_for(rtol), algebraic_limit=ALGEBRAIC_SHARE * rtol)
@@ -246,7 +219,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
                 d = np.asarray(sol.info["goal_dual_correction"])
                 enr["theta"], enr["gauges"] = enr["theta"] - float(d[0]), enr["gauges"] - d[1:]
             enriched_s = time.perf_counter() - te
-            rss_level = _rss_now_gb()          # the level's fields, matrix, hierarchy and enriched solve alive
+            rss_level = rss.now_gb()          # the level's fields, matrix, hierarchy and enriched solve alive
             sol.solver = sol.system = None     # not needed again (the last mesh's load cases: goal_cases): free them
             vals = goal_values(design, sol)
             td = time.perf_counter()
@@ -277,10 +250,10 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             bar.update(1)
             bar.set_description(f"flexure: level {lv} {mesh.n_dofs} dofs, worst error ±{worst:.2%}")
             rec["level_s"] = time.perf_counter() - tl
-            rec["peak_rss_gb"] = _rss_gb()
+            rec["peak_rss_gb"] = rss.peak_gb()
             rec["predicted_peak_gb"] = predicted_gb        # by the level before (None on the first)
             # this level's peak: the process's if the level raised it, else the largest sampled RSS
-            level_peak = max(rss_level, _rss_now_gb(), rec["peak_rss_gb"] if rec["peak_rss_gb"] > peak_before else 0.0)
+            level_peak = max(rss_level, rss.now_gb(), rec["peak_rss_gb"] if rec["peak_rss_gb"] > peak_before else 0.0)
             if worst <= rtol and lv + 1 >= MIN_LEVELS:
                 stopped = "rtol"
                 break
@@ -319,7 +292,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             ref0 = sol.q[-6:] if design.coupling == "rigid" else None
             tm, (x0, bands), rinfo = bisect(tm, marked, [sol.U, bands], rounds=ROUNDS, projector=projector)
             sol = None                                       # free the old level's matrix and hierarchy
-            _rss_now_gb(trim=True)                           # ... and give the freed heap back to the system
+            rss.now_gb(trim=True)                           # ... and give the freed heap back to the system
             rec["refine_s"] = time.perf_counter() - tr
             predicted_gb = sizing.predicted_peak_gb(tm.mesh.n_dofs, base_gb, mem_per)
             rec["marked"] = int(len(marked))
