@@ -1,19 +1,13 @@
 """Threads of the FEM's compiled kernels (numba ``prange`` loops): one setting.
 
-``THREADS`` comes from the environment variable ``TORQUEBENCH_THREADS``: unset, one thread; a
-positive integer fixes the count; ``auto``: the kernels use the cores no other process is running on at the
+``THREADS`` comes from the environment variable ``TORQUEBENCH_THREADS``: a positive integer fixes
+the count; unset (or ``auto``) the kernels use the cores no other process is running on at the
 call, between 1 and the machine's cores (``os.sched_getaffinity``): the kernel regions are short
 (10 ms – 2 s) and a thread waiting at their end for a partner descheduled by another process's
 work is slower than one thread (measured on the shared 2-core machine at load 3: the enriched
 assembly 1.4 s with 1 thread, 1.7 s with 2; a CSR product 55 ms against 92 ms). "Busy" is the
 kernel's instantaneous count of runnable tasks (/proc/stat ``procs_running``) less this process's
 own (its numba workers may still be spinning after the last region).
-Why one by default (measured 2026-11-26 on the 2-core machine, quiet, load ≤ 1.3): 2 threads took the
-thick disc's default run from 132 s to 117 s wall (1.13×; the paper disc's 19.1 → 18.6 s), but they
-raised a level's peak resident memory unpredictably (the paper disc at --rtol 0.002, 74 k DOFs: 0.67 GB
-with 1 thread, 0.75–0.79 GB in three runs with 2), past the adaptive memory model's prediction
-(flexure.adaptive_sizing, fitted with one): a --max-memory-gb budget is a promise, 13 % is not worth
-breaking it. ``TORQUEBENCH_THREADS=2`` (or ``auto``) takes the speed where memory has room.
 Everything is capped by numba's pool (``NUMBA_NUM_THREADS``). ``use()`` applies the count before a
 parallel kernel runs (numba's setting is per calling thread); ``limited(n)`` fixes ``n`` within a
 block (tests and benchmarks compare 1 and N). The kernels' results do not depend on the count, or
@@ -36,16 +30,14 @@ def _cores() -> int:
 
 def _from_env() -> int | None:
     v = os.environ.get("TORQUEBENCH_THREADS", "").strip().lower()
-    if v == "auto":
-        return None
     try:
         n = int(v)
     except ValueError:
-        return 1
-    return n if n > 0 else 1
+        return None
+    return n if n > 0 else None
 
 
-#: threads of the FEM's parallel kernels (env TORQUEBENCH_THREADS; unset: 1); None (``auto``): the idle cores at each call
+#: threads of the FEM's parallel kernels (env TORQUEBENCH_THREADS); None: the idle cores at each call
 THREADS: int | None = _from_env()
 CORES: int = _cores()
 _override: int | None = None
