@@ -46,7 +46,9 @@ pages returned (malloc_trim: up to 50 MB of an STL's meshing, which the first le
 read as its own; with them in the base, the STL disc's second level came out 1.16–1.21× its
 prediction). Measured with the trimmed base (2026-11-26, paper, thick and STL thick discs): per falls
 as N grows (the first level carries one-off costs), each level's peak 0.92–0.98 of the prediction from
-the level before; MEMORY_MARGIN = 1.1 is the allowance for what those four steps did not show. The peak
+the level before. The same step repeated is not the same peak: the paper disc at --rtol 0.002 under a
+0.91 GB budget, level 1 at the same 73.7 k DOFs, peaked at 0.67, 0.75, 0.75 and 0.79 GB in four runs
+(1.04× the 1.1 prediction at most; the allocator's reuse of freed pages varies), so MEMORY_MARGIN = 1.2. The peak
 is the enriched solve's in every level (the final six-case figures after the loop did not raise the
 process's peak in any of those runs).
 
@@ -93,7 +95,7 @@ MAX_GROWTH = 6.0
 FACTOR_RISE_MEAN = math.sqrt(SAT_SAFETY / (1.0 - 0.5) / SAT_FLAT)
 FACTOR_RISE = 1.0
 #: the predicted peak's margin over the largest measured peak per DOF (module docstring, "Memory")
-MEMORY_MARGIN = 1.1
+MEMORY_MARGIN = 1.2
 
 
 def rates(prev: dict | None, cur: dict) -> np.ndarray:
