@@ -48,7 +48,9 @@ prediction). Measured with the trimmed base (2026-11-26, paper, thick and STL th
 as N grows (the first level carries one-off costs), each level's peak 0.92–0.98 of the prediction from
 the level before. The same step repeated is not the same peak: the paper disc at --rtol 0.002 under a
 0.91 GB budget, level 1 at the same 73.7 k DOFs, peaked at 0.67, 0.75, 0.75 and 0.79 GB in four runs
-(1.04× the 1.1 prediction at most; the allocator's reuse of freed pages varies), so MEMORY_MARGIN = 1.2. The peak
+(1.04× the 1.1 prediction at most), so MEMORY_MARGIN = 1.2; and in CI (fresh venv, two test workers, load)
+a level at 94.6 k DOFs peaked at 1.13× its 1.2 prediction: the prediction is not a guarantee yet (the spread's
+source — allocator reuse, numba compiling or threads inside a level — is not found; the test is an xfail). The peak
 is the enriched solve's in every level (the final six-case figures after the loop did not raise the
 process's peak in any of those runs).
 
