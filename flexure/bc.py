@@ -295,8 +295,9 @@ class Problem:
                 B[base + 3:base + 6, 3:] = np.eye(3)
             T = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                               shape=(3 * n, n_q))
-            A = (T.T @ K @ T).tocsr()
-            b = T.T @ f
+            Tt = T.T.tocsr()          # CSR products only: CSC @ CSR would copy K to CSC first (4 s at 1 M dofs)
+            A = ((Tt @ K.tocsr()) @ T).tocsr()
+            b = Tt @ f
             b[3 * len(free_nodes):] += bq_extra
             fixed_nodes_dofs = np.flatnonzero(self.fixed[free_nodes].ravel())
             fixed_q = fixed_nodes_dofs

@@ -114,7 +114,15 @@ def block_diagonal_inverse(A) -> np.ndarray:
         for b in range(3):
             d = A.diagonal(b - a)                  # k ≥ 0: A[r, r + k];  k < 0: A[r − k, r]
             D[:, a, b] = d[3 * np.arange(nb) + min(a, b)]
-    return np.linalg.pinv(D)
+    # LU where a block is regular (every block but a constrained or empty one): pinv's SVD per block
+    # costs several times more; the rest by pinv, as before
+    det = np.linalg.det(D)
+    ok = np.abs(det) > 1e-12 * np.abs(D).max(axis=(1, 2)) ** 3
+    Dinv = np.empty_like(D)
+    Dinv[ok] = np.linalg.inv(D[ok])
+    if not ok.all():
+        Dinv[~ok] = np.linalg.pinv(D[~ok])
+    return Dinv
 
 
 def _pmg_setup(A, coarse, B_coarse, smoothed: bool):
@@ -122,9 +130,10 @@ def _pmg_setup(A, coarse, B_coarse, smoothed: bool):
     and the coarse V-cycle M₁ on the Galerkin P1-vertex system A₁ = Iᵀ A I
     (aggregation AMG with the rigid-body modes; plain keeps the wide-stencil A₁ sparse)."""
     Dinv = block_diagonal_inverse(A)
-    A1 = (coarse.T @ A @ coarse).tocsr()
+    It = coarse.T.tocsr()
+    A1 = ((It @ sp.csr_matrix(A)) @ coarse).tocsr()      # CSR products: Iᵀ as CSC would copy A to CSC first
     ml = _sa_hierarchy(A1, B_coarse, smoothed=smoothed, max_coarse=PMG_MAX_COARSE)
-    return Dinv, ml, ml.aspreconditioner(cycle="V"), coarse.T.tocsr()
+    return Dinv, ml, ml.aspreconditioner(cycle="V"), It
 
 
 def _pmg_preconditioner(A, coarse, B_coarse, smoothed: bool = False):
