@@ -295,9 +295,8 @@ class Problem:
                 B[base + 3:base + 6, 3:] = np.eye(3)
             T = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                               shape=(3 * n, n_q))
-            Tt = T.T.tocsr()          # CSR products only: CSC @ CSR would copy K to CSC first (4 s at 1 M dofs)
-            A = ((Tt @ K.tocsr()) @ T).tocsr()
-            b = Tt @ f
+            A = _condensed(K, T, 3 * len(free_nodes))
+            b = T.T @ f
             b[3 * len(free_nodes):] += bq_extra
             fixed_nodes_dofs = np.flatnonzero(self.fixed[free_nodes].ravel())
             fixed_q = fixed_nodes_dofs
@@ -397,3 +396,15 @@ class Problem:
         """Nodal displacements (n,3) from the reduced solution q."""
         u = q if system.T is None else system.T @ q
         return np.asarray(u).reshape(-1, 3)
+
+
+def _condensed(K, T, n_free: int):
+    """Tᵀ K T: compiled (flexure.condense) where numba is, else by CSR products (Tᵀ as CSR: CSC @ CSR
+    would copy K to CSC first)."""
+    from flexure import stiffness_assembly
+
+    if stiffness_assembly.available():
+        from flexure.condense import tkt
+
+        return tkt(K, T, n_free)
+    return ((T.T.tocsr() @ K.tocsr()) @ T).tocsr()

@@ -7,19 +7,24 @@ import numpy as np
 
 def warm() -> bool:
     """Compile (and cache) the FEM's parallel loops on a tiny mesh — the stiffness, the enriched
-    assembly, the CSR products — so that the first analysis does not pay numba's compile time
+    assembly, the CSR products, the coupling's condensation — so that the first analysis does not pay numba's compile time
     (measured 30 + 14 + 9 s at load 4: benchmarks/bench_fem_parallel.py --cold); False without numba."""
     from flexure import stiffness_assembly
 
     if not stiffness_assembly.available():
         return False
     from flexure import enriched, enriched_assembly, fem, sparse_parallel, threads
+    from flexure.bc import Problem
     from flexure.material import Material
     from flexure.mesh import box_mesh, to_quadratic
 
     m = to_quadratic(box_mesh(1, 1, 1))
     mat = Material(70e9, 0.33, 270e6, "warm-up")
     K = fem.stiffness_matrix(m, mat)
+    top = np.flatnonzero(m.points[:, 2] == m.points[:, 2].max())
+    prob = Problem(m, mat).fix(np.flatnonzero(m.points[:, 2] == 0))
+    prob.couple_rigid(top, (0.5, 0.5, 1.0))
+    prob.reduced_system(K)                       # flexure.condense's loop
     C = enriched_assembly.assemble_enriched(m, mat, np.zeros((m.n_nodes, 3)),
                                             enriched.surplus_numbering(m, np.zeros(m.n_nodes, bool)))[2]
     with threads.limited(2):
