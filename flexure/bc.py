@@ -22,6 +22,18 @@ from flexure.fem import TRI_QUAD, rigid_body_modes, tri_shape
 from flexure.mesh import Mesh
 
 
+#: A = Tᵀ K T by flexure.reduce's compiled row loop (False: scipy's products, the reference)
+REDUCE_COMPILED = True
+
+
+def _numba() -> bool:
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
 def _faces_checked(mesh: Mesh, faces, what: str) -> np.ndarray:
     faces = np.asarray(faces, dtype=np.int64)
     nf = 3 if mesh.order == 1 else 6
@@ -275,6 +287,7 @@ class Problem:
             B[:3 * len(free_nodes)] = B_full.reshape(n, 3, 6)[free_nodes].reshape(-1, 6)
             bq_extra = np.zeros(6 * len(kin))
             ref_slices = []
+            g_dofs, g_of, g_rows = [], [], []
             for k, c in enumerate(kin):
                 base = 3 * len(free_nodes) + 6 * k
                 ref_slices.append(slice(base, base + 6))
@@ -287,6 +300,8 @@ class Problem:
                 cc = base + np.broadcast_to(np.arange(6), blk.shape)
                 nz = blk != 0
                 rows.append(r[nz]); cols.append(cc[nz]); vals.append(blk[nz])
+                g_dofs.append((3 * c.nodes[:, None] + np.arange(3)).ravel())
+                g_of.append(np.full(3 * len(c.nodes), k)); g_rows.append(blk.reshape(-1, 6))
                 bq_extra[6 * k:6 * k + 3] = c.force_N
                 bq_extra[6 * k + 3:6 * k + 6] = c.moment_Nm
                 # rigid modes of the reference dofs: translation e_k → (e_k, 0); rotation a → (a×(x_r−c), a)
@@ -295,7 +310,14 @@ class Problem:
                 B[base + 3:base + 6, 3:] = np.eye(3)
             T = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                               shape=(3 * n, n_q))
-            A = (T.T @ K @ T).tocsr()
+            if REDUCE_COMPILED and _numba():
+                from flexure.reduce import reduced_stiffness
+
+                gd = np.concatenate(g_dofs)
+                o = np.argsort(gd)
+                A = reduced_stiffness(K, gd[o], np.concatenate(g_of)[o], np.concatenate(g_rows)[o], len(kin))
+            else:
+                A = (T.T @ K @ T).tocsr()                                # the reference path
             b = T.T @ f
             b[3 * len(free_nodes):] += bq_extra
             fixed_nodes_dofs = np.flatnonzero(self.fixed[free_nodes].ravel())
