@@ -3,9 +3,13 @@
 import numba
 import numpy as np
 
+
 @numba.njit(cache=True, nogil=True)
 def count(indptr, indices, fdofs, fmap, gk, m, cnt):
+    """cnt[r]: entries of A's free row r (its free columns, 6 per coupling it touches);
+    → the number of (row, coupling) touches."""
     seen = np.zeros(m, np.bool_)
+    touches = 0
     for r in range(len(fdofs)):
         i = fdofs[r]
         c = 0
@@ -17,12 +21,18 @@ def count(indptr, indices, fdofs, fmap, gk, m, cnt):
             elif not seen[gk[j]]:
                 seen[gk[j]] = True
                 c += 6
+                touches += 1
         cnt[r] = c
+    return touches
+
 
 @numba.njit(cache=True, nogil=True)
-def fill(indptr, indices, data, fdofs, fmap, gk, gslot, G, m, nf, optr, oind, odat):
+def fill(indptr, indices, data, fdofs, fmap, gk, gslot, G, m, nf, optr, oind, odat, trow, tk, tval):
+    """A's free rows: K_ff entries renumbered, then (K_fc G) in the 6 columns of each coupling
+    touched; each touch also to (trow, tk, tval (touches, 6)) for the reference rows (its transpose)."""
     acc = np.zeros(6 * m)
     seen = np.zeros(m, np.bool_)
+    t = 0
     for r in range(len(fdofs)):
         i = fdofs[r]
         o = optr[r]
@@ -45,7 +55,11 @@ def fill(indptr, indices, data, fdofs, fmap, gk, gslot, G, m, nf, optr, oind, od
                     acc[6 * k + c] += v * G[s, c]
         for k in range(m):
             if seen[k]:
+                trow[t] = r
+                tk[t] = k
                 for c in range(6):
                     oind[o] = nf + 6 * k + c
                     odat[o] = acc[6 * k + c]
+                    tval[t, c] = acc[6 * k + c]
                     o += 1
+                t += 1

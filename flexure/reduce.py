@@ -43,43 +43,39 @@ def reduced_stiffness(K, coupled_dofs: np.ndarray, coupling_of: np.ndarray, G: n
 
     cnt = np.empty(nf, np.int64)
     indptr = K.indptr.astype(np.int64, copy=False)
-    count(indptr, K.indices, fdofs, fmap, gk, m, cnt)
-    optr = np.zeros(nf + 1, np.int64)
-    np.cumsum(cnt, out=optr[1:])
-    nnz_f = int(optr[-1])
-    oind = np.empty(nnz_f, np.int64)
-    odat = np.empty(nnz_f)
+    touches = count(indptr, K.indices, fdofs, fmap, gk, m, cnt)
+    nr = 6 * m
+    nq = nf + nr
+    nnz_f = int(cnt.sum())
+    nnz = nnz_f + 6 * touches + nr * nr
+    idx = np.int32 if max(nq, nnz) < 2**31 else np.int64
+    indptr_out = np.empty(nq + 1, np.int64)
+    indptr_out[0] = 0
+    np.cumsum(cnt, out=indptr_out[1:nf + 1])
+    oind = np.empty(nnz, idx)
+    odat = np.empty(nnz)
+    trow, tk, tval = np.empty(touches, np.int64), np.empty(touches, np.int64), np.empty((touches, 6))
     fill(indptr, K.indices, K.data, fdofs, fmap, gk, gslot, np.ascontiguousarray(G, float), m, nf,
-         optr, oind, odat)
-    # reference rows: (K_fc G)ᵀ from the free rows' reference columns, then Gᵀ K_cc G (dense 6m)
-    is_ref = oind >= nf
-    rrow = oind[is_ref] - nf
-    rcol = np.repeat(np.arange(nf), cnt)[is_ref]
-    rval = odat[is_ref]
-    order = np.lexsort((rcol, rrow))
-    rrow, rcol, rval = rrow[order], rcol[order], rval[order]
+         indptr_out, oind, odat, trow, tk, tval)
+    # reference rows: (K_fc G)ᵀ (the touches, rows increasing), then Gᵀ K_cc G (dense 6m)
     Gs = sp.csr_matrix((G.ravel(), (np.repeat(np.arange(len(coupled_dofs)), 6),
                                     6 * np.repeat(coupling_of, 6) + np.tile(np.arange(6), len(coupled_dofs)))),
                        shape=(len(coupled_dofs), 6 * m))
     Kcc = K[coupled_dofs][:, coupled_dofs]
     Arr = np.asarray((Gs.T @ (Kcc @ Gs)).todense())
-    nr = 6 * m
-    rcnt = np.bincount(rrow, minlength=nr) + nr
-    indptr_out = np.concatenate([optr, nnz_f + np.cumsum(rcnt)])
-    ind_r = np.empty(int(rcnt.sum()), np.int64)
-    dat_r = np.empty(int(rcnt.sum()))
-    start = np.concatenate([[0], np.cumsum(rcnt)])
-    first = np.concatenate([[0], np.cumsum(np.bincount(rrow, minlength=nr))])
-    for s in range(nr):
-        a, b = first[s], first[s + 1]
-        o = start[s]
-        ind_r[o:o + b - a] = rcol[a:b]
-        dat_r[o:o + b - a] = rval[a:b]
-        ind_r[o + b - a:start[s + 1]] = nf + np.arange(nr)
-        dat_r[o + b - a:start[s + 1]] = Arr[s]
-    nq = nf + nr
-    idx_dtype = np.int32 if max(nq, indptr_out[-1]) < 2**31 else np.int64
-    A = sp.csr_matrix((np.concatenate([odat, dat_r]), np.concatenate([oind, ind_r]).astype(idx_dtype),
-                       indptr_out.astype(idx_dtype)), shape=(nq, nq))
+    o = nnz_f
+    for k in range(m):
+        sel = np.flatnonzero(tk == k)
+        for c in range(6):
+            s = 6 * k + c
+            oind[o:o + len(sel)] = trow[sel]
+            odat[o:o + len(sel)] = tval[sel, c]
+            o += len(sel)
+            oind[o:o + nr] = nf + np.arange(nr)
+            odat[o:o + nr] = Arr[s]
+            o += nr
+            indptr_out[nf + s + 1] = o
+    indptr_out = indptr_out.astype(idx, copy=False)
+    A = sp.csr_matrix((odat, oind, indptr_out), shape=(nq, nq), copy=False)
     A.has_sorted_indices = True
     return A
