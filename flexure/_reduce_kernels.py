@@ -5,14 +5,15 @@ import numpy as np
 
 
 @numba.njit(cache=True, nogil=True)
-def count(indptr, indices, fdofs, fmap, gk, m, cnt):
-    """cnt[r]: entries of A's free row r (its free columns, 6 per coupling it touches);
-    → the number of (row, coupling) touches."""
+def count(indptr, indices, fdofs, fmap, gk, m, cnt, tcnt):
+    """cnt[r]: entries of A's free row r (its free columns, 6 per coupling it touches), tcnt[r]:
+    the couplings it touches; → the number of (row, coupling) touches."""
     seen = np.zeros(m, np.bool_)
     touches = 0
     for r in range(len(fdofs)):
         i = fdofs[r]
         c = 0
+        tc = 0
         seen[:] = False
         for p in range(indptr[i], indptr[i + 1]):
             j = indices[p]
@@ -21,21 +22,32 @@ def count(indptr, indices, fdofs, fmap, gk, m, cnt):
             elif not seen[gk[j]]:
                 seen[gk[j]] = True
                 c += 6
-                touches += 1
+                tc += 1
         cnt[r] = c
+        tcnt[r] = tc
+        touches += tc
     return touches
 
 
-@numba.njit(cache=True, nogil=True)
-def fill(indptr, indices, data, fdofs, fmap, gk, gslot, G, m, nf, optr, oind, odat, trow, tk, tval):
+@numba.njit(cache=True, nogil=True, parallel=True)
+def fill(indptr, indices, data, fdofs, fmap, gk, gslot, G, m, nf, optr, oind, odat, toff, trow, tk, tval, nchunk):
     """A's free rows: K_ff entries renumbered, then (K_fc G) in the 6 columns of each coupling
-    touched; each touch also to (trow, tk, tval (touches, 6)) for the reference rows (its transpose)."""
+    touched; each touch also to (trow, tk, tval (touches, 6)) from toff[r] on, for the reference rows
+    (its transpose). Rows in ``nchunk`` chunks over the threads (each row's output has its place)."""
+    n = len(fdofs)
+    for ch in numba.prange(nchunk):
+        _fill_rows(indptr, indices, data, fdofs, fmap, gk, gslot, G, m, nf, optr, oind, odat, toff, trow, tk, tval,
+                   ch * n // nchunk, (ch + 1) * n // nchunk)
+
+
+@numba.njit(cache=True, nogil=True)
+def _fill_rows(indptr, indices, data, fdofs, fmap, gk, gslot, G, m, nf, optr, oind, odat, toff, trow, tk, tval, r0, r1):
     acc = np.zeros(6 * m)
     seen = np.zeros(m, np.bool_)
-    t = 0
-    for r in range(len(fdofs)):
+    for r in range(r0, r1):
         i = fdofs[r]
         o = optr[r]
+        t = toff[r]
         seen[:] = False
         for p in range(indptr[i], indptr[i + 1]):
             j = indices[p]

@@ -39,11 +39,15 @@ def reduced_stiffness(K, coupled_dofs: np.ndarray, coupling_of: np.ndarray, G: n
     gk[coupled_dofs] = coupling_of
     gslot = np.full(n, -1, np.int64)
     gslot[coupled_dofs] = np.arange(len(coupled_dofs))
+    from flexure import threads
     from flexure._reduce_kernels import count, fill
 
     cnt = np.empty(nf, np.int64)
     indptr = K.indptr.astype(np.int64, copy=False)
-    touches = count(indptr, K.indices, fdofs, fmap, gk, m, cnt)
+    tcnt = np.empty(nf, np.int64)
+    touches = count(indptr, K.indices, fdofs, fmap, gk, m, cnt, tcnt)
+    toff = np.zeros(nf + 1, np.int64)
+    np.cumsum(tcnt, out=toff[1:])
     nr = 6 * m
     nq = nf + nr
     nnz_f = int(cnt.sum())
@@ -55,8 +59,10 @@ def reduced_stiffness(K, coupled_dofs: np.ndarray, coupling_of: np.ndarray, G: n
     oind = np.empty(nnz, idx)
     odat = np.empty(nnz)
     trow, tk, tval = np.empty(touches, np.int64), np.empty(touches, np.int64), np.empty((touches, 6))
-    fill(indptr, K.indices, K.data, fdofs, fmap, gk, gslot, np.ascontiguousarray(G, float), m, nf,
-         indptr_out, oind, odat, trow, tk, tval)
+    nt = threads.use()
+    with threads.dynamic():
+        fill(indptr, K.indices, K.data, fdofs, fmap, gk, gslot, np.ascontiguousarray(G, float), m, nf,
+             indptr_out, oind, odat, toff, trow, tk, tval, 1 if nt == 1 else 8 * nt)
     # reference rows: (K_fc G)ᵀ (the touches, rows increasing), then Gᵀ K_cc G (dense 6m)
     Gs = sp.csr_matrix((G.ravel(), (np.repeat(np.arange(len(coupled_dofs)), 6),
                                     6 * np.repeat(coupling_of, 6) + np.tile(np.arange(6), len(coupled_dofs)))),

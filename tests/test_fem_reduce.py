@@ -70,3 +70,15 @@ def test_unsorted_stiffness_is_accepted(monkeypatch):
     S.has_sorted_indices = False
     S.sort_indices()                                      # the flag is true: sorting changes nothing
     assert new_u.A.has_sorted_indices and np.array_equal(S.indices, new_u.A.indices)
+
+
+def test_same_bits_for_one_and_two_threads(monkeypatch):
+    from flexure import threads
+
+    p, K = _problem((3, 24, 2), True, False)
+    with threads.limited(1):
+        a = p.reduced_system(K).A
+    with threads.limited(2):
+        b = p.reduced_system(K).A
+    assert np.array_equal(a.indptr, b.indptr) and np.array_equal(a.indices, b.indices)
+    assert np.array_equal(a.data, b.data)
