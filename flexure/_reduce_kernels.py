@@ -1,4 +1,5 @@
-"""The compiled row loops of flexure.reduce (numba, compiled on first use and cached)."""
+"""The compiled row loops of flexure.reduce, and the 3×3 diagonal blocks of flexure.solve (numba,
+compiled on first use and cached)."""
 
 import numba
 import numpy as np
@@ -75,3 +76,16 @@ def _fill_rows(indptr, indices, data, fdofs, fmap, gk, gslot, G, m, nf, optr, oi
                     tval[t, c] = acc[6 * k + c]
                     o += 1
                 t += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def diagonal_blocks(indptr, indices, data, D):
+    """D[i] = the 3×3 diagonal block A[3i:3i+3, 3i:3i+3] of a CSR matrix (flexure.solve's
+    block-diagonal inverse); zero where A has no entry."""
+    for i in range(D.shape[0]):
+        for a in range(3):
+            r = 3 * i + a
+            for p in range(indptr[r], indptr[r + 1]):
+                j = indices[p] - 3 * i
+                if 0 <= j < 3:
+                    D[i, a, j] += data[p]

@@ -82,3 +82,16 @@ def test_same_bits_for_one_and_two_threads(monkeypatch):
         b = p.reduced_system(K).A
     assert np.array_equal(a.indptr, b.indptr) and np.array_equal(a.indices, b.indices)
     assert np.array_equal(a.data, b.data)
+
+
+def test_block_diagonal_inverse_compiled_equals_the_diagonals(monkeypatch):
+    from flexure import solve as fsolve
+
+    p, K = _problem((3, 24, 2), True, True)
+    A = p.reduced_system(K).A
+    A = A[:A.shape[0] - A.shape[0] % 3][:, :A.shape[0] - A.shape[0] % 3]
+    monkeypatch.setattr(fsolve, "BLOCKS_COMPILED", False)
+    ref = fsolve.block_diagonal_inverse(A)
+    monkeypatch.setattr(fsolve, "BLOCKS_COMPILED", True)
+    new = fsolve.block_diagonal_inverse(A)
+    assert np.array_equal(new, ref)
