@@ -34,6 +34,30 @@ def _numba() -> bool:
     return True
 
 
+def _row_entries(A, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions in A.data/A.indices of the entries of ``rows`` of CSR A, and their row."""
+    lo, hi = A.indptr[rows].astype(np.int64), A.indptr[rows + 1].astype(np.int64)
+    n = hi - lo
+    start = np.repeat(lo - np.concatenate([[0], np.cumsum(n)[:-1]]), n)
+    return start + np.arange(int(n.sum())), np.repeat(rows, n)
+
+
+def _zero_fixed(A, fixed: np.ndarray, isfix: np.ndarray, scale: float) -> bool:
+    """Rows and columns ``fixed`` of the structurally symmetric CSR A zeroed, their diagonal
+    ``scale``, visiting only the rows that hold them (the fixed rows and their columns' rows);
+    False (A untouched) if a fixed row has no diagonal entry."""
+    p, r = _row_entries(A, fixed)
+    if np.count_nonzero(A.indices[p] == r) != len(fixed):
+        return False
+    rows = np.unique(np.concatenate([fixed, A.indices[p]]))
+    p, r = _row_entries(A, rows)
+    c = A.indices[p]
+    diag = (r == c) & isfix[r]
+    A.data[p[(isfix[r] | isfix[c]) & ~diag]] = 0.0
+    A.data[p[diag]] = scale
+    return True
+
+
 def _faces_checked(mesh: Mesh, faces, what: str) -> np.ndarray:
     faces = np.asarray(faces, dtype=np.int64)
     nf = 3 if mesh.order == 1 else 6
@@ -330,9 +354,10 @@ class Problem:
                 b = b - A @ gq
             scale = float(np.mean(np.abs(A.diagonal()))) or 1.0
             isfix = np.zeros(A.shape[0], dtype=bool); isfix[fixed_q] = True
-            rows_fixed = np.repeat(isfix, np.diff(A.indptr))
-            A.data[rows_fixed | isfix[A.indices]] = 0.0
-            A.setdiag(np.where(isfix, scale, A.diagonal()))
+            if not (REDUCE_COMPILED and _zero_fixed(A, fixed_q, isfix, scale)):
+                rows_fixed = np.repeat(isfix, np.diff(A.indptr))
+                A.data[rows_fixed | isfix[A.indices]] = 0.0
+                A.setdiag(np.where(isfix, scale, A.diagonal()))
             A.eliminate_zeros()
             b = b.copy(); b[fixed_q] = scale * g
         coarse, B_coarse = (None, None)
