@@ -19,7 +19,9 @@ Prints seconds and ratios new/old and the 1-minute load. Measured 2026-11-27 (th
 scipy path (0.52–1.83 s against 2.6–4.4 s), A equal to 2.7e-17 of max |A|; the coarse LU 0.31 s
 against 0.66 s (COLAMD); solve_goals 19.4–20.1 s against 23.1–23.6 s (0.85 ×: assemble 5.1 against
 6.9 s, set-up 3.6 against 4.7 s, CG 10.3 against 10.9 s), the same iterations [19, 10, 10, 10, 10],
-θ and the gauge readings equal to 1.4e-13.
+θ and the gauge readings equal to 1.4e-13. At load 1.3 (same day, --repeat 2 --cg --goals):
+reduced_system 0.37 s against 1.26 s (0.30 ×); solve_goals 6.07 s against 7.09 s (0.86 ×: assemble
+1.78 against 2.39 s, set-up 1.02 against 1.39 s, CG 3.10 against 3.14 s), goals equal to 2.7e-13.
 """
 
 from __future__ import annotations
