@@ -22,6 +22,42 @@ from flexure.fem import TRI_QUAD, rigid_body_modes, tri_shape
 from flexure.mesh import Mesh
 
 
+#: A = Tᵀ K T by flexure.reduce's compiled row loop (False: scipy's products, the reference)
+REDUCE_COMPILED = True
+
+
+def _numba() -> bool:
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _row_entries(A, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions in A.data/A.indices of the entries of ``rows`` of CSR A, and their row."""
+    lo, hi = A.indptr[rows].astype(np.int64), A.indptr[rows + 1].astype(np.int64)
+    n = hi - lo
+    start = np.repeat(lo - np.concatenate([[0], np.cumsum(n)[:-1]]), n)
+    return start + np.arange(int(n.sum())), np.repeat(rows, n)
+
+
+def _zero_fixed(A, fixed: np.ndarray, isfix: np.ndarray, scale: float) -> bool:
+    """Rows and columns ``fixed`` of the structurally symmetric CSR A zeroed, their diagonal
+    ``scale``, visiting only the rows that hold them (the fixed rows and their columns' rows);
+    False (A untouched) if a fixed row has no diagonal entry."""
+    p, r = _row_entries(A, fixed)
+    if np.count_nonzero(A.indices[p] == r) != len(fixed):
+        return False
+    rows = np.unique(np.concatenate([fixed, A.indices[p]]))
+    p, r = _row_entries(A, rows)
+    c = A.indices[p]
+    diag = (r == c) & isfix[r]
+    A.data[p[(isfix[r] | isfix[c]) & ~diag]] = 0.0
+    A.data[p[diag]] = scale
+    return True
+
+
 def _faces_checked(mesh: Mesh, faces, what: str) -> np.ndarray:
     faces = np.asarray(faces, dtype=np.int64)
     nf = 3 if mesh.order == 1 else 6
@@ -275,6 +311,7 @@ class Problem:
             B[:3 * len(free_nodes)] = B_full.reshape(n, 3, 6)[free_nodes].reshape(-1, 6)
             bq_extra = np.zeros(6 * len(kin))
             ref_slices = []
+            g_dofs, g_of, g_rows = [], [], []
             for k, c in enumerate(kin):
                 base = 3 * len(free_nodes) + 6 * k
                 ref_slices.append(slice(base, base + 6))
@@ -287,6 +324,8 @@ class Problem:
                 cc = base + np.broadcast_to(np.arange(6), blk.shape)
                 nz = blk != 0
                 rows.append(r[nz]); cols.append(cc[nz]); vals.append(blk[nz])
+                g_dofs.append((3 * c.nodes[:, None] + np.arange(3)).ravel())
+                g_of.append(np.full(3 * len(c.nodes), k)); g_rows.append(blk.reshape(-1, 6))
                 bq_extra[6 * k:6 * k + 3] = c.force_N
                 bq_extra[6 * k + 3:6 * k + 6] = c.moment_Nm
                 # rigid modes of the reference dofs: translation e_k → (e_k, 0); rotation a → (a×(x_r−c), a)
@@ -295,7 +334,14 @@ class Problem:
                 B[base + 3:base + 6, 3:] = np.eye(3)
             T = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                               shape=(3 * n, n_q))
-            A = _condensed(K, T, 3 * len(free_nodes))
+            if REDUCE_COMPILED and _numba():
+                from flexure.reduce import reduced_stiffness
+
+                gd = np.concatenate(g_dofs)
+                o = np.argsort(gd)
+                A = reduced_stiffness(K, gd[o], np.concatenate(g_of)[o], np.concatenate(g_rows)[o], len(kin))
+            else:
+                A = (T.T @ K @ T).tocsr()                                # the reference path
             b = T.T @ f
             b[3 * len(free_nodes):] += bq_extra
             fixed_nodes_dofs = np.flatnonzero(self.fixed[free_nodes].ravel())
@@ -308,9 +354,10 @@ class Problem:
                 b = b - A @ gq
             scale = float(np.mean(np.abs(A.diagonal()))) or 1.0
             isfix = np.zeros(A.shape[0], dtype=bool); isfix[fixed_q] = True
-            rows_fixed = np.repeat(isfix, np.diff(A.indptr))
-            A.data[rows_fixed | isfix[A.indices]] = 0.0
-            A.setdiag(np.where(isfix, scale, A.diagonal()))
+            if not (REDUCE_COMPILED and _zero_fixed(A, fixed_q, isfix, scale)):
+                rows_fixed = np.repeat(isfix, np.diff(A.indptr))
+                A.data[rows_fixed | isfix[A.indices]] = 0.0
+                A.setdiag(np.where(isfix, scale, A.diagonal()))
             A.eliminate_zeros()
             b = b.copy(); b[fixed_q] = scale * g
         coarse, B_coarse = (None, None)
@@ -396,15 +443,3 @@ class Problem:
         """Nodal displacements (n,3) from the reduced solution q."""
         u = q if system.T is None else system.T @ q
         return np.asarray(u).reshape(-1, 3)
-
-
-def _condensed(K, T, n_free: int):
-    """Tᵀ K T: compiled (flexure.condense) where numba is, else by CSR products (Tᵀ as CSR: CSC @ CSR
-    would copy K to CSC first)."""
-    from flexure import stiffness_assembly
-
-    if stiffness_assembly.available():
-        from flexure.condense import tkt
-
-        return tkt(K, T, n_free)
-    return ((T.T.tocsr() @ K.tocsr()) @ T).tocsr()

@@ -52,6 +52,8 @@ PMG_SWEEPS = 1
 #: iterations at 72k DOFs and 22–31 at 145k (2 levels), 39–46 at 317k (3 levels with 1000);
 #: with 6000 the 317k model keeps 2 levels and needs 22–30 (benchmarks/bench_fem.py --only ladder).
 PMG_MAX_COARSE = 6000
+#: the 3×3 diagonal blocks by one compiled pass over the rows (False: nine scipy diagonals, the reference)
+BLOCKS_COMPILED = True
 
 
 @dataclass
@@ -110,10 +112,15 @@ def block_diagonal_inverse(A) -> np.ndarray:
     A = sp.csr_matrix(A)
     nb = A.shape[0] // 3
     D = np.zeros((nb, 3, 3))
-    for a in range(3):
-        for b in range(3):
-            d = A.diagonal(b - a)                  # k ≥ 0: A[r, r + k];  k < 0: A[r − k, r]
-            D[:, a, b] = d[3 * np.arange(nb) + min(a, b)]
+    if BLOCKS_COMPILED and _multirhs_available():       # one pass over the rows (duplicates summed, as diagonal())
+        from flexure._reduce_kernels import diagonal_blocks
+
+        diagonal_blocks(A.indptr, A.indices, A.data, D)
+    else:
+        for a in range(3):
+            for b in range(3):
+                d = A.diagonal(b - a)                  # k ≥ 0: A[r, r + k];  k < 0: A[r − k, r]
+                D[:, a, b] = d[3 * np.arange(nb) + min(a, b)]
     # LU where a block is regular (every block but a constrained or empty one): pinv's SVD per block
     # costs several times more; the rest by pinv, as before
     det = np.linalg.det(D)
