@@ -10,6 +10,13 @@ Prints per storage: set-up and CG seconds, PCG iterations, the bytes of K_WW + K
 the ratios against the old path of the same round, and the largest relative change of J(u⁺) − J(u_h)
 (θ and each gauge) against it (the CG to enriched.RTOL in each: the change is the effect on the CG's
 iterate, to compare with the estimate's own accuracy, ~10 %). The 1-minute load with every line.
+
+Measured 2026-11-27 (2 cores shared, load 5–6, --h-factor 1.0 --rounds 1; commit after 3f): K_WW + K_hW
+2397–2725 → 891–1013 B/P2 dof (0.37 x) in block32, 0.70 x in block64; set-up 0.57–0.89 x; CG 0.77–0.93 x
+in block32/jacobi with the same iterations (29, 23, 24, 22 on paper_disc 134 k, thick_disc 229 k,
+reentrant 138 k, cross_frame 142 k) and d moved ≤ 1.3e-4; block32/sgs 19, 17, 18, 17 iterations, CG
+0.55–1.07 x, d moved ≤ 3.7e-3 on three parts but 0.12 on paper_disc's smallest gauge (the CG's RTOL
+matters more with sgs: why enriched.W_PRECOND stays "jacobi").
 """
 
 from __future__ import annotations
