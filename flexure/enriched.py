@@ -41,6 +41,18 @@ from flexure.mesh import TET_EDGES, TET_FACES, TET_FACES_P2, Mesh
 #: iterations where 1e-3 took 43, 33, 33 (≤ 0.1 %)
 RTOL = 1e-2
 MAX_ITER = 2000
+#: K_WW and K_hW as 3 × 3 blocks of float32 values (flexure.block_sparse; products summed in float64):
+#: 40 bytes a block against 108 in the scalar float64 CSR. Its rounding (relative 6e-8 an entry) is far
+#: below the CG's 1e-2: d moved by ≤ 1.3e-4 (relative, θ and gauges, 2026-11-27, first adaptive meshes at
+#: h-factor 1: paper_disc 134 k P2 dofs, thick_disc 229 k, reentrant 138 k, cross_frame 142 k) in the
+#: same PCG iterations; converged (rtol 1e-12) by ~1e-7 (tests/test_block_sparse.py)
+STORAGE = "block32"
+#: the W block of the preconditioner: "sgs", one multicolour symmetric block Gauss–Seidel sweep pair on
+#: K_WW (flexure.block_sparse; as good as K_WW⁻¹ itself: paper_disc 28.5 k P2 dofs 37 → 25 PCG
+#: iterations, K_WW⁻¹ exactly 24), or "jacobi" (its 3 × 3 diagonal blocks: the default until RTOL is
+#: re-checked with "sgs", whose iterate at 1e-2 is 7 % off the converged d of paper_disc's smallest gauge d (134 k P2 dofs;
+#: jacobi 4 % in 29 iterations; sgs at 5e-3: 2.7 % in 21)
+W_PRECOND = "jacobi"
 
 
 def surplus_numbering(mesh: Mesh, constrained: np.ndarray):
@@ -143,8 +155,16 @@ def _block_jacobi(K):
     return np.linalg.inv(D)
 
 
+def _nbytes(M) -> int:
+    """Bytes of a scipy CSR or flexure.block_sparse.BlockMatrix's arrays."""
+    if hasattr(M, "indptr"):
+        return M.data.nbytes + M.indices.nbytes + M.indptr.nbytes
+    return M.nbytes
+
+
 def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarray, constrained: np.ndarray,
-                   precond_h, rtol: float = RTOL, max_iter: int = MAX_ITER, theta_index: int | None = None):
+                   precond_h, rtol: float = RTOL, max_iter: int = MAX_ITER, theta_index: int | None = None,
+                   storage: str | None = None, w_precond: str | None = None):
     """The Galerkin error e⁺ = u⁺ − u_h in V⁺ = V_h ⊕ W of the load case whose P2 solution is the
     reduced q0 (nodal U0 (n,3)), solved as one system (module docstring)
 
@@ -155,7 +175,9 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
     p-multigrid cycle) on the V_h block, 3 × 3 block Jacobi on W (spectrally equivalent to K_WW,
     h-independent). The first block row also takes up the P2 solve's algebraic error. → (J(u⁺) −
     J(u_h) of each gauge (g,), of the reduced dof ``theta_index`` (the hub rotation; NaN if None),
-    info)."""
+    info). ``storage`` (default STORAGE) of K_WW and K_hW in the compiled path: "block32", "block64"
+    (flexure.block_sparse) or "csr" (scalar CSR, float64); ``w_precond`` (default W_PRECOND) the W
+    block's preconditioner: "sgs" (block storages) or "jacobi"."""
     import scipy.sparse as sp
 
     from flexure import dwr
@@ -168,20 +190,28 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
     nq = A.shape[0]
     mask = np.ones(nq)
     mask[system.fixed_q] = 0.0
+    storage = STORAGE if storage is None else storage
     if enriched_assembly.available():            # compiled: C kept on the nodal rows, T and the mask applied
-        Kww, rW, C, Dinv, num = enriched_assembly.assemble_enriched(
-            mesh, material, U0, surplus_numbering(mesh, np.asarray(constrained, bool)))
+        num = surplus_numbering(mesh, np.asarray(constrained, bool))
+        if storage == "csr":
+            Kww, rW, C, Dinv, num = enriched_assembly.assemble_enriched(mesh, material, U0, num)
+            c_mv, c_rmv = (lambda x: sparse_parallel.matvec(C, x)), (lambda x: sparse_parallel.rmatvec(C, x))
+            k_mv = lambda x: sparse_parallel.matvec(Kww, x)  # noqa: E731
+        else:                                    # 3 × 3 blocks, float32 or float64 values
+            Kww, rW, C, Dinv, num = enriched_assembly.assemble_enriched_blocks(
+                mesh, material, U0, num, np.float32 if storage == "block32" else np.float64)
+            c_mv, c_rmv, k_mv = C.matvec, C.rmatvec, Kww.matvec
         G, sign, free = num
         keep = np.repeat(free, 3)
         T, TT = system.T, None if system.T is None else system.T.T.tocsr()
 
         def coupling(xw):                        # mask Tᵀ C x_W
-            y = sparse_parallel.matvec(C, xw)
+            y = c_mv(xw)
             return mask * (y if TT is None else TT @ y)
 
         def coupling_t(xh):                      # Cᵀ T (mask x_h)
             y = mask * xh
-            return sparse_parallel.rmatvec(C, y if T is None else T @ y)
+            return c_rmv(y if T is None else T @ y)
     else:
         Kww, rW, num = assemble(mesh, material, U0, constrained)
         G, sign, free = num
@@ -195,6 +225,8 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
         Dinv = _block_jacobi(Kww)
         CqT = Cq.T                               # a CSC view: no second copy of the coupling
         coupling, coupling_t = Cq.__matmul__, CqT.__matmul__
+        k_mv = lambda x: sparse_parallel.matvec(Kww, x)  # noqa: E731
+    w_sgs = (W_PRECOND if w_precond is None else w_precond) == "sgs" and hasattr(Kww, "symmetric_gauss_seidel")
     b = np.zeros(nq) if theta_index is None else np.eye(1, nq, theta_index).ravel()
     rh = (system.b if theta_index is None else b) - A @ q0
     rh[system.fixed_q] = 0.0
@@ -203,12 +235,14 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
 
     def matvec(x):
         xh, xw = x[:nq], x[nq:]
-        return np.concatenate([sparse_parallel.matvec(A, xh) + coupling(xw),
-                               coupling_t(xh) + sparse_parallel.matvec(Kww, xw)])
+        return np.concatenate([sparse_parallel.matvec(A, xh) + coupling(xw), coupling_t(xh) + k_mv(xw)])
 
     def prec(r):
         zh = np.asarray(precond_h(np.ascontiguousarray(r[:nq, None])))[:, 0]
-        zw = np.einsum("kij,kj->ki", Dinv, r[nq:].reshape(-1, 3)).ravel()
+        if w_sgs:
+            zw = Kww.symmetric_gauss_seidel(Dinv, r[nq:])
+        else:
+            zw = np.einsum("kij,kj->ki", Dinv, r[nq:].reshape(-1, 3)).ravel()
         return np.concatenate([zh, zw])
 
     x = np.zeros(len(rhs))
@@ -238,6 +272,7 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
     d_eps = np.einsum("nig,ni->g", F, uh) + dwr.gauge_indicators(mesh, gauges, coef[:, :6], coef[:, 6:]).sum(axis=0)
     d_theta = float(eh[theta_index]) if theta_index is not None else math.nan
     info = {"enriched_dofs": int(nq + keep.sum()), "pcg_iterations": int(its), "setup_s": t1 - t0,
+            "matrix_bytes": int(sum(_nbytes(M) for M in (Kww, C if enriched_assembly.available() else Cq))),
             "solve_s": time.perf_counter() - t1, "coef": coef}
     return d_eps, d_theta, info
 

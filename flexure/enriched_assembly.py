@@ -57,3 +57,43 @@ def assemble_enriched(mesh: Mesh, material, u: np.ndarray, numbering, traction=N
                     float(material.shear_modulus_Pa), kb, kc, K.data, cb, cc, C.data, r, D,
                     *ek.colour_elements(np.ascontiguousarray(tets[:, :4]), mesh.n_nodes), 1 if nt == 1 else 8 * nt)
     return K, r, C, np.linalg.inv(D), (G, sign, free)
+
+
+def assemble_enriched_blocks(mesh: Mesh, material, u: np.ndarray, numbering, dtype=np.float32, traction=None):
+    """``assemble_enriched`` with K_WW and K_hW as flexure.block_sparse.BlockMatrix of values ``dtype``
+    (float32: element terms computed in float64, summed into float32; 4.4 bytes an entry against
+    12 in the scalar CSR): → (K_WW, r_W, K_hW, the inverse 3 × 3 diagonal blocks of K_WW (float64,
+    summed in float64), the numbering)."""
+    from flexure import _block_kernels as bk
+    from flexure import _enriched_kernels as ek
+    from flexure import threads
+    from flexure.bank_weiser import face_rhs
+    from flexure.block_sparse import BlockMatrix
+    from flexure.fem import tet_shape
+    from flexure.surplus import surplus_basis, tet_rule_degree5
+
+    G, sign, free = numbering
+    kept = np.cumsum(free) - 1
+    nk = int(free.sum())
+    Gk = np.where(free[G], kept[G], -1).astype(np.int64)
+    tets = np.ascontiguousarray(mesh.tets, dtype=np.int64)
+    nt = threads.use()
+    kb, kc = ek.block_pattern(Gk, Gk, nk, nk, nt)
+    kc = kc.astype(np.int32)
+    cb, cc = ek.block_pattern(tets, Gk, mesh.n_nodes, nk, nt)
+    cc = cc.astype(np.int32)
+    K = BlockMatrix(kb, kc, np.zeros((len(kc), 3, 3), dtype), nk)
+    C = BlockMatrix(cb, cc, np.zeros((len(cc), 3, 3), dtype), nk)
+    rhs = face_rhs(mesh, material, u, traction)
+    xi, wq = tet_rule_degree5()
+    _, dN = tet_shape(2, xi)
+    _, dB = surplus_basis(xi)
+    r = np.zeros(3 * nk)
+    D = np.zeros((nk, 3, 3))
+    with threads.dynamic():
+        bk.assemble(np.ascontiguousarray(mesh.points, float), tets, np.ascontiguousarray(np.asarray(u, float).reshape(-1, 3)),
+                    np.ascontiguousarray(rhs), Gk, np.ascontiguousarray(sign), np.ascontiguousarray(dN),
+                    np.ascontiguousarray(dB), np.ascontiguousarray(wq), float(material.lame_lambda_Pa),
+                    float(material.shear_modulus_Pa), kb, kc, K.data, cb, cc, C.data, r, D,
+                    *ek.colour_elements(np.ascontiguousarray(tets[:, :4]), mesh.n_nodes), 1 if nt == 1 else 8 * nt)
+    return K, r, C, np.linalg.inv(D), (G, sign, free)

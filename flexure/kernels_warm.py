@@ -7,7 +7,8 @@ import numpy as np
 
 def warm() -> bool:
     """Compile (and cache) the FEM's parallel loops on a tiny mesh — the stiffness, the enriched
-    assembly, the CSR products, the coupling's condensation — so that the first analysis does not pay numba's compile time
+    assembly (CSR and 3 × 3 blocks), the sparse products, the block Gauss–Seidel, the coupling's condensation —
+    so that the first analysis does not pay numba's compile time
     (measured 30 + 14 + 9 s at load 4: benchmarks/bench_fem_parallel.py --cold); False without numba."""
     from flexure import stiffness_assembly
 
@@ -24,10 +25,15 @@ def warm() -> bool:
     top = np.flatnonzero(m.points[:, 2] == m.points[:, 2].max())
     prob = Problem(m, mat).fix(np.flatnonzero(m.points[:, 2] == 0))
     prob.couple_rigid(top, (0.5, 0.5, 1.0))
-    prob.reduced_system(K)                       # flexure.condense's loop
+    prob.reduced_system(K)                       # flexure.reduce's loop (Tᵀ K T)
     C = enriched_assembly.assemble_enriched(m, mat, np.zeros((m.n_nodes, 3)),
                                             enriched.surplus_numbering(m, np.zeros(m.n_nodes, bool)))[2]
+    Kb, _, Cb, Dinv, _ = enriched_assembly.assemble_enriched_blocks(
+        m, mat, np.zeros((m.n_nodes, 3)), enriched.surplus_numbering(m, np.zeros(m.n_nodes, bool)))
     with threads.limited(2):
         sparse_parallel.matvec(K, np.ones(K.shape[0]))
         sparse_parallel.rmatvec(C, np.ones(C.shape[0]))
+        Cb.matvec(np.ones(Cb.shape[1]))
+        Cb.rmatvec(np.ones(Cb.shape[0]))
+        Kb.symmetric_gauss_seidel(Dinv, np.ones(Kb.shape[0]))
     return True

@@ -52,7 +52,8 @@ def test_compiled_assembly_equals_the_numpy_form(constrain):
 def test_enriched_solve_is_the_same_with_the_compiled_assembly(monkeypatch):
     """The rigidly coupled bar of tests/test_enriched.py: θ⁺ − θ_h and the gauge's J(u⁺) − J(u_h)
     from the compiled assembly (coupling applied through T and the Dirichlet mask in the product)
-    and from the numpy form agree to the CG's round-off."""
+    and from the numpy form agree to the CG's round-off (the compiled path's scalar CSR storage: the
+    float32 blocks in tests/test_block_sparse.py)."""
     from estimator import compiled
     from test_enriched import _bar
 
@@ -66,7 +67,7 @@ def test_enriched_solve_is_the_same_with_the_compiled_assembly(monkeypatch):
     for on in (True, False):
         monkeypatch.setattr(compiled, "ENABLED", on)
         d_eps, d_th, info = enriched.enriched_solve(sy, mesh, AL, [g], U, q, cons, lambda R: lu.solve(R),
-                                                    rtol=1e-12, theta_index=i_th)
+                                                    rtol=1e-12, theta_index=i_th, storage="csr")
         out.append((d_eps[0], d_th, info["enriched_dofs"]))
     assert out[0][2] == out[1][2]
     assert out[0][0] == pytest.approx(out[1][0], rel=1e-9)

@@ -1,0 +1,177 @@
+"""The compiled loops of flexure.block_sparse (numba, compiled on first use and cached beside this
+file): the enriched element loop of flexure._enriched_kernels adding into 3 × 3 block-sparse (BSR)
+arrays of any float type (one column index per block, not per entry), and the block products
+y = A x, y = Aᵀ x (each entry accumulated in float64 whatever the stored type)."""
+
+import numba
+import numpy as np
+
+from flexure import threads
+from flexure._enriched_kernels import _element, _slot
+
+threads.select_layer()                 # before any parallel loop runs (flexure.threads: fork safety)
+
+
+@numba.njit(cache=True, nogil=True)
+def _add(data, bptr, bcol, r, c, A, a0, c0, s):
+    """data[block (r, c)] += s A[a0:a0+3, c0:c0+3] (data (n_blocks, 3, 3))."""
+    p = bptr[r] + _slot(bptr, bcol, r, c)
+    for i in range(3):
+        for j in range(3):
+            data[p, i, j] += s * A[a0 + i, c0 + j]
+
+
+@numba.njit(cache=True, nogil=True)
+def _scatter(e, tets, Gk, sign, AB, AC, rl, kb, kc, kdata, cb, cc, cdata, r, D):
+    """Element e's blocks into the K_WW and coupling block data, r and D (flexure._enriched_kernels._scatter)."""
+    for b in range(10):
+        gb = Gk[e, b]
+        if gb < 0:
+            continue
+        sb = sign[e, b]
+        for i in range(3):
+            r[3 * gb + i] += sb * rl[b, i]
+        for c in range(10):
+            gc = Gk[e, c]
+            if gc < 0:
+                continue
+            _add(kdata, kb, kc, gb, gc, AB, 3 * b, 3 * c, sb * sign[e, c])
+            if b == c:
+                for i in range(3):
+                    for j in range(3):
+                        D[gb, i, j] += AB[3 * b + i, 3 * b + j]
+    for a in range(10):
+        na = tets[e, a]
+        for c in range(10):
+            gc = Gk[e, c]
+            if gc >= 0:
+                _add(cdata, cb, cc, na, gc, AC, 3 * a, 3 * c, sign[e, c])
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def assemble(points, tets, u, rhs_face, Gk, sign, dN, dB, wq, lmb, mu,
+             kb, kc, kdata, cb, cc, cdata, r, D, cptr, order, nchunk):
+    """flexure._enriched_kernels.assemble into block data kdata, cdata (n_blocks, 3, 3): colour by
+    colour, each colour's elements in ``nchunk`` ranges (results independent of the thread count)."""
+    for col in range(len(cptr) - 1):
+        lo, hi = cptr[col], cptr[col + 1]
+        for t in numba.prange(nchunk):
+            X = np.empty((10, 3))
+            ue = np.empty((10, 3))
+            J = np.empty((3, 3))
+            Jinv = np.empty((3, 3))
+            gN = np.empty((10, 3))
+            gB = np.empty((10, 3))
+            PB = np.empty((30, 30))
+            PC = np.empty((30, 30))
+            AB = np.empty((30, 30))
+            AC = np.empty((30, 30))
+            rl = np.empty((10, 3))
+            sig = np.empty((3, 3))
+            for k in range(lo + (hi - lo) * t // nchunk, lo + (hi - lo) * (t + 1) // nchunk):
+                e = order[k]
+                _element(e, points, tets, u, rhs_face, dN, dB, wq, lmb, mu, X, ue, J, Jinv, gN, gB,
+                         PB, PC, AB, AC, rl, sig)
+                _scatter(e, tets, Gk, sign, AB, AC, rl, kb, kc, kdata, cb, cc, cdata, r, D)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def matvec(bptr, bcol, data, x, y):
+    """y_3r+i = Σ_p Σ_j data[p, i, j] x_3 bcol_p + j, p ∈ [bptr_r, bptr_r+1) (each row in order)."""
+    for r in numba.prange(len(bptr) - 1):
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        for p in range(bptr[r], bptr[r + 1]):
+            c = 3 * np.int64(bcol[p])
+            x0, x1, x2 = x[c], x[c + 1], x[c + 2]
+            s0 += np.float64(data[p, 0, 0]) * x0 + np.float64(data[p, 0, 1]) * x1 + np.float64(data[p, 0, 2]) * x2
+            s1 += np.float64(data[p, 1, 0]) * x0 + np.float64(data[p, 1, 1]) * x1 + np.float64(data[p, 1, 2]) * x2
+            s2 += np.float64(data[p, 2, 0]) * x0 + np.float64(data[p, 2, 1]) * x1 + np.float64(data[p, 2, 2]) * x2
+        y[3 * r] = s0
+        y[3 * r + 1] = s1
+        y[3 * r + 2] = s2
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def rmatvec(bptr, bcol, data, x, y, nchunk):
+    """y = Aᵀ x (y zeroed here): the block rows in ``nchunk`` ranges, each into its own copy of y,
+    summed chunk by chunk."""
+    n = len(bptr) - 1
+    m = len(y)
+    part = np.zeros((nchunk, m))
+    for t in numba.prange(nchunk):
+        for r in range(n * t // nchunk, n * (t + 1) // nchunk):
+            x0, x1, x2 = x[3 * r], x[3 * r + 1], x[3 * r + 2]
+            for p in range(bptr[r], bptr[r + 1]):
+                c = 3 * np.int64(bcol[p])
+                for j in range(3):
+                    part[t, c + j] += (np.float64(data[p, 0, j]) * x0 + np.float64(data[p, 1, j]) * x1
+                                       + np.float64(data[p, 2, j]) * x2)
+    for j in numba.prange(m):
+        s = part[0, j]
+        for t in range(1, nchunk):
+            s += part[t, j]
+        y[j] = s
+
+
+@numba.njit(cache=True, nogil=True)
+def colour_rows(bptr, bcol):
+    """Greedy colouring of the block rows of a structurally symmetric pattern: no two rows of a
+    colour share a block → (cptr (n_colours+1,), order: the rows colour by colour, ascending)."""
+    n = len(bptr) - 1
+    colour = np.full(n, -1, np.int64)
+    forbid = np.full(n + 1, -1, np.int64)
+    n_col = 0
+    for r in range(n):
+        for p in range(bptr[r], bptr[r + 1]):
+            c = colour[bcol[p]]
+            if c >= 0:
+                forbid[c] = r
+        c = 0
+        while forbid[c] == r:
+            c += 1
+        colour[r] = c
+        n_col = max(n_col, c + 1)
+    cptr = np.zeros(n_col + 1, np.int64)
+    for r in range(n):
+        cptr[colour[r] + 1] += 1
+    for c in range(n_col):
+        cptr[c + 1] += cptr[c]
+    fill = cptr[:-1].copy()
+    order = np.empty(n, np.int64)
+    for r in range(n):
+        order[fill[colour[r]]] = r
+        fill[colour[r]] += 1
+    return cptr, order
+
+
+@numba.njit(cache=True, nogil=True)
+def _relax(bptr, bcol, data, Dinv, r, z, k):
+    """z_k = D_k⁻¹ (r_k − Σ_{j ≠ k} K_kj z_j) (3 × 3 blocks, sums in float64)."""
+    s0, s1, s2 = r[3 * k], r[3 * k + 1], r[3 * k + 2]
+    for p in range(bptr[k], bptr[k + 1]):
+        j = np.int64(bcol[p])
+        if j == k:
+            continue
+        x0, x1, x2 = z[3 * j], z[3 * j + 1], z[3 * j + 2]
+        s0 -= np.float64(data[p, 0, 0]) * x0 + np.float64(data[p, 0, 1]) * x1 + np.float64(data[p, 0, 2]) * x2
+        s1 -= np.float64(data[p, 1, 0]) * x0 + np.float64(data[p, 1, 1]) * x1 + np.float64(data[p, 1, 2]) * x2
+        s2 -= np.float64(data[p, 2, 0]) * x0 + np.float64(data[p, 2, 1]) * x1 + np.float64(data[p, 2, 2]) * x2
+    for i in range(3):
+        z[3 * k + i] = Dinv[k, i, 0] * s0 + Dinv[k, i, 1] * s1 + Dinv[k, i, 2] * s2
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def symmetric_gauss_seidel(bptr, bcol, data, Dinv, cptr, order, r, z):
+    """z = M⁻¹ r, M = (D + L) D⁻¹ (D + U) in the colour order (``colour_rows``): from z = 0 one block
+    Gauss–Seidel sweep colour by colour, then one in the reverse colour order (rows of a colour in
+    parallel: they share no block, so the result does not depend on the thread count)."""
+    z[:] = 0.0
+    nc = len(cptr) - 1
+    for c in range(nc):
+        for q in numba.prange(cptr[c], cptr[c + 1]):
+            _relax(bptr, bcol, data, Dinv, r, z, order[q])
+    for c in range(nc - 1, -1, -1):
+        for q in numba.prange(cptr[c], cptr[c + 1]):
+            _relax(bptr, bcol, data, Dinv, r, z, order[q])

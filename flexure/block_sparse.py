@@ -1,0 +1,79 @@
+"""A 3 × 3 block-sparse matrix (BSR: block row pointer, one int32 column per block, values
+(n_blocks, 3, 3) of any float type) and its products on flexure.threads' threads: the enriched
+solve's K_WW and K_hW (flexure.enriched). Against the scalar CSR of the same matrix (float64 values,
+an int32 column per entry: 12 bytes an entry) it stores 4 + 9 s bytes a block (s the value size:
+4.4 bytes an entry in float32, 8.4 in float64); products accumulate in float64 (y = A x: each row
+in order, the same bits for every thread count; Aᵀ x: one partial sum per thread, then summed)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: block rows a thread takes at a time in A x (dynamic hand-out: flexure.threads.dynamic)
+ROW_CHUNK = 1024
+
+
+class BlockMatrix:
+    """(3 n_rows × 3 n_cols) with blocks ``data[p]`` at (r, bcol[p]), p ∈ [bptr[r], bptr[r+1])."""
+
+    def __init__(self, bptr: np.ndarray, bcol: np.ndarray, data: np.ndarray, n_cols: int):
+        self.bptr, self.bcol, self.data = bptr, bcol, data
+        self.shape = (3 * (len(bptr) - 1), 3 * int(n_cols))
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the arrays held."""
+        return self.bptr.nbytes + self.bcol.nbytes + self.data.nbytes
+
+    def astype(self, dtype) -> "BlockMatrix":
+        """The same pattern (shared) with values of ``dtype``."""
+        return BlockMatrix(self.bptr, self.bcol, self.data.astype(dtype), self.shape[1] // 3)
+
+    def matvec(self, x: np.ndarray) -> np.ndarray:
+        """A x (x (3 n_cols,) float64)."""
+        from flexure import _block_kernels as bk
+        from flexure import threads
+
+        y = np.empty(self.shape[0])
+        with threads.dynamic(ROW_CHUNK):
+            bk.matvec(self.bptr, self.bcol, self.data, np.ascontiguousarray(x, float), y)
+        return y
+
+    def rmatvec(self, x: np.ndarray) -> np.ndarray:
+        """Aᵀ x (x (3 n_rows,) float64)."""
+        from flexure import _block_kernels as bk
+        from flexure import threads
+
+        y = np.empty(self.shape[1])
+        bk.rmatvec(self.bptr, self.bcol, self.data, np.ascontiguousarray(x, float), y, max(1, threads.use()))
+        return y
+
+    def colouring(self):
+        """(cptr, order): the block rows by colour, no two of a colour sharing a block (square,
+        structurally symmetric patterns; computed once)."""
+        if getattr(self, "_colours", None) is None:
+            from flexure import _block_kernels as bk
+
+            self._colours = bk.colour_rows(self.bptr, self.bcol)
+        return self._colours
+
+    def symmetric_gauss_seidel(self, Dinv: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """z = M⁻¹ r of the multicolour symmetric block Gauss–Seidel M = (D + L) D⁻¹ (D + U) (D the
+        3 × 3 diagonal blocks, Dinv their inverses (n,3,3); SPD where A is): one forward and one
+        backward sweep from z = 0, each colour's rows in parallel."""
+        from flexure import _block_kernels as bk
+        from flexure import threads
+
+        z = np.empty(self.shape[0])
+        with threads.dynamic(ROW_CHUNK):
+            bk.symmetric_gauss_seidel(self.bptr, self.bcol, self.data, Dinv, *self.colouring(),
+                                      np.ascontiguousarray(r, float), z)
+        return z
+
+    def tocsr(self):
+        """The scipy CSR (float64) of the same matrix (tests, references)."""
+        import scipy.sparse as sp
+
+        n = len(self.bptr) - 1
+        return sp.bsr_matrix((self.data.astype(float), self.bcol.astype(np.int64), self.bptr.astype(np.int64)),
+                             shape=(3 * n, self.shape[1])).tocsr()
