@@ -290,7 +290,11 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             gain = rec["sizing"]["marks"]["gain"] or gain
             rec["safety_factor"] = _safety_factor(design, mesh, sol.U[:, :, 0])
             ref0 = sol.q[-6:] if design.coupling == "rigid" else None
-            tm, (x0, bands), rinfo = bisect(tm, marked, [sol.U, bands], rounds=ROUNDS, projector=projector)
+            new, (x0, bands_new), rinfo = bisect(tm, marked, [sol.U, bands], rounds=ROUNDS, projector=projector)
+            if rinfo.get("invalid_elements"):       # folded on the true surface past mending: this level is the answer
+                rec["invalid_elements"], stopped = int(rinfo["invalid_elements"]), "invalid_mesh"
+                break
+            tm, bands = new, bands_new
             sol = None                                       # free the old level's matrix and hierarchy
             rss.now_gb(trim=True)                           # ... and give the freed heap back to the system
             rec["refine_s"] = time.perf_counter() - tr
@@ -584,6 +588,8 @@ def _attach(res: dict, hist: list, design, rtol: float, stopped: str, max_dofs: 
     if stopped != "rtol":
         why = {"max_dofs": f"the next level would exceed --max-dofs {max_dofs}",
                "memory": f"the next level would exceed the memory budget {max_memory_gb:g} GB",
-               "max_levels": f"{MAX_LEVELS} levels"}[stopped]
+               "max_levels": f"{MAX_LEVELS} levels",
+               "invalid_mesh": f"the next refinement, whose {last.get('invalid_elements')} elements the projection onto "
+                               "the true surface left flat or inverted"}[stopped]
         res["warnings"] = list(res["warnings"]) + [
             f"--rtol {rtol:g} not reached: worst error estimate {worst:.2%} at {last['dofs']} dofs; stopped by {why}"]

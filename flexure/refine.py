@@ -500,24 +500,25 @@ def bisect(tm: TaggedMesh, elements, fields=(), rounds: int = 1, projector=None,
             info["projected_by_morph"] = settled["projected"]
             out.pending = settled["pending"]
     if projector is not None:
-        info["straightened"] = straighten_invalid(out)
+        info["straightened"], info["invalid_elements"] = straighten_invalid(out)
     return out, fields, info
 
 
-def straighten_invalid(tm: TaggedMesh, min_scaled: float = 0.05, rounds: int = 8) -> int:
+def straighten_invalid(tm: TaggedMesh, min_scaled: float = 0.05, rounds: int = 8) -> tuple[int, int]:
     """Make every element valid again (in place): a child samples its curved parent's map at new
     nodes, where the parent's det J (checked only at its quadrature points and nodes) can be ≤ 0.
     The mid nodes of an element whose det J falls below ``min_scaled`` × its straight det are put
     back on their straight midpoints (a straight element with a positive det is valid), their
     neighbours re-checked; the boundary ones join ``pending`` (retried at the next refinement).
-    → how many mid nodes were straightened."""
+    → (how many mid nodes were straightened, how many elements are still invalid: a straight element
+    flat or inverted, which no mid node can mend — the caller must not solve on that mesh)."""
     mesh = tm.mesh
     t = mesh.tets
     check = np.arange(len(t))
     moved = np.zeros(mesh.n_nodes, bool)
-    for _ in range(rounds):
+    for _ in range(rounds + 1):
         bad = check[~element_valid(mesh, check, min_scaled)]
-        if len(bad) == 0:
+        if len(bad) == 0 or _ == rounds:
             break
         for j, (a, b) in enumerate(TET_EDGES.tolist()):
             mid = t[bad, 4 + j]
@@ -529,7 +530,7 @@ def straighten_invalid(tm: TaggedMesh, min_scaled: float = 0.05, rounds: int = 8
         nodes, dims, tags = mid_node_targets(tm)
         sel = moved[nodes]
         tm.pending = _strongest(*[np.concatenate([p, q[sel]]) for p, q in zip(tm.pending, (nodes, dims, tags))])
-    return int(moved.sum())
+    return int(moved.sum()), int(len(bad))
 
 
 def check_conforming(mesh: Mesh) -> None:

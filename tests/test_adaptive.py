@@ -107,6 +107,24 @@ def test_estimate_covers_the_last_change(small_run):
         assert a["estimate"]["torsional_stiffness_Nm_per_rad"] >= change > 0
 
 
+def test_a_refinement_left_folded_stops_at_the_last_valid_level(tmp_path, monkeypatch):
+    """A refinement whose projection leaves elements flat or inverted (refine.straighten_invalid cannot mend
+    them) is not solved on: the run answers with the level before it and says why."""
+    import flexure.refine as refine
+
+    real = refine.bisect
+
+    def folded(*a, **k):
+        out, fields, info = real(*a, **k)
+        return out, fields, {**info, "invalid_elements": 3}
+
+    monkeypatch.setattr(refine, "bisect", folded)
+    res, _ = analyze_adaptive(annulus(tmp_path, sections=24), rtol=1e-5, initial_h_factor=2.5)
+    assert res["stopped_by"] == "invalid_mesh" and len(res["discretization_levels"]) == 1
+    assert any("not reached" in w and "3 elements" in w and "flat or inverted" in w for w in res["warnings"])
+    assert all(math.isfinite(res[f"{k}_error_estimate"]) for k in ("gauge_strain_per_Nm", "torsional_stiffness_Nm_per_rad"))
+
+
 @pytest.mark.parametrize("budget,stop,needle", [
     pytest.param({"max_dofs": 8_000}, "max_dofs", "--max-dofs 8000", marks=pytest.mark.slow),
     ({"max_memory_gb": 0.2}, "memory", "memory budget 0.2 GB")])

@@ -243,3 +243,20 @@ def test_morph_local_puts_nodes_on_the_surface_with_the_interior_following():
     assert (np.linalg.norm(mesh.points[interior] - before[interior], axis=1) > 0).sum() > 10
     assert quality(mesh)["n_inverted"] == 0
     assert element_shape_metrics(mesh.points, mesh.corner_tets)["dihedral_deg"].min() >= min(angle0, 10.0) - 0.5
+
+
+def test_straightening_reports_what_it_cannot_mend():
+    """A curved mid node that folds an element is put back straight; a flat straight element is reported."""
+    from flexure.refine import straighten_invalid
+
+    tm = TaggedMesh.untagged(to_quadratic(box_mesh(2, 2, 2)))
+    assert straighten_invalid(tm) == (0, 0)
+    t = tm.mesh.tets[0]
+    tm.mesh.points[t[4]] += 0.9 * (tm.mesh.points[t[3]] - tm.mesh.points[t[4]])     # a mid node pushed far: folded
+    tm.mesh._cache.clear()
+    moved, left = straighten_invalid(tm)
+    assert moved >= 1 and left == 0
+    p = tm.mesh.points
+    p[t[3]] = p[t[0]] + 0.3 * (p[t[1]] - p[t[0]]) + 0.3 * (p[t[2]] - p[t[0]])       # vertex 3 on face 012: flat
+    tm.mesh._cache.clear()
+    assert straighten_invalid(tm)[1] >= 1
