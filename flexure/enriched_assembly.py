@@ -34,10 +34,7 @@ def assemble_enriched(mesh: Mesh, material, u: np.ndarray, numbering, traction=N
     from flexure.surplus import surplus_basis, tet_rule_degree5
 
     G, sign, free = numbering
-    kept = np.cumsum(free) - 1
-    nk = int(free.sum())
-    Gk = np.where(free[G], kept[G], -1).astype(np.int64)
-    tets = np.ascontiguousarray(mesh.tets, dtype=np.int64)
+    nk, Gk, tets = _free_functions(mesh, numbering)
     nt = threads.use()
     kb, kc = ek.block_pattern(Gk, Gk, nk, nk, nt)
     K = _csr(kb, kc, nk, nk)
@@ -73,10 +70,7 @@ def assemble_enriched_blocks(mesh: Mesh, material, u: np.ndarray, numbering, dty
     from flexure.surplus import surplus_basis, tet_rule_degree5
 
     G, sign, free = numbering
-    kept = np.cumsum(free) - 1
-    nk = int(free.sum())
-    Gk = np.where(free[G], kept[G], -1).astype(np.int64)
-    tets = np.ascontiguousarray(mesh.tets, dtype=np.int64)
+    nk, Gk, tets = _free_functions(mesh, numbering)
     nt = threads.use()
     kb, kc = ek.block_pattern(Gk, Gk, nk, nk, nt)
     kc = kc.astype(np.int32)
@@ -97,3 +91,11 @@ def assemble_enriched_blocks(mesh: Mesh, material, u: np.ndarray, numbering, dty
                     float(material.shear_modulus_Pa), kb, kc, K.data, cb, cc, C.data, r, D,
                     *ek.colour_elements(np.ascontiguousarray(tets[:, :4]), mesh.n_nodes), 1 if nt == 1 else 8 * nt)
     return K, r, C, np.linalg.inv(D), (G, sign, free)
+
+
+def _free_functions(mesh: Mesh, numbering):
+    """(n_free, Gk (m,10) each element's surplus functions numbered among the free ones, −1 where
+    constrained, the element table as int64) of a numbering (G, sign, free)."""
+    G, _, free = numbering
+    kept = np.cumsum(free) - 1
+    return int(free.sum()), np.where(free[G], kept[G], -1).astype(np.int64), np.ascontiguousarray(mesh.tets, dtype=np.int64)
