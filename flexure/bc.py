@@ -26,14 +26,6 @@ from flexure.mesh import Mesh
 REDUCE_COMPILED = True
 
 
-def _numba() -> bool:
-    try:
-        import numba  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
 def _row_entries(A, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Positions in A.data/A.indices of the entries of ``rows`` of CSR A, and their row."""
     lo, hi = A.indptr[rows].astype(np.int64), A.indptr[rows + 1].astype(np.int64)
@@ -334,7 +326,9 @@ class Problem:
                 B[base + 3:base + 6, 3:] = np.eye(3)
             T = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                               shape=(3 * n, n_q))
-            if REDUCE_COMPILED and _numba():
+            from estimator import compiled
+
+            if REDUCE_COMPILED and compiled.available():        # the project's one switch of compiled loops
                 from flexure.reduce import reduced_stiffness
 
                 gd = np.concatenate(g_dofs)

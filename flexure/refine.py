@@ -516,9 +516,9 @@ def straighten_invalid(tm: TaggedMesh, min_scaled: float = 0.05, rounds: int = 8
     t = mesh.tets
     check = np.arange(len(t))
     moved = np.zeros(mesh.n_nodes, bool)
-    for _ in range(rounds + 1):
+    for k in range(rounds + 1):                    # the last check only counts what is left
         bad = check[~element_valid(mesh, check, min_scaled)]
-        if len(bad) == 0 or _ == rounds:
+        if len(bad) == 0 or k == rounds:
             break
         for j, (a, b) in enumerate(TET_EDGES.tolist()):
             mid = t[bad, 4 + j]
