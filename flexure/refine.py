@@ -463,28 +463,13 @@ def bisect(tm: TaggedMesh, elements, fields=(), rounds: int = 1, projector=None,
     mesh = tm.mesh
     if mesh.order != 2:
         raise ValueError("bisect: a P2 mesh is expected")
-    points, tets = mesh.points.copy(), mesh.tets.astype(np.int64)
-    face_tag, edge_tag = tm.face_tag.astype(np.int64), tm.edge_tag.astype(np.int64)
-    flag = np.zeros(len(tets), bool)
-    flag[np.asarray(elements)] = True
-    fields = [np.asarray(f, float) for f in fields]
-    n0 = len(points)
-    moved_nodes, moved_dim, moved_tag = [], [], []
-    passes = bisections = 0
-    for _ in range(rounds):
-        marked = np.zeros(len(points), bool)
-        marked[tets[flag, 4 + longest_edge(points, tets[flag])]] = True
-        while True:
-            points, tets, face_tag, edge_tag, flag, marked, fields, tgt, nb = _bisect_pass(
-                points, tets, face_tag, edge_tag, flag, marked, fields,
-                CLOSURE_RATIO if closure_ratio is None else closure_ratio)
-            if nb == 0:
-                break
-            passes += 1
-            bisections += nb
-            moved_nodes.append(tgt[0]); moved_dim.append(tgt[1]); moved_tag.append(tgt[2])
-            if passes > max_passes:
-                raise RuntimeError("bisect: the closure did not end")
+    from flexure._refine_kernels import passes as bisect_passes
+
+    n0 = mesh.n_nodes
+    points, tets, face_tag, edge_tag, fields, targets, passes, bisections = bisect_passes(
+        mesh.points, mesh.tets, tm.face_tag, tm.edge_tag, elements, [np.asarray(f, float) for f in fields], rounds,
+        CLOSURE_RATIO if closure_ratio is None else closure_ratio, max_passes)
+    moved_nodes, moved_dim, moved_tag = (list(x) for x in zip(*targets)) if targets else ([], [], [])
     info = {"passes": passes, "bisections": bisections, "new_nodes": len(points) - n0,
             "projected": 0, "projection_undone": 0, "max_projection_m": 0.0}
     out = TaggedMesh(Mesh(points, tets), face_tag, edge_tag, tm.pending)
@@ -502,6 +487,32 @@ def bisect(tm: TaggedMesh, elements, fields=(), rounds: int = 1, projector=None,
     if projector is not None:
         info["straightened"], info["invalid_elements"] = straighten_invalid(out)
     return out, fields, info
+
+
+def _passes_reference(points, tets, face_tag, edge_tag, elements, fields=(), rounds: int = 1,
+                      closure_ratio: float = 1.0, max_passes: int = 200):
+    """The passes of ``bisect`` over the whole mesh (``_bisect_pass``: every pass and closure step
+    touches every element): the reference that flexure._refine_kernels.passes reproduces bit for bit."""
+    points, tets = np.array(points, float), np.array(tets, np.int64)
+    face_tag, edge_tag = np.array(face_tag, np.int64), np.array(edge_tag, np.int64)
+    flag = np.zeros(len(tets), bool)
+    flag[np.asarray(elements)] = True
+    fields = [np.asarray(f, float) for f in fields]
+    targets, passes, bisections = [], 0, 0
+    for _ in range(rounds):
+        marked = np.zeros(len(points), bool)
+        marked[tets[flag, 4 + longest_edge(points, tets[flag])]] = True
+        while True:
+            points, tets, face_tag, edge_tag, flag, marked, fields, tgt, nb = _bisect_pass(
+                points, tets, face_tag, edge_tag, flag, marked, fields, closure_ratio)
+            if nb == 0:
+                break
+            passes += 1
+            bisections += nb
+            targets.append(tgt)
+            if passes > max_passes:
+                raise RuntimeError("bisect: the closure did not end")
+    return points, tets, face_tag, edge_tag, fields, targets, passes, bisections
 
 
 def straighten_invalid(tm: TaggedMesh, min_scaled: float = 0.05, rounds: int = 8) -> tuple[int, int]:
