@@ -20,11 +20,11 @@ from flexure.mesh import TET_EDGES
 _MASK32 = np.int64(0xFFFFFFFF)
 
 
-def _grow(a: np.ndarray, need: int, fill=0) -> np.ndarray:
-    """``a`` with room for at least ``need`` rows (doubling; new rows ``fill``)."""
+def _grow(a: np.ndarray, need: int) -> np.ndarray:
+    """``a`` with room for at least ``need`` rows (× 1.5; the new rows not set)."""
     if need <= len(a):
         return a
-    b = np.full((max(need, 2 * len(a)),) + a.shape[1:], fill, a.dtype)
+    b = np.empty((max(need, len(a) + len(a) // 2),) + a.shape[1:], a.dtype)
     b[: len(a)] = a
     return b
 
@@ -67,14 +67,16 @@ class Bisector:
         self.head = np.full(n, -1, np.int64)
         self.nxt = np.full(6 * m, -1, np.int64)
         self._link(np.arange(6 * m, dtype=np.int64), eid.ravel())
-        # an edge made by a bisection holds its new vertex; one that exists already is found by its
-        # vertex pair (the reference: among the nodes that are some element's mid node). The start
-        # mesh's edges can only be found where a mid node is also a vertex (a hanging node)
-        vert = np.zeros(n, bool)
-        vert[self.tets[:, :4]] = True
-        hang = mids[vert[mids]]
+        # an existing edge is found by its vertex pair among the edges that are some live element's
+        # now (the reference's rule); such an edge holds a vertex made by an earlier bisection (or, in
+        # a start mesh with hanging nodes, a mid node that is a vertex too): the made edges are kept,
+        # one sorted chunk (codes, nodes) per pass
+        self.vert = np.zeros(n, bool)
+        self.vert[self.tets[:, :4]] = True
+        hang = mids[self.vert[mids]]
         seed = mids[np.isin(self.code[mids] >> 32, hang) | np.isin(self.code[mids] & _MASK32, hang)]
-        self.made = dict(zip(self.code[seed][::-1].tolist(), seed[::-1].tolist()))
+        o = np.lexsort((seed, self.code[seed]))
+        self.made = [(self.code[seed][o], seed[o])]
         self.passes = 0
 
     # -- storage ---------------------------------------------------------------------------------
@@ -106,20 +108,32 @@ class Bisector:
         ents = np.concatenate(out) if out else np.zeros(0, np.int64)
         return ents[self.alive[ents // 6]]
 
+    def _find(self, codes) -> np.ndarray:
+        """The node of each edge (vertex-pair code) that is some live element's mid node, else −1."""
+        found = np.full(len(codes), -1, np.int64)
+        for c, nodes in self.made:
+            if len(c) == 0 or len(codes) == 0:
+                continue
+            pos = np.minimum(np.searchsorted(c, codes), len(c) - 1)
+            cand = nodes[pos]
+            ok = (c[pos] == codes) & (self.refc[cand] > 0) & (found < 0)
+            found[ok] = cand[ok]
+        return found
+
     def _add_nodes(self, k):
         need = self.n + k
         self.points = _grow(self.points, need)
         self.fields = [_grow(f, need) for f in self.fields]
-        for name in ("code", "L2n", "Ln", "emark", "refc"):
+        for name in ("code", "L2n", "Ln", "emark", "refc", "vert"):
             setattr(self, name, _grow(getattr(self, name), need))
-        self.head = _grow(self.head, need, -1)
+        self.head = _grow(self.head, need)
 
     def _add_elements(self, k):
         need = self.M + k
         names = ("tets", "codes", "alive", "flag", "key", "L", "le") + (() if self.topology else ("ft", "et"))
         for name in names:
             setattr(self, name, _grow(getattr(self, name), need))
-        self.nxt = _grow(self.nxt, 6 * need, -1)
+        self.nxt = _grow(self.nxt, 6 * need)
 
     # -- rounds and passes -----------------------------------------------------------------------
     def start_round(self) -> np.ndarray:
@@ -197,10 +211,12 @@ class Bisector:
         new_codes = np.concatenate([_pair(vi, m), _pair(vj, m), _pair(m, vk), _pair(m, vl)])
         uniq, first, inv = np.unique(new_codes, return_index=True, return_inverse=True)
         inv = inv.ravel()
-        found = np.array([self.made.get(c, -1) for c in uniq.tolist()], np.int64)
-        exists = found >= 0
-        exists[exists] = self.refc[found[exists]] > 0          # an edge that is some element's now
-        node_of = np.where(exists, found, 0)
+        ask = np.zeros(len(uniq), bool)
+        ask[inv] = np.tile(self.vert[m], 4)           # only an edge at a vertex made before can exist
+        node_of = np.full(len(uniq), -1, np.int64)
+        node_of[ask] = self._find(uniq[ask])
+        exists = node_of >= 0
+        node_of[~exists] = 0
         fresh = np.flatnonzero(~exists)
         nf = len(fresh)
         node_of[fresh] = n + np.arange(nf)
@@ -220,9 +236,12 @@ class Bisector:
         self.code[new] = uniq[fresh]
         self.emark[new] = False
         self.refc[new] = 0
+        self.head[new] = -1
         self.n = n + nf
         self._lengths(np.arange(n, n + nf))
-        self.made.update(zip(uniq[fresh].tolist(), node_of[fresh].tolist()))
+        self.made.append((uniq[fresh], node_of[fresh]))
+        self.vert[new] = False
+        self.vert[m] = True
         targets = None
         if not self.topology:
             ft, et = self.ft, self.et
