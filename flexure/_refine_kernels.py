@@ -88,13 +88,13 @@ class Bisector:
         self.Ln[nodes] = np.linalg.norm(d, axis=1)
 
     def _link(self, ents, nodes):
-        """Prepend element edges ``ents`` (slot·6 + local edge) to their mid nodes' lists."""
-        order = np.argsort(nodes, kind="stable")
-        q, e = nodes[order], ents[order]
-        same = np.r_[q[1:] == q[:-1], False]
-        self.nxt[e] = np.where(same, np.r_[e[1:], -1], self.head[q])
-        first = np.r_[True, ~same[:-1]]
-        self.head[q[first]] = e[first]
+        """Prepend element edges ``ents`` (slot·6 + local edge) to their mid nodes' lists (a node listed
+        k times: where a write to the head is lost to another of its entries, that one goes next; k steps)."""
+        while len(ents):
+            self.nxt[ents] = self.head[nodes]
+            self.head[nodes] = ents
+            lost = self.head[nodes] != ents
+            ents, nodes = ents[lost], nodes[lost]
 
     def holders(self, nodes) -> np.ndarray:
         """The element edges (slot·6 + local edge) of the live elements that hold mid nodes ``nodes`` (unique)."""
