@@ -195,7 +195,7 @@ def marks_for(tm, comb: np.ndarray, target: int, rounds: int, forced=(), tries: 
     (closure makes N(n) slightly non-linear) while a trial is more than 10 % off. → (elements,
     info: the trials (marks, DOFs), the DOFs per mark ``gain`` of the chosen one). No trial above
     ``limit`` (a budget's cap) is chosen: where every one is, the marks are scaled down to it (more trials)."""
-    from flexure.refine import TaggedMesh, bisect
+    from flexure.refine import bisected_dofs
 
     mesh = tm.mesh
     n_el = len(comb)
@@ -205,9 +205,7 @@ def marks_for(tm, comb: np.ndarray, target: int, rounds: int, forced=(), tries: 
     def dofs(n: int) -> int:
         if n == 0 and len(forced) == 0:
             return mesh.n_dofs
-        out, _, _ = bisect(TaggedMesh(mesh, tm.face_tag, tm.edge_tag, tm.pending),
-                           np.union1d(order[:n], forced), [], rounds=rounds)
-        return out.mesh.n_dofs
+        return bisected_dofs(tm, np.union1d(order[:n], forced), rounds)
 
     pts = [(0, dofs(0))]
     n = max(1, int(TRIAL_SHARE * n_el) if not gain else min(int((target - pts[0][1]) / gain), n_el))

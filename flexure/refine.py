@@ -489,6 +489,17 @@ def bisect(tm: TaggedMesh, elements, fields=(), rounds: int = 1, projector=None,
     return out, fields, info
 
 
+def bisected_dofs(tm: TaggedMesh, elements, rounds: int = 1, closure_ratio: float | None = None) -> int:
+    """DOFs of ``bisect(tm, elements, rounds=rounds)``'s mesh, from its passes alone (no fields, tags,
+    projection): a trial that sizes a refinement (flexure.adaptive_sizing.marks_for)."""
+    from flexure._refine_kernels import passes as bisect_passes
+
+    mesh = tm.mesh
+    points = bisect_passes(mesh.points, mesh.tets, tm.face_tag, tm.edge_tag, elements, (), rounds,
+                           CLOSURE_RATIO if closure_ratio is None else closure_ratio, topology=True)[0]
+    return 3 * len(points)
+
+
 def _passes_reference(points, tets, face_tag, edge_tag, elements, fields=(), rounds: int = 1,
                       closure_ratio: float = 1.0, max_passes: int = 200):
     """The passes of ``bisect`` over the whole mesh (``_bisect_pass``: every pass and closure step
