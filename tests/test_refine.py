@@ -260,3 +260,90 @@ def test_straightening_reports_what_it_cannot_mend():
     p[t[3]] = p[t[0]] + 0.3 * (p[t[1]] - p[t[0]]) + 0.3 * (p[t[2]] - p[t[0]])       # vertex 3 on face 012: flat
     tm.mesh._cache.clear()
     assert straighten_invalid(tm)[1] >= 1
+
+
+def _box_tagged(nx, ny, nz, jitter, seed):
+    """A P2 box mesh, interior vertices jittered (distinct edge lengths; 0: the box's ties), each side
+    its own surface tag 1..6 and every element edge along a box edge in x or y a curve tag 10 + its
+    direction (one along z is seen as on either of its two surfaces: the strongest target's ties)."""
+    from flexure.mesh import TET_EDGES, TET_FACES
+    from flexure.refine import _boundary_face_mask
+
+    rng = np.random.default_rng(seed)
+    mesh = box_mesh(nx, ny, nz, size=(1.0, 0.7, 1.2))
+    lo, hi = mesh.points.min(axis=0), mesh.points.max(axis=0)
+    inner = np.all((mesh.points > lo + 1e-9) & (mesh.points < hi - 1e-9), axis=1)
+    mesh.points[inner] += jitter * (rng.random((inner.sum(), 3)) - 0.5) / max(nx, ny, nz)
+    mesh = to_quadratic(mesh)
+    tm = TaggedMesh.untagged(mesh)
+    P = mesh.points[mesh.corner_tets]                                      # (m,4,3)
+    side = np.stack([np.isclose(P, lo), np.isclose(P, hi)], axis=-1)        # (m,4,3,2) vertex on x/y/z lo/hi
+    bf = _boundary_face_mask(mesh)
+    for f in range(4):
+        on = side[:, TET_FACES[f]].all(axis=1).reshape(-1, 6)              # the face's 3 vertices on a side
+        tm.face_tag[:, f] = np.where(bf[:, f] & on.any(axis=1), 1 + on.argmax(axis=1), 0)
+    for j, (a, b) in enumerate(TET_EDGES.tolist()):
+        both = (side[:, a] & side[:, b]).any(axis=2)                       # (m,3): the edge on a side ⊥ x, y, z
+        along = both.sum(axis=1) == 2                                      # on two sides: a box edge
+        axis = (~both).argmax(axis=1)                                      # the box edge's direction
+        tm.edge_tag[:, j] = np.where(along & (axis < 2), 10 + axis, 0)     # along z: two surfaces' edge
+    return tm
+
+
+def _same(a, b):
+    """Bit for bit: points, tets (order too), tags, fields, projection targets, counts."""
+    assert a[0].tobytes() == b[0].tobytes()
+    for x, y in zip(a[1:4], b[1:4]):
+        assert np.array_equal(x, y)
+    assert all(x.tobytes() == y.tobytes() for x, y in zip(a[4], b[4]))
+    assert len(a[5]) == len(b[5]) and all(np.array_equal(x, y) for g, h in zip(a[5], b[5]) for x, y in zip(g, h))
+    assert a[6:] == b[6:]
+
+
+@pytest.mark.parametrize("jitter,ratio,rounds", [(0.0, 1.0, 1), (0.5, 1.0, 3), (0.5, 0.7, 1), (0.3, 0.7, 3)])
+def test_active_set_passes_equal_the_whole_mesh_reference(jitter, ratio, rounds):
+    """refine.bisect's passes on the active set (flexure._refine_kernels) give the whole-mesh reference's
+    (refine._passes_reference) mesh bit for bit: points, element order, face and edge tags, prolongated
+    fields, projection targets, passes; over three successive refinements of random marks on a tagged,
+    jittered box (ties of equal lengths without jitter), Rivara's closure and the relaxed one; and the
+    topology-only trial (bisected_dofs) counts the same DOFs."""
+    from flexure._refine_kernels import passes
+    from flexure.mesh import Mesh
+    from flexure.refine import _passes_reference, bisected_dofs
+
+    tm = _box_tagged(4, 3, 4, jitter, seed=int(10 * jitter) + rounds)
+    rng = np.random.default_rng(rounds)
+    points, tets, ft, et = tm.mesh.points, tm.mesh.tets, tm.face_tag, tm.edge_tag
+    fields = [_quadratic(points), rng.random((len(points), 3, 2))]
+    assert (ft > 0).sum() > 50 and (et > 0).sum() > 20
+    for step in range(3):
+        marks = np.flatnonzero(rng.random(len(tets)) < 0.12)
+        ref = _passes_reference(points, tets, ft, et, marks, fields, rounds, ratio)
+        new = passes(points, tets, ft, et, marks, fields, rounds, ratio)
+        _same(new, ref)
+        assert ref[6] >= rounds and len(ref[1]) > len(tets)
+        trial = TaggedMesh(Mesh(points, tets), ft, et)
+        assert bisected_dofs(trial, marks, rounds, ratio) == 3 * len(ref[0])
+        points, tets, ft, et, fields = ref[:5]
+        check_conforming(Mesh(points, tets))
+        assert np.abs(fields[0] - _quadratic(points)).max() < 1e-12
+
+
+@pytest.mark.slow
+def test_active_set_passes_equal_the_reference_on_a_design_mesh():
+    """As above on the paper disc's first adaptive mesh (gmsh, CAD surface and curve tags, snapped onto
+    the true geometry), random marks, 1 and 3 rounds, Rivara's closure and 0.7."""
+    from flexure._refine_kernels import passes
+    from flexure.adaptive import geometry, start_mesh
+    from flexure.design import load_design
+    from flexure.refine import _passes_reference
+
+    d = load_design("designs/paper_disc.toml")
+    tm, proj = geometry(d, start_mesh(d))
+    snap(tm, proj)
+    rng = np.random.default_rng(0)
+    u = rng.random((tm.mesh.n_nodes, 3, 6))
+    for rounds, ratio in ((1, 1.0), (3, 1.0), (3, 0.7)):
+        marks = np.flatnonzero(rng.random(tm.mesh.n_elements) < 0.05)
+        args = (tm.mesh.points, tm.mesh.tets, tm.face_tag, tm.edge_tag, marks, [u], rounds, ratio)
+        _same(passes(*args), _passes_reference(*args))
