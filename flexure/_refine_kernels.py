@@ -317,18 +317,21 @@ class Bisector:
         return targets
 
     def result(self):
-        """(points, tets, face_tag, edge_tag, fields) in the reference's element order."""
+        """(points, tets, face_tag, edge_tag, fields, kept) in the reference's element order; the first
+        ``kept`` elements are the start mesh's that were not bisected, in their order."""
         S = np.flatnonzero(self.alive[: self.M])
         S = S[np.argsort(self.key[S])]
         n = self.n
         ft, et = (None, None) if self.topology else (self.ft[S], self.et[S])
-        return self.points[:n].copy(), self.tets[S], ft, et, [f[:n].copy() for f in self.fields]
+        kept = int(np.count_nonzero(self.key[S] < np.int64(1) << 32))     # the start mesh's unsplit elements, first
+        return self.points[:n].copy(), self.tets[S], ft, et, [f[:n].copy() for f in self.fields], kept
 
 
 def passes(points, tets, face_tag, edge_tag, elements, fields=(), rounds: int = 1, closure_ratio: float = 1.0,
            max_passes: int = 200, topology: bool = False):
     """``rounds`` rounds of passes (refine.bisect) → (points, tets, face_tag, edge_tag, fields,
-    targets [(nodes, dims, tags) per pass], passes, bisections)."""
+    targets [(nodes, dims, tags) per pass], passes, bisections, kept: how many of the first elements
+    are the start mesh's, not bisected)."""
     bs = Bisector(points, tets, face_tag, edge_tag, fields, topology)
     bs.flag[np.asarray(elements)] = True
     targets, count, bisections = [], 0, 0
@@ -343,4 +346,5 @@ def passes(points, tets, face_tag, edge_tag, elements, fields=(), rounds: int = 
             targets.append(tgt)
             if count > max_passes:
                 raise RuntimeError("bisect: the closure did not end")
-    return (*bs.result(), targets, count, bisections)
+    points, tets, face_tag, edge_tag, fields, kept = bs.result()
+    return points, tets, face_tag, edge_tag, fields, targets, count, bisections, kept

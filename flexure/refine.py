@@ -33,7 +33,7 @@ a move that would fold an element (det J ≤ 0 at a quadrature point or node) is
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -62,6 +62,9 @@ class TaggedMesh:
     #: nodes still off their curve or surface (their move would have folded an element), retried
     #: at every refinement: (nodes, dims, tags)
     pending: tuple = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64))
+    #: (min_scaled, tets, points) as ``straighten_invalid`` left them with every element valid: a
+    #: later bisection checks only the elements that are new or have a node moved since
+    valid: tuple | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def untagged(cls, mesh: Mesh) -> "TaggedMesh":
@@ -466,7 +469,7 @@ def bisect(tm: TaggedMesh, elements, fields=(), rounds: int = 1, projector=None,
     from flexure._refine_kernels import passes as bisect_passes
 
     n0 = mesh.n_nodes
-    points, tets, face_tag, edge_tag, fields, targets, passes, bisections = bisect_passes(
+    points, tets, face_tag, edge_tag, fields, targets, passes, bisections, kept = bisect_passes(
         mesh.points, mesh.tets, tm.face_tag, tm.edge_tag, elements, [np.asarray(f, float) for f in fields], rounds,
         CLOSURE_RATIO if closure_ratio is None else closure_ratio, max_passes)
     moved_nodes, moved_dim, moved_tag = (list(x) for x in zip(*targets)) if targets else ([], [], [])
@@ -485,7 +488,7 @@ def bisect(tm: TaggedMesh, elements, fields=(), rounds: int = 1, projector=None,
             info["projected_by_morph"] = settled["projected"]
             out.pending = settled["pending"]
     if projector is not None:
-        info["straightened"], info["invalid_elements"] = straighten_invalid(out)
+        info["straightened"], info["invalid_elements"] = straighten_invalid(out, known=_known_valid(tm, out, kept))
     return out, fields, info
 
 
@@ -526,7 +529,21 @@ def _passes_reference(points, tets, face_tag, edge_tag, elements, fields=(), rou
     return points, tets, face_tag, edge_tag, fields, targets, passes, bisections
 
 
-def straighten_invalid(tm: TaggedMesh, min_scaled: float = 0.05, rounds: int = 8) -> tuple[int, int]:
+def _known_valid(tm: TaggedMesh, out: TaggedMesh, kept: int, min_scaled: float = 0.05) -> np.ndarray | None:
+    """(m,) bool: the elements of ``out`` (``bisect(tm)``; its first ``kept`` are tm's, unsplit) that
+    ``straighten_invalid`` found valid in ``tm`` and whose nodes have not moved since; None if unknown."""
+    v = tm.valid
+    if (v is None or v[0] != min_scaled or not np.array_equal(v[1], tm.mesh.tets)
+            or not np.array_equal(v[2], tm.mesh.points)):
+        return None
+    moved = np.any(out.mesh.points[: tm.mesh.n_nodes] != tm.mesh.points, axis=1)
+    known = np.zeros(out.mesh.n_elements, bool)
+    known[:kept] = ~moved[out.mesh.tets[:kept]].any(axis=1)
+    return known
+
+
+def straighten_invalid(tm: TaggedMesh, min_scaled: float = 0.05, rounds: int = 8,
+                       known: np.ndarray | None = None) -> tuple[int, int]:
     """Make every element valid again (in place): a child samples its curved parent's map at new
     nodes, where the parent's det J (checked only at its quadrature points and nodes) can be ≤ 0.
     The mid nodes of an element whose det J falls below ``min_scaled`` × its straight det are put
@@ -536,7 +553,7 @@ def straighten_invalid(tm: TaggedMesh, min_scaled: float = 0.05, rounds: int = 8
     flat or inverted, which no mid node can mend — the caller must not solve on that mesh)."""
     mesh = tm.mesh
     t = mesh.tets
-    check = np.arange(len(t))
+    check = np.arange(len(t)) if known is None else np.flatnonzero(~known)     # known: valid, unchanged
     moved = np.zeros(mesh.n_nodes, bool)
     for k in range(rounds + 1):                    # the last check only counts what is left
         bad = check[~element_valid(mesh, check, min_scaled)]
@@ -552,6 +569,8 @@ def straighten_invalid(tm: TaggedMesh, min_scaled: float = 0.05, rounds: int = 8
         nodes, dims, tags = mid_node_targets(tm)
         sel = moved[nodes]
         tm.pending = _strongest(*[np.concatenate([p, q[sel]]) for p, q in zip(tm.pending, (nodes, dims, tags))])
+    if len(bad) == 0:
+        tm.valid = (min_scaled, t.copy(), mesh.points.copy())
     return int(moved.sum()), int(len(bad))
 
 
