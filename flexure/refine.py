@@ -62,8 +62,9 @@ class TaggedMesh:
     #: nodes still off their curve or surface (their move would have folded an element), retried
     #: at every refinement: (nodes, dims, tags)
     pending: tuple = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64))
-    #: (min_scaled, tets, points) as ``straighten_invalid`` left them with every element valid: a
-    #: later bisection checks only the elements that are new or have a node moved since
+    #: (min_scaled, tets, points) as ``straighten_invalid`` or ``morph`` left them with every element
+    #: valid (det J ≥ min_scaled × the straight det): a later bisection's ``straighten_invalid`` checks
+    #: only the elements that are new or have a node moved since
     valid: tuple | None = field(default=None, repr=False, compare=False)
 
     @classmethod
@@ -242,12 +243,17 @@ def morph(tm: TaggedMesh, projector, vertices: bool = False, tries: int = 8,
             D[I] = LII.solve(-(LIB @ D[B]))
         mesh.points[:] = X0 + D
 
+    checked = []
+
     def invalid():
-        return ~(element_valid(mesh, np.arange(len(t)), msj)
-                 & (_straight_det(mesh.points[t[:, :4]]) >= MIN_VOLUME_SHARE * before))
+        checked[:] = [~(element_valid(mesh, np.arange(len(t)), msj)
+                        & (_straight_det(mesh.points[t[:, :4]]) >= MIN_VOLUME_SHARE * before))]
+        return checked[0]
 
     beta = halve_until_valid(nodes, t, mesh.n_nodes, move, invalid, tries)
     mesh._cache.clear()
+    if not checked[0].any():                  # the mesh as left: every element valid (straighten_invalid)
+        tm.valid = (msj, t.copy(), mesh.points.copy())
     left = (beta < 1.0) & np.any(dB != 0, axis=1)             # a node with nothing to move is not pending
     tm.pending = (nodes[left], dims[left], tags[left])
     info.update(projected=int((~left).sum()), projection_undone=int(((beta == 0) & left).sum()),
@@ -533,7 +539,7 @@ def _known_valid(tm: TaggedMesh, out: TaggedMesh, kept: int, min_scaled: float =
     """(m,) bool: the elements of ``out`` (``bisect(tm)``; its first ``kept`` are tm's, unsplit) that
     ``straighten_invalid`` found valid in ``tm`` and whose nodes have not moved since; None if unknown."""
     v = tm.valid
-    if (v is None or v[0] != min_scaled or not np.array_equal(v[1], tm.mesh.tets)
+    if (v is None or v[0] < min_scaled or not np.array_equal(v[1], tm.mesh.tets)
             or not np.array_equal(v[2], tm.mesh.points)):
         return None
     moved = np.any(out.mesh.points[: tm.mesh.n_nodes] != tm.mesh.points, axis=1)
