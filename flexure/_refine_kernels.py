@@ -18,8 +18,63 @@ import numpy as np
 from flexure.mesh import TET_EDGES
 
 _MASK32 = np.int64(0xFFFFFFFF)
+# -- the element-level rules of the bisection (flexure.refine uses them too) ------------------------
+#: for edge t = (p, q): the two other local vertices (increasing)
+_OTHER = np.array([[v for v in range(4) if v not in e] for e in TET_EDGES.tolist()], dtype=np.int64)
+#: projection target priority by dim: a curve (1) over a surface (2) over none (0)
+_PRIORITY = np.array([0, 2, 1])
 
 
+def edge_codes(tets: np.ndarray) -> np.ndarray:
+    """(m,6) int64 code lo·2³² + hi of every element edge's vertex pair."""
+    V = tets[:, :4].astype(np.int64)
+    a, b = V[:, TET_EDGES[:, 0]], V[:, TET_EDGES[:, 1]]
+    return (np.minimum(a, b) << 32) | np.maximum(a, b)
+
+
+def _longest_of(L2: np.ndarray, codes: np.ndarray) -> np.ndarray:
+    """Local index of the longest of each row's edges (squared lengths L2 (m,6)), ties by the larger code."""
+    best = L2.max(axis=1)
+    return np.where(L2 == best[:, None], codes, -1).argmax(axis=1)
+
+
+def _edge_targets(face_tag: np.ndarray, edge_tag: np.ndarray):
+    """(dim, tag) (m,6) of every element edge as the element sees it: its curve (1) if tagged,
+    else the surface (2) of the element's faces that hold it (opposite its two other vertices)."""
+    fa, fb = face_tag[:, _OTHER[:, 0]], face_tag[:, _OTHER[:, 1]]                # (m,6)
+    surf = np.where(fa == fb, fa, np.where(fa == 0, fb, np.where(fb == 0, fa, 0)))
+    return (np.where(edge_tag > 0, 1, np.where(surf > 0, 2, 0)), np.where(edge_tag > 0, edge_tag, surf))
+
+
+def _p2_weights(bary: np.ndarray) -> np.ndarray:
+    """P2 shape functions (k,10) at barycentric points (k,4) (VTK order, flexure.mesh)."""
+    N = np.empty((len(bary), 10))
+    N[:, :4] = bary * (2.0 * bary - 1.0)
+    N[:, 4:] = 4.0 * bary[:, TET_EDGES[:, 0]] * bary[:, TET_EDGES[:, 1]]
+    return N
+
+
+#: refine.CLOSURE_RATIO's "as good": children's smallest dihedral angle at least the longest-edge children's, or this
+QUALITY_FLOOR_DEG = 12.0
+
+
+def _children_min_dihedral(X4: np.ndarray, edge: np.ndarray) -> np.ndarray:
+    """Smallest dihedral angle (k,) of the two children of tetrahedra X4 (k,4,3) bisected at local edge
+    ``edge`` (k,) (TET_EDGES order)."""
+    from flexure.mesh import element_shape_metrics
+
+    r = np.arange(len(X4))
+    i, j = TET_EDGES[edge, 0], TET_EDGES[edge, 1]
+    m = 0.5 * (X4[r, i] + X4[r, j])
+    c1, c2 = X4.copy(), X4.copy()
+    c1[r, j], c2[r, i] = m, m
+    pts = np.vstack([c1, c2]).reshape(-1, 3)
+    tets = np.arange(len(pts)).reshape(-1, 4)
+    d = element_shape_metrics(pts, tets)["dihedral_deg"].min(axis=1)
+    return np.minimum(d[: len(X4)], d[len(X4):])
+
+
+# -- the passes ---------------------------------------------------------------------------------------
 def _grow(a: np.ndarray, need: int) -> np.ndarray:
     """``a`` with room for at least ``need`` rows (× 1.5; the new rows not set)."""
     if need <= len(a):
@@ -40,8 +95,6 @@ class Bisector:
     tags, projection targets): what a trial that counts the new nodes needs."""
 
     def __init__(self, points, tets, face_tag, edge_tag, fields=(), topology: bool = False):
-        from flexure.refine import _longest_of, edge_codes
-
         self.topology = topology
         m, n = len(tets), len(points)
         self.M, self.n = m, n
@@ -146,8 +199,6 @@ class Bisector:
 
     def bisect_pass(self, A: np.ndarray, closure_ratio: float):
         """``refine._bisect_pass`` on the active set ``A`` → (new active set, targets, bisections)."""
-        from flexure.refine import QUALITY_FLOOR_DEG, _children_min_dihedral
-
         emark = self.emark
         rows = np.arange(len(A))
         eidA, L, le = self.tets[A, 4:], self.L[A], self.le[A]
@@ -199,8 +250,6 @@ class Bisector:
     def _split(self, B, e):
         """Bisect elements ``B`` (in the reference order) at local edges ``e`` (as ``refine._bisect_pass``)
         → projection targets of the new nodes and of the split edges' nodes (None for ``topology``)."""
-        from flexure.refine import _OTHER, _PRIORITY, _edge_targets, _longest_of, _p2_weights, edge_codes
-
         n, nb = self.n, len(B)
         i, j = TET_EDGES[e, 0], TET_EDGES[e, 1]
         k, l = _OTHER[e, 0], _OTHER[e, 1]

@@ -22,7 +22,9 @@ conforming again (checked by ``check_conforming``). Rivara's own closure (CLOSUR
 default: split only at the longest edge) spreads far in 3-D, since an edge is split in all ~5
 elements around it and each of those first at its own longest edge: 12 % of a four-spoke STL's start
 mesh marked (clustered, two rounds) made it 4.1× larger, ratio 0.7 2.5× (three levels: 251 k against
-108 k elements); see CLOSURE_RATIO for why 0.7 is not the default.
+108 k elements); see CLOSURE_RATIO for why 0.7 is not the default. The passes run on an active set, the
+elements holding a marked edge (flexure._refine_kernels), at a cost of the refined region's size, and
+give ``_passes_reference``'s whole-mesh passes' mesh bit for bit (points, element order, tags, fields).
 
 Boundary: every element carries the geometric entity each of its faces (``face_tag`` (m,4): a
 surface tag > 0, 0 inside) and edges (``edge_tag`` (m,6): a curve tag > 0, e.g. a sharp CAD edge)
@@ -37,14 +39,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from flexure._refine_kernels import (_OTHER, _PRIORITY, QUALITY_FLOOR_DEG, _children_min_dihedral,  # noqa: F401
+                                     _edge_targets, _longest_of, _p2_weights, edge_codes)
 from flexure.mesh import TET_EDGES, Mesh
 from flexure.mesh_motion import (MIN_SCALED_JACOBIAN, MIN_VOLUME_SHARE, _graph_laplacian, _straight_det,  # noqa: F401
                                  element_valid, halve_until_valid, morph_local, project_nodes)
 
-#: for edge t = (p, q): the two other local vertices (increasing)
-_OTHER = np.array([[v for v in range(4) if v not in e] for e in TET_EDGES.tolist()], dtype=np.int64)
-#: projection target priority by dim: a curve (1) over a surface (2) over none (0)
-_PRIORITY = np.array([0, 2, 1])
 #: local edge index of the vertex pair (p, q)
 _EDGE_OF = np.full((4, 4), -1, dtype=np.int64)
 for _t, (_p, _q) in enumerate(TET_EDGES.tolist()):
@@ -89,13 +89,6 @@ def _boundary_face_mask(mesh: Mesh) -> np.ndarray:
     return (cnt[inv.ravel()] == 1).reshape(-1, 4)
 
 
-def edge_codes(tets: np.ndarray) -> np.ndarray:
-    """(m,6) int64 code lo·2³² + hi of every element edge's vertex pair."""
-    V = tets[:, :4].astype(np.int64)
-    a, b = V[:, TET_EDGES[:, 0]], V[:, TET_EDGES[:, 1]]
-    return (np.minimum(a, b) << 32) | np.maximum(a, b)
-
-
 def longest_edge(points: np.ndarray, tets: np.ndarray, codes: np.ndarray | None = None) -> np.ndarray:
     """Local index (m,) of each element's longest edge, ties broken by the larger vertex-pair code
     (the same total order in every element, so neighbours sharing an edge agree)."""
@@ -108,20 +101,6 @@ def _longest(points, codes, uc, eid):
     lo, hi = uc >> 32, uc & 0xFFFFFFFF
     d = points[hi] - points[lo]
     return _longest_of(np.einsum("ei,ei->e", d, d)[eid], codes)
-
-
-def _longest_of(L2: np.ndarray, codes: np.ndarray) -> np.ndarray:
-    """Local index of the longest of each row's edges (squared lengths L2 (m,6)), ties by the larger code."""
-    best = L2.max(axis=1)
-    return np.where(L2 == best[:, None], codes, -1).argmax(axis=1)
-
-
-def _edge_targets(face_tag: np.ndarray, edge_tag: np.ndarray):
-    """(dim, tag) (m,6) of every element edge as the element sees it: its curve (1) if tagged,
-    else the surface (2) of the element's faces that hold it (opposite its two other vertices)."""
-    fa, fb = face_tag[:, _OTHER[:, 0]], face_tag[:, _OTHER[:, 1]]                # (m,6)
-    surf = np.where(fa == fb, fa, np.where(fa == 0, fb, np.where(fb == 0, fa, 0)))
-    return (np.where(edge_tag > 0, 1, np.where(surf > 0, 2, 0)), np.where(edge_tag > 0, edge_tag, surf))
 
 
 def mid_node_targets(tm: TaggedMesh):
@@ -292,14 +271,6 @@ def boundary_geometry_error(tm: TaggedMesh, projector):
     return e, dist, R
 
 
-def _p2_weights(bary: np.ndarray) -> np.ndarray:
-    """P2 shape functions (k,10) at barycentric points (k,4) (VTK order, flexure.mesh)."""
-    N = np.empty((len(bary), 10))
-    N[:, :4] = bary * (2.0 * bary - 1.0)
-    N[:, 4:] = 4.0 * bary[:, TET_EDGES[:, 0]] * bary[:, TET_EDGES[:, 1]]
-    return N
-
-
 def _bisect_pass(points, tets, face_tag, edge_tag, flag, emark, fields, closure_ratio: float = 1.0):
     """One pass: closure, then every element whose longest edge is marked is bisected. An edge is
     named by its mid node (one per edge, conforming or between passes alike: an edge keeps its node
@@ -441,24 +412,6 @@ def _bisect_pass(points, tets, face_tag, edge_tag, flag, emark, fields, closure_
 #: and the marks, concentrated at the same edges level after level, left 37 tetrahedra below 10° (2.4°)
 #: against 5 (7.6°): an option, measured, not the default
 CLOSURE_RATIO = 1.0
-#: ... as good: their smallest dihedral angle at least the longest-edge children's, or this
-QUALITY_FLOOR_DEG = 12.0
-
-
-def _children_min_dihedral(X4: np.ndarray, edge: np.ndarray) -> np.ndarray:
-    """Smallest dihedral angle (k,) of the two children of tetrahedra X4 (k,4,3) bisected at local edge
-    ``edge`` (k,) (TET_EDGES order)."""
-    from flexure.mesh import element_shape_metrics
-
-    r = np.arange(len(X4))
-    i, j = TET_EDGES[edge, 0], TET_EDGES[edge, 1]
-    m = 0.5 * (X4[r, i] + X4[r, j])
-    c1, c2 = X4.copy(), X4.copy()
-    c1[r, j], c2[r, i] = m, m
-    pts = np.vstack([c1, c2]).reshape(-1, 3)
-    tets = np.arange(len(pts)).reshape(-1, 4)
-    d = element_shape_metrics(pts, tets)["dihedral_deg"].min(axis=1)
-    return np.minimum(d[: len(X4)], d[len(X4):])
 
 
 def bisect(tm: TaggedMesh, elements, fields=(), rounds: int = 1, projector=None, max_passes: int = 200,
