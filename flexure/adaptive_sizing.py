@@ -202,10 +202,14 @@ def marks_for(tm, comb: np.ndarray, target: int, rounds: int, forced=(), tries: 
     order = np.argsort(-comb)
     forced = np.asarray(forced, np.int64)
 
+    counted = {}
+
     def dofs(n: int) -> int:
         if n == 0 and len(forced) == 0:
             return mesh.n_dofs
-        return bisected_dofs(tm, np.union1d(order[:n], forced), rounds)
+        if n not in counted:                      # a trial repeated (the secant back at 0): counted once
+            counted[n] = bisected_dofs(tm, np.union1d(order[:n], forced), rounds)
+        return counted[n]
 
     pts = [(0, dofs(0))]
     n = max(1, int(TRIAL_SHARE * n_el) if not gain else min(int((target - pts[0][1]) / gain), n_el))
