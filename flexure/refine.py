@@ -341,6 +341,7 @@ def _bisect_pass(points, tets, face_tag, edge_tag, flag, emark, fields, closure_
     r = np.arange(len(B))
     vi, vj, vk, vl = TB[r, i], TB[r, j], TB[r, k], TB[r, l]
     m = TB[r, 4 + e]
+    _straighten_folding_mids(points, TB[:, :4], r, i, j, m)
     # the four new edges per bisected element, their reference points in the parent, and where
     # they lie: on the split edge (a curve, or a surface face next to it) or on a parent face
     pair = lambda x, y: (np.minimum(x, y) << 32) | np.maximum(x, y)  # noqa: E731
@@ -423,6 +424,33 @@ def _bisect_pass(points, tets, face_tag, edge_tag, flag, emark, fields, closure_
     flag = np.concatenate([flag[keep], flag[B], flag[B]])
     emark = np.concatenate([emark, np.zeros(len(points) - n, bool)])
     return points, tets, face_tag, edge_tag, flag, emark, fields, targets, len(B)
+
+
+#: a child's straight det below this share of its half of the parent's is folded by the split edge's curve
+CHILD_DET_SHARE = 0.2
+
+
+def _straighten_folding_mids(points, corners, r, i, j, m) -> None:
+    """Put the mid nodes ``m`` of split edges (i, j) (local, per element ``corners`` (k,4)) back on their
+    chords (in place) where a child would be folded: the mid node becomes a vertex of both children,
+    and on a thin element along a curved boundary it can lie beyond the opposite face, so a child's
+    straight det falls below ``CHILD_DET_SHARE`` × its straight half D/2 of the parent's D (≤ 0: a child
+    no mid node can mend). On the chord the children are the straight halves (D/2 each); the node, a
+    projection target of the pass, goes back on the surface as far as its elements stay valid
+    (mesh_motion.project_nodes)."""
+    X = points[corners]                                            # (k,4,3)
+    D = _straight_dets(X)
+    c1, c2 = X.copy(), X.copy()
+    c1[r, j] = points[m]
+    c2[r, i] = points[m]
+    fold = np.minimum(_straight_dets(c1), _straight_dets(c2)) < CHILD_DET_SHARE * 0.5 * D
+    if fold.any():
+        points[m[fold]] = 0.5 * (X[r[fold], i[fold]] + X[r[fold], j[fold]])
+
+
+def _straight_dets(X: np.ndarray) -> np.ndarray:
+    """det of the straight maps (k,) of tetrahedra with corners X (k,4,3)."""
+    return np.linalg.det(np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2))
 
 
 #: an element holding a marked edge at least this fraction of its longest edge is bisected at that edge

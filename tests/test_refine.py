@@ -260,3 +260,25 @@ def test_straightening_reports_what_it_cannot_mend():
     p[t[3]] = p[t[0]] + 0.3 * (p[t[1]] - p[t[0]]) + 0.3 * (p[t[2]] - p[t[0]])       # vertex 3 on face 012: flat
     tm.mesh._cache.clear()
     assert straighten_invalid(tm)[1] >= 1
+
+
+def test_a_curved_mid_node_that_would_fold_a_child_goes_back_on_its_chord():
+    """A thin element whose longest edge's mid node bulges past the opposite face (h = 0.2 above the
+    chord of a 0.064-det element: either child, with the mid node as a vertex, has det 0.032 − 0.25 h < 0):
+    the split puts it on the chord, each child is the straight half (det D/2), and an untouched split
+    (a bulge of 0.01) keeps its curved node."""
+    from flexure.mesh import Mesh
+
+    corners = np.array([[0, 0, 0], [1, 0, 0], [0.5, 0.8, 0], [0.5, 0.3, 0.08]], float)
+    for h, on_chord in ((0.2, True), (0.01, False)):
+        mesh = to_quadratic(Mesh(corners.copy(), np.array([[0, 1, 2, 3]])))
+        mid = mesh.tets[0, 4]                                   # edge (0, 1), the longest
+        mesh.points[mid] = [0.5, 0.0, h]
+        out, _, _ = bisect(TaggedMesh.untagged(mesh), [0])
+        X = out.mesh.points[out.mesh.tets[:, :4]]
+        det = np.linalg.det(np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2))
+        assert len(det) == 2
+        if on_chord:
+            assert np.allclose(out.mesh.points[mid], [0.5, 0.0, 0.0]) and np.allclose(np.abs(det), 0.032)
+        else:
+            assert out.mesh.points[mid][2] == 0.01 and np.allclose(np.abs(det), 0.032 - 0.25 * 0.01)
