@@ -49,3 +49,29 @@ def test_certified_projection_equals_brute_force_with_and_without_numba():
             assert got == pytest.approx(brute, rel=1e-9, abs=1e-15)
     finally:
         compiled.ENABLED = was
+
+
+def test_compiled_element_validity_matches_the_numpy_check():
+    """mesh_motion.element_valid compiled against its numpy form on a P2 box mesh whose mid nodes are
+    pushed at random (some elements folded, some inverted straight), at two floors."""
+    from estimator import compiled
+    from flexure.mesh import box_mesh, to_quadratic
+    from flexure.mesh_motion import element_valid
+
+    mesh = to_quadratic(box_mesh(6, 6, 3, (0.01, 0.01, 0.004)))
+    rng = np.random.default_rng(5)
+    mids = np.unique(mesh.tets[:, 4:])
+    mesh.points[mids] += rng.normal(scale=6e-4, size=(len(mids), 3))
+    mesh.points[mesh.tets[:5, 0]] = mesh.points[mesh.tets[:5, 1]]            # flat straight corners
+    el = rng.permutation(len(mesh.tets))[:300]
+    was = compiled.ENABLED
+    try:
+        got = {}
+        for on in (True, False):
+            compiled.ENABLED = on
+            got[on] = [element_valid(mesh, el, s) for s in (0.05, 0.25)] + [element_valid(mesh, np.arange(5), 0.05)]
+    finally:
+        compiled.ENABLED = was
+    for a, b in zip(got[True], got[False]):
+        assert np.array_equal(a, b)
+    assert 0 < got[True][0].sum() < len(el) and not got[True][2].any()
