@@ -439,18 +439,13 @@ def _straighten_folding_mids(points, corners, r, i, j, m) -> None:
     projection target of the pass, goes back on the surface as far as its elements stay valid
     (mesh_motion.project_nodes)."""
     X = points[corners]                                            # (k,4,3)
-    D = _straight_dets(X)
+    D = _straight_det(X)
     c1, c2 = X.copy(), X.copy()
     c1[r, j] = points[m]
     c2[r, i] = points[m]
-    fold = np.minimum(_straight_dets(c1), _straight_dets(c2)) < CHILD_DET_SHARE * 0.5 * D
+    fold = np.minimum(_straight_det(c1), _straight_det(c2)) < CHILD_DET_SHARE * 0.5 * D
     if fold.any():
         points[m[fold]] = 0.5 * (X[r[fold], i[fold]] + X[r[fold], j[fold]])
-
-
-def _straight_dets(X: np.ndarray) -> np.ndarray:
-    """det of the straight maps (k,) of tetrahedra with corners X (k,4,3)."""
-    return np.linalg.det(np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2))
 
 
 #: an element holding a marked edge at least this fraction of its longest edge is bisected at that edge
