@@ -426,15 +426,11 @@ def _bisect_pass(points, tets, face_tag, edge_tag, flag, emark, fields, closure_
     return points, tets, face_tag, edge_tag, flag, emark, fields, targets, len(B)
 
 
-#: a child's straight det below this share of its half of the parent's is folded by the split edge's curve
-CHILD_DET_SHARE = 0.2
-
-
 def _straighten_folding_mids(points, corners, r, i, j, m) -> None:
     """Put the mid nodes ``m`` of split edges (i, j) (local, per element ``corners`` (k,4)) back on their
     chords (in place) where a child would be folded: the mid node becomes a vertex of both children,
     and on a thin element along a curved boundary it can lie beyond the opposite face, so a child's
-    straight det falls below ``CHILD_DET_SHARE`` × its straight half D/2 of the parent's D (≤ 0: a child
+    straight det falls below ``MIN_VOLUME_SHARE`` (mesh_motion: the share a vertex move may leave) × its straight half D/2 of the parent's D (≤ 0: a child
     no mid node can mend). On the chord the children are the straight halves (D/2 each); the node, a
     projection target of the pass, goes back on the surface as far as its elements stay valid
     (mesh_motion.project_nodes)."""
@@ -443,7 +439,7 @@ def _straighten_folding_mids(points, corners, r, i, j, m) -> None:
     c1, c2 = X.copy(), X.copy()
     c1[r, j] = points[m]
     c2[r, i] = points[m]
-    fold = np.minimum(_straight_det(c1), _straight_det(c2)) < CHILD_DET_SHARE * 0.5 * D
+    fold = np.minimum(_straight_det(c1), _straight_det(c2)) < MIN_VOLUME_SHARE * 0.5 * D
     if fold.any():
         points[m[fold]] = 0.5 * (X[r[fold], i[fold]] + X[r[fold], j[fold]])
 
