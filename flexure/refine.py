@@ -430,8 +430,8 @@ def _straighten_folding_mids(points, corners, r, i, j, m) -> None:
     """Put the mid nodes ``m`` of split edges (i, j) (local, per element ``corners`` (k,4)) back on their
     chords (in place) where a child would be folded: the mid node becomes a vertex of both children,
     and on a thin element along a curved boundary it can lie beyond the opposite face, so a child's
-    straight det falls below ``MIN_VOLUME_SHARE`` (mesh_motion: the share a vertex move may leave) × its straight half D/2 of the parent's D (≤ 0: a child
-    no mid node can mend). On the chord the children are the straight halves (D/2 each); the node, a
+    straight det falls below ``MIN_VOLUME_SHARE`` (the share of its volume a vertex move may leave)
+    × its straight half D/2 of the parent's D (≤ 0: a child no mid node can mend). On the chord the children are the straight halves (D/2 each); the node, a
     projection target of the pass, goes back on the surface as far as its elements stay valid
     (mesh_motion.project_nodes)."""
     X = points[corners]                                            # (k,4,3)
