@@ -220,30 +220,6 @@ class StlProjector:
             cp[ball], d[ball] = self._closest_csr(points[ball], indptr, tris)
         return cp
 
-    def facet_sagitta(self, points: np.ndarray) -> np.ndarray:
-        """The STL's own chord error near each point (k,) m: s = w φ / 8 over the folds of the facet
-        nearest to it that are gentler than ``feature_deg`` (φ the fold angle, w the facets' mean width
-        across it: a polygon of facets of width w on a circle of radius R = w/φ is off the circle by
-        w²/8R), the largest of its three; 0 on a flat facet. A smooth curve through points on the
-        facets (a P2 edge) is off them by up to about s however fine the mesh: below it the facets
-        cannot tell geometry from facetting."""
-        if getattr(self, "_sag", None) is None:
-            import trimesh
-
-            tm = trimesh.Trimesh(self.surface.points, self.surface.faces, process=False)
-            phi = tm.face_adjacency_angles
-            L = np.linalg.norm(np.diff(self.surface.points[tm.face_adjacency_edges], axis=1)[:, 0], axis=1)
-            w = tm.area_faces[tm.face_adjacency].sum(axis=1) / np.maximum(L, 1e-300)
-            s = np.where(phi < np.deg2rad(self.feature_deg), w * phi / 8.0, 0.0)
-            self._sag = np.zeros(len(self.surface.faces))
-            np.maximum.at(self._sag, tm.face_adjacency[:, 0], s)
-            np.maximum.at(self._sag, tm.face_adjacency[:, 1], s)
-        points = np.asarray(points, float)
-        if len(points) == 0:
-            return np.zeros(0)
-        _, idx = self.tree.query(points, k=1)
-        return self._sag[self.owner[np.asarray(idx).ravel()]]
-
     def project_on_edges(self, points: np.ndarray) -> np.ndarray:
         """Closest points on the STL's sharp edges (segments where its facets fold by more than
         ``feature_deg``): candidates from a KD-tree of the segments' midpoints, certified by a ball

@@ -175,25 +175,6 @@ def test_stl_sharp_edges_are_curves_and_project_onto_the_stl_edges():
     assert not np.allclose(got[1], got[0])
 
 
-def test_stl_facet_sagitta_is_the_polygon_chord_error():
-    """On a 48-gon annulus STL the facets' sagitta near the outer wall is w²/8R (w = 2R sin(π/48)), on
-    the flat caps 0 (project.StlProjector.facet_sagitta)."""
-    import trimesh
-
-    from flexure.geometry import Surface
-    from flexure.project import StlProjector
-
-    R = 0.01
-    ann = trimesh.creation.annulus(r_min=0.004, r_max=R, height=0.003, sections=48)
-    proj = StlProjector(Surface(np.asarray(ann.vertices), np.asarray(ann.faces)))
-    w = 2 * R * np.sin(np.pi / 48)
-    ang = np.linspace(0.1, 6.0, 7)
-    wall = np.column_stack([R * np.cos(ang), R * np.sin(ang), np.zeros(7)])
-    s = proj.facet_sagitta(wall)
-    assert np.allclose(s, w * w / (8 * R), rtol=0.05)
-    assert proj.facet_sagitta(np.array([[0.007, 0.0, 0.003]]))[0] == 0.0          # a flat cap
-
-
 def test_relaxed_closure_is_conforming_and_more_local_than_rivaras():
     """bisect's closure_ratio (refine.CLOSURE_RATIO): splitting an element at a marked edge of at least
     0.7 × its longest keeps the mesh conforming and nested, adds fewer elements than Rivara's closure
