@@ -77,7 +77,7 @@ def _on_triangle(p0, p1, p2, T):
 def closest_on_triangles(points, tri, indptr, indices):
     """Closest points (k,3) and distances (k,) of ``points`` (k,3) on their candidate triangles
     ``tri[indices[indptr[i]:indptr[i+1]]]`` (tri (f,3,3)); the first of equally near candidates,
-    a candidate listed twice in a row looked at once."""
+    a candidate repeated next to itself (sorted lists) looked at once."""
     k = len(points)
     out = np.empty((k, 3))
     dist = np.empty(k)
@@ -86,12 +86,7 @@ def closest_on_triangles(points, tri, indptr, indices):
         best = np.inf
         for s in range(indptr[i], indptr[i + 1]):
             t = indices[s]
-            seen = False
-            for r in range(indptr[i], s):
-                if indices[r] == t:
-                    seen = True
-                    break
-            if seen:
+            if s > indptr[i] and indices[s - 1] == t:
                 continue
             q0, q1, q2, e = _on_triangle(p0, p1, p2, tri[t])
             if e < best:

@@ -255,7 +255,7 @@ class StlProjector:
     def _closest(self, points, cand):
         """Closest points (k,3) and distances (k,) of ``points`` on their candidate triangles (k,c)."""
         k, c = cand.shape
-        return self._closest_csr(points, np.arange(0, k * c + 1, c), cand.ravel())
+        return self._closest_csr(points, np.arange(0, k * c + 1, c), np.sort(cand, axis=1).ravel())
 
     def _closest_csr(self, points, indptr, tris):
         """Closest points (k,3) and distances (k,) of ``points`` on the triangles
