@@ -70,6 +70,15 @@ class BlockMatrix:
                                       np.ascontiguousarray(r, float), z)
         return z
 
+    @classmethod
+    def from_csr(cls, A, dtype=np.float32) -> "BlockMatrix":
+        """The 3 × 3 blocks of a scalar CSR A (3 n × 3 m) with values of ``dtype`` (each entry rounded
+        once; an entry stored twice is summed in ``dtype``)."""
+        from flexure import _block_kernels as bk
+
+        bptr, bcol, vals = bk.csr_to_blocks(A.indptr, A.indices, A.data, A.shape[0] // 3, np.zeros(1, dtype))
+        return cls(bptr, bcol, vals, A.shape[1] // 3)
+
     def tocsr(self):
         """The scipy CSR (float64) of the same matrix (tests, references)."""
         import scipy.sparse as sp
