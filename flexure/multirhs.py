@@ -37,6 +37,8 @@ def warm() -> bool:
         return False
     import scipy.sparse as sp
 
+    from flexure.block_sparse import BlockMatrix
+
     A = sp.identity(6, format="csr") * 2.0
     Dinv = np.tile(np.eye(3) / 2.0, (2, 1, 1))
     for k in range(1, KMAX + 1):
@@ -44,6 +46,10 @@ def warm() -> bool:
         for order in "CF":                # pcg's X is C-ordered, a caller's may be Fortran-ordered
             block_gauss_seidel(A, Dinv, np.zeros((6, k), order=order), np.ones((6, k)), True)
         forward_gauss_seidel_residual(A, Dinv, np.ones((6, k)))
+        for dtype in (np.float32, np.float64):          # the block smoother (flexure.solve SMOOTHER_STORAGE)
+            Ab = BlockMatrix.from_csr(A, dtype)
+            block_gauss_seidel_bsr(Ab, Dinv, np.zeros((6, k)), np.ones((6, k)), True)
+            forward_gauss_seidel_residual_bsr(Ab, Dinv, np.ones((6, k)))
     for bs in (3, 6):                     # flexure.vcycle's coarse levels
         block_gauss_seidel_blocks(A, np.tile(np.eye(bs) / 2.0, (6 // bs, 1, 1)), np.zeros((6, 2)), np.ones((6, 2)), True)
     return True
