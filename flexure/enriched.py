@@ -70,7 +70,11 @@ def surplus_numbering(mesh: Mesh, constrained: np.ndarray):
     m = len(t)
     uc, einv = np.unique(edge_codes(t).ravel(), return_inverse=True)
     fkey = np.sort(t[:, TET_FACES].reshape(-1, 3), axis=1)
-    _, finv = np.unique(fkey, axis=0, return_inverse=True)
+    n = int(t.max()) + 1
+    if n < 2**21:                      # one int64 code a face (a n + b) n + c: a 1-D unique, 30 × faster
+        _, finv = np.unique((fkey[:, 0] * n + fkey[:, 1]) * n + fkey[:, 2], return_inverse=True)
+    else:                              # than the rows' unique (thick disc, 78 k elements: 0.01 against 0.30 s)
+        _, finv = np.unique(fkey, axis=0, return_inverse=True)
     finv = finv.ravel()
     ne, nf = len(uc), int(finv.max()) + 1
     G = np.hstack([einv.reshape(m, 6), ne + finv.reshape(m, 4)])
