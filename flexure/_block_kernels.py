@@ -216,3 +216,38 @@ def csr_to_blocks(indptr, indices, data, nb, data_out):
                 j = indices[p]
                 vals[slot[j // 3], a, j % 3] += data[p]
     return bptr, bcol, vals
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def matvec_rmatvec(bptr, bcol, data, x, xt, y, yt, nchunk):
+    """y = A x and yt = Aᵀ xt in one pass over A (``matvec``'s rows, ``rmatvec``'s partial sums of yt
+    per chunk of rows, summed chunk by chunk; yt zeroed here)."""
+    n = len(bptr) - 1
+    m = len(yt)
+    part = np.zeros((nchunk, m))
+    for t in numba.prange(nchunk):
+        for r in range(n * t // nchunk, n * (t + 1) // nchunk):
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            u0, u1, u2 = xt[3 * r], xt[3 * r + 1], xt[3 * r + 2]
+            for p in range(bptr[r], bptr[r + 1]):
+                c = 3 * np.int64(bcol[p])
+                x0, x1, x2 = x[c], x[c + 1], x[c + 2]
+                a00, a01, a02 = np.float64(data[p, 0, 0]), np.float64(data[p, 0, 1]), np.float64(data[p, 0, 2])
+                a10, a11, a12 = np.float64(data[p, 1, 0]), np.float64(data[p, 1, 1]), np.float64(data[p, 1, 2])
+                a20, a21, a22 = np.float64(data[p, 2, 0]), np.float64(data[p, 2, 1]), np.float64(data[p, 2, 2])
+                s0 += a00 * x0 + a01 * x1 + a02 * x2
+                s1 += a10 * x0 + a11 * x1 + a12 * x2
+                s2 += a20 * x0 + a21 * x1 + a22 * x2
+                part[t, c] += a00 * u0 + a10 * u1 + a20 * u2
+                part[t, c + 1] += a01 * u0 + a11 * u1 + a21 * u2
+                part[t, c + 2] += a02 * u0 + a12 * u1 + a22 * u2
+            y[3 * r] = s0
+            y[3 * r + 1] = s1
+            y[3 * r + 2] = s2
+    for j in numba.prange(m):
+        s = part[0, j]
+        for t in range(1, nchunk):
+            s += part[t, j]
+        yt[j] = s

@@ -48,6 +48,17 @@ class BlockMatrix:
         bk.rmatvec(self.bptr, self.bcol, self.data, np.ascontiguousarray(x, float), y, max(1, threads.use()))
         return y
 
+    def matvec_rmatvec(self, x: np.ndarray, xt: np.ndarray):
+        """(A x, Aᵀ xt) in one pass over A (x (3 n_cols,), xt (3 n_rows,) float64): the rows in
+        ``rmatvec``'s chunks (one per thread), so A x has ``matvec``'s bits and Aᵀ xt ``rmatvec``'s."""
+        from flexure import _block_kernels as bk
+        from flexure import threads
+
+        y, yt = np.empty(self.shape[0]), np.empty(self.shape[1])
+        bk.matvec_rmatvec(self.bptr, self.bcol, self.data, np.ascontiguousarray(x, float),
+                          np.ascontiguousarray(xt, float), y, yt, max(1, threads.use()))
+        return y, yt
+
     def colouring(self):
         """(cptr, order): the block rows by colour, no two of a colour sharing a block (square,
         structurally symmetric patterns; computed once)."""

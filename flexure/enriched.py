@@ -222,6 +222,15 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
         def coupling_t(xh):                      # Cᵀ T (mask x_h)
             y = mask * xh
             return c_rmv(y if T is None else T @ y)
+
+        if hasattr(C, "matvec_rmatvec"):         # both in one pass over C (the bits of the two apart)
+            def couplings(xh, xw):
+                y = mask * xh
+                cw, ct = C.matvec_rmatvec(xw, y if T is None else T @ y)
+                return mask * (cw if TT is None else TT @ cw), ct
+        else:
+            def couplings(xh, xw):
+                return coupling(xw), coupling_t(xh)
     else:
         Kww, rW, num = assemble(mesh, material, U0, constrained)
         G, sign, free = num
@@ -235,6 +244,9 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
         Dinv = _block_jacobi(Kww)
         CqT = Cq.T                               # a CSC view: no second copy of the coupling
         coupling, coupling_t = Cq.__matmul__, CqT.__matmul__
+
+        def couplings(xh, xw):
+            return coupling(xw), coupling_t(xh)
         k_mv = lambda x: sparse_parallel.matvec(Kww, x)  # noqa: E731
     # A x on the P2 smoother's 3 × 3 blocks where they hold the storage's value type (flexure.solve
     # SMOOTHER_STORAGE): fewer bytes read than the float64 CSR, the same rounding as K_WW and K_hW
@@ -252,7 +264,8 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
 
     def matvec(x):
         xh, xw = x[:nq], x[nq:]
-        return np.concatenate([a_mv(xh) + coupling(xw), coupling_t(xh) + k_mv(xw)])
+        cw, ct = couplings(xh, xw)
+        return np.concatenate([a_mv(xh) + cw, ct + k_mv(xw)])
 
     def prec(r):
         zh = np.asarray(precond_h(np.ascontiguousarray(r[:nq, None])))[:, 0]
