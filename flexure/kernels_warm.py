@@ -35,5 +35,6 @@ def warm() -> bool:
         sparse_parallel.rmatvec(C, np.ones(C.shape[0]))
         Cb.matvec(np.ones(Cb.shape[1]))
         Cb.rmatvec(np.ones(Cb.shape[0]))
+        Cb.matvec_rmatvec(np.ones(Cb.shape[1]), np.ones(Cb.shape[0]))
         Kb.symmetric_gauss_seidel(Dinv, np.ones(Kb.shape[0]))
     return True
