@@ -175,3 +175,79 @@ def symmetric_gauss_seidel(bptr, bcol, data, Dinv, cptr, order, r, z):
     for c in range(nc - 1, -1, -1):
         for q in numba.prange(cptr[c], cptr[c + 1]):
             _relax(bptr, bcol, data, Dinv, r, z, order[q])
+
+
+@numba.njit(cache=True, nogil=True)
+def csr_to_blocks(indptr, indices, data, nb, data_out):
+    """The 3 × 3 block pattern (bptr, bcol int32 ascending) of a scalar CSR (n = 3 nb rows, any
+    sorted or unsorted indices), its values into a new array of ``data_out``'s type (zeros where a
+    block's entry is not stored) → (bptr, bcol, values (n_blocks, 3, 3))."""
+    mark = np.full(nb, -1, np.int64)
+    bptr = np.zeros(nb + 1, np.int64)
+    for i in range(nb):
+        c = 0
+        for a in range(3):
+            r = 3 * i + a
+            for p in range(indptr[r], indptr[r + 1]):
+                j = indices[p] // 3
+                if mark[j] != i:
+                    mark[j] = i
+                    c += 1
+        bptr[i + 1] = bptr[i] + c
+    bcol = np.empty(bptr[nb], np.int32)
+    vals = np.zeros((bptr[nb], 3, 3), data_out.dtype)
+    slot = np.empty(nb, np.int64)
+    for i in range(nb):
+        q = bptr[i]
+        for a in range(3):
+            r = 3 * i + a
+            for p in range(indptr[r], indptr[r + 1]):
+                j = indices[p] // 3
+                if mark[j] != -2 - i:
+                    mark[j] = -2 - i
+                    bcol[q] = j
+                    q += 1
+        bcol[bptr[i]:bptr[i + 1]].sort()
+        for p in range(bptr[i], bptr[i + 1]):
+            slot[bcol[p]] = p
+        for a in range(3):
+            r = 3 * i + a
+            for p in range(indptr[r], indptr[r + 1]):
+                j = indices[p]
+                vals[slot[j // 3], a, j % 3] += data[p]
+    return bptr, bcol, vals
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def matvec_rmatvec(bptr, bcol, data, x, xt, y, yt, nchunk):
+    """y = A x and yt = Aᵀ xt in one pass over A (``matvec``'s rows, ``rmatvec``'s partial sums of yt
+    per chunk of rows, summed chunk by chunk; yt zeroed here)."""
+    n = len(bptr) - 1
+    m = len(yt)
+    part = np.zeros((nchunk, m))
+    for t in numba.prange(nchunk):
+        for r in range(n * t // nchunk, n * (t + 1) // nchunk):
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            u0, u1, u2 = xt[3 * r], xt[3 * r + 1], xt[3 * r + 2]
+            for p in range(bptr[r], bptr[r + 1]):
+                c = 3 * np.int64(bcol[p])
+                x0, x1, x2 = x[c], x[c + 1], x[c + 2]
+                a00, a01, a02 = np.float64(data[p, 0, 0]), np.float64(data[p, 0, 1]), np.float64(data[p, 0, 2])
+                a10, a11, a12 = np.float64(data[p, 1, 0]), np.float64(data[p, 1, 1]), np.float64(data[p, 1, 2])
+                a20, a21, a22 = np.float64(data[p, 2, 0]), np.float64(data[p, 2, 1]), np.float64(data[p, 2, 2])
+                s0 += a00 * x0 + a01 * x1 + a02 * x2
+                s1 += a10 * x0 + a11 * x1 + a12 * x2
+                s2 += a20 * x0 + a21 * x1 + a22 * x2
+                part[t, c] += a00 * u0 + a10 * u1 + a20 * u2
+                part[t, c + 1] += a01 * u0 + a11 * u1 + a21 * u2
+                part[t, c + 2] += a02 * u0 + a12 * u1 + a22 * u2
+            y[3 * r] = s0
+            y[3 * r + 1] = s1
+            y[3 * r + 2] = s2
+    for j in numba.prange(m):
+        s = part[0, j]
+        for t in range(1, nchunk):
+            s += part[t, j]
+        yt[j] = s

@@ -8,7 +8,8 @@ never moved: a bisected one is dropped (``alive`` False) and its children append
 rank in the reference order (``key``: the pass that made it, then child 1s before child 2s, then
 its parent's rank), so the mesh handed back is the reference's, element for element. What is
 cached per element (its edges' lengths, its longest edge) and per node (its edge's vertex pair)
-does not change while the points stay put (no projection inside the passes).
+does not change while the points stay put (no projection inside the passes; a split edge's mid node
+put back on its chord, ``_straighten_folding_mids``, has its edges' lengths renewed where it was a vertex).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from flexure.mesh import TET_EDGES
+from flexure.mesh_motion import MIN_VOLUME_SHARE, _straight_det
 
 _MASK32 = np.int64(0xFFFFFFFF)
 # -- the element-level rules of the bisection (flexure.refine uses them too) ------------------------
@@ -72,6 +74,25 @@ def _children_min_dihedral(X4: np.ndarray, edge: np.ndarray) -> np.ndarray:
     tets = np.arange(len(pts)).reshape(-1, 4)
     d = element_shape_metrics(pts, tets)["dihedral_deg"].min(axis=1)
     return np.minimum(d[: len(X4)], d[len(X4):])
+
+
+def _straighten_folding_mids(points, corners, r, i, j, m) -> np.ndarray:
+    """Put the mid nodes ``m`` of split edges (i, j) (local, per element ``corners`` (k,4)) back on their
+    chords (in place) where a child would be folded: the mid node becomes a vertex of both children,
+    and on a thin element along a curved boundary it can lie beyond the opposite face, so a child's
+    straight det falls below ``MIN_VOLUME_SHARE`` (the share of its volume a vertex move may leave)
+    × its straight half D/2 of the parent's D (≤ 0: a child no mid node can mend). On the chord the children are the straight halves (D/2 each); the node, a
+    projection target of the pass, goes back on the surface as far as its elements stay valid
+    (mesh_motion.project_nodes). → the nodes moved (unique)."""
+    X = points[corners]                                            # (k,4,3)
+    D = _straight_det(X)
+    c1, c2 = X.copy(), X.copy()
+    c1[r, j] = points[m]
+    c2[r, i] = points[m]
+    fold = np.minimum(_straight_det(c1), _straight_det(c2)) < MIN_VOLUME_SHARE * 0.5 * D
+    if fold.any():
+        points[m[fold]] = 0.5 * (X[r[fold], i[fold]] + X[r[fold], j[fold]])
+    return np.unique(m[fold])
 
 
 # -- the passes ---------------------------------------------------------------------------------------
@@ -173,6 +194,17 @@ class Bisector:
             found[ok] = cand[ok]
         return found
 
+    def _refresh(self, nodes):
+        """After vertices ``nodes`` moved: their live edges' lengths and their elements' longest edges."""
+        live = np.flatnonzero(self.refc[: self.n] > 0)
+        c = self.code[live]
+        at = live[np.isin(c >> 32, nodes) | np.isin(c & _MASK32, nodes)]
+        self._lengths(at)
+        slots = np.unique(self.holders(at) // 6)
+        eid = self.tets[slots, 4:]
+        self.L[slots] = self.Ln[eid]
+        self.le[slots] = _longest_of(self.L2n[eid], self.codes[slots])
+
     def _add_nodes(self, k):
         need = self.n + k
         self.points = _grow(self.points, need)
@@ -257,6 +289,9 @@ class Bisector:
         r = np.arange(nb)
         vi, vj, vk, vl = TB[r, i], TB[r, j], TB[r, k], TB[r, l]
         m = TB[r, 4 + e]
+        moved = _straighten_folding_mids(self.points, TB[:, :4], r, i, j, m)
+        if self.vert[moved].any():                    # a vertex already: the lengths of its edges change
+            self._refresh(moved[self.vert[moved]])
         new_codes = np.concatenate([_pair(vi, m), _pair(vj, m), _pair(m, vk), _pair(m, vl)])
         uniq, first, inv = np.unique(new_codes, return_index=True, return_inverse=True)
         inv = inv.ravel()

@@ -48,6 +48,17 @@ class BlockMatrix:
         bk.rmatvec(self.bptr, self.bcol, self.data, np.ascontiguousarray(x, float), y, max(1, threads.use()))
         return y
 
+    def matvec_rmatvec(self, x: np.ndarray, xt: np.ndarray):
+        """(A x, Aᵀ xt) in one pass over A (x (3 n_cols,), xt (3 n_rows,) float64): the rows in
+        ``rmatvec``'s chunks (one per thread), so A x has ``matvec``'s bits and Aᵀ xt ``rmatvec``'s."""
+        from flexure import _block_kernels as bk
+        from flexure import threads
+
+        y, yt = np.empty(self.shape[0]), np.empty(self.shape[1])
+        bk.matvec_rmatvec(self.bptr, self.bcol, self.data, np.ascontiguousarray(x, float),
+                          np.ascontiguousarray(xt, float), y, yt, max(1, threads.use()))
+        return y, yt
+
     def colouring(self):
         """(cptr, order): the block rows by colour, no two of a colour sharing a block (square,
         structurally symmetric patterns; computed once)."""
@@ -69,6 +80,15 @@ class BlockMatrix:
             bk.symmetric_gauss_seidel(self.bptr, self.bcol, self.data, Dinv, *self.colouring(),
                                       np.ascontiguousarray(r, float), z)
         return z
+
+    @classmethod
+    def from_csr(cls, A, dtype=np.float32) -> "BlockMatrix":
+        """The 3 × 3 blocks of a scalar CSR A (3 n × 3 m) with values of ``dtype`` (each entry rounded
+        once; an entry stored twice is summed in ``dtype``)."""
+        from flexure import _block_kernels as bk
+
+        bptr, bcol, vals = bk.csr_to_blocks(A.indptr, A.indices, A.data, A.shape[0] // 3, np.zeros(1, dtype))
+        return cls(bptr, bcol, vals, A.shape[1] // 3)
 
     def tocsr(self):
         """The scipy CSR (float64) of the same matrix (tests, references)."""

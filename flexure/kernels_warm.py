@@ -7,8 +7,8 @@ import numpy as np
 
 def warm() -> bool:
     """Compile (and cache) the FEM's parallel loops on a tiny mesh — the stiffness, the enriched
-    assembly (CSR and 3 × 3 blocks), the sparse products, the block Gauss–Seidel, the coupling's condensation —
-    so that the first analysis does not pay numba's compile time
+    assembly (CSR and 3 × 3 blocks), the sparse products, the block Gauss–Seidel, the coupling's condensation,
+    the STL's closest points and the curved elements' validity check — so that the first analysis does not pay numba's compile time
     (measured 30 + 14 + 9 s at load 4: benchmarks/bench_fem_parallel.py --cold); False without numba."""
     from flexure import stiffness_assembly
 
@@ -35,5 +35,11 @@ def warm() -> bool:
         sparse_parallel.rmatvec(C, np.ones(C.shape[0]))
         Cb.matvec(np.ones(Cb.shape[1]))
         Cb.rmatvec(np.ones(Cb.shape[0]))
+        Cb.matvec_rmatvec(np.ones(Cb.shape[1]), np.ones(Cb.shape[0]))
         Kb.symmetric_gauss_seidel(Dinv, np.ones(Kb.shape[0]))
+    from flexure._closest_kernels import closest_on_triangles
+    from flexure.mesh_motion import element_valid
+
+    closest_on_triangles(np.zeros((1, 3)), np.eye(3)[None], np.array([0, 1]), np.array([0]))
+    element_valid(m, np.arange(len(m.tets)))
     return True

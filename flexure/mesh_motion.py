@@ -176,12 +176,19 @@ def _straight_det(X4: np.ndarray) -> np.ndarray:
 def element_valid(mesh: Mesh, elements: np.ndarray, min_scaled: float = 0.05) -> np.ndarray:
     """(k,) bool: straight det > 0 and the P2 map's det J ≥ ``min_scaled`` × it at the degree-2
     quadrature points and the ten nodes."""
+    from estimator import compiled
     from flexure.fem import TET_QUAD, tet_shape
     from flexure.post import REF_NODES
 
+    _, dN = tet_shape(2, np.vstack([TET_QUAD[2][0], REF_NODES]))
+    if compiled.available():
+        from flexure._valid_kernels import element_valid as valid
+
+        el = np.asarray(elements)
+        el = np.flatnonzero(el) if el.dtype == bool else el.astype(np.int64).ravel()
+        return valid(mesh.points, mesh.tets, el, dN, float(min_scaled))
     X = mesh.points[mesh.tets[elements]]
     straight = np.linalg.det(np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2))
-    _, dN = tet_shape(2, np.vstack([TET_QUAD[2][0], REF_NODES]))
     det = np.linalg.det(np.einsum("eai,qak->eqik", X, dN))
     return (straight > 0) & (det >= min_scaled * straight[:, None]).all(axis=1)
 

@@ -37,6 +37,8 @@ def warm() -> bool:
         return False
     import scipy.sparse as sp
 
+    from flexure.block_sparse import BlockMatrix
+
     A = sp.identity(6, format="csr") * 2.0
     Dinv = np.tile(np.eye(3) / 2.0, (2, 1, 1))
     for k in range(1, KMAX + 1):
@@ -44,6 +46,10 @@ def warm() -> bool:
         for order in "CF":                # pcg's X is C-ordered, a caller's may be Fortran-ordered
             block_gauss_seidel(A, Dinv, np.zeros((6, k), order=order), np.ones((6, k)), True)
         forward_gauss_seidel_residual(A, Dinv, np.ones((6, k)))
+        for dtype in (np.float32, np.float64):          # the block smoother (flexure.solve SMOOTHER_STORAGE)
+            Ab = BlockMatrix.from_csr(A, dtype)
+            block_gauss_seidel_bsr(Ab, Dinv, np.zeros((6, k)), np.ones((6, k)), True)
+            forward_gauss_seidel_residual_bsr(Ab, Dinv, np.ones((6, k)))
     for bs in (3, 6):                     # flexure.vcycle's coarse levels
         block_gauss_seidel_blocks(A, np.tile(np.eye(bs) / 2.0, (6 // bs, 1, 1)), np.zeros((6, 2)), np.ones((6, 2)), True)
     return True
@@ -111,6 +117,52 @@ def _gs0_src(k: int) -> str:
                       "        lo = 3 * i", *rows, *upd, *scatter])
 
 
+def _bvals(indent: str) -> list:
+    """The block's nine values as float64 (v00 … v22) and its column c."""
+    return [indent + "c = 3 * np.int64(bcol[p])",
+            *[indent + "; ".join(f"v{a}{b} = np.float64(data[p, {a}, {b}])" for b in range(3)) for a in range(3)]]
+
+
+def _bgs_src(k: int) -> str:
+    """``_gs_src`` on 3 × 3 block storage (flexure.block_sparse: bptr, bcol, values (n_blocks, 3, 3)
+    of any float type, summed in float64): one pass over a block row reads each block once."""
+    c = range(k)
+    body = ["    nb = Dinv.shape[0]",
+            "    for t in range(nb):",
+            "        i = t if forward else nb - 1 - t",
+            *["        " + "; ".join(f"s{a}_{j} = B[3 * i + {a}, {j}]" for j in c) for a in range(3)],
+            "        for p in range(bptr[i], bptr[i + 1]):", *_bvals("            ")]
+    for j in c:
+        body += [f"            x0 = X[c, {j}]; x1 = X[c + 1, {j}]; x2 = X[c + 2, {j}]",
+                 *[f"            s{a}_{j} -= v{a}0 * x0 + v{a}1 * x1 + v{a}2 * x2" for a in range(3)]]
+    body += [f"        X[3 * i + {a}, {j}] += Dinv[i, {a}, 0] * s0_{j} + Dinv[i, {a}, 1] * s1_{j} + Dinv[i, {a}, 2] * s2_{j}"
+             for a in range(3) for j in c]
+    return "\n".join(["def bgs(bptr, bcol, data, Dinv, X, B, forward):", *body])
+
+
+def _bgs0_src(k: int) -> str:
+    """``_gs0_src`` on 3 × 3 block storage: the forward sweep from X = 0 over the blocks left of the
+    diagonal, then each of them scatters Aᵢⱼᵀ xᵢ into the residual of block row j < i (A symmetric)."""
+    c = range(k)
+    body = ["    for i in range(Dinv.shape[0]):",
+            *["        " + "; ".join(f"s{a}_{j} = B[3 * i + {a}, {j}]" for j in c) for a in range(3)],
+            "        pend = bptr[i]",
+            "        for p in range(bptr[i], bptr[i + 1]):",
+            "            if bcol[p] >= i:",
+            "                break",
+            "            pend = p + 1", *_bvals("            ")]
+    for j in c:
+        body += [f"            x0 = X[c, {j}]; x1 = X[c + 1, {j}]; x2 = X[c + 2, {j}]",
+                 *[f"            s{a}_{j} -= v{a}0 * x0 + v{a}1 * x1 + v{a}2 * x2" for a in range(3)]]
+    body += [f"        x{a}_{j} = Dinv[i, {a}, 0] * s0_{j} + Dinv[i, {a}, 1] * s1_{j} + Dinv[i, {a}, 2] * s2_{j}"
+             for a in range(3) for j in c]
+    body += [f"        X[3 * i + {a}, {j}] = x{a}_{j}" for a in range(3) for j in c]
+    body += ["        for p in range(bptr[i], pend):", *_bvals("            ")]
+    for j in c:
+        body += [f"            R[c + {b}, {j}] -= v0{b} * x0_{j} + v1{b} * x1_{j} + v2{b} * x2_{j}" for b in range(3)]
+    return "\n".join(["def bgs0(bptr, bcol, data, Dinv, X, B, R):", *body])
+
+
 #: block Gauss–Seidel for any block size b (D⁻¹ (n/b, b, b)) and any k columns (runtime loops):
 #: the coarse AMG levels (b = 3 on the P1 vertex system, 6 below: the six rigid-body modes)
 _GS_ANY_SRC = """def block_gs_any(indptr, indices, data, Dinv, X, B, forward):
@@ -143,7 +195,10 @@ def _kernel(name: str, k: int):
     numba caches the compiled code)."""
     from flexure import _multirhs_fused, _multirhs_loops
 
-    return getattr(_multirhs_fused if name == "gs0_res" else _multirhs_loops, f"{name}_{k}")
+    from flexure import _multirhs_blocks
+
+    mod = {"gs0_res": _multirhs_fused, "bgs": _multirhs_blocks, "bgs0": _multirhs_blocks}.get(name, _multirhs_loops)
+    return getattr(mod, f"{name}_{k}")
 
 
 def _groups(k: int):
@@ -184,6 +239,34 @@ def forward_gauss_seidel_residual(A, Dinv: np.ndarray, B: np.ndarray):
         else:
             Xg, Rg = np.empty((B.shape[0], g.stop - g.start)), np.zeros((B.shape[0], g.stop - g.start))
             _kernel("gs0_res", g.stop - g.start)(A.indptr, A.indices, A.data, Dinv, Xg, np.ascontiguousarray(B[:, g]), Rg)
+            X[:, g], R[:, g] = Xg, Rg
+    return X, R
+
+
+def block_gauss_seidel_bsr(Ab, Dinv: np.ndarray, X: np.ndarray, B: np.ndarray, forward: bool) -> None:
+    """``block_gauss_seidel`` on a flexure.block_sparse.BlockMatrix ``Ab`` (3 × 3 blocks, any value
+    type, sums in float64)."""
+    for g in _groups(X.shape[1]):
+        if g.start == 0 and g.stop == X.shape[1]:
+            _kernel("bgs", X.shape[1])(Ab.bptr, Ab.bcol, Ab.data, Dinv, X, np.ascontiguousarray(B), forward)
+        else:
+            Xg = np.ascontiguousarray(X[:, g])
+            _kernel("bgs", g.stop - g.start)(Ab.bptr, Ab.bcol, Ab.data, Dinv, Xg, np.ascontiguousarray(B[:, g]), forward)
+            X[:, g] = Xg
+
+
+def forward_gauss_seidel_residual_bsr(Ab, Dinv: np.ndarray, B: np.ndarray):
+    """``forward_gauss_seidel_residual`` on a flexure.block_sparse.BlockMatrix ``Ab`` (symmetric,
+    block columns ascending)."""
+    B = np.ascontiguousarray(B)
+    X = np.empty_like(B)
+    R = np.zeros_like(B)
+    for g in _groups(B.shape[1]):
+        if g.start == 0 and g.stop == B.shape[1]:
+            _kernel("bgs0", B.shape[1])(Ab.bptr, Ab.bcol, Ab.data, Dinv, X, B, R)
+        else:
+            Xg, Rg = np.empty((B.shape[0], g.stop - g.start)), np.zeros((B.shape[0], g.stop - g.start))
+            _kernel("bgs0", g.stop - g.start)(Ab.bptr, Ab.bcol, Ab.data, Dinv, Xg, np.ascontiguousarray(B[:, g]), Rg)
             X[:, g], R[:, g] = Xg, Rg
     return X, R
 
@@ -236,16 +319,17 @@ def pcg(A, B: np.ndarray, M, rtol: float, maxiter: int, X0: np.ndarray | None = 
 
 #: the generated files: the loops of the sweeps and products, and of the fused first sweep and the
 #: coarse levels (two files, each under the project's module-size limit)
-GENERATED = {"_multirhs_loops.py": ("spmm", "block_gs"), "_multirhs_fused.py": ("gs0_res",)}
+GENERATED = {"_multirhs_loops.py": ("spmm", "block_gs"), "_multirhs_fused.py": ("gs0_res",),
+             "_multirhs_blocks.py": ("bgs", "bgs0")}
 
 
 def _generate(filename: str = "_multirhs_loops.py") -> str:
     """Source of flexure/<filename> (one of GENERATED)."""
-    srcs = {"spmm": _spmm_src, "block_gs": _gs_src, "gs0_res": _gs0_src}
+    srcs = {"spmm": _spmm_src, "block_gs": _gs_src, "gs0_res": _gs0_src, "bgs": _bgs_src, "bgs0": _bgs0_src}
     out = ['"""Generated by ``python -m flexure.multirhs`` (do not edit): the loops of flexure.multirhs for',
            'k = 1 … 6 columns, one function per k so that the k accumulators stay in registers; compiled by',
            'numba on first use and cached beside this file."""', '', 'import numba']
-    out += ['import numpy as np', ''] if filename == "_multirhs_fused.py" else ['']
+    out += ['import numpy as np', ''] if filename != "_multirhs_loops.py" else ['']
     for k in range(1, KMAX + 1):
         for name in GENERATED[filename]:
             out += ["", "@numba.njit(cache=True, nogil=True)", srcs[name](k).replace(f"def {name}(", f"def {name}_{k}(", 1), ""]

@@ -13,6 +13,8 @@ the per-element face and edge tags of a ``refine.TaggedMesh``.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from flexure.mesh import TET_EDGES, TET_FACES, Mesh
@@ -169,6 +171,7 @@ class StlProjector:
         self.tri = surface.points[surface.faces]                           # (f,3,3)
         edge = np.linalg.norm(self.tri - self.tri[:, [1, 2, 0]], axis=2)
         self.unit = float(np.median(edge))
+        self.tri_unit = self.tri / self.unit                                   # (f,3,3) in median edges
         step = spacing * self.unit
         k = np.clip(np.ceil(edge.max(axis=1) / step), 1, 64).astype(int)
         #: every point of a triangle is within this of one of its samples (a grid cell's longest edge)
@@ -206,36 +209,16 @@ class StlProjector:
         ds, idx = self.tree.query(points, k=c)
         ds, idx = ds.reshape(len(points), c), idx.reshape(len(points), c)
         cp, d = self._closest(points, self.owner[idx])
+        if not certified:
+            return cp
         # certified where every sample within d + gap (the farthest a triangle holding a closer point
-        # can have its nearest sample) was a candidate; else a ball query of that radius
-        for i in np.flatnonzero(ds[:, -1] < d + self.gap) if certified else ():
-            near = self.tree.query_ball_point(points[i], d[i] + self.gap)
-            cp[i], d[i] = (a[0] for a in self._closest(points[i:i + 1], np.unique(self.owner[near])[None]))
+        # can have its nearest sample) was a candidate; else all triangles of a ball of that radius
+        ball = np.flatnonzero(ds[:, -1] < d + self.gap)
+        if len(ball):
+            rows, tris = _owners_in_balls(self.tree, self.owner, points[ball], d[ball] + self.gap)
+            indptr = np.searchsorted(rows, np.arange(len(ball) + 1))
+            cp[ball], d[ball] = self._closest_csr(points[ball], indptr, tris)
         return cp
-
-    def facet_sagitta(self, points: np.ndarray) -> np.ndarray:
-        """The STL's own chord error near each point (k,) m: s = w φ / 8 over the folds of the facet
-        nearest to it that are gentler than ``feature_deg`` (φ the fold angle, w the facets' mean width
-        across it: a polygon of facets of width w on a circle of radius R = w/φ is off the circle by
-        w²/8R), the largest of its three; 0 on a flat facet. A smooth curve through points on the
-        facets (a P2 edge) is off them by up to about s however fine the mesh: below it the facets
-        cannot tell geometry from facetting."""
-        if getattr(self, "_sag", None) is None:
-            import trimesh
-
-            tm = trimesh.Trimesh(self.surface.points, self.surface.faces, process=False)
-            phi = tm.face_adjacency_angles
-            L = np.linalg.norm(np.diff(self.surface.points[tm.face_adjacency_edges], axis=1)[:, 0], axis=1)
-            w = tm.area_faces[tm.face_adjacency].sum(axis=1) / np.maximum(L, 1e-300)
-            s = np.where(phi < np.deg2rad(self.feature_deg), w * phi / 8.0, 0.0)
-            self._sag = np.zeros(len(self.surface.faces))
-            np.maximum.at(self._sag, tm.face_adjacency[:, 0], s)
-            np.maximum.at(self._sag, tm.face_adjacency[:, 1], s)
-        points = np.asarray(points, float)
-        if len(points) == 0:
-            return np.zeros(0)
-        _, idx = self.tree.query(points, k=1)
-        return self._sag[self.owner[np.asarray(idx).ravel()]]
 
     def project_on_edges(self, points: np.ndarray) -> np.ndarray:
         """Closest points on the STL's sharp edges (segments where its facets fold by more than
@@ -259,23 +242,55 @@ class StlProjector:
         _, idx = tree.query(points, k=c)
         idx = idx.reshape(len(points), c)
         cp, d = _closest_on_segments(points, seg[idx])
-        for i in range(len(points)):                  # certified: every segment whose midpoint is within d + half
-            near = tree.query_ball_point(points[i], d[i] + half)
-            if len(near) > c or not np.isin(near, idx[i]).all():
-                cp[i], d[i] = (a[0] for a in _closest_on_segments(points[i:i + 1], seg[np.asarray(near)][None]))
+        # certified: every segment whose midpoint is within d + half was a candidate; else all of those
+        near = tree.query_ball_point(points, d + half)
+        lengths = np.fromiter(map(len, near), np.int64, len(near))
+        rows = np.repeat(np.arange(len(points)), lengths)
+        found = np.fromiter(itertools.chain.from_iterable(near), np.int64, int(lengths.sum()))
+        missed = np.unique(rows[~(idx[rows] == found[:, None]).any(axis=1)])
+        for i in missed:
+            cp[i], d[i] = (a[0] for a in _closest_on_segments(points[i:i + 1], seg[np.asarray(near[i])][None]))
         return cp
 
     def _closest(self, points, cand):
         """Closest points (k,3) and distances (k,) of ``points`` on their candidate triangles (k,c)."""
+        k, c = cand.shape
+        return self._closest_csr(points, np.arange(0, k * c + 1, c), np.sort(cand, axis=1).ravel())
+
+    def _closest_csr(self, points, indptr, tris):
+        """Closest points (k,3) and distances (k,) of ``points`` on the triangles
+        ``tris[indptr[i]:indptr[i+1]]`` of each (flexure._closest_kernels; trimesh's without numba)."""
+        from estimator import compiled
+
+        u = self.unit
+        if compiled.available():
+            from flexure._closest_kernels import closest_on_triangles
+
+            cp, d = closest_on_triangles(points / u, self.tri_unit, indptr, tris)
+            return u * cp, u * d
         from trimesh.triangles import closest_point
 
-        q = np.repeat(points, cand.shape[1], axis=0)
-        u = self.unit
-        cp = u * closest_point(self.tri[cand.ravel()] / u, q / u).reshape(len(points), -1, 3)
-        d = np.linalg.norm(cp - points[:, None], axis=2)
-        j = d.argmin(axis=1)
-        r = np.arange(len(points))
-        return cp[r, j], d[r, j]
+        cp, d = np.empty_like(points), np.empty(len(points))
+        for width in np.unique(np.diff(indptr)):       # rows of one length at a time
+            rows = np.flatnonzero(np.diff(indptr) == width)
+            cand = tris[indptr[rows][:, None] + np.arange(width)]
+            q = u * closest_point(self.tri_unit[cand.ravel()], np.repeat(points[rows], width, axis=0) / u)
+            q = q.reshape(len(rows), width, 3)
+            dist = np.linalg.norm(q - points[rows, None], axis=2)
+            j = dist.argmin(axis=1)
+            cp[rows], d[rows] = q[np.arange(len(rows)), j], dist[np.arange(len(rows)), j]
+        return cp, d
+
+
+def _owners_in_balls(tree, owner: np.ndarray, centres: np.ndarray, radii: np.ndarray):
+    """The distinct triangles (``owner`` of the samples) within ``radii`` of each of ``centres``,
+    as (row, triangle) pairs sorted by row: one ball query for all."""
+    near = tree.query_ball_point(centres, radii)
+    lengths = np.fromiter(map(len, near), np.int64, len(near))
+    samples = np.fromiter(itertools.chain.from_iterable(near), np.int64, int(lengths.sum()))
+    n_tri = np.int64(owner.max() + 1)
+    key = np.unique(np.repeat(np.arange(len(near), dtype=np.int64), lengths) * n_tri + owner[samples])
+    return key // n_tri, key % n_tri
 
 
 def _closest_on_segments(points: np.ndarray, seg: np.ndarray):

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from flexure._refine_kernels import (_OTHER, _PRIORITY, QUALITY_FLOOR_DEG, _children_min_dihedral,  # noqa: F401
-                                     _edge_targets, _longest_of, _p2_weights, edge_codes)
+                                     _edge_targets, _longest_of, _p2_weights, _straighten_folding_mids, edge_codes)
 from flexure.mesh import TET_EDGES, Mesh
 from flexure.mesh_motion import (MIN_SCALED_JACOBIAN, MIN_VOLUME_SHARE, _graph_laplacian, _straight_det,  # noqa: F401
                                  element_valid, halve_until_valid, morph_local, project_nodes)
@@ -321,6 +321,7 @@ def _bisect_pass(points, tets, face_tag, edge_tag, flag, emark, fields, closure_
     r = np.arange(len(B))
     vi, vj, vk, vl = TB[r, i], TB[r, j], TB[r, k], TB[r, l]
     m = TB[r, 4 + e]
+    _straighten_folding_mids(points, TB[:, :4], r, i, j, m)
     # the four new edges per bisected element, their reference points in the parent, and where
     # they lie: on the split edge (a curve, or a surface face next to it) or on a parent face
     pair = lambda x, y: (np.minimum(x, y) << 32) | np.maximum(x, y)  # noqa: E731

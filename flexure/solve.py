@@ -52,6 +52,14 @@ PMG_SWEEPS = 1
 #: iterations at 72k DOFs and 22–31 at 145k (2 levels), 39–46 at 317k (3 levels with 1000);
 #: with 6000 the 317k model keeps 2 levels and needs 22–30 (benchmarks/bench_fem.py --only ladder).
 PMG_MAX_COARSE = 6000
+#: the P2 smoother's copy of the matrix (``_pmg_multi``): "block32", 3 × 3 blocks of float32 values
+#: (flexure.block_sparse; sums in float64), "block64" the same in float64, "csr" the scalar CSR itself.
+#: The sweeps are bound by reading the matrix: 12 bytes an entry in the CSR, 4.4 in "block32" (thick
+#: disc, 354 k dofs, one column: forward sweep with its residual 95 → 33-48 ms, backward 130 → 65-83 ms,
+#: 2026-11-27 under load 2.8). The blocks' rounding (6e-8 relative) only changes the preconditioner,
+#: not the system CG solves (its products stay on the float64 CSR); same CG iterations
+#: (tests/test_fem_multirhs.py)
+SMOOTHER_STORAGE = "block32"
 #: the 3×3 diagonal blocks by one compiled pass over the rows (False: nine scipy diagonals, the reference)
 BLOCKS_COMPILED = True
 
@@ -174,23 +182,31 @@ def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False, sweeps: int = 1):
     from flexure import multirhs
     from flexure.vcycle import MultiVCycle
 
+    from flexure.block_sparse import BlockMatrix
+
     Ac = A.tocsr()
     Ac.sort_indices()
     Dinv, ml, _, It = _pmg_setup(Ac, coarse, B_coarse, smoothed)
     Dinv = np.ascontiguousarray(Dinv)
     V = MultiVCycle(ml)                     # the coarse V-cycle on all columns at once
+    if SMOOTHER_STORAGE == "csr":
+        Ab, gs0, gs = Ac, multirhs.forward_gauss_seidel_residual, multirhs.block_gauss_seidel
+    else:                                   # 3 × 3 blocks: fewer bytes read per sweep
+        Ab = BlockMatrix.from_csr(Ac, np.float32 if SMOOTHER_STORAGE == "block32" else np.float64)
+        gs0, gs = multirhs.forward_gauss_seidel_residual_bsr, multirhs.block_gauss_seidel_bsr
 
     def apply(R):
-        X, res = multirhs.forward_gauss_seidel_residual(Ac, Dinv, R)
+        X, res = gs0(Ab, Dinv, R)
         for _ in range(sweeps - 1):
-            multirhs.block_gauss_seidel(Ac, Dinv, X, R, forward=True)
+            gs(Ab, Dinv, X, R, forward=True)
         if sweeps > 1:
             res = R - multirhs.spmm(Ac, X)
         X += coarse @ V(It @ res)
         for _ in range(sweeps):
-            multirhs.block_gauss_seidel(Ac, Dinv, X, R, forward=False)
+            gs(Ab, Dinv, X, R, forward=False)
         return X
 
+    apply.blocks = Ab if SMOOTHER_STORAGE != "csr" else None     # flexure.enriched: its A x on the blocks
     return apply, V
 
 

@@ -99,6 +99,14 @@ def _distance_within(points: np.ndarray, x: np.ndarray, tol: float) -> np.ndarra
     if len(pid) == 0:
         return out
     t = tri[np.repeat(start, m) + np.arange(len(pid)) - np.repeat(np.cumsum(m) - m, m)]
+    from estimator import compiled
+
+    if compiled.available():                                          # one compiled pass, no pair arrays
+        from flexure._closest_kernels import closest_on_triangles
+
+        out = closest_on_triangles(points, x, np.r_[0, np.cumsum(m)], t)[1]
+        out[out > tol] = np.inf
+        return out
     for c0 in range(0, len(pid), 200_000):                             # bounded memory
         sl = slice(c0, c0 + 200_000)
         d = point_triangle_distance(points[pid[sl]], x[t[sl], 0], x[t[sl], 1], x[t[sl], 2])

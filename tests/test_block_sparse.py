@@ -53,6 +53,11 @@ def test_block_products_the_same_with_one_and_two_threads():
             out[n] = (K.matvec(x), C.rmatvec(y))
     assert np.array_equal(out[1][0], out[2][0])
     assert np.allclose(out[1][1], out[2][1], rtol=1e-13, atol=1e-13 * np.abs(out[1][1]).max())
+    xw = rng.normal(size=C.shape[1])
+    for n in (1, 2):                          # C x and Cᵀ y in one pass: the bits of the two apart
+        with threads.limited(n):
+            both = C.matvec_rmatvec(xw, y)
+            assert np.array_equal(both[0], C.matvec(xw)) and np.array_equal(both[1], C.rmatvec(y))
 
 
 @pytest.mark.parametrize("rtol, rel", [(1e-12, 1e-5), (enriched.RTOL, 2e-2)])
@@ -143,3 +148,32 @@ def test_enriched_solve_with_sgs_same_estimate():
     assert out["sgs"][0][0] == pytest.approx(out["jacobi"][0][0], rel=1e-8)
     assert out["sgs"][1] == pytest.approx(out["jacobi"][1], rel=1e-8)
     assert out["sgs"][2]["pcg_iterations"] <= out["jacobi"][2]["pcg_iterations"]
+
+
+def test_blocks_from_a_csr_hold_its_entries():
+    """BlockMatrix.from_csr: unsorted indices, blocks stored in part, an entry stored twice (summed)
+    → the same matrix (float64) and products; float32 to its rounding."""
+    import scipy.sparse as sp
+
+    from flexure.block_sparse import BlockMatrix
+
+    M = sp.random(12, 12, density=0.3, random_state=7, format="csr")
+    M = (M + M.T).tocsr()
+    ind, dat, ptr = [], [], [0]
+    for r in range(12):                                               # each row reversed; row 4 a duplicate
+        cols, vals = M.indices[M.indptr[r]:M.indptr[r + 1]][::-1], M.data[M.indptr[r]:M.indptr[r + 1]][::-1]
+        if r == 4:
+            cols, vals = np.r_[cols, 7], np.r_[vals, 1.5]
+        ind += list(cols)
+        dat += list(vals)
+        ptr.append(len(ind))
+    U = sp.csr_matrix((np.array(dat), np.array(ind, np.int32), np.array(ptr, np.int32)), shape=(12, 12))
+    ref = sp.csr_matrix(U.toarray())                                  # the duplicate summed
+    Ab = BlockMatrix.from_csr(U, np.float64)
+    for r in range(4):
+        assert np.all(np.diff(Ab.bcol[Ab.bptr[r]:Ab.bptr[r + 1]]) > 0)
+    assert abs(Ab.tocsr() - ref).max() == 0.0
+    x = np.random.default_rng(5).standard_normal(12)
+    assert np.allclose(Ab.matvec(x), ref @ x, rtol=1e-14, atol=1e-14)
+    A32 = BlockMatrix.from_csr(U, np.float32)
+    assert A32.data.dtype == np.float32 and abs(A32.tocsr() - ref).max() <= 1e-7 * abs(ref).max()

@@ -129,3 +129,40 @@ def test_forward_sweep_from_zero_with_residual_equals_sweep_then_product(disc, k
     assert np.abs(X - X_ref).max() <= 1e-12 * np.abs(X_ref).max()
     R_ref = B - A @ X_ref
     assert np.abs(R - R_ref).max() <= 1e-9 * np.abs(B).max()
+
+
+@pytest.mark.parametrize("k", [1, 5, 8])
+def test_block_storage_sweeps_equal_the_csr_sweeps(disc, k):
+    """multirhs' sweeps on 3 × 3 block storage (flexure.block_sparse, fsolve.SMOOTHER_STORAGE): float64
+    blocks give the CSR sweeps to round-off; float32 blocks to their rounding (~1e-7)."""
+    from flexure.block_sparse import BlockMatrix
+
+    sy, _ = disc
+    A = sy.A.tocsr()
+    A.sort_indices()
+    Dinv = np.ascontiguousarray(fsolve.block_diagonal_inverse(A))
+    B = np.random.default_rng(k).standard_normal((A.shape[0], k))
+    X, R = multirhs.forward_gauss_seidel_residual(A, Dinv, B)
+    multirhs.block_gauss_seidel(A, Dinv, X, B, False)
+    for dtype, tol in ((np.float64, 1e-12), (np.float32, 1e-5)):
+        Ab = BlockMatrix.from_csr(A, dtype)
+        assert Ab.data.dtype == dtype
+        Xb, Rb = multirhs.forward_gauss_seidel_residual_bsr(Ab, Dinv, B)
+        assert np.abs(Rb - R).max() <= tol * np.abs(R).max()
+        multirhs.block_gauss_seidel_bsr(Ab, Dinv, Xb, B, False)
+        assert np.abs(Xb - X).max() <= tol * np.abs(X).max()
+    assert np.abs(Xb - X).max() > 0.0                                  # float32: not the same bits
+
+
+def test_p2_solve_same_iterations_with_the_block_smoother(disc, monkeypatch):
+    """The float32 block smoother changes the preconditioner by its rounding only: the same CG
+    iterations per case (± 1) and the same answers to the CG tolerance as the CSR smoother."""
+    sy, B = disc
+    out = {}
+    for storage in ("csr", "block32"):
+        monkeypatch.setattr(fsolve, "SMOOTHER_STORAGE", storage)
+        out[storage] = fsolve.solve_system(sy.A, B, sy.B, "amg", 1e-10, coarse=sy.coarse, B_coarse=sy.B_coarse)
+    (q0, i0), (q1, i1) = out["csr"], out["block32"]
+    assert all(abs(a - b) <= 1 for a, b in zip(i1["iterations"], i0["iterations"]))
+    assert np.abs(q1 - q0).max() <= 1e-8 * np.abs(q0).max()
+    assert i1["residual_norm"] < 1e-10

@@ -175,25 +175,6 @@ def test_stl_sharp_edges_are_curves_and_project_onto_the_stl_edges():
     assert not np.allclose(got[1], got[0])
 
 
-def test_stl_facet_sagitta_is_the_polygon_chord_error():
-    """On a 48-gon annulus STL the facets' sagitta near the outer wall is w²/8R (w = 2R sin(π/48)), on
-    the flat caps 0 (project.StlProjector.facet_sagitta)."""
-    import trimesh
-
-    from flexure.geometry import Surface
-    from flexure.project import StlProjector
-
-    R = 0.01
-    ann = trimesh.creation.annulus(r_min=0.004, r_max=R, height=0.003, sections=48)
-    proj = StlProjector(Surface(np.asarray(ann.vertices), np.asarray(ann.faces)))
-    w = 2 * R * np.sin(np.pi / 48)
-    ang = np.linspace(0.1, 6.0, 7)
-    wall = np.column_stack([R * np.cos(ang), R * np.sin(ang), np.zeros(7)])
-    s = proj.facet_sagitta(wall)
-    assert np.allclose(s, w * w / (8 * R), rtol=0.05)
-    assert proj.facet_sagitta(np.array([[0.007, 0.0, 0.003]]))[0] == 0.0          # a flat cap
-
-
 def test_relaxed_closure_is_conforming_and_more_local_than_rivaras():
     """bisect's closure_ratio (refine.CLOSURE_RATIO): splitting an element at a marked edge of at least
     0.7 × its longest keeps the mesh conforming and nested, adds fewer elements than Rivara's closure
@@ -300,23 +281,28 @@ def _same(a, b):
     assert a[6:8] == b[6:8]
 
 
-@pytest.mark.parametrize("jitter,ratio,rounds", [(0.0, 1.0, 1), (0.5, 1.0, 3), (0.5, 0.7, 1), (0.3, 0.7, 3)])
-def test_active_set_passes_equal_the_whole_mesh_reference(jitter, ratio, rounds):
+@pytest.mark.parametrize("jitter,ratio,rounds,bulge", [(0.0, 1.0, 1, 0.0), (0.5, 1.0, 3, 0.0), (0.5, 0.7, 1, 0.0),
+                                                      (0.3, 0.7, 3, 0.0), (0.5, 1.0, 3, 0.2)])
+def test_active_set_passes_equal_the_whole_mesh_reference(jitter, ratio, rounds, bulge):
     """refine.bisect's passes on the active set (flexure._refine_kernels) give the whole-mesh reference's
     (refine._passes_reference) mesh bit for bit: points, element order, face and edge tags, prolongated
     fields, projection targets, passes; over three successive refinements of random marks on a tagged,
-    jittered box (ties of equal lengths without jitter), Rivara's closure and the relaxed one; and the
-    topology-only trial (bisected_dofs) counts the same DOFs."""
+    jittered box (ties of equal lengths without jitter), Rivara's closure and the relaxed one, and with
+    mid nodes bulged off their chords (``bulge``: split edges' mid nodes that would fold a child go back
+    on the chord, some of them vertices already); and the topology-only trial (bisected_dofs) counts the
+    same DOFs."""
     from flexure._refine_kernels import passes
     from flexure.mesh import Mesh
     from flexure.refine import _passes_reference, bisected_dofs
 
     tm = _box_tagged(4, 3, 4, jitter, seed=int(10 * jitter) + rounds)
     rng = np.random.default_rng(rounds)
+    mids = np.unique(tm.mesh.tets[:, 4:])
+    tm.mesh.points[mids] += bulge * (rng.random((len(mids), 3)) - 0.5) / 4
     points, tets, ft, et = tm.mesh.points, tm.mesh.tets, tm.face_tag, tm.edge_tag
     fields = [_quadratic(points), rng.random((len(points), 3, 2))]
     assert (ft > 0).sum() > 50 and (et > 0).sum() > 20
-    for step in range(3):
+    for step in range(3 if bulge == 0 else 2):              # bulged: the third grows tenfold
         marks = np.flatnonzero(rng.random(len(tets)) < 0.12)
         ref = _passes_reference(points, tets, ft, et, marks, fields, rounds, ratio)
         new = passes(points, tets, ft, et, marks, fields, rounds, ratio)
@@ -326,7 +312,8 @@ def test_active_set_passes_equal_the_whole_mesh_reference(jitter, ratio, rounds)
         assert bisected_dofs(trial, marks, rounds, ratio) == 3 * len(ref[0])
         points, tets, ft, et, fields = ref[:5]
         check_conforming(Mesh(points, tets))
-        assert np.abs(fields[0] - _quadratic(points)).max() < 1e-12
+        if bulge == 0:                        # a mid node put back on its chord is not the quadratic's
+            assert np.abs(fields[0] - _quadratic(points)).max() < 1e-12
 
 
 @pytest.mark.slow
@@ -381,3 +368,25 @@ def test_straightening_after_a_bisection_checks_only_what_changed_and_finds_the_
     assert 0 < sizes[0] < sizes[1] < fast.mesh.n_elements and sizes[2:] == [None, None]    # snap (morph) left it valid
     assert fast.mesh.points.tobytes() == slow.mesh.points.tobytes() and np.array_equal(fast.mesh.tets, slow.mesh.tets)
     assert uf.tobytes() == us.tobytes()
+
+
+def test_a_curved_mid_node_that_would_fold_a_child_goes_back_on_its_chord():
+    """A thin element whose longest edge's mid node bulges past the opposite face (h = 0.2 above the
+    chord of a 0.064-det element: either child, with the mid node as a vertex, has det 0.032 − 0.25 h < 0):
+    the split puts it on the chord, each child is the straight half (det D/2), and an untouched split
+    (a bulge of 0.01) keeps its curved node."""
+    from flexure.mesh import Mesh
+
+    corners = np.array([[0, 0, 0], [1, 0, 0], [0.5, 0.8, 0], [0.5, 0.3, 0.08]], float)
+    for h, on_chord in ((0.2, True), (0.01, False)):
+        mesh = to_quadratic(Mesh(corners.copy(), np.array([[0, 1, 2, 3]])))
+        mid = mesh.tets[0, 4]                                   # edge (0, 1), the longest
+        mesh.points[mid] = [0.5, 0.0, h]
+        out, _, _ = bisect(TaggedMesh.untagged(mesh), [0])
+        X = out.mesh.points[out.mesh.tets[:, :4]]
+        det = np.linalg.det(np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2))
+        assert len(det) == 2
+        if on_chord:
+            assert np.allclose(out.mesh.points[mid], [0.5, 0.0, 0.0]) and np.allclose(np.abs(det), 0.032)
+        else:
+            assert out.mesh.points[mid][2] == 0.01 and np.allclose(np.abs(det), 0.032 - 0.25 * 0.01)

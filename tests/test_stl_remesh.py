@@ -128,8 +128,13 @@ def test_a_strategy_gmsh_cannot_build_gives_way_to_the_next(monkeypatch):
         gmsh_mesh._session([("re-parametrised", "R")], _field(1.0), "part.toml", 1)
 
 
-def test_surface_distance_is_exact_within_its_tolerance():
-    """The binned distance equals brute force over every triangle for points within tol, inf beyond."""
+@pytest.mark.parametrize("compiled_loops", [True, False], ids=["numba", "numpy"])
+def test_surface_distance_is_exact_within_its_tolerance(compiled_loops, monkeypatch):
+    """The binned distance equals brute force over every triangle for points within tol, inf beyond
+    (the compiled closest point of flexure._closest_kernels and the numpy one alike)."""
+    from estimator import compiled
+
+    monkeypatch.setattr(compiled, "ENABLED", compiled_loops)
     tm = thin_tube(6.0, 0.8, 4.0, res=8)
     pts, faces = np.asarray(tm.vertices), np.asarray(tm.faces)
     rng = np.random.default_rng(1)
