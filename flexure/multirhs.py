@@ -217,56 +217,50 @@ def spmm(A, X: np.ndarray) -> np.ndarray:
 
 def block_gauss_seidel(A, Dinv: np.ndarray, X: np.ndarray, B: np.ndarray, forward: bool) -> None:
     """One block Gauss–Seidel sweep in place on X (n, k) for A X = B (CSR A, Dinv (n/3, 3, 3))."""
-    for g in _groups(X.shape[1]):
-        if g.start == 0 and g.stop == X.shape[1]:
-            _kernel("block_gs", X.shape[1])(A.indptr, A.indices, A.data, Dinv, X, np.ascontiguousarray(B), forward)
-        else:
-            Xg = np.ascontiguousarray(X[:, g])
-            _kernel("block_gs", g.stop - g.start)(A.indptr, A.indices, A.data, Dinv, Xg,
-                                             np.ascontiguousarray(B[:, g]), forward)
-            X[:, g] = Xg
+    _sweep("block_gs", (A.indptr, A.indices, A.data), Dinv, X, B, forward)
 
 
 def forward_gauss_seidel_residual(A, Dinv: np.ndarray, B: np.ndarray):
     """(X, R): one forward block Gauss–Seidel sweep from X = 0 on A X = B and R = B − A X, in one
     pass over the lower triangle of the symmetric CSR A (sorted indices), for B (n, k)."""
-    B = np.ascontiguousarray(B)
-    X = np.empty_like(B)
-    R = np.zeros_like(B)
-    for g in _groups(B.shape[1]):
-        if g.start == 0 and g.stop == B.shape[1]:
-            _kernel("gs0_res", B.shape[1])(A.indptr, A.indices, A.data, Dinv, X, B, R)
-        else:
-            Xg, Rg = np.empty((B.shape[0], g.stop - g.start)), np.zeros((B.shape[0], g.stop - g.start))
-            _kernel("gs0_res", g.stop - g.start)(A.indptr, A.indices, A.data, Dinv, Xg, np.ascontiguousarray(B[:, g]), Rg)
-            X[:, g], R[:, g] = Xg, Rg
-    return X, R
+    return _sweep_residual("gs0_res", (A.indptr, A.indices, A.data), Dinv, B)
 
 
 def block_gauss_seidel_bsr(Ab, Dinv: np.ndarray, X: np.ndarray, B: np.ndarray, forward: bool) -> None:
     """``block_gauss_seidel`` on a flexure.block_sparse.BlockMatrix ``Ab`` (3 × 3 blocks, any value
     type, sums in float64)."""
-    for g in _groups(X.shape[1]):
-        if g.start == 0 and g.stop == X.shape[1]:
-            _kernel("bgs", X.shape[1])(Ab.bptr, Ab.bcol, Ab.data, Dinv, X, np.ascontiguousarray(B), forward)
-        else:
-            Xg = np.ascontiguousarray(X[:, g])
-            _kernel("bgs", g.stop - g.start)(Ab.bptr, Ab.bcol, Ab.data, Dinv, Xg, np.ascontiguousarray(B[:, g]), forward)
-            X[:, g] = Xg
+    _sweep("bgs", (Ab.bptr, Ab.bcol, Ab.data), Dinv, X, B, forward)
 
 
 def forward_gauss_seidel_residual_bsr(Ab, Dinv: np.ndarray, B: np.ndarray):
     """``forward_gauss_seidel_residual`` on a flexure.block_sparse.BlockMatrix ``Ab`` (symmetric,
     block columns ascending)."""
+    return _sweep_residual("bgs0", (Ab.bptr, Ab.bcol, Ab.data), Dinv, B)
+
+
+def _sweep(kernel: str, matrix: tuple, Dinv: np.ndarray, X: np.ndarray, B: np.ndarray, forward: bool) -> None:
+    """The sweep ``kernel`` in place on X (n, k) over ``matrix`` (its index and value arrays), in
+    groups of at most KMAX columns."""
+    for g in _groups(X.shape[1]):
+        if g.start == 0 and g.stop == X.shape[1]:
+            _kernel(kernel, X.shape[1])(*matrix, Dinv, X, np.ascontiguousarray(B), forward)
+        else:
+            Xg = np.ascontiguousarray(X[:, g])
+            _kernel(kernel, g.stop - g.start)(*matrix, Dinv, Xg, np.ascontiguousarray(B[:, g]), forward)
+            X[:, g] = Xg
+
+
+def _sweep_residual(kernel: str, matrix: tuple, Dinv: np.ndarray, B: np.ndarray):
+    """(X, R) of the first sweep ``kernel`` from X = 0 and its residual, in groups of KMAX columns."""
     B = np.ascontiguousarray(B)
     X = np.empty_like(B)
     R = np.zeros_like(B)
     for g in _groups(B.shape[1]):
         if g.start == 0 and g.stop == B.shape[1]:
-            _kernel("bgs0", B.shape[1])(Ab.bptr, Ab.bcol, Ab.data, Dinv, X, B, R)
+            _kernel(kernel, B.shape[1])(*matrix, Dinv, X, B, R)
         else:
             Xg, Rg = np.empty((B.shape[0], g.stop - g.start)), np.zeros((B.shape[0], g.stop - g.start))
-            _kernel("bgs0", g.stop - g.start)(Ab.bptr, Ab.bcol, Ab.data, Dinv, Xg, np.ascontiguousarray(B[:, g]), Rg)
+            _kernel(kernel, g.stop - g.start)(*matrix, Dinv, Xg, np.ascontiguousarray(B[:, g]), Rg)
             X[:, g], R[:, g] = Xg, Rg
     return X, R
 
