@@ -123,6 +123,15 @@ def _bvals(indent: str) -> list:
             *[indent + "; ".join(f"v{a}{b} = np.float64(data[p, {a}, {b}])" for b in range(3)) for a in range(3)]]
 
 
+def _block_times_x(c) -> list:
+    """s_j −= A_block x_c for each column j in ``c`` (the block's values v, its column c: ``_bvals``)."""
+    out = []
+    for j in c:
+        out += [f"            x0 = X[c, {j}]; x1 = X[c + 1, {j}]; x2 = X[c + 2, {j}]",
+                *[f"            s{a}_{j} -= v{a}0 * x0 + v{a}1 * x1 + v{a}2 * x2" for a in range(3)]]
+    return out
+
+
 def _bgs_src(k: int) -> str:
     """``_gs_src`` on 3 × 3 block storage (flexure.block_sparse: bptr, bcol, values (n_blocks, 3, 3)
     of any float type, summed in float64): one pass over a block row reads each block once."""
@@ -132,9 +141,7 @@ def _bgs_src(k: int) -> str:
             "        i = t if forward else nb - 1 - t",
             *["        " + "; ".join(f"s{a}_{j} = B[3 * i + {a}, {j}]" for j in c) for a in range(3)],
             "        for p in range(bptr[i], bptr[i + 1]):", *_bvals("            ")]
-    for j in c:
-        body += [f"            x0 = X[c, {j}]; x1 = X[c + 1, {j}]; x2 = X[c + 2, {j}]",
-                 *[f"            s{a}_{j} -= v{a}0 * x0 + v{a}1 * x1 + v{a}2 * x2" for a in range(3)]]
+    body += _block_times_x(c)
     body += [f"        X[3 * i + {a}, {j}] += Dinv[i, {a}, 0] * s0_{j} + Dinv[i, {a}, 1] * s1_{j} + Dinv[i, {a}, 2] * s2_{j}"
              for a in range(3) for j in c]
     return "\n".join(["def bgs(bptr, bcol, data, Dinv, X, B, forward):", *body])
@@ -151,9 +158,7 @@ def _bgs0_src(k: int) -> str:
             "            if bcol[p] >= i:",
             "                break",
             "            pend = p + 1", *_bvals("            ")]
-    for j in c:
-        body += [f"            x0 = X[c, {j}]; x1 = X[c + 1, {j}]; x2 = X[c + 2, {j}]",
-                 *[f"            s{a}_{j} -= v{a}0 * x0 + v{a}1 * x1 + v{a}2 * x2" for a in range(3)]]
+    body += _block_times_x(c)
     body += [f"        x{a}_{j} = Dinv[i, {a}, 0] * s0_{j} + Dinv[i, {a}, 1] * s1_{j} + Dinv[i, {a}, 2] * s2_{j}"
              for a in range(3) for j in c]
     body += [f"        X[3 * i + {a}, {j}] = x{a}_{j}" for a in range(3) for j in c]
