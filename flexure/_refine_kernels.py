@@ -81,9 +81,10 @@ def _straighten_folding_mids(points, corners, r, i, j, m) -> np.ndarray:
     chords (in place) where a child would be folded: the mid node becomes a vertex of both children,
     and on a thin element along a curved boundary it can lie beyond the opposite face, so a child's
     straight det falls below ``MIN_VOLUME_SHARE`` (the share of its volume a vertex move may leave)
-    × its straight half D/2 of the parent's D (≤ 0: a child no mid node can mend). On the chord the children are the straight halves (D/2 each); the node, a
-    projection target of the pass, goes back on the surface as far as its elements stay valid
-    (mesh_motion.project_nodes). → the nodes moved (unique)."""
+    × its straight half D/2 of the parent's D (≤ 0: a child no mid node can mend). On the chord the
+    children are the straight halves (D/2 each); the node, a projection target of the pass, goes back
+    on the surface as far as its elements stay valid (mesh_motion.project_nodes). → the nodes moved
+    (unique)."""
     X = points[corners]                                            # (k,4,3)
     D = _straight_det(X)
     c1, c2 = X.copy(), X.copy()

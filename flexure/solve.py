@@ -193,9 +193,8 @@ def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False, sweeps: int = 1):
     leaves take one pass over the lower triangle (``multirhs.forward_gauss_seidel_residual``).
     Returns (M(R) → Z for R (n, k), the coarse hierarchy)."""
     from flexure import multirhs
-    from flexure.vcycle import MultiVCycle
-
     from flexure.block_sparse import BlockMatrix
+    from flexure.vcycle import MultiVCycle
 
     Ac = A.tocsr()
     Ac.sort_indices()
