@@ -4,10 +4,14 @@ numba on first use and cached beside this file."""
 
 import numba
 
+from flexure import threads
 
-@numba.njit(cache=True, nogil=True)
+threads.select_layer()                 # before any parallel loop runs (flexure.threads: fork safety)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
 def spmm_1(indptr, indices, data, X, Y):
-    for i in range(Y.shape[0]):
+    for i in numba.prange(Y.shape[0]):
         a0 = 0.0
         for p in range(indptr[i], indptr[i + 1]):
             v = data[p]; j = indices[p]
@@ -40,9 +44,9 @@ def block_gs_1(indptr, indices, data, Dinv, X, B, forward):
         X[3 * i + 2, 0] += Dinv[i, 2, 0] * s0_0 + Dinv[i, 2, 1] * s1_0 + Dinv[i, 2, 2] * s2_0
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, parallel=True)
 def spmm_2(indptr, indices, data, X, Y):
-    for i in range(Y.shape[0]):
+    for i in numba.prange(Y.shape[0]):
         a0 = 0.0; a1 = 0.0
         for p in range(indptr[i], indptr[i + 1]):
             v = data[p]; j = indices[p]
@@ -83,9 +87,9 @@ def block_gs_2(indptr, indices, data, Dinv, X, B, forward):
         X[3 * i + 2, 1] += Dinv[i, 2, 0] * s0_1 + Dinv[i, 2, 1] * s1_1 + Dinv[i, 2, 2] * s2_1
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, parallel=True)
 def spmm_3(indptr, indices, data, X, Y):
-    for i in range(Y.shape[0]):
+    for i in numba.prange(Y.shape[0]):
         a0 = 0.0; a1 = 0.0; a2 = 0.0
         for p in range(indptr[i], indptr[i + 1]):
             v = data[p]; j = indices[p]
@@ -134,9 +138,9 @@ def block_gs_3(indptr, indices, data, Dinv, X, B, forward):
         X[3 * i + 2, 2] += Dinv[i, 2, 0] * s0_2 + Dinv[i, 2, 1] * s1_2 + Dinv[i, 2, 2] * s2_2
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, parallel=True)
 def spmm_4(indptr, indices, data, X, Y):
-    for i in range(Y.shape[0]):
+    for i in numba.prange(Y.shape[0]):
         a0 = 0.0; a1 = 0.0; a2 = 0.0; a3 = 0.0
         for p in range(indptr[i], indptr[i + 1]):
             v = data[p]; j = indices[p]
@@ -193,9 +197,9 @@ def block_gs_4(indptr, indices, data, Dinv, X, B, forward):
         X[3 * i + 2, 3] += Dinv[i, 2, 0] * s0_3 + Dinv[i, 2, 1] * s1_3 + Dinv[i, 2, 2] * s2_3
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, parallel=True)
 def spmm_5(indptr, indices, data, X, Y):
-    for i in range(Y.shape[0]):
+    for i in numba.prange(Y.shape[0]):
         a0 = 0.0; a1 = 0.0; a2 = 0.0; a3 = 0.0; a4 = 0.0
         for p in range(indptr[i], indptr[i + 1]):
             v = data[p]; j = indices[p]
@@ -260,9 +264,9 @@ def block_gs_5(indptr, indices, data, Dinv, X, B, forward):
         X[3 * i + 2, 4] += Dinv[i, 2, 0] * s0_4 + Dinv[i, 2, 1] * s1_4 + Dinv[i, 2, 2] * s2_4
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, parallel=True)
 def spmm_6(indptr, indices, data, X, Y):
-    for i in range(Y.shape[0]):
+    for i in numba.prange(Y.shape[0]):
         a0 = 0.0; a1 = 0.0; a2 = 0.0; a3 = 0.0; a4 = 0.0; a5 = 0.0
         for p in range(indptr[i], indptr[i + 1]):
             v = data[p]; j = indices[p]

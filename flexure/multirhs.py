@@ -59,7 +59,7 @@ def _spmm_src(k: int) -> str:
     c = range(k)
     return "\n".join([
         "def spmm(indptr, indices, data, X, Y):",
-        "    for i in range(Y.shape[0]):",
+        "    for i in numba.prange(Y.shape[0]):",
         "        " + "; ".join(f"a{j} = 0.0" for j in c),
         "        for p in range(indptr[i], indptr[i + 1]):",
         "            v = data[p]; j = indices[p]",
@@ -210,13 +210,23 @@ def _groups(k: int):
     return [slice(s, min(k, s + KMAX)) for s in range(0, k, KMAX)]
 
 
+#: rows a thread takes at a time in A X (dynamic hand-out: flexure.threads.dynamic)
+ROW_CHUNK = 2048
+
+
 def spmm(A, X: np.ndarray) -> np.ndarray:
-    """A X for CSR A and X (n, k)."""
+    """A X for CSR A and X (n, k), the rows among flexure.threads' threads (each row summed in
+    order: the same bits for every thread count)."""
+    from flexure import threads
+
     Y = np.empty((A.shape[0], X.shape[1]))
-    for g in _groups(X.shape[1]):
-        Yg = np.empty((A.shape[0], g.stop - g.start))
-        _kernel("spmm", g.stop - g.start)(A.indptr, A.indices, A.data, np.ascontiguousarray(X[:, g]), Yg)
-        Y[:, g] = Yg
+    threads.use()
+    with threads.dynamic(ROW_CHUNK):
+        for g in _groups(X.shape[1]):
+            Yg = Y if g.stop - g.start == X.shape[1] else np.empty((A.shape[0], g.stop - g.start))
+            _kernel("spmm", g.stop - g.start)(A.indptr, A.indices, A.data, np.ascontiguousarray(X[:, g]), Yg)
+            if Yg is not Y:
+                Y[:, g] = Yg
     return Y
 
 
@@ -329,9 +339,12 @@ def _generate(filename: str = "_multirhs_loops.py") -> str:
            'k = 1 … 6 columns, one function per k so that the k accumulators stay in registers; compiled by',
            'numba on first use and cached beside this file."""', '', 'import numba']
     out += ['import numpy as np', ''] if filename != "_multirhs_loops.py" else ['']
+    if filename == "_multirhs_loops.py":           # spmm's rows are split among threads (numba prange)
+        out += ["from flexure import threads", "", "threads.select_layer()                 # before any parallel loop runs (flexure.threads: fork safety)", ""]
     for k in range(1, KMAX + 1):
         for name in GENERATED[filename]:
-            out += ["", "@numba.njit(cache=True, nogil=True)", srcs[name](k).replace(f"def {name}(", f"def {name}_{k}(", 1), ""]
+            jit = "@numba.njit(cache=True, nogil=True, parallel=True)" if name == "spmm" else "@numba.njit(cache=True, nogil=True)"
+            out += ["", jit, srcs[name](k).replace(f"def {name}(", f"def {name}_{k}(", 1), ""]
     if filename == "_multirhs_fused.py":
         out += ["", "@numba.njit(cache=True, nogil=True)", _GS_ANY_SRC, ""]
     return "\n".join(out).rstrip() + "\n"

@@ -52,6 +52,19 @@ def test_spmm_equals_scipy(disc, k):
     assert np.abs(Y - sy.A @ X).max() <= 1e-12 * np.abs(sy.A @ X).max()
 
 
+def test_spmm_same_bits_on_any_thread_count(disc):
+    """The rows are split among threads, each row summed in order: 1 and 2 threads give the same bits."""
+    from flexure import threads
+
+    sy, _ = disc
+    X = np.random.default_rng(5).standard_normal((sy.A.shape[0], 5))
+    with threads.limited(1):
+        Y1 = multirhs.spmm(sy.A, X)
+    with threads.limited(2):                  # 4326 rows: three chunks of ROW_CHUNK, both threads take some
+        Y2 = multirhs.spmm(sy.A, X)
+    assert np.array_equal(Y1, Y2)
+
+
 @pytest.mark.parametrize("forward", [True, False])
 def test_block_gauss_seidel_equals_pyamg_per_column(disc, forward):
     from pyamg.relaxation.relaxation import block_gauss_seidel
