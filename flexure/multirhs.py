@@ -291,14 +291,15 @@ def block_gauss_seidel_blocks(A, Dinv: np.ndarray, X: np.ndarray, B: np.ndarray,
 def pcg(A, B: np.ndarray, M, rtol: float, maxiter: int, X0: np.ndarray | None = None):
     """CG on the columns of B (n, k) together, preconditioner M(R) → Z for R (n, m) (the active
     columns), from the initial guess X0 (n, k) (zero by default; a coarser level's solution
-    prolongated saves iterations). Stops each column at ‖b − A x‖ ≤ rtol ‖b‖. Returns X (n, k),
-    iterations per column, and whether each column converged."""
+    prolongated saves iterations). Stops each column at ‖b_j − A x_j‖ ≤ rtol_j ‖b_j‖ (``rtol`` one
+    number or one per column). Returns X (n, k), iterations per column, and whether each column
+    converged."""
     n, k = B.shape
     X = np.zeros((n, k)) if X0 is None else np.array(X0, dtype=np.float64).reshape(n, k)
     its = np.zeros(k, dtype=np.int64)
-    bn = np.sqrt(np.einsum("ij,ij->j", B, B))
+    stop = np.sqrt(np.einsum("ij,ij->j", B, B)) * np.broadcast_to(np.asarray(rtol, float), (k,))
     R0 = B - spmm(A, X) if X0 is not None else B
-    done = (bn == 0) | (np.sqrt(np.einsum("ij,ij->j", R0, R0)) <= rtol * bn)
+    done = (stop == 0) | (np.sqrt(np.einsum("ij,ij->j", R0, R0)) <= stop)
     act = np.flatnonzero(~done)
     if not len(act):
         return X, its.tolist(), done
@@ -312,7 +313,7 @@ def pcg(A, B: np.ndarray, M, rtol: float, maxiter: int, X0: np.ndarray | None = 
         X[:, act] += P * alpha
         R -= AP * alpha
         its[act] += 1
-        ok = np.sqrt(np.einsum("ij,ij->j", R, R)) <= rtol * bn[act]
+        ok = np.sqrt(np.einsum("ij,ij->j", R, R)) <= stop[act]
         if ok.any():
             done[act[ok]] = True
             keep = ~ok
