@@ -21,7 +21,7 @@ def mesh_and_design(tmp_path_factory):
 @pytest.mark.parametrize("cg_rtol", [1e-2, 1e-3, 1e-4])
 def test_loose_goal_cg_is_within_its_algebraic_bound_of_a_direct_solve(mesh_and_design, cg_rtol, monkeypatch):
     """CG from zero to a loose tolerance (the adaptive run uses min(1e-4, rtol/100) from the previous
-    level's fields): the dual-corrected θ and gauge readings are within their reported algebraic
+    level's fields, the torque column at goals.TORQUE_RTOL_FACTOR × it): the dual-corrected θ and gauge readings are within their reported algebraic
     error |z̃_gᵀ r₀| of a direct solve (relative to max(|ε_g|, mean |ε|)), and that error is far
     below the uncorrected one; the readings of the other load cases from the duals (not corrected)
     are within 10 × the CG tolerance of their largest value (measured: 0.8, 0.36, 0.39 ×)."""
@@ -32,15 +32,18 @@ def test_loose_goal_cg_is_within_its_algebraic_bound_of_a_direct_solve(mesh_and_
     direct = goals.solve_goals(design, mres.mesh)
     monkeypatch.setattr(fsolve, "DIRECT_MAX_DOFS", 100)
     loose = goals.solve_goals(design, mres.mesh, rtol=cg_rtol, algebraic_limit=1.0)
-    raw = goals.solve_goals(design, mres.mesh, rtol=cg_rtol)
+    raw = goals.solve_goals(design, mres.mesh, rtol=cg_rtol * goals.TORQUE_RTOL_FACTOR)   # the torque column's tolerance
     assert "amg-cg" in loose.info["solver"] and loose.info["cg_rtol"] == cg_rtol
     bound = loose.info["goal_algebraic_error"]
     scale = np.maximum(np.abs(direct.eps), np.abs(direct.eps).mean())
     assert abs(loose.theta - direct.theta) <= bound * abs(direct.theta) + 1e-12 * abs(direct.theta)
     err = np.abs(loose.eps - direct.eps) / scale
     assert err.max() <= bound
-    # the correction pays (measured: about 8×, 90×, 1200× below the uncorrected one)
-    assert err.max() <= 0.2 * (np.abs(raw.eps - direct.eps) / scale).max()
+    # the correction pays (against the uncorrected readings at the torque column's tolerance;
+    # measured 0.027, 0.016, 0.0015)
+    ratio = err.max() / (np.abs(raw.eps - direct.eps) / scale).max()
+    print(f"corrected / uncorrected error at cg_rtol {cg_rtol:g}: {ratio:.3g}")
+    assert ratio <= 0.2
     wrench = np.eye(6)[[5, 0, 1, 2, 3, 4]]
     read = [goal_cases.from_goals(s)(design, mres.mesh, None, None, None, None, wrench)[1] for s in (loose, direct)]
     assert np.abs(read[0] - read[1]).max() <= 10 * cg_rtol * np.abs(read[1]).max()
