@@ -21,6 +21,11 @@ class BlockMatrix:
         self.shape = (3 * (len(bptr) - 1), 3 * int(n_cols))
 
     @property
+    def dtype(self):
+        """The value type of the blocks."""
+        return self.data.dtype
+
+    @property
     def nbytes(self) -> int:
         """Bytes of the arrays held."""
         return self.bptr.nbytes + self.bcol.nbytes + self.data.nbytes

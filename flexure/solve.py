@@ -47,6 +47,8 @@ RESIDUAL_LIMIT = 1e-6
 MULTI_RHS = True
 #: block Gauss–Seidel sweeps before and after the coarse correction of the P2 p-multigrid
 PMG_SWEEPS = 1
+#: the P2 sweeps in flexure.split_gs's order, its two parts side by side (block storages, one sweep)
+SPLIT_SWEEPS = True
 #: largest system the P2 p-multigrid's coarse AMG solves directly. The CG iterations grew with the
 #: number of AMG levels, not with h or the geometry: on the paper disc (smoothed coarse) 26–36
 #: iterations at 72k DOFs and 22–31 at 145k (2 levels), 39–46 at 317k (3 levels with 1000);
@@ -206,6 +208,8 @@ def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False, sweeps: int = 1):
     else:                                   # 3 × 3 blocks: fewer bytes read per sweep
         Ab = BlockMatrix.from_csr(Ac, np.float32 if SMOOTHER_STORAGE == "block32" else np.float64)
         gs0, gs = multirhs.forward_gauss_seidel_residual_bsr, multirhs.block_gauss_seidel_bsr
+        if SPLIT_SWEEPS and sweeps == 1:
+            return _pmg_split(Ab, Dinv, coarse, It, V)
 
     def apply(R):
         X, res = gs0(Ab, Dinv, R)
@@ -219,6 +223,27 @@ def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False, sweeps: int = 1):
         return X
 
     apply.blocks = Ab if SMOOTHER_STORAGE != "csr" else None     # flexure.enriched: its A x on the blocks
+    return apply, V
+
+
+def _pmg_split(Ab, Dinv, coarse, It, V):
+    """``_pmg_multi``'s cycle with flexure.split_gs's sweeps (two parts side by side) in its order of
+    the rows; the coarse interpolation's rows renumbered with them."""
+    from flexure.split_gs import SplitSmoother
+
+    H = SplitSmoother(Ab, Dinv)
+    del Ab
+    coarse_p = coarse.tocsr()[H.perm]
+    It_p = coarse_p.T.tocsr()
+
+    def apply(R):
+        Rp = np.ascontiguousarray(np.asarray(R)[H.perm])
+        X, res = H.forward_from_zero(Rp)
+        X += coarse_p @ V(It_p @ res)
+        H.backward(X, Rp)
+        return X[H.inv]
+
+    apply.blocks = H                        # flexure.enriched: its A x on the parts' blocks
     return apply, V
 
 

@@ -1,0 +1,66 @@
+"""The compiled loops of flexure.split_gs (numba, compiled on first use and cached beside this
+file): a 3 × 3 block matrix renumbered and split into parts, and the product of its off-part blocks."""
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True, nogil=True)
+def split(bptr, bcol, data, perm, inv, part_of):
+    """The block matrix A (bptr, bcol, data) renumbered, row and column r of the new one being
+    row and column perm[r] of A (inv = perm⁻¹), each new row's blocks split into those whose column
+    lies in the row's own part (``part_of`` per new row; parts are ranges of new rows) and the
+    others. → (in_ptr, in_col, in_data): the in-part blocks, columns ascending, still global new
+    numbers; (off_ptr, off_col, off_data): the off-part ones, in A's order."""
+    n = len(perm)
+    in_ptr = np.zeros(n + 1, np.int64)
+    off_ptr = np.zeros(n + 1, np.int64)
+    for r in range(n):
+        i = perm[r]
+        k = 0
+        for p in range(bptr[i], bptr[i + 1]):
+            k += part_of[inv[bcol[p]]] == part_of[r]
+        in_ptr[r + 1] = in_ptr[r] + k
+        off_ptr[r + 1] = off_ptr[r] + (bptr[i + 1] - bptr[i] - k)
+    in_col = np.empty(in_ptr[n], np.int32)
+    in_data = np.empty((in_ptr[n], 3, 3), data.dtype)
+    off_col = np.empty(off_ptr[n], np.int32)
+    off_data = np.empty((off_ptr[n], 3, 3), data.dtype)
+    for r in range(n):
+        i = perm[r]
+        a = in_ptr[r]
+        b = off_ptr[r]
+        for p in range(bptr[i], bptr[i + 1]):
+            c = inv[bcol[p]]
+            if part_of[c] == part_of[r]:
+                # insertion into the row's sorted run [in_ptr[r], a)
+                q = a
+                while q > in_ptr[r] and in_col[q - 1] > c:
+                    in_col[q] = in_col[q - 1]
+                    in_data[q] = in_data[q - 1]
+                    q -= 1
+                in_col[q] = c
+                in_data[q] = data[p]
+                a += 1
+            else:
+                off_col[b] = c
+                off_data[b] = data[p]
+                b += 1
+    return in_ptr, in_col, in_data, off_ptr, off_col, off_data
+
+
+@numba.njit(cache=True, nogil=True)
+def subtract_off(off_ptr, off_col, off_data, r0, r1, X, Y):
+    """Y (rows 3 r0 … 3 r1 − 1 of the product, shifted to 0) −= the off-part blocks of block rows
+    [r0, r1) times X (3 n, k), summed in float64."""
+    k = X.shape[1]
+    for r in range(r0, r1):
+        y = 3 * (r - r0)
+        for p in range(off_ptr[r], off_ptr[r + 1]):
+            c = 3 * np.int64(off_col[p])
+            for a in range(3):
+                v0 = np.float64(off_data[p, a, 0])
+                v1 = np.float64(off_data[p, a, 1])
+                v2 = np.float64(off_data[p, a, 2])
+                for j in range(k):
+                    Y[y + a, j] -= v0 * X[c, j] + v1 * X[c + 1, j] + v2 * X[c + 2, j]

@@ -1,0 +1,105 @@
+"""The P2 smoother's two parts side by side (flexure.split_gs): the renumbered blocks hold the whole
+matrix and the two parts do not touch, a sweep is block Gauss–Seidel in the new order, the cycle stays
+a symmetric preconditioner, the bits do not depend on the threads, and the CG iterations stay."""
+
+import numpy as np
+import pytest
+
+from flexure import split_gs, threads
+from flexure import solve as fsolve
+from flexure.bc import Problem
+from flexure.block_sparse import BlockMatrix
+from flexure.fem import stiffness_matrix
+from flexure.material import ALUMINIUM_6061_T6 as MAT
+from flexure.mesh import cylinder_mesh
+
+
+@pytest.fixture(scope="module")
+def disc():
+    """An annular P2 disc (4326 unknowns), rim fixed, bore rigidly coupled: its reduced system, the
+    six unit wrenches on the reference DOFs."""
+    m = cylinder_mesh(0.004, 0.03, 0.006, 3, 24, 2, order=2)
+    r = np.hypot(m.points[:, 0], m.points[:, 1])
+    p = Problem(m, MAT).fix(np.flatnonzero(r > 0.03 * (1 - 1e-9)))
+    p.couple_rigid(np.flatnonzero(r < 0.004 * (1 + 1e-9)), (0, 0, 0.003))
+    sy = p.reduced_system(stiffness_matrix(m, MAT))
+    B = np.zeros((sy.A.shape[0], 6))
+    B[sy.ref_slices[0], :] = np.eye(6)
+    A = sy.A.tocsr()
+    A.sort_indices()
+    return sy, A, B
+
+
+def _parts(A, dtype=np.float64):
+    Dinv = np.ascontiguousarray(fsolve.block_diagonal_inverse(A))
+    return split_gs.SplitSmoother(BlockMatrix.from_csr(A, dtype), Dinv), Dinv
+
+
+def test_the_parts_hold_the_whole_matrix_and_do_not_touch(disc):
+    """In-part blocks (columns ascending) plus off-part blocks = the renumbered matrix; P₀ and P₁
+    share no block; the separator holds the dense reference rows; A x through the parts equals A x."""
+    sy, A, _ = disc
+    H, _ = _parts(A)
+    Ap = A[H.perm][:, H.perm].toarray()
+    for i, P in enumerate(H.blocks):
+        for r in range(len(P.bptr) - 1):
+            assert np.all(np.diff(P.bcol[P.bptr[r]:P.bptr[r + 1]]) > 0)
+        assert np.array_equal(P.tocsr().toarray(), Ap[H._rows(i), H._rows(i)])
+    assert not Ap[H._rows(0), H._rows(1)].any()
+    assert min(H.bounds[1] - H.bounds[0], H.bounds[2] - H.bounds[1]) > 0.25 * len(Ap) // 3
+    ref = np.arange(sy.ref_slices[0].start, sy.ref_slices[0].stop)
+    assert np.all((H.inv[ref] >= 3 * H.bounds[2]))                 # the reference rows in S
+    x = np.random.default_rng(0).standard_normal(A.shape[0])
+    assert np.abs(H.matvec(x) - A @ x).max() <= 1e-12 * np.abs(A @ x).max()
+
+
+def test_a_sweep_is_block_gauss_seidel_in_the_new_order(disc):
+    """The forward sweep from zero and the backward sweep equal x = (D + L)⁻¹ b and
+    x + (D + U)⁻¹ (b − A x) of the renumbered matrix (L, U by 3 × 3 blocks), with the forward one's residual."""
+    _, A, _ = disc
+    H, _ = _parts(A)
+    Ap = A[H.perm][:, H.perm].toarray()
+    n = len(Ap)
+    node = np.arange(n) // 3
+    lower = np.where(node[:, None] >= node[None, :], Ap, 0.0)
+    B = np.random.default_rng(1).standard_normal((n, 2))
+    X, R = H.forward_from_zero(B)
+    X_ref = np.linalg.solve(lower, B)
+    assert np.abs(X - X_ref).max() <= 1e-10 * np.abs(X_ref).max()
+    assert np.abs(R - (B - Ap @ X)).max() <= 1e-10 * np.abs(B).max()
+    X0 = X.copy()
+    H.backward(X, B)
+    X_ref = X0 + np.linalg.solve(lower.T, B - Ap @ X0)
+    assert np.abs(X - X_ref).max() <= 1e-10 * np.abs(X_ref).max()
+
+
+def test_the_cycle_is_symmetric_and_the_threads_do_not_change_its_bits(disc, monkeypatch):
+    """yᵀ M x = xᵀ M y to round-off (float64 blocks), and 1 or 2 threads give the same bits."""
+    sy, A, _ = disc
+    monkeypatch.setattr(fsolve, "SMOOTHER_STORAGE", "block64")
+    M, _ = fsolve._pmg_multi(A, sy.coarse, sy.B_coarse, False, 1)
+    assert isinstance(M.blocks, split_gs.SplitSmoother)
+    rng = np.random.default_rng(2)
+    x, y = rng.standard_normal((A.shape[0], 1)), rng.standard_normal((A.shape[0], 1))
+    with threads.limited(1):
+        Mx1, My = M(x), M(y)
+    with threads.limited(2):
+        Mx2 = M(x)
+    assert np.array_equal(Mx1, Mx2)
+    assert abs(float(y[:, 0] @ Mx1[:, 0]) - float(x[:, 0] @ My[:, 0])) <= 1e-12 * abs(float(y[:, 0] @ Mx1[:, 0]))
+    assert float(x[:, 0] @ Mx1[:, 0]) > 0
+
+
+def test_the_cg_iterations_stay(disc, monkeypatch):
+    """The same P2 solve in the natural order and in P₀, P₁, S: another Gauss–Seidel ordering, so
+    not the same iterations, but not a worse preconditioner by more than a quarter (measured: 1.10–1.17×
+    here, where S is a fifth of the rows; the thick disc's goal solves 0.9–1.08× at 83–354 k DOFs) and
+    the same answers to the CG tolerance."""
+    sy, A, B = disc
+    out = {}
+    for split in (False, True):
+        monkeypatch.setattr(fsolve, "SPLIT_SWEEPS", split)
+        out[split] = fsolve.solve_system(sy.A, B, sy.B, "amg", 1e-10, coarse=sy.coarse, B_coarse=sy.B_coarse)
+    (q0, i0), (q1, i1) = out[False], out[True]
+    assert np.max(np.array(i1["iterations"]) / np.array(i0["iterations"])) <= 1.25
+    assert np.abs(q1 - q0).max() <= 1e-8 * np.abs(q0).max()
