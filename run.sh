@@ -73,7 +73,7 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
     # the compiled loops (numba: estimator, CUSUM calibration, FEM multi-RHS solve) are compiled once here
     # (a failure is said, not hidden: the loops then compile inside the first runs and tests)
     warmlog=$(mktemp)
-    "$VENV/bin/python" -c "from estimator import warmup; from flexure import gmsh_size, multirhs, kernels_warm; warmup.warm(); multirhs.warm(); gmsh_size.warm(); kernels_warm.warm()" \
+    "$VENV/bin/python" -c "from estimator import warmup; from flexure import gmsh_size, multirhs, kernels_warm, split_gs; warmup.warm(); multirhs.warm(); split_gs.warm(); gmsh_size.warm(); kernels_warm.warm()" \
         >"$warmlog" 2>&1 || say "compiling the numba loops at install failed (they compile on first use): $(grep -v '^\s*$' "$warmlog" | tail -n 1)"
     rm -f "$warmlog"
     # and the per-sample bound, release and 3-D loops, on the shipped logs (their real inputs)

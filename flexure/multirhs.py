@@ -38,7 +38,6 @@ def warm() -> bool:
     import scipy.sparse as sp
 
     from flexure.block_sparse import BlockMatrix
-    from flexure.split_gs import SplitSmoother
 
     A = sp.identity(6, format="csr") * 2.0
     Dinv = np.tile(np.eye(3) / 2.0, (2, 1, 1))
@@ -51,9 +50,6 @@ def warm() -> bool:
             Ab = BlockMatrix.from_csr(A, dtype)
             block_gauss_seidel_bsr(Ab, Dinv, np.zeros((6, k)), np.ones((6, k)), True)
             forward_gauss_seidel_residual_bsr(Ab, Dinv, np.ones((6, k)))
-            if k == 1:                                  # its two parts side by side (flexure.split_gs)
-                H = SplitSmoother(Ab, Dinv)
-                H.backward(H.forward_from_zero(np.ones((6, 1)))[0], np.ones((6, 1)))
     for bs in (3, 6):                     # flexure.vcycle's coarse levels
         block_gauss_seidel_blocks(A, np.tile(np.eye(bs) / 2.0, (6 // bs, 1, 1)), np.zeros((6, 2)), np.ones((6, 2)), True)
     return True

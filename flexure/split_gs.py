@@ -33,6 +33,18 @@ def _pool():
     return _POOL
 
 
+def warm() -> None:
+    """Compile (and cache) the renumbering and the off-part product on a tiny matrix."""
+    import scipy.sparse as sp
+
+    from flexure.block_sparse import BlockMatrix
+
+    for dtype in (np.float32, np.float64):
+        H = SplitSmoother(BlockMatrix.from_csr(sp.identity(6, format="csr") * 2.0, dtype), np.tile(np.eye(3) / 2.0, (2, 1, 1)))
+        H.backward(H.forward_from_zero(np.ones((6, 1)))[0], np.ones((6, 1)))
+        H.matvec(np.ones(6))
+
+
 def rcm_order(bptr: np.ndarray, bcol: np.ndarray) -> np.ndarray:
     """Reverse Cuthill–McKee order of a block pattern's graph (new row r = old row order[r])."""
     import scipy.sparse as sp

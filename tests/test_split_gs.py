@@ -103,3 +103,15 @@ def test_the_cg_iterations_stay(disc, monkeypatch):
     (q0, i0), (q1, i1) = out[False], out[True]
     assert np.max(np.array(i1["iterations"]) / np.array(i0["iterations"])) <= 1.25
     assert np.abs(q1 - q0).max() <= 1e-8 * np.abs(q0).max()
+
+
+def test_warm_compiles_on_a_matrix_without_a_second_part():
+    """run.sh's warm-up: two isolated rows, no separator; the sweeps solve the diagonal system."""
+    split_gs.warm()
+    import scipy.sparse as sp
+
+    H = split_gs.SplitSmoother(BlockMatrix.from_csr(sp.identity(6, format="csr") * 2.0, np.float64),
+                               np.tile(np.eye(3) / 2.0, (2, 1, 1)))
+    assert H.bounds[3] - H.bounds[2] == 0
+    X, R = H.forward_from_zero(np.ones((6, 1)))
+    assert np.allclose(X, 0.5) and np.allclose(R, 0.0)
