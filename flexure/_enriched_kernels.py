@@ -72,6 +72,33 @@ def block_pattern(R, Cc, n_rows, n_cols, nchunk):
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
+def element_slots(R, Cc, bptr, bcol, n_cols, nchunk):
+    """S (m,k,l) int32: the index p (bptr[R[e,a]] ≤ p < bptr[R[e,a]+1]) of block (R[e,a], Cc[e,b]) in
+    the pattern (bptr, bcol) of Σ_e R[e]ᵀ ⊗ Cc[e] (``block_pattern``), −1 where either is −1: the element
+    loop adds each block at its place without searching its row. Rows in ``nchunk`` ranges, one position
+    array each (a row occurs at most once in an element, so every S[e,a] is written by one row)."""
+    n_rows = len(bptr) - 1
+    ptr, els = _incidence(R, n_rows)
+    m, k = R.shape
+    lc = Cc.shape[1]
+    S = np.full((m, k, lc), -1, np.int32)
+    for t in numba.prange(nchunk):
+        pos = np.empty(n_cols, np.int64)
+        for r in range(n_rows * t // nchunk, n_rows * (t + 1) // nchunk):
+            for p in range(bptr[r], bptr[r + 1]):
+                pos[bcol[p]] = p
+            for q in range(ptr[r], ptr[r + 1]):
+                e = els[q]
+                for a in range(k):
+                    if R[e, a] == r:
+                        for b in range(lc):
+                            j = Cc[e, b]
+                            if j >= 0:
+                                S[e, a, b] = pos[j]
+    return S
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
 def scalar_csr(bptr, bcol, indptr, indices):
     """The scalar CSR (rows 3r + i, each block row's blocks in order, 3 columns each) of a block
     pattern, into indptr (3 n_rows + 1,) and indices (9 nnz_blocks,)."""
@@ -165,8 +192,10 @@ def colour_elements(V, n_nodes):
 
 
 @numba.njit(cache=True, nogil=True)
-def _element(e, points, tets, u, rhs_face, dN, dB, wq, lmb, mu, X, ue, J, Jinv, gN, gB, PB, PC, AB, AC, rl, sig):
-    """Element e's surplus stiffness AB (30,30), coupling AC (30,30) and residual rl (10,3) (``assemble``)."""
+def _element(e, points, tets, u, rhs_face, dN, dB, wq, lmb, mu, X, ue, J, Jinv, gN, gB, PB, PC, AB, AC, rl, sig, w):
+    """Element e's surplus stiffness AB (30,30), coupling AC (30,30) and residual rl (10,3) (``assemble``;
+    PB, PC (30,32) and w (32,) work arrays, w[30:] = 0: P's rows as 32-wide loops, each entry's sum over
+    the points in the same order as a 30-wide one)."""
     nq = wq.shape[0]
     for a in range(10):
         for i in range(3):
@@ -217,14 +246,15 @@ def _element(e, points, tets, u, rhs_face, dN, dB, wq, lmb, mu, X, ue, J, Jinv, 
                 for j in range(3):
                     s += sig[i, j] * gB[b, j]
                 rl[b, i] -= dv * s
-        for b in range(10):
+        for b in range(10):                                 # w: gB's 30 values, padded to 32
             for i in range(3):
-                vb = dv * gB[b, i]
-                vn = dv * gN[b, i]
-                for c in range(10):
-                    for j in range(3):
-                        PB[3 * b + i, 3 * c + j] += vb * gB[c, j]
-                        PC[3 * b + i, 3 * c + j] += vn * gB[c, j]
+                w[3 * b + i] = gB[b, i]
+        for r in range(30):                                 # P rows of 32: one vectorised loop each
+            vb = dv * w[r]
+            vn = dv * gN[r // 3, r % 3]
+            for k in range(32):
+                PB[r, k] += vb * w[k]
+                PC[r, k] += vn * w[k]
     # A[(b,i),(c,j)] = λ P_bc,ij + μ P_bc,ji + μ δ_ij Σ_k P_bc,kk
     for b in range(10):
         for c in range(10):
@@ -286,14 +316,15 @@ def assemble(points, tets, u, rhs_face, Gk, sign, dN, dB, wq, lmb, mu,
             Jinv = np.empty((3, 3))
             gN = np.empty((10, 3))
             gB = np.empty((10, 3))
-            PB = np.empty((30, 30))
-            PC = np.empty((30, 30))
+            PB = np.empty((30, 32))
+            PC = np.empty((30, 32))
             AB = np.empty((30, 30))
             AC = np.empty((30, 30))
             rl = np.empty((10, 3))
             sig = np.empty((3, 3))
+            w = np.zeros(32)
             for k in range(lo + (hi - lo) * t // nchunk, lo + (hi - lo) * (t + 1) // nchunk):
                 e = order[k]
                 _element(e, points, tets, u, rhs_face, dN, dB, wq, lmb, mu, X, ue, J, Jinv, gN, gB,
-                         PB, PC, AB, AC, rl, sig)
+                         PB, PC, AB, AC, rl, sig, w)
                 _scatter(e, tets, Gk, sign, AB, AC, rl, kb, kc, kdata, cb, cc, cdata, r, D)

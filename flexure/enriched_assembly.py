@@ -76,6 +76,8 @@ def assemble_enriched_blocks(mesh: Mesh, material, u: np.ndarray, numbering, dty
     kc = kc.astype(np.int32)
     cb, cc = ek.block_pattern(tets, Gk, mesh.n_nodes, nk, nt)
     cc = cc.astype(np.int32)
+    SK = ek.element_slots(Gk, Gk, kb, kc, nk, nt)           # each element block's place (no row search)
+    SC = ek.element_slots(tets, Gk, cb, cc, nk, nt)
     K = BlockMatrix(kb, kc, np.zeros((len(kc), 3, 3), dtype), nk)
     C = BlockMatrix(cb, cc, np.zeros((len(cc), 3, 3), dtype), nk)
     rhs = face_rhs(mesh, material, u, traction)
@@ -88,7 +90,7 @@ def assemble_enriched_blocks(mesh: Mesh, material, u: np.ndarray, numbering, dty
         bk.assemble(np.ascontiguousarray(mesh.points, float), tets, np.ascontiguousarray(np.asarray(u, float).reshape(-1, 3)),
                     np.ascontiguousarray(rhs), Gk, np.ascontiguousarray(sign), np.ascontiguousarray(dN),
                     np.ascontiguousarray(dB), np.ascontiguousarray(wq), float(material.lame_lambda_Pa),
-                    float(material.shear_modulus_Pa), kb, kc, K.data, cb, cc, C.data, r, D,
+                    float(material.shear_modulus_Pa), SK, K.data, SC, C.data, r, D,
                     *ek.colour_elements(np.ascontiguousarray(tets[:, :4]), mesh.n_nodes), 1 if nt == 1 else 8 * nt)
     return K, r, C, np.linalg.inv(D), (G, sign, free)
 
