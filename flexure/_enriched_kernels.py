@@ -67,7 +67,7 @@ def block_pattern(R, Cc, n_rows, n_cols, nchunk):
         mark = np.full(n_cols, -1, np.int64)
         for r in range(n_rows * t // nchunk, n_rows * (t + 1) // nchunk):
             _row_blocks(ptr, els, Cc, mark, r, bcol, bptr[r], True)
-            bcol[bptr[r]:bptr[r + 1]] = np.sort(bcol[bptr[r]:bptr[r + 1]])
+            bcol[bptr[r]:bptr[r + 1]].sort()                 # in place: no array per row
     return bptr, bcol
 
 
