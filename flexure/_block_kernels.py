@@ -176,44 +176,50 @@ def symmetric_gauss_seidel(bptr, bcol, data, Dinv, cptr, order, r, z):
             _relax(bptr, bcol, data, Dinv, r, z, order[q])
 
 
-@numba.njit(cache=True, nogil=True)
-def csr_to_blocks(indptr, indices, data, nb, data_out):
+@numba.njit(cache=True, nogil=True, parallel=True)
+def csr_to_blocks(indptr, indices, data, nb, data_out, nchunk=1):
     """The 3 × 3 block pattern (bptr, bcol int32 ascending) of a scalar CSR (n = 3 nb rows, any
     sorted or unsorted indices), its values into a new array of ``data_out``'s type (zeros where a
-    block's entry is not stored) → (bptr, bcol, values (n_blocks, 3, 3))."""
-    mark = np.full(nb, -1, np.int64)
+    block's entry is not stored) → (bptr, bcol, values (n_blocks, 3, 3)). Block rows in ``nchunk``
+    ranges, one marker array each (each row on its own: the same result for every nchunk)."""
     bptr = np.zeros(nb + 1, np.int64)
+    for t in numba.prange(nchunk):
+        mark = np.full(nb, -1, np.int64)
+        for i in range(nb * t // nchunk, nb * (t + 1) // nchunk):
+            c = 0
+            for a in range(3):
+                r = 3 * i + a
+                for p in range(indptr[r], indptr[r + 1]):
+                    j = indices[p] // 3
+                    if mark[j] != i:
+                        mark[j] = i
+                        c += 1
+            bptr[i + 1] = c
     for i in range(nb):
-        c = 0
-        for a in range(3):
-            r = 3 * i + a
-            for p in range(indptr[r], indptr[r + 1]):
-                j = indices[p] // 3
-                if mark[j] != i:
-                    mark[j] = i
-                    c += 1
-        bptr[i + 1] = bptr[i] + c
+        bptr[i + 1] += bptr[i]
     bcol = np.empty(bptr[nb], np.int32)
     vals = np.zeros((bptr[nb], 3, 3), data_out.dtype)
-    slot = np.empty(nb, np.int64)
-    for i in range(nb):
-        q = bptr[i]
-        for a in range(3):
-            r = 3 * i + a
-            for p in range(indptr[r], indptr[r + 1]):
-                j = indices[p] // 3
-                if mark[j] != -2 - i:
-                    mark[j] = -2 - i
-                    bcol[q] = j
-                    q += 1
-        bcol[bptr[i]:bptr[i + 1]].sort()
-        for p in range(bptr[i], bptr[i + 1]):
-            slot[bcol[p]] = p
-        for a in range(3):
-            r = 3 * i + a
-            for p in range(indptr[r], indptr[r + 1]):
-                j = indices[p]
-                vals[slot[j // 3], a, j % 3] += data[p]
+    for t in numba.prange(nchunk):
+        mark = np.full(nb, -1, np.int64)
+        slot = np.empty(nb, np.int64)
+        for i in range(nb * t // nchunk, nb * (t + 1) // nchunk):
+            q = bptr[i]
+            for a in range(3):
+                r = 3 * i + a
+                for p in range(indptr[r], indptr[r + 1]):
+                    j = indices[p] // 3
+                    if mark[j] != i:
+                        mark[j] = i
+                        bcol[q] = j
+                        q += 1
+            bcol[bptr[i]:bptr[i + 1]].sort()
+            for p in range(bptr[i], bptr[i + 1]):
+                slot[bcol[p]] = p
+            for a in range(3):
+                r = 3 * i + a
+                for p in range(indptr[r], indptr[r + 1]):
+                    j = indices[p]
+                    vals[slot[j // 3], a, j % 3] += data[p]
     return bptr, bcol, vals
 
 

@@ -16,6 +16,7 @@ def warm() -> bool:
         return False
     from flexure import enriched, enriched_assembly, fem, sparse_parallel, threads
     from flexure.bc import Problem
+    from flexure.block_sparse import BlockMatrix
     from flexure.material import Material
     from flexure.mesh import box_mesh, to_quadratic
 
@@ -35,6 +36,7 @@ def warm() -> bool:
     dwr.energy_indicators(m, mat, np.zeros((m.n_nodes, 3, 2)), np.zeros((m.n_elements, 6, 3)),
                           np.zeros((m.n_elements, 4, 3)))
     with threads.limited(2):
+        BlockMatrix.from_csr(K)
         sparse_parallel.matvec(K, np.ones(K.shape[0]))
         sparse_parallel.rmatvec(C, np.ones(C.shape[0]))
         Cb.matvec(np.ones(Cb.shape[1]))
