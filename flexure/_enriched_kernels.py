@@ -72,6 +72,42 @@ def block_pattern(R, Cc, n_rows, n_cols, nchunk):
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
+def block_pattern_slots(R, Cc, n_rows, n_cols, nchunk):
+    """``block_pattern`` and ``element_slots`` in one: each row's places written as the row is sorted
+    (one incidence, no second pass over the rows) → (bptr, bcol, S (m,k,l) int32)."""
+    ptr, els = _incidence(R, n_rows)
+    m, k = R.shape
+    lc = Cc.shape[1]
+    bptr = np.zeros(n_rows + 1, np.int64)
+    dummy = np.empty(0, np.int64)
+    for t in numba.prange(nchunk):
+        mark = np.full(n_cols, -1, np.int64)
+        for r in range(n_rows * t // nchunk, n_rows * (t + 1) // nchunk):
+            bptr[r + 1] = _row_blocks(ptr, els, Cc, mark, r, dummy, 0, False)
+    for i in range(n_rows):
+        bptr[i + 1] += bptr[i]
+    bcol = np.empty(bptr[n_rows], np.int64)
+    S = np.full((m, k, lc), -1, np.int32)
+    for t in numba.prange(nchunk):
+        mark = np.full(n_cols, -1, np.int64)
+        pos = np.empty(n_cols, np.int64)                    # the places of the current row's columns
+        for r in range(n_rows * t // nchunk, n_rows * (t + 1) // nchunk):
+            _row_blocks(ptr, els, Cc, mark, r, bcol, bptr[r], True)
+            bcol[bptr[r]:bptr[r + 1]].sort()
+            for p in range(bptr[r], bptr[r + 1]):
+                pos[bcol[p]] = p
+            for q in range(ptr[r], ptr[r + 1]):
+                e = els[q]
+                for a in range(k):
+                    if R[e, a] == r:
+                        for b in range(lc):
+                            j = Cc[e, b]
+                            if j >= 0:
+                                S[e, a, b] = pos[j]
+    return bptr, bcol, S
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
 def element_slots(R, Cc, bptr, bcol, n_cols, nchunk):
     """S (m,k,l) int32: the index p (bptr[R[e,a]] ≤ p < bptr[R[e,a]+1]) of block (R[e,a], Cc[e,b]) in
     the pattern (bptr, bcol) of Σ_e R[e]ᵀ ⊗ Cc[e] (``block_pattern``), −1 where either is −1: the element
@@ -148,6 +184,17 @@ def _inv3(J, Jinv):
     Jinv[0, 1], Jinv[1, 1], Jinv[2, 1] = (c * h - b * k) / det, (a * k - c * g) / det, (b * g - a * h) / det
     Jinv[0, 2], Jinv[1, 2], Jinv[2, 2] = (b * f - c * e) / det, (c * d - a * f) / det, (a * e - b * d) / det
     return det
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def inverse_blocks(D, nchunk):
+    """The inverses (n,3,3) of the 3 × 3 blocks D (n,3,3) (``_inv3``: the cofactors over the determinant)."""
+    n = D.shape[0]
+    out = np.empty_like(D)
+    for t in numba.prange(nchunk):
+        for i in range(n * t // nchunk, n * (t + 1) // nchunk):
+            _inv3(D[i], out[i])
+    return out
 
 
 @numba.njit(cache=True, nogil=True)

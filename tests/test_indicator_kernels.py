@@ -85,6 +85,9 @@ def test_element_slots_are_the_blocks_places():
         bptr, bcol = ek.block_pattern(R, Gk, n_rows, nk, 1)
         S = ek.element_slots(R, Gk, bptr, bcol, nk, 3)
         assert np.array_equal(S, ek.element_slots(R, Gk, bptr, bcol, nk, 1))
+        for n in (1, 3):                                    # the fused form: the same pattern and places
+            got = ek.block_pattern_slots(R, Gk, n_rows, nk, n)
+            assert all(np.array_equal(x, y) for x, y in zip(got, (bptr, bcol, S)))
         e, a, b = np.nonzero((R[:, :, None] >= 0) & (Gk[:, None, :] >= 0))
         assert np.all(S[R[:, :, None].repeat(10, 2) < 0] == -1)
         p = S[e, a, b]
