@@ -15,7 +15,7 @@ threads.select_layer()                 # before any parallel loop runs (flexure.
 @numba.njit(cache=True, nogil=True)
 def _scatter(e, Gk, sign, AB, AC, rl, SK, kdata, SC, cdata, r, D):
     """Element e's blocks into the K_WW and coupling block data at their places SK, SC (m,10,10)
-    (flexure._enriched_kernels.element_slots), r and D (flexure._enriched_kernels._scatter's order)."""
+    (flexure._enriched_kernels.block_pattern_slots), r and D (flexure._enriched_kernels._scatter's order)."""
     for b in range(10):
         gb = Gk[e, b]
         if gb < 0:
@@ -49,7 +49,7 @@ def _scatter(e, Gk, sign, AB, AC, rl, SK, kdata, SC, cdata, r, D):
 def assemble(points, tets, u, rhs_face, Gk, sign, dN, dB, wq, lmb, mu,
              SK, kdata, SC, cdata, r, D, cptr, order, nchunk):
     """flexure._enriched_kernels.assemble into block data kdata, cdata (n_blocks, 3, 3) at the blocks'
-    places SK, SC (flexure._enriched_kernels.element_slots): colour by colour, each colour's elements
+    places SK, SC (flexure._enriched_kernels.block_pattern_slots): colour by colour, each colour's elements
     in ``nchunk`` ranges (results independent of the thread count)."""
     for col in range(len(cptr) - 1):
         lo, hi = cptr[col], cptr[col + 1]

@@ -73,8 +73,10 @@ def block_pattern(R, Cc, n_rows, n_cols, nchunk):
 
 @numba.njit(cache=True, nogil=True, parallel=True)
 def block_pattern_slots(R, Cc, n_rows, n_cols, nchunk):
-    """``block_pattern`` and ``element_slots`` in one: each row's places written as the row is sorted
-    (one incidence, no second pass over the rows) → (bptr, bcol, S (m,k,l) int32)."""
+    """``block_pattern`` and S (m,k,l) int32: the index p (bptr[R[e,a]] ≤ p < bptr[R[e,a]+1]) of block
+    (R[e,a], Cc[e,b]), −1 where either is −1 (the element loop adds each block at its place without
+    searching its row), written as each row is sorted (a row occurs at most once in an element, so
+    every S[e,a] is written by one row) → (bptr, bcol, S)."""
     ptr, els = _incidence(R, n_rows)
     m, k = R.shape
     lc = Cc.shape[1]
@@ -105,33 +107,6 @@ def block_pattern_slots(R, Cc, n_rows, n_cols, nchunk):
                             if j >= 0:
                                 S[e, a, b] = pos[j]
     return bptr, bcol, S
-
-
-@numba.njit(cache=True, nogil=True, parallel=True)
-def element_slots(R, Cc, bptr, bcol, n_cols, nchunk):
-    """S (m,k,l) int32: the index p (bptr[R[e,a]] ≤ p < bptr[R[e,a]+1]) of block (R[e,a], Cc[e,b]) in
-    the pattern (bptr, bcol) of Σ_e R[e]ᵀ ⊗ Cc[e] (``block_pattern``), −1 where either is −1: the element
-    loop adds each block at its place without searching its row. Rows in ``nchunk`` ranges, one position
-    array each (a row occurs at most once in an element, so every S[e,a] is written by one row)."""
-    n_rows = len(bptr) - 1
-    ptr, els = _incidence(R, n_rows)
-    m, k = R.shape
-    lc = Cc.shape[1]
-    S = np.full((m, k, lc), -1, np.int32)
-    for t in numba.prange(nchunk):
-        pos = np.empty(n_cols, np.int64)
-        for r in range(n_rows * t // nchunk, n_rows * (t + 1) // nchunk):
-            for p in range(bptr[r], bptr[r + 1]):
-                pos[bcol[p]] = p
-            for q in range(ptr[r], ptr[r + 1]):
-                e = els[q]
-                for a in range(k):
-                    if R[e, a] == r:
-                        for b in range(lc):
-                            j = Cc[e, b]
-                            if j >= 0:
-                                S[e, a, b] = pos[j]
-    return S
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
