@@ -7,23 +7,15 @@ import numba
 import numpy as np
 
 from flexure import threads
-from flexure._enriched_kernels import _element, _slot
+from flexure._enriched_kernels import _element
 
 threads.select_layer()                 # before any parallel loop runs (flexure.threads: fork safety)
 
 
 @numba.njit(cache=True, nogil=True)
-def _add(data, bptr, bcol, r, c, A, a0, c0, s):
-    """data[block (r, c)] += s A[a0:a0+3, c0:c0+3] (data (n_blocks, 3, 3))."""
-    p = bptr[r] + _slot(bptr, bcol, r, c)
-    for i in range(3):
-        for j in range(3):
-            data[p, i, j] += s * A[a0 + i, c0 + j]
-
-
-@numba.njit(cache=True, nogil=True)
-def _scatter(e, tets, Gk, sign, AB, AC, rl, kb, kc, kdata, cb, cc, cdata, r, D):
-    """Element e's blocks into the K_WW and coupling block data, r and D (flexure._enriched_kernels._scatter)."""
+def _scatter(e, Gk, sign, AB, AC, rl, SK, kdata, SC, cdata, r, D):
+    """Element e's blocks into the K_WW and coupling block data at their places SK, SC (m,10,10)
+    (flexure._enriched_kernels.block_pattern_slots), r and D (flexure._enriched_kernels._scatter's order)."""
     for b in range(10):
         gb = Gk[e, b]
         if gb < 0:
@@ -32,27 +24,33 @@ def _scatter(e, tets, Gk, sign, AB, AC, rl, kb, kc, kdata, cb, cc, cdata, r, D):
         for i in range(3):
             r[3 * gb + i] += sb * rl[b, i]
         for c in range(10):
-            gc = Gk[e, c]
-            if gc < 0:
+            if Gk[e, c] < 0:
                 continue
-            _add(kdata, kb, kc, gb, gc, AB, 3 * b, 3 * c, sb * sign[e, c])
+            p = SK[e, b, c]
+            s = sb * sign[e, c]
+            for i in range(3):
+                for j in range(3):
+                    kdata[p, i, j] += s * AB[3 * b + i, 3 * c + j]
             if b == c:
                 for i in range(3):
                     for j in range(3):
                         D[gb, i, j] += AB[3 * b + i, 3 * b + j]
     for a in range(10):
-        na = tets[e, a]
         for c in range(10):
-            gc = Gk[e, c]
-            if gc >= 0:
-                _add(cdata, cb, cc, na, gc, AC, 3 * a, 3 * c, sign[e, c])
+            if Gk[e, c] >= 0:
+                p = SC[e, a, c]
+                s = sign[e, c]
+                for i in range(3):
+                    for j in range(3):
+                        cdata[p, i, j] += s * AC[3 * a + i, 3 * c + j]
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
 def assemble(points, tets, u, rhs_face, Gk, sign, dN, dB, wq, lmb, mu,
-             kb, kc, kdata, cb, cc, cdata, r, D, cptr, order, nchunk):
-    """flexure._enriched_kernels.assemble into block data kdata, cdata (n_blocks, 3, 3): colour by
-    colour, each colour's elements in ``nchunk`` ranges (results independent of the thread count)."""
+             SK, kdata, SC, cdata, r, D, cptr, order, nchunk):
+    """flexure._enriched_kernels.assemble into block data kdata, cdata (n_blocks, 3, 3) at the blocks'
+    places SK, SC (flexure._enriched_kernels.block_pattern_slots): colour by colour, each colour's elements
+    in ``nchunk`` ranges (results independent of the thread count)."""
     for col in range(len(cptr) - 1):
         lo, hi = cptr[col], cptr[col + 1]
         for t in numba.prange(nchunk):
@@ -62,17 +60,18 @@ def assemble(points, tets, u, rhs_face, Gk, sign, dN, dB, wq, lmb, mu,
             Jinv = np.empty((3, 3))
             gN = np.empty((10, 3))
             gB = np.empty((10, 3))
-            PB = np.empty((30, 30))
-            PC = np.empty((30, 30))
+            PB = np.empty((30, 32))
+            PC = np.empty((30, 32))
             AB = np.empty((30, 30))
             AC = np.empty((30, 30))
             rl = np.empty((10, 3))
             sig = np.empty((3, 3))
+            w = np.zeros(32)
             for k in range(lo + (hi - lo) * t // nchunk, lo + (hi - lo) * (t + 1) // nchunk):
                 e = order[k]
                 _element(e, points, tets, u, rhs_face, dN, dB, wq, lmb, mu, X, ue, J, Jinv, gN, gB,
-                         PB, PC, AB, AC, rl, sig)
-                _scatter(e, tets, Gk, sign, AB, AC, rl, kb, kc, kdata, cb, cc, cdata, r, D)
+                         PB, PC, AB, AC, rl, sig, w)
+                _scatter(e, Gk, sign, AB, AC, rl, SK, kdata, SC, cdata, r, D)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
@@ -177,44 +176,50 @@ def symmetric_gauss_seidel(bptr, bcol, data, Dinv, cptr, order, r, z):
             _relax(bptr, bcol, data, Dinv, r, z, order[q])
 
 
-@numba.njit(cache=True, nogil=True)
-def csr_to_blocks(indptr, indices, data, nb, data_out):
+@numba.njit(cache=True, nogil=True, parallel=True)
+def csr_to_blocks(indptr, indices, data, nb, data_out, nchunk=1):
     """The 3 × 3 block pattern (bptr, bcol int32 ascending) of a scalar CSR (n = 3 nb rows, any
     sorted or unsorted indices), its values into a new array of ``data_out``'s type (zeros where a
-    block's entry is not stored) → (bptr, bcol, values (n_blocks, 3, 3))."""
-    mark = np.full(nb, -1, np.int64)
+    block's entry is not stored) → (bptr, bcol, values (n_blocks, 3, 3)). Block rows in ``nchunk``
+    ranges, one marker array each (each row on its own: the same result for every nchunk)."""
     bptr = np.zeros(nb + 1, np.int64)
+    for t in numba.prange(nchunk):
+        mark = np.full(nb, -1, np.int64)
+        for i in range(nb * t // nchunk, nb * (t + 1) // nchunk):
+            c = 0
+            for a in range(3):
+                r = 3 * i + a
+                for p in range(indptr[r], indptr[r + 1]):
+                    j = indices[p] // 3
+                    if mark[j] != i:
+                        mark[j] = i
+                        c += 1
+            bptr[i + 1] = c
     for i in range(nb):
-        c = 0
-        for a in range(3):
-            r = 3 * i + a
-            for p in range(indptr[r], indptr[r + 1]):
-                j = indices[p] // 3
-                if mark[j] != i:
-                    mark[j] = i
-                    c += 1
-        bptr[i + 1] = bptr[i] + c
+        bptr[i + 1] += bptr[i]
     bcol = np.empty(bptr[nb], np.int32)
     vals = np.zeros((bptr[nb], 3, 3), data_out.dtype)
-    slot = np.empty(nb, np.int64)
-    for i in range(nb):
-        q = bptr[i]
-        for a in range(3):
-            r = 3 * i + a
-            for p in range(indptr[r], indptr[r + 1]):
-                j = indices[p] // 3
-                if mark[j] != -2 - i:
-                    mark[j] = -2 - i
-                    bcol[q] = j
-                    q += 1
-        bcol[bptr[i]:bptr[i + 1]].sort()
-        for p in range(bptr[i], bptr[i + 1]):
-            slot[bcol[p]] = p
-        for a in range(3):
-            r = 3 * i + a
-            for p in range(indptr[r], indptr[r + 1]):
-                j = indices[p]
-                vals[slot[j // 3], a, j % 3] += data[p]
+    for t in numba.prange(nchunk):
+        mark = np.full(nb, -1, np.int64)
+        slot = np.empty(nb, np.int64)
+        for i in range(nb * t // nchunk, nb * (t + 1) // nchunk):
+            q = bptr[i]
+            for a in range(3):
+                r = 3 * i + a
+                for p in range(indptr[r], indptr[r + 1]):
+                    j = indices[p] // 3
+                    if mark[j] != i:
+                        mark[j] = i
+                        bcol[q] = j
+                        q += 1
+            bcol[bptr[i]:bptr[i + 1]].sort()
+            for p in range(bptr[i], bptr[i + 1]):
+                slot[bcol[p]] = p
+            for a in range(3):
+                r = 3 * i + a
+                for p in range(indptr[r], indptr[r + 1]):
+                    j = indices[p]
+                    vals[slot[j // 3], a, j % 3] += data[p]
     return bptr, bcol, vals
 
 

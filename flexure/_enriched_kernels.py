@@ -67,8 +67,46 @@ def block_pattern(R, Cc, n_rows, n_cols, nchunk):
         mark = np.full(n_cols, -1, np.int64)
         for r in range(n_rows * t // nchunk, n_rows * (t + 1) // nchunk):
             _row_blocks(ptr, els, Cc, mark, r, bcol, bptr[r], True)
-            bcol[bptr[r]:bptr[r + 1]] = np.sort(bcol[bptr[r]:bptr[r + 1]])
+            bcol[bptr[r]:bptr[r + 1]].sort()                 # in place: no array per row
     return bptr, bcol
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def block_pattern_slots(R, Cc, n_rows, n_cols, nchunk):
+    """``block_pattern`` and S (m,k,l) int32: the index p (bptr[R[e,a]] ≤ p < bptr[R[e,a]+1]) of block
+    (R[e,a], Cc[e,b]), −1 where either is −1 (the element loop adds each block at its place without
+    searching its row), written as each row is sorted (a row occurs at most once in an element, so
+    every S[e,a] is written by one row) → (bptr, bcol, S)."""
+    ptr, els = _incidence(R, n_rows)
+    m, k = R.shape
+    lc = Cc.shape[1]
+    bptr = np.zeros(n_rows + 1, np.int64)
+    dummy = np.empty(0, np.int64)
+    for t in numba.prange(nchunk):
+        mark = np.full(n_cols, -1, np.int64)
+        for r in range(n_rows * t // nchunk, n_rows * (t + 1) // nchunk):
+            bptr[r + 1] = _row_blocks(ptr, els, Cc, mark, r, dummy, 0, False)
+    for i in range(n_rows):
+        bptr[i + 1] += bptr[i]
+    bcol = np.empty(bptr[n_rows], np.int64)
+    S = np.full((m, k, lc), -1, np.int32)
+    for t in numba.prange(nchunk):
+        mark = np.full(n_cols, -1, np.int64)
+        pos = np.empty(n_cols, np.int64)                    # the places of the current row's columns
+        for r in range(n_rows * t // nchunk, n_rows * (t + 1) // nchunk):
+            _row_blocks(ptr, els, Cc, mark, r, bcol, bptr[r], True)
+            bcol[bptr[r]:bptr[r + 1]].sort()
+            for p in range(bptr[r], bptr[r + 1]):
+                pos[bcol[p]] = p
+            for q in range(ptr[r], ptr[r + 1]):
+                e = els[q]
+                for a in range(k):
+                    if R[e, a] == r:
+                        for b in range(lc):
+                            j = Cc[e, b]
+                            if j >= 0:
+                                S[e, a, b] = pos[j]
+    return bptr, bcol, S
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
@@ -123,6 +161,17 @@ def _inv3(J, Jinv):
     return det
 
 
+@numba.njit(cache=True, nogil=True, parallel=True)
+def inverse_blocks(D, nchunk):
+    """The inverses (n,3,3) of the 3 × 3 blocks D (n,3,3) (``_inv3``: the cofactors over the determinant)."""
+    n = D.shape[0]
+    out = np.empty_like(D)
+    for t in numba.prange(nchunk):
+        for i in range(n * t // nchunk, n * (t + 1) // nchunk):
+            _inv3(D[i], out[i])
+    return out
+
+
 @numba.njit(cache=True, nogil=True)
 def colour_elements(V, n_nodes):
     """Greedy colouring of the elements (corner vertices V (m,4)) so that no two of one colour share a
@@ -165,8 +214,10 @@ def colour_elements(V, n_nodes):
 
 
 @numba.njit(cache=True, nogil=True)
-def _element(e, points, tets, u, rhs_face, dN, dB, wq, lmb, mu, X, ue, J, Jinv, gN, gB, PB, PC, AB, AC, rl, sig):
-    """Element e's surplus stiffness AB (30,30), coupling AC (30,30) and residual rl (10,3) (``assemble``)."""
+def _element(e, points, tets, u, rhs_face, dN, dB, wq, lmb, mu, X, ue, J, Jinv, gN, gB, PB, PC, AB, AC, rl, sig, w):
+    """Element e's surplus stiffness AB (30,30), coupling AC (30,30) and residual rl (10,3) (``assemble``;
+    PB, PC (30,32) and w (32,) work arrays, w[30:] = 0: P's rows as 32-wide loops, each entry's sum over
+    the points in the same order as a 30-wide one)."""
     nq = wq.shape[0]
     for a in range(10):
         for i in range(3):
@@ -217,14 +268,15 @@ def _element(e, points, tets, u, rhs_face, dN, dB, wq, lmb, mu, X, ue, J, Jinv, 
                 for j in range(3):
                     s += sig[i, j] * gB[b, j]
                 rl[b, i] -= dv * s
-        for b in range(10):
+        for b in range(10):                                 # w: gB's 30 values, padded to 32
             for i in range(3):
-                vb = dv * gB[b, i]
-                vn = dv * gN[b, i]
-                for c in range(10):
-                    for j in range(3):
-                        PB[3 * b + i, 3 * c + j] += vb * gB[c, j]
-                        PC[3 * b + i, 3 * c + j] += vn * gB[c, j]
+                w[3 * b + i] = gB[b, i]
+        for r in range(30):                                 # P rows of 32: one vectorised loop each
+            vb = dv * w[r]
+            vn = dv * gN[r // 3, r % 3]
+            for k in range(32):
+                PB[r, k] += vb * w[k]
+                PC[r, k] += vn * w[k]
     # A[(b,i),(c,j)] = λ P_bc,ij + μ P_bc,ji + μ δ_ij Σ_k P_bc,kk
     for b in range(10):
         for c in range(10):
@@ -286,14 +338,15 @@ def assemble(points, tets, u, rhs_face, Gk, sign, dN, dB, wq, lmb, mu,
             Jinv = np.empty((3, 3))
             gN = np.empty((10, 3))
             gB = np.empty((10, 3))
-            PB = np.empty((30, 30))
-            PC = np.empty((30, 30))
+            PB = np.empty((30, 32))
+            PC = np.empty((30, 32))
             AB = np.empty((30, 30))
             AC = np.empty((30, 30))
             rl = np.empty((10, 3))
             sig = np.empty((3, 3))
+            w = np.zeros(32)
             for k in range(lo + (hi - lo) * t // nchunk, lo + (hi - lo) * (t + 1) // nchunk):
                 e = order[k]
                 _element(e, points, tets, u, rhs_face, dN, dB, wq, lmb, mu, X, ue, J, Jinv, gN, gB,
-                         PB, PC, AB, AC, rl, sig)
+                         PB, PC, AB, AC, rl, sig, w)
                 _scatter(e, tets, Gk, sign, AB, AC, rl, kb, kc, kdata, cb, cc, cdata, r, D)

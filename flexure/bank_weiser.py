@@ -158,6 +158,10 @@ def face_rhs(mesh: Mesh, material, u: np.ndarray, traction=None, chunk: int = 40
     for i, p in enumerate(_PERMS):
         lut[9 * p[0] + 3 * p[1] + p[2]] = i
     perm = T[lut[9 * order[..., 0] + 3 * order[..., 1] + order[..., 2]]]       # (m,4,q'): canonical q
+    from flexure import stiffness_assembly
+
+    if traction is None and stiffness_assembly.available():
+        return _face_rhs_compiled(mesh, u, lmb, mu, glob, perm, dN_f, Bf, wq_f, area, nhat)
     # pass 1: outward traction τ = σ n at every face point, listed in sorted-vertex order
     tau = np.empty((m, 4, nq, 3))
     for s in range(0, m, chunk):
@@ -193,4 +197,43 @@ def face_rhs(mesh: Mesh, material, u: np.ndarray, traction=None, chunk: int = 40
     that_c = np.take_along_axis(that, inv_perm[..., None], axis=2)
     rhs = np.einsum("mf,q,mfqi,fqb->mbi", 2.0 * area, wq_f, that_c, Bf, optimize=True)
     del that, that_c
+    return rhs
+
+
+def _face_pairs(glob: np.ndarray, n_nodes: int) -> np.ndarray:
+    """The other element face (flat index 4 e' + f') sharing each element face (m,4) of vertices
+    ``glob`` (m,4,3), −1 on a face of one element."""
+    m = len(glob)
+    key = np.sort(glob, axis=2).reshape(-1, 3).astype(np.int64)
+    nn = np.int64(n_nodes)
+    code = (key[:, 0] * nn + key[:, 1]) * nn + key[:, 2] if n_nodes < 2_000_000 else key
+    _, finv, fcnt = np.unique(code, axis=0 if code.ndim == 2 else None, return_inverse=True, return_counts=True)
+    finv = finv.ravel()
+    o = np.argsort(finv, kind="stable")
+    fs = finv[o]
+    i = np.flatnonzero((fs[1:] == fs[:-1]) & (fcnt[fs[1:]] == 2))
+    partner = np.full(4 * m, -1, np.int64)
+    partner[o[i]], partner[o[i + 1]] = o[i + 1], o[i]
+    return partner
+
+
+def _face_rhs_compiled(mesh: Mesh, u, lmb, mu, glob, perm, dN_f, Bf, wq_f, area, nhat) -> np.ndarray:
+    """``face_rhs`` without an applied traction by compiled element loops (flexure._indicator_kernels):
+    the tractions τ at each face's points, then t̂ from the face's partner and the face integrals."""
+    from flexure import _indicator_kernels as ik
+    from flexure import threads
+
+    m, nq = len(glob), len(wq_f)
+    tets = np.ascontiguousarray(mesh.tets, np.int64)
+    tau = np.empty((m, 4, nq, 3))
+    rhs = np.empty((m, 10, 3))
+    perm = np.ascontiguousarray(perm, np.int64)
+    nt = threads.use()
+    with threads.dynamic():
+        ik.face_tractions(np.ascontiguousarray(mesh.points, float), tets, np.ascontiguousarray(u).reshape(-1, 3, 1),
+                          np.ascontiguousarray(dN_f), np.ascontiguousarray(nhat), float(lmb), float(mu), tau,
+                          1 if nt == 1 else 8 * nt)
+        ik.face_terms(tau, _face_pairs(glob, mesh.n_nodes), perm, np.ascontiguousarray(np.argsort(perm, axis=2)),
+                      np.ascontiguousarray(area), np.ascontiguousarray(wq_f, float), np.ascontiguousarray(Bf),
+                      rhs, 1 if nt == 1 else 8 * nt)
     return rhs

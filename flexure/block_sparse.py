@@ -91,8 +91,11 @@ class BlockMatrix:
         """The 3 × 3 blocks of a scalar CSR A (3 n × 3 m) with values of ``dtype`` (each entry rounded
         once; an entry stored twice is summed in ``dtype``)."""
         from flexure import _block_kernels as bk
+        from flexure import threads
 
-        bptr, bcol, vals = bk.csr_to_blocks(A.indptr, A.indices, A.data, A.shape[0] // 3, np.zeros(1, dtype))
+        nt = threads.use()
+        bptr, bcol, vals = bk.csr_to_blocks(A.indptr, A.indices, A.data, A.shape[0] // 3, np.zeros(1, dtype),
+                                            1 if nt == 1 else 8 * nt)
         return cls(bptr, bcol, vals, A.shape[1] // 3)
 
     def tocsr(self):

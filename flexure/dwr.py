@@ -178,6 +178,7 @@ def energy_indicators(mesh: Mesh, material, V: np.ndarray, ce: np.ndarray, cf: n
     """−a(v_c, w ψ_a) at every vertex a, (n, c), for the fields V (n, 3, c) and one weight w given
     by its surplus coefficients ``ce`` (m,6,3), ``cf`` (m,4,3) (``surplus_coefficients``):
     ∫ σ(v):ε(w ψ_a) = ∫ ψ_a σ(v):∇w + (σ(v) ∇ψ_a)·w, degree-5 quadrature, isoparametric map."""
+    from flexure import stiffness_assembly
     from flexure.bank_weiser import point_jacobians
     from flexure.fem import tet_shape
 
@@ -190,6 +191,21 @@ def energy_indicators(mesh: Mesh, material, V: np.ndarray, ce: np.ndarray, cf: n
     m = mesh.n_elements
     c = V.shape[2]
     eta = np.zeros((mesh.n_nodes, c))
+    if stiffness_assembly.available():           # each element's terms by a compiled loop (flexure._indicator_kernels)
+        from flexure import _indicator_kernels as ik
+        from flexure import threads
+
+        part = np.empty((m, 4, c))
+        nt = threads.use()
+        with threads.dynamic():
+            ik.energy_parts(np.ascontiguousarray(mesh.points, float), np.ascontiguousarray(mesh.tets, np.int64),
+                            np.ascontiguousarray(V, float), np.ascontiguousarray(np.concatenate([ce, cf], axis=1), float),
+                            np.ascontiguousarray(dN2), np.ascontiguousarray(Bs), np.ascontiguousarray(dBs), L, dL,
+                            np.ascontiguousarray(wq), float(lam), float(mu), part, 1 if nt == 1 else 8 * nt)
+        t4 = mesh.tets[:, :4].ravel()
+        for col in range(c):
+            eta[:, col] = -np.bincount(t4, weights=part[:, :, col].ravel(), minlength=mesh.n_nodes)
+        return eta
     for s in range(0, m, chunk):
         sl = slice(s, min(m, s + chunk))
         t = mesh.tets[sl]

@@ -53,7 +53,7 @@ def assemble_enriched(mesh: Mesh, material, u: np.ndarray, numbering, traction=N
                     np.ascontiguousarray(dB), np.ascontiguousarray(wq), float(material.lame_lambda_Pa),
                     float(material.shear_modulus_Pa), kb, kc, K.data, cb, cc, C.data, r, D,
                     *ek.colour_elements(np.ascontiguousarray(tets[:, :4]), mesh.n_nodes), 1 if nt == 1 else 8 * nt)
-    return K, r, C, np.linalg.inv(D), (G, sign, free)
+    return K, r, C, ek.inverse_blocks(D, 1 if nt == 1 else 8 * nt), (G, sign, free)
 
 
 def assemble_enriched_blocks(mesh: Mesh, material, u: np.ndarray, numbering, dtype=np.float32, traction=None):
@@ -72,9 +72,9 @@ def assemble_enriched_blocks(mesh: Mesh, material, u: np.ndarray, numbering, dty
     G, sign, free = numbering
     nk, Gk, tets = _free_functions(mesh, numbering)
     nt = threads.use()
-    kb, kc = ek.block_pattern(Gk, Gk, nk, nk, nt)
+    kb, kc, SK = ek.block_pattern_slots(Gk, Gk, nk, nk, nt)   # and each element block's place (no row search)
     kc = kc.astype(np.int32)
-    cb, cc = ek.block_pattern(tets, Gk, mesh.n_nodes, nk, nt)
+    cb, cc, SC = ek.block_pattern_slots(tets, Gk, mesh.n_nodes, nk, nt)
     cc = cc.astype(np.int32)
     K = BlockMatrix(kb, kc, np.zeros((len(kc), 3, 3), dtype), nk)
     C = BlockMatrix(cb, cc, np.zeros((len(cc), 3, 3), dtype), nk)
@@ -88,9 +88,9 @@ def assemble_enriched_blocks(mesh: Mesh, material, u: np.ndarray, numbering, dty
         bk.assemble(np.ascontiguousarray(mesh.points, float), tets, np.ascontiguousarray(np.asarray(u, float).reshape(-1, 3)),
                     np.ascontiguousarray(rhs), Gk, np.ascontiguousarray(sign), np.ascontiguousarray(dN),
                     np.ascontiguousarray(dB), np.ascontiguousarray(wq), float(material.lame_lambda_Pa),
-                    float(material.shear_modulus_Pa), kb, kc, K.data, cb, cc, C.data, r, D,
+                    float(material.shear_modulus_Pa), SK, K.data, SC, C.data, r, D,
                     *ek.colour_elements(np.ascontiguousarray(tets[:, :4]), mesh.n_nodes), 1 if nt == 1 else 8 * nt)
-    return K, r, C, np.linalg.inv(D), (G, sign, free)
+    return K, r, C, ek.inverse_blocks(D, 1 if nt == 1 else 8 * nt), (G, sign, free)
 
 
 def _free_functions(mesh: Mesh, numbering):

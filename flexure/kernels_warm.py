@@ -16,6 +16,7 @@ def warm() -> bool:
         return False
     from flexure import enriched, enriched_assembly, fem, sparse_parallel, threads
     from flexure.bc import Problem
+    from flexure.block_sparse import BlockMatrix
     from flexure.material import Material
     from flexure.mesh import box_mesh, to_quadratic
 
@@ -28,9 +29,14 @@ def warm() -> bool:
     prob.reduced_system(K)                       # flexure.reduce's loop (Tᵀ K T)
     C = enriched_assembly.assemble_enriched(m, mat, np.zeros((m.n_nodes, 3)),
                                             enriched.surplus_numbering(m, np.zeros(m.n_nodes, bool)))[2]
-    Kb, _, Cb, Dinv, _ = enriched_assembly.assemble_enriched_blocks(
+    Kb, _, Cb, Dinv, _ = enriched_assembly.assemble_enriched_blocks(   # and the face term (bank_weiser)
         m, mat, np.zeros((m.n_nodes, 3)), enriched.surplus_numbering(m, np.zeros(m.n_nodes, bool)))
+    from flexure import dwr
+
+    dwr.energy_indicators(m, mat, np.zeros((m.n_nodes, 3, 2)), np.zeros((m.n_elements, 6, 3)),
+                          np.zeros((m.n_elements, 4, 3)))
     with threads.limited(2):
+        BlockMatrix.from_csr(K)
         sparse_parallel.matvec(K, np.ones(K.shape[0]))
         sparse_parallel.rmatvec(C, np.ones(C.shape[0]))
         Cb.matvec(np.ones(Cb.shape[1]))
