@@ -16,7 +16,8 @@ smallest h; a block whose bound h_min + g · dist(x, box) is not below the size 
 skipped (every spot in it gives h_k + g d_k ≥ that bound, in floating point too: the rounded
 terms are monotone in the gap), the block with the smallest bound is read first. The size is the
 same number as the plain loop over every spot (a minimum does not depend on the order;
-tests/test_stl_remesh.py), at a fraction of the cost (2640 spots: 9.4 → ~2 µs a call).
+tests/test_stl_remesh.py), at a fraction of the cost: a call 4.3× faster at the 2640 spots and 48
+edges of a six-spoke STL's adaptive start, 2.3× at the thick disc STL's 1216 (back to back, loaded).
 
 Without numba (or with estimator.compiled.ENABLED False) ``kernel()`` is None and the caller keeps
 its numpy form, the reference this loop is tested against (tests/test_stl_remesh.py).
