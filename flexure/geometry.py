@@ -259,8 +259,8 @@ def orient_faces(points: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
     if the surface is open, non-manifold, in several pieces or not orientable (the caller falls
     back to trimesh). Two faces across an edge are consistent when they run it in opposite
     directions; the parity of a face (reversed or not) is its BFS parent's, flipped across an
-    inconsistent edge (scipy's breadth-first order, where trimesh walks it in Python: 2.6 s on a
-    15.7 k-triangle STL)."""
+    inconsistent edge (scipy's breadth-first order, where trimesh walks it in Python: 0.05 s where
+    trimesh took 0.9 s on a 15.7 k-triangle STL)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import breadth_first_order
 

@@ -32,7 +32,7 @@ def _box_pairs(lo: np.ndarray, hi: np.ndarray):
     by their low end along the longest axis, box a against the boxes b > a that start before it
     ends there (sweep and prune), kept where they overlap along all three axes. Compiled where
     ``estimator.compiled`` is (the same pairs in the same order, none of the candidate arrays:
-    3.8 M candidates for 99 k pairs on a 15.7 k-triangle STL, 1.7 s → 0.05 s), else in numpy."""
+    3.8 M candidates for 99 k pairs on a 15.7 k-triangle STL: check_solid 1.0 → 0.3 s), else in numpy."""
     axis = int(np.argmax(np.ptp(np.vstack([lo, hi]), axis=0)))
     order = np.argsort(lo[:, axis], kind="stable")
     lo_s, hi_s = lo[order], hi[order]
