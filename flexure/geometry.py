@@ -238,12 +238,60 @@ def load_stl(path: str | Path, unit_m: float = 1e-3, repair: bool = True, where:
     if not tm.is_watertight:
         raise InputError(f"{where}: {path}: surface is not watertight even after repair "
                          f"({len(tm.faces)} faces); close it in your CAD tool")
+    faces = np.asarray(tm.faces, np.int64)
     if not tm.is_winding_consistent or tm.volume < 0:
-        trimesh.repair.fix_normals(tm)
+        oriented = orient_faces(np.asarray(tm.vertices, float), faces)
+        if oriented is None:                      # several pieces or not orientable: trimesh's walk
+            trimesh.repair.fix_normals(tm)
+            oriented = np.asarray(tm.faces, np.int64)
+        faces = oriented
         repaired.append("fixed normals")
-    surf = Surface(np.asarray(tm.vertices, float) * unit_m, np.asarray(tm.faces, np.int64),
-                   source=str(path), info={"repairs": repaired})
+    surf = Surface(np.asarray(tm.vertices, float) * unit_m, faces, source=str(path), info={"repairs": repaired})
     check_watertight(surf, f"{where} {path}")
     from flexure.surface_check import check_solid
     check_solid(surf.points, surf.faces, f"{where}: {path}")
     return surf
+
+
+def orient_faces(points: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
+    """The faces of a closed, one-piece, orientable triangle surface wound consistently and outward
+    (V > 0), each face kept or reversed (``[::-1]``), as trimesh.repair.fix_normals leaves them; None
+    if the surface is open, non-manifold, in several pieces or not orientable (the caller falls
+    back to trimesh). Two faces across an edge are consistent when they run it in opposite
+    directions; the parity of a face (reversed or not) is its BFS parent's, flipped across an
+    inconsistent edge (scipy's breadth-first order, where trimesh walks it in Python: 0.05 s where
+    trimesh took 0.9 s on a 15.7 k-triangle STL)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import breadth_first_order
+
+    f = np.asarray(faces, np.int64)
+    m = len(f)
+    e = f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)                  # directed edge k of face k // 3
+    key = np.sort(e, axis=1)
+    order = np.lexsort((key[:, 1], key[:, 0]))
+    ks = key[order]
+    if m == 0 or len(e) % 2 or not (ks[0::2] == ks[1::2]).all() or (ks[2::2] == ks[1:-1:2]).all(axis=1).any():
+        return None                                               # an edge not shared by exactly two
+    a, b = order[0::2], order[1::2]
+    fa, fb = a // 3, b // 3
+    same = (e[a] == e[b]).all(axis=1)                             # same direction: one face must turn
+    pair = np.sort(np.column_stack([fa, fb]), axis=1)
+    if (fa == fb).any() or len(np.unique(pair, axis=0)) < len(pair):
+        return None                                               # two faces sharing two edges
+    g = coo_matrix((same.astype(np.int8) + 1, (fa, fb)), shape=(m, m)).tocsr()
+    g = (g + g.T).tocsr()
+    bfs, parent = breadth_first_order(g, 0, directed=False, return_predecessors=True)
+    if len(bfs) < m:
+        return None                                               # several pieces
+    flip = np.zeros(m, bool)
+    turn = np.asarray(g[parent[bfs[1:]], bfs[1:]]).ravel() == 2   # across an inconsistent edge
+    for node, p, t in zip(bfs[1:].tolist(), parent[bfs[1:]].tolist(), turn.tolist()):
+        flip[node] = flip[p] ^ t
+    if (flip[fa] ^ flip[fb] != same).any():
+        return None                                               # not orientable
+    out = f.copy()
+    out[flip] = out[flip][:, ::-1]
+    x = np.asarray(points, float)[out]
+    if np.einsum("ij,ij->i", x[:, 0], np.cross(x[:, 1], x[:, 2])).sum() < 0:
+        out = out[:, ::-1]
+    return np.ascontiguousarray(out)

@@ -95,10 +95,10 @@ def _size_field(gmsh, field, spots=None) -> None:
     if fast is not None:
         prm = np.array([h1, h0, r0, g], float)
         cc, ee = np.ascontiguousarray(c, float), gmsh_size.pack_edges(e0, ev, ev2, he)
-        ss = np.ascontiguousarray(spots, float)
+        ss, sb, sf = gmsh_size.pack_spots(spots)
 
         def size(dim, tag, x, y, z, lc):    # noqa: F811 (the numpy form above is the reference)
-            return fast(x, y, z, lc, prm, cc, ee, ss)
+            return fast(x, y, z, lc, prm, cc, ee, ss, sb, sf)
 
     gmsh.model.mesh.setSizeCallback(_INTERRUPT.wrap(size, 0.0))   # Ctrl-C: size 0 stops gmsh
     gmsh.option.setNumber("Mesh.LcIntegrationPrecision", LC_INTEGRATION_PRECISION)

@@ -166,3 +166,63 @@ def test_parametric_design_with_a_gauge_off_the_part(tmp_path, no_meshing):
     p.write_text(text)
     with pytest.raises(InputError, match=r"gauges: gauge g1 \(arm 1\): centre \[40.0, 0.0, 2.2\] mm"):
         analyze(load_design(p))
+
+
+def _flipped_solids():
+    """Closed solids with a third of their faces reversed (seeded): a sphere, a four-spoke disc
+    (trimesh's extrusion), and the same two inside out."""
+    import trimesh
+    from shapely.geometry import Point
+
+    rng = np.random.default_rng(11)
+    from shapely.geometry import box
+
+    disc = Point(0, 0).buffer(30).difference(Point(0, 0).buffer(22)).union(Point(0, 0).buffer(10))
+    disc = disc.union(box(-26, -2, 26, 2)).union(box(-2, -26, 2, 26)).difference(Point(0, 0).buffer(4))
+    for tm in (trimesh.creation.icosphere(3), trimesh.creation.extrude_polygon(disc.buffer(0), 4.0)):
+        for inside_out in (False, True):
+            f = np.asarray(tm.faces, np.int64)
+            f = f[:, ::-1] if inside_out else f
+            turn = rng.random(len(f)) < 1 / 3
+            f = f.copy()
+            f[turn] = f[turn][:, ::-1]
+            yield np.asarray(tm.vertices, float), np.ascontiguousarray(f)
+
+
+def test_orienting_faces_gives_trimeshs_winding():
+    """geometry.orient_faces reverses the faces trimesh.repair.fix_normals reverses (the same
+    arrays), on one-piece solids with faces turned; two pieces or an open surface: None."""
+    import trimesh
+
+    from flexure.geometry import orient_faces
+
+    for points, faces in _flipped_solids():
+        tm = trimesh.Trimesh(points, faces, process=False)
+        assert not tm.is_winding_consistent
+        trimesh.repair.fix_normals(tm)
+        got = orient_faces(points, faces)
+        assert got is not None and np.array_equal(got, np.asarray(tm.faces)) and tm.volume > 0
+    two = trimesh.util.concatenate([trimesh.creation.box(), trimesh.creation.box().apply_translation([3, 0, 0])])
+    assert orient_faces(np.asarray(two.vertices), np.asarray(two.faces)) is None
+    box = trimesh.creation.box()
+    assert orient_faces(np.asarray(box.vertices), np.asarray(box.faces)[1:]) is None
+
+
+def test_compiled_box_sweep_gives_numpys_pairs(monkeypatch):
+    """surface_check._box_pairs compiled: the same overlapping pairs in the same order as numpy."""
+    from estimator import compiled
+
+    from flexure import surface_check
+
+    if not compiled.available():
+        pytest.skip("numba not installed")
+    rng = np.random.default_rng(2)
+    lo = rng.uniform(0, 10, (3000, 3)) * [1, 1, 0.2]
+    hi = lo + rng.uniform(0, 0.6, (3000, 3))
+    got = {}
+    for enabled in (True, False):
+        monkeypatch.setattr(compiled, "ENABLED", enabled)
+        pairs = list(surface_check._box_pairs(lo, hi))
+        got[enabled] = [np.concatenate([p[k] for p in pairs]) for k in (0, 1)]
+    assert len(got[True][0]) > 1000
+    assert all(np.array_equal(a, b) for a, b in zip(got[True], got[False]))

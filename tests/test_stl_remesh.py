@@ -194,6 +194,34 @@ def test_compiled_size_callback_equals_its_numpy_form(monkeypatch):
     assert np.allclose(got[True], got[False], rtol=1e-12, atol=0) and len(set(np.round(got[True], 6))) > 50
 
 
+def test_size_kernel_skips_blocks_of_spots_without_changing_the_size():
+    """gmsh_size's blocks of spots (pack_spots) give the very number the loop over every spot gives
+    (one block holding them all: nothing to skip), at points near, between and far from them."""
+    from flexure import gmsh_size
+
+    if gmsh_size.kernel() is None:
+        pytest.skip("numba not installed")
+    k = gmsh_size.kernel()
+    rng = np.random.default_rng(5)
+    ring = rng.uniform(0, 2 * np.pi, 3000)                       # spots along folds of a disc (mm)
+    spots = np.column_stack([20 * np.cos(ring), 20 * np.sin(ring), rng.uniform(0, 5, 3000),
+                             rng.uniform(0.2, 3.0, 3000)])
+    ss, blocks, first = gmsh_size.pack_spots(spots)
+    assert len(blocks) > 50 and np.diff(first).max() <= gmsh_size.BLOCK_SPOTS
+    assert np.array_equal(np.sort(ss, axis=0), np.sort(spots, axis=0))
+    for b in range(len(blocks)):                                  # each box holds its spots
+        s = ss[first[b]:first[b + 1]]
+        assert (s[:, :3] >= blocks[b, :3]).all() and (s[:, :3] <= blocks[b, 3:6]).all()
+        assert blocks[b, 6] == s[:, 3].min()
+    one = (spots, np.r_[spots[:, :3].min(0), spots[:, :3].max(0), spots[:, 3].min()][None], np.array([0, 3000]))
+    prm, cc = np.array([12.0, 0.5, 1.0, 0.7]), np.array([[20.0, 0.0, 5.0]])
+    ee = gmsh_size.pack_edges(np.zeros((1, 3)), np.array([[0.0, 0.0, 5.0]]), np.array([25.0]), np.array([0.8]))
+    at = np.vstack([rng.uniform(-30, 30, (3000, 3)), spots[:500, :3] + rng.normal(0, 0.3, (500, 3))])
+    got = [k(*p, lc, prm, cc, ee, ss, blocks, first) for p, lc in zip(at.tolist(), [1e22, 4.0] * 1750)]
+    ref = [k(*p, lc, prm, cc, ee, *one) for p, lc in zip(at.tolist(), [1e22, 4.0] * 1750)]
+    assert got == ref and len(set(got)) > 1000
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("part, h_mm", [
     ("six-spoke disc", 1.0),           # direct: 0.23°, 95 below 10°; re-parametrised 16.2°
