@@ -3,7 +3,8 @@
 solve's K_WW and K_hW (flexure.enriched). Against the scalar CSR of the same matrix (float64 values,
 an int32 column per entry: 12 bytes an entry) it stores 4 + 9 s bytes a block (s the value size:
 4.4 bytes an entry in float32, 8.4 in float64); products accumulate in float64 (y = A x: each row
-in order, the same bits for every thread count; Aᵀ x: one partial sum per thread, then summed)."""
+in order; Aᵀ x: flexure.threads.REDUCTION_CHUNKS partial sums, then summed: the same bits for every
+thread count)."""
 
 from __future__ import annotations
 
@@ -50,18 +51,20 @@ class BlockMatrix:
         from flexure import threads
 
         y = np.empty(self.shape[1])
-        bk.rmatvec(self.bptr, self.bcol, self.data, np.ascontiguousarray(x, float), y, max(1, threads.use()))
+        threads.use()
+        bk.rmatvec(self.bptr, self.bcol, self.data, np.ascontiguousarray(x, float), y, threads.REDUCTION_CHUNKS)
         return y
 
     def matvec_rmatvec(self, x: np.ndarray, xt: np.ndarray):
         """(A x, Aᵀ xt) in one pass over A (x (3 n_cols,), xt (3 n_rows,) float64): the rows in
-        ``rmatvec``'s chunks (one per thread), so A x has ``matvec``'s bits and Aᵀ xt ``rmatvec``'s."""
+        ``rmatvec``'s chunks, so A x has ``matvec``'s bits and Aᵀ xt ``rmatvec``'s."""
         from flexure import _block_kernels as bk
         from flexure import threads
 
+        threads.use()
         y, yt = np.empty(self.shape[0]), np.empty(self.shape[1])
         bk.matvec_rmatvec(self.bptr, self.bcol, self.data, np.ascontiguousarray(x, float),
-                          np.ascontiguousarray(xt, float), y, yt, max(1, threads.use()))
+                          np.ascontiguousarray(xt, float), y, yt, threads.REDUCTION_CHUNKS)
         return y, yt
 
     def colouring(self):

@@ -1,8 +1,9 @@
 """Sparse matrix–vector products on flexure.threads' threads (the CGs' matvecs: scipy's are one
 thread): ``matvec(A, x)`` = A x and ``rmatvec(A, x)`` = Aᵀ x of a CSR matrix, by the compiled row loops
-of flexure._sparse_kernels when flexure.threads gives more than one thread; scipy's product with
-one, without numba (estimator.compiled off) or for any other format. A x has the same bits for every thread count; Aᵀ x is summed in one chunk per thread (equal to
-round-off across thread counts, the same bits as scipy with one)."""
+of flexure._sparse_kernels (A x: where flexure.threads gives more than one thread, else scipy's
+product, the same bits); scipy's products without numba (estimator.compiled off) or for any other
+format. Aᵀ x is summed in flexure.threads.REDUCTION_CHUNKS partial sums whatever the threads: the
+same bits for every thread count."""
 
 from __future__ import annotations
 
@@ -39,12 +40,16 @@ def matvec(A, x: np.ndarray) -> np.ndarray:
 
 
 def rmatvec(A, x: np.ndarray) -> np.ndarray:
-    """Aᵀ x (x (m,) float)."""
-    n = _threads(A)
-    if not n:
+    """Aᵀ x (x (m,) float): in flexure.threads.REDUCTION_CHUNKS partial sums on any thread count (the
+    same bits whatever the load), scipy's product without numba or for another format."""
+    from estimator import compiled
+
+    if not (compiled.available() and A.format == "csr" and A.dtype == np.float64):
         return A.T @ x
     from flexure import _sparse_kernels as sk
+    from flexure import threads
 
+    threads.use()
     y = np.empty(A.shape[1])
-    sk.csr_rmatvec(A.indptr, A.indices, A.data, np.ascontiguousarray(x, float), y, n)
+    sk.csr_rmatvec(A.indptr, A.indices, A.data, np.ascontiguousarray(x, float), y, threads.REDUCTION_CHUNKS)
     return y

@@ -10,8 +10,8 @@ kernel's instantaneous count of runnable tasks (/proc/stat ``procs_running``) le
 own (its numba workers may still be spinning after the last region).
 Everything is capped by numba's pool (``NUMBA_NUM_THREADS``). ``use()`` applies the count before a
 parallel kernel runs (numba's setting is per calling thread); ``limited(n)`` fixes ``n`` within a
-block (tests and benchmarks compare 1 and N). The kernels' results do not depend on the count, or
-only to round-off (flexure._enriched_kernels and flexure._sparse_kernels say which). BLAS stays at
+block (tests and benchmarks compare 1 and N). The kernels' results do not depend on the count (the
+reductions' partial sums are REDUCTION_CHUNKS ranges whatever the threads). BLAS stays at
 one thread (flexure.blas explains why).
 """
 
@@ -39,6 +39,11 @@ def _from_env() -> int | None:
 
 #: threads of the FEM's parallel kernels (env TORQUEBENCH_THREADS); None: the idle cores at each call
 THREADS: int | None = _from_env()
+#: the partial sums of a reduction over rows (Aᵀ x: each range of rows into its own copy of the
+#: result, then summed): a fixed count, not the threads found at the call, so that the order of the
+#: sums, and the result's bits, do not change with the machine's load (an adaptive run repeated
+#: refines the same way)
+REDUCTION_CHUNKS = 2
 CORES: int = _cores()
 _override: int | None = None
 
