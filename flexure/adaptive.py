@@ -269,8 +269,9 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
                                       rise)
             mem_per = sizing.peak_per_dof(mesh.n_dofs, base_gb, level_peak, mem_per, rec["peak_rss_gb"] > peak_before)
             mem_cap = sizing.memory_dofs(base_gb, mem_per, max_memory_gb)
-            nxt = sizing.next_dofs(mesh.n_dofs, want, min(max_dofs, mem_cap), grow, split=not split_done)
-            split_done = split_done or min(max_dofs, mem_cap) < want       # one split per run
+            cap = min(max_dofs, mem_cap)
+            nxt = sizing.next_dofs(mesh.n_dofs, want, cap, grow, split=not split_done, prior=prev_rel is None)
+            split_done = split_done or cap < want or 0 < nxt < min(want, cap)     # one split per run
             rec["sizing"] = {"target_dofs": int(want), "memory_cap_dofs": int(mem_cap), "base_rss_gb": base_gb,
                             "level_peak_gb": level_peak, "peak_per_dof_gb": mem_per, "next_dofs": int(nxt),
                             "factor_rise": rise}

@@ -35,6 +35,10 @@ def test_next_dofs_never_leaves_a_level_stranded_below_the_cap():
     g = 1.3
     assert sz.next_dofs(100, 200, 1000, g) == 200                    # room for another step after it
     assert sz.next_dofs(100, 900, 1000, g) == 1000                   # the last step: to the cap
+    m = sz.next_dofs(100, 900, 1000, g, prior=True)                  # ... not on the a-priori rate alone:
+    assert g * 100 <= m < 1000 / g                                    # a measurable step, room for the last
+    assert sz.next_dofs(100, 900, 1000, g, split=False, prior=True) == 1000
+    assert sz.next_dofs(100, 200, 1000, g, prior=True) == 200         # room after it: as asked
     m = sz.next_dofs(100, 600, 500, g)                               # rtol out of reach: one step
     assert m == int(min(max(np.sqrt(100 * 500), 500 / (sz.LANDING * g ** 2)), 500 / (sz.LANDING * g)))
     assert 130 <= m and sz.LANDING * m * g <= 500                    # ... leaving room for the last one
