@@ -50,9 +50,9 @@ def _row_blocks(ptr, els, Cc, mark, r, bcol, c0, fill):
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def block_pattern(R, Cc, n_rows, n_cols, nchunk):
-    """Block pattern of Σ_e R[e]ᵀ ⊗ Cc[e]: → (bptr (n_rows+1,), bcol sorted within each row); the rows
-    in ``nchunk`` ranges, one marker array each (the same result for every nchunk)."""
+def _row_pointers(R, Cc, n_rows, n_cols, nchunk):
+    """The rows' element incidence (ptr, els) and the block row pointer of Σ_e R[e]ᵀ ⊗ Cc[e]: each
+    row's distinct columns counted, rows in ``nchunk`` ranges with one marker array each."""
     ptr, els = _incidence(R, n_rows)
     bptr = np.zeros(n_rows + 1, np.int64)
     dummy = np.empty(0, np.int64)
@@ -62,6 +62,14 @@ def block_pattern(R, Cc, n_rows, n_cols, nchunk):
             bptr[r + 1] = _row_blocks(ptr, els, Cc, mark, r, dummy, 0, False)
     for i in range(n_rows):
         bptr[i + 1] += bptr[i]
+    return ptr, els, bptr
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def block_pattern(R, Cc, n_rows, n_cols, nchunk):
+    """Block pattern of Σ_e R[e]ᵀ ⊗ Cc[e]: → (bptr (n_rows+1,), bcol sorted within each row); the rows
+    in ``nchunk`` ranges, one marker array each (the same result for every nchunk)."""
+    ptr, els, bptr = _row_pointers(R, Cc, n_rows, n_cols, nchunk)
     bcol = np.empty(bptr[n_rows], np.int64)
     for t in numba.prange(nchunk):
         mark = np.full(n_cols, -1, np.int64)
@@ -77,17 +85,9 @@ def block_pattern_slots(R, Cc, n_rows, n_cols, nchunk):
     (R[e,a], Cc[e,b]), −1 where either is −1 (the element loop adds each block at its place without
     searching its row), written as each row is sorted (a row occurs at most once in an element, so
     every S[e,a] is written by one row) → (bptr, bcol, S)."""
-    ptr, els = _incidence(R, n_rows)
+    ptr, els, bptr = _row_pointers(R, Cc, n_rows, n_cols, nchunk)
     m, k = R.shape
     lc = Cc.shape[1]
-    bptr = np.zeros(n_rows + 1, np.int64)
-    dummy = np.empty(0, np.int64)
-    for t in numba.prange(nchunk):
-        mark = np.full(n_cols, -1, np.int64)
-        for r in range(n_rows * t // nchunk, n_rows * (t + 1) // nchunk):
-            bptr[r + 1] = _row_blocks(ptr, els, Cc, mark, r, dummy, 0, False)
-    for i in range(n_rows):
-        bptr[i + 1] += bptr[i]
     bcol = np.empty(bptr[n_rows], np.int64)
     S = np.full((m, k, lc), -1, np.int32)
     for t in numba.prange(nchunk):

@@ -7,24 +7,15 @@ import pytest
 
 from flexure import split_gs, threads
 from flexure import solve as fsolve
-from flexure.bc import Problem
 from flexure.block_sparse import BlockMatrix
-from flexure.fem import stiffness_matrix
-from flexure.material import ALUMINIUM_6061_T6 as MAT
-from flexure.mesh import cylinder_mesh
+from test_fem_multirhs import disc as multirhs_disc  # noqa: F401  (a fixture)
 
 
 @pytest.fixture(scope="module")
-def disc():
-    """An annular P2 disc (4326 unknowns), rim fixed, bore rigidly coupled: its reduced system, the
-    six unit wrenches on the reference DOFs."""
-    m = cylinder_mesh(0.004, 0.03, 0.006, 3, 24, 2, order=2)
-    r = np.hypot(m.points[:, 0], m.points[:, 1])
-    p = Problem(m, MAT).fix(np.flatnonzero(r > 0.03 * (1 - 1e-9)))
-    p.couple_rigid(np.flatnonzero(r < 0.004 * (1 + 1e-9)), (0, 0, 0.003))
-    sy = p.reduced_system(stiffness_matrix(m, MAT))
-    B = np.zeros((sy.A.shape[0], 6))
-    B[sy.ref_slices[0], :] = np.eye(6)
+def disc(multirhs_disc):
+    """test_fem_multirhs's annular P2 disc (4326 unknowns; rim fixed, bore rigidly coupled): its reduced
+    system, the system's matrix with sorted indices, the six unit wrenches."""
+    sy, B = multirhs_disc
     A = sy.A.tocsr()
     A.sort_indices()
     return sy, A, B
