@@ -1,11 +1,16 @@
 """The compiled loops of flexure.split_gs (numba, compiled on first use and cached beside this
-file): a 3 × 3 block matrix renumbered and split into parts, and the product of its off-part blocks."""
+file): a 3 × 3 block matrix renumbered and split into parts (rows among the threads, each row's
+output at its own place: the same result on any thread count), and the product of its off-part blocks."""
 
 import numba
 import numpy as np
 
+from flexure import threads
 
-@numba.njit(cache=True, nogil=True)
+threads.select_layer()                 # before any parallel loop runs (flexure.threads: fork safety)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
 def split(bptr, bcol, data, perm, inv, part_of):
     """The block matrix A (bptr, bcol, data) renumbered, row and column r of the new one being
     row and column perm[r] of A (inv = perm⁻¹), each new row's blocks split into those whose column
@@ -15,18 +20,21 @@ def split(bptr, bcol, data, perm, inv, part_of):
     n = len(perm)
     in_ptr = np.zeros(n + 1, np.int64)
     off_ptr = np.zeros(n + 1, np.int64)
-    for r in range(n):
+    for r in numba.prange(n):
         i = perm[r]
         k = 0
         for p in range(bptr[i], bptr[i + 1]):
             k += part_of[inv[bcol[p]]] == part_of[r]
-        in_ptr[r + 1] = in_ptr[r] + k
-        off_ptr[r + 1] = off_ptr[r] + (bptr[i + 1] - bptr[i] - k)
+        in_ptr[r + 1] = k
+        off_ptr[r + 1] = bptr[i + 1] - bptr[i] - k
+    for r in range(n):
+        in_ptr[r + 1] += in_ptr[r]
+        off_ptr[r + 1] += off_ptr[r]
     in_col = np.empty(in_ptr[n], np.int32)
     in_data = np.empty((in_ptr[n], 3, 3), data.dtype)
     off_col = np.empty(off_ptr[n], np.int32)
     off_data = np.empty((off_ptr[n], 3, 3), data.dtype)
-    for r in range(n):
+    for r in numba.prange(n):
         i = perm[r]
         a = in_ptr[r]
         b = off_ptr[r]
@@ -50,11 +58,11 @@ def split(bptr, bcol, data, perm, inv, part_of):
 
 
 @numba.njit(cache=True, nogil=True)
-def subtract_off(off_ptr, off_col, off_data, r0, r1, X, Y):
-    """Y (rows 3 r0 … 3 r1 − 1 of the product, shifted to 0) −= the off-part blocks of block rows
-    [r0, r1) times X (3 n, k), summed in float64."""
+def subtract_off(off_ptr, off_col, off_data, rows, r0, X, Y):
+    """Y (rows 3 r0 … of the product, shifted to 0) −= the off-part blocks of the block ``rows``
+    (those of a part that have any, ascending) times X (3 n, k), summed in float64."""
     k = X.shape[1]
-    for r in range(r0, r1):
+    for r in rows:
         y = 3 * (r - r0)
         for p in range(off_ptr[r], off_ptr[r + 1]):
             c = 3 * np.int64(off_col[p])

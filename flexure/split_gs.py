@@ -79,6 +79,7 @@ class SplitSmoother:
 
     def __init__(self, Ab, Dinv: np.ndarray):
         from flexure import _split_kernels as hk
+        from flexure import threads
         from flexure.block_sparse import BlockMatrix
 
         n = len(Ab.bptr) - 1
@@ -86,8 +87,11 @@ class SplitSmoother:
         inv_b = np.empty(n, np.int64)
         inv_b[order] = np.arange(n)
         self.bounds = np.searchsorted(part, np.arange(4)).tolist()     # P₀, P₁, S as ranges of new rows
+        threads.use()
         in_ptr, in_col, in_data, self._off_ptr, self._off_col, self._off_data = hk.split(
             Ab.bptr, Ab.bcol, Ab.data, order, inv_b, part)
+        has_off = np.diff(self._off_ptr) > 0
+        self._off_rows = [lo + np.flatnonzero(has_off[lo:hi]) for lo, hi in zip(self.bounds[:-1], self.bounds[1:])]
         self.blocks, self.D = [], []
         for lo, hi in zip(self.bounds[:-1], self.bounds[1:]):
             ptr = in_ptr[lo:hi + 1] - in_ptr[lo]
@@ -108,7 +112,7 @@ class SplitSmoother:
         """Y −= (part i's blocks outside it) X, X (3 n, k) in the new order."""
         from flexure import _split_kernels as hk
 
-        hk.subtract_off(self._off_ptr, self._off_col, self._off_data, self.bounds[i], self.bounds[i + 1], X, Y)
+        hk.subtract_off(self._off_ptr, self._off_col, self._off_data, self._off_rows[i], self.bounds[i], X, Y)
 
     def _both(self, work) -> list:
         """[work(0), work(1)]: side by side when flexure.threads gives more than one thread."""
