@@ -63,6 +63,21 @@ def von_mises(stress: np.ndarray) -> np.ndarray:
     return np.sqrt(1.5 * np.einsum("...ij,...ij->...", s, s))
 
 
+def max_shear_strain(strain: np.ndarray) -> np.ndarray:
+    """½ (ε_max − ε_min) of symmetric 3 × 3 tensors (..., 3, 3), in closed form (Smith 1961): with
+    q = tr ε / 3, d = ε − q I, p = √(d:d / 6) and φ = ⅓ arccos(det(d / p) / 2), the principal values
+    are q + 2 p cos(φ + 2πk/3), so ½ (ε_max − ε_min) = √3 p sin(φ + π/3); 0 where p = 0."""
+    e = np.asarray(strain, dtype=np.float64)
+    q = np.trace(e, axis1=-2, axis2=-1) / 3.0
+    d0, d1, d2 = e[..., 0, 0] - q, e[..., 1, 1] - q, e[..., 2, 2] - q
+    a, b, c = e[..., 0, 1], e[..., 0, 2], e[..., 1, 2]
+    p = np.sqrt((d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * (a * a + b * b + c * c)) / 6.0)
+    det = d0 * d1 * d2 + 2.0 * a * b * c - d0 * c * c - d1 * b * b - d2 * a * a
+    safe = np.where(p > 0, p, 1.0)
+    phi = np.arccos(np.clip(det / (2.0 * safe ** 3), -1.0, 1.0)) / 3.0
+    return np.where(p > 0, np.sqrt(3.0) * p * np.sin(phi + np.pi / 3.0), 0.0)
+
+
 def directional_strain(strain: np.ndarray, direction) -> np.ndarray:
     """ε_d = dᵀ ε d for unit vectors d ((3,) or (k,3))."""
     d = np.asarray(direction, dtype=np.float64)

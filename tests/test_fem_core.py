@@ -8,7 +8,7 @@ from userio.errors import InputError
 from flexure.fem import element_stiffness, rigid_body_modes, stiffness_matrix
 from flexure.material import ALUMINIUM_6061_T6, Material
 from flexure.mesh import Mesh, box_mesh, cylinder_mesh, quality, to_linear, to_quadratic, unique_edges
-from flexure.post import displacement_at, element_strains, nodal_strains, strain_at, von_mises
+from flexure.post import displacement_at, element_strains, max_shear_strain, nodal_strains, strain_at, von_mises
 from flexure.solve import solve
 
 MAT = Material(70e9, 0.3, 250e6, "test")
@@ -178,6 +178,23 @@ def test_input_errors():
     with pytest.raises(InputError, match="fixed and rigidly coupled"):
         p.couple_rigid([0, 1], (0, 0, 0))
         solve(p)
+
+
+def test_max_shear_strain_is_half_the_principal_spread():
+    """The closed form equals ½ (λ_max − λ_min) of numpy's eigvalsh on random tensors at strain scale,
+    with the degenerate cases: isotropic (0), two equal principal values, pure shear."""
+    rng = np.random.default_rng(7)
+    M = rng.standard_normal((2000, 3, 3)) * 1e-4
+    E = 0.5 * (M + np.swapaxes(M, -1, -2))
+    Q = np.linalg.qr(rng.standard_normal((3, 3)))[0]
+    E = np.concatenate([E, [np.eye(3) * 3e-4, Q @ np.diag([2e-4, 2e-4, -1e-4]) @ Q.T,
+                            Q @ np.diag([1e-4, -1e-4, -1e-4]) @ Q.T, [[0, 5e-5, 0], [5e-5, 0, 0], [0, 0, 0]]]])
+    ev = np.linalg.eigvalsh(E)
+    ref = 0.5 * (ev[:, 2] - ev[:, 0])
+    got = max_shear_strain(E)
+    assert np.abs(got - ref).max() <= 1e-7 * np.abs(E).max()
+    assert got[-4] == 0.0 and got[-1] == pytest.approx(5e-5, rel=1e-9)
+    assert got[-3] == pytest.approx(1.5e-4, rel=1e-7) and got[-2] == pytest.approx(1e-4, rel=1e-7)
 
 
 def test_material_default_and_von_mises():
