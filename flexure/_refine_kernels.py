@@ -60,6 +60,28 @@ def _p2_weights(bary: np.ndarray) -> np.ndarray:
 QUALITY_FLOOR_DEG = 12.0
 
 
+def edge_to_split(mk, L, le, Lmax, closure_ratio: float, ids, corners, q_cache: dict) -> np.ndarray:
+    """The local edge (m,) each element bisects: its longest ``le``, or its longest marked one (``mk``
+    (m,6), lengths ``L``) where that is at least ``closure_ratio`` × the longest ``Lmax`` and its
+    children are as good (``QUALITY_FLOOR_DEG``). The children's verdict is cached in ``q_cache`` per
+    (element id ``ids``, edge); ``corners(at)`` gives the corner points (k,4,3) of rows ``at``."""
+    rows = np.arange(len(le))
+    Lm = np.where(mk, L, -1.0)
+    cand = Lm.argmax(axis=1)
+    alt = ~mk[rows, le] & (Lm[rows, cand] >= closure_ratio * Lmax)
+    if alt.any():
+        at = np.flatnonzero(alt)
+        key = ids[at] * 6 + cand[at]
+        new = np.array([k not in q_cache for k in key.tolist()], bool)
+        if new.any():
+            corner = corners(at[new])
+            qa = _children_min_dihedral(corner, cand[at[new]])
+            ql = _children_min_dihedral(corner, le[at[new]])
+            q_cache.update(zip(key[new].tolist(), (qa >= np.minimum(ql, QUALITY_FLOOR_DEG)).tolist()))
+        alt[at] = np.array([q_cache[k] for k in key.tolist()], bool)
+    return np.where(alt, cand, le)
+
+
 def _children_min_dihedral(X4: np.ndarray, edge: np.ndarray) -> np.ndarray:
     """Smallest dihedral angle (k,) of the two children of tetrahedra X4 (k,4,3) bisected at local edge
     ``edge`` (k,) (TET_EDGES order)."""
@@ -239,21 +261,8 @@ class Bisector:
         Lmax = L[rows, le]
         q_cache = {}
         while True:                                   # closure to a fixpoint
-            Lm = np.where(mk, L, -1.0)
-            cand = Lm.argmax(axis=1)
-            alt = ~mk[rows, le] & (Lm[rows, cand] >= closure_ratio * Lmax)
-            if alt.any():
-                at = np.flatnonzero(alt)
-                key = A[at] * 6 + cand[at]
-                new = np.array([k not in q_cache for k in key.tolist()], bool)
-                if new.any():
-                    corner = self.points[self.tets[A[at[new]], :4]]
-                    qa = _children_min_dihedral(corner, cand[at[new]])
-                    ql = _children_min_dihedral(corner, le[at[new]])
-                    ok = qa >= np.minimum(ql, QUALITY_FLOOR_DEG)
-                    q_cache.update(zip(key[new].tolist(), ok.tolist()))
-                alt[at] = np.array([q_cache[k] for k in key.tolist()], bool)
-            chosen = np.where(alt, cand, le)
+            chosen = edge_to_split(mk, L, le, Lmax, closure_ratio, A,
+                                   lambda at, A=A: self.points[self.tets[A[at], :4]], q_cache)
             need = mk.any(axis=1) & ~mk[rows, chosen]
             if not need.any():
                 break

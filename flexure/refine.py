@@ -39,8 +39,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexure._refine_kernels import (_OTHER, _PRIORITY, QUALITY_FLOOR_DEG, _children_min_dihedral,  # noqa: F401
-                                     _edge_targets, _longest_of, _p2_weights, _straighten_folding_mids, edge_codes)
+from flexure._refine_kernels import (_OTHER, _PRIORITY,  # noqa: F401
+                                     _edge_targets, _longest_of, _p2_weights, _straighten_folding_mids, edge_codes,
+                                     edge_to_split)
 from flexure.mesh import TET_EDGES, Mesh
 from flexure.mesh_motion import (MIN_SCALED_JACOBIAN, MIN_VOLUME_SHARE, _graph_laplacian, _straight_det,  # noqa: F401
                                  element_valid, halve_until_valid, morph_local, project_nodes)
@@ -292,20 +293,7 @@ def _bisect_pass(points, tets, face_tag, edge_tag, flag, emark, fields, closure_
     corner = points[tets[:, :4]]
     q_cache = {}                                  # (element, edge) → children's smallest dihedral angle
     while True:                                   # closure to a fixpoint
-        Lm = np.where(mk, L, -1.0)
-        cand = Lm.argmax(axis=1)
-        alt = ~mk[rows, le] & (Lm[rows, cand] >= closure_ratio * Lmax)
-        if alt.any():                             # a shorter marked edge only where its children are as good
-            at = np.flatnonzero(alt)
-            key = at * 6 + cand[at]
-            new = np.array([k not in q_cache for k in key.tolist()], bool)
-            if new.any():
-                qa = _children_min_dihedral(corner[at[new]], cand[at[new]])
-                ql = _children_min_dihedral(corner[at[new]], le[at[new]])
-                ok = qa >= np.minimum(ql, QUALITY_FLOOR_DEG)
-                q_cache.update(zip(key[new].tolist(), ok.tolist()))
-            alt[at] = np.array([q_cache[k] for k in key.tolist()], bool)
-        chosen = np.where(alt, cand, le)
+        chosen = edge_to_split(mk, L, le, Lmax, closure_ratio, rows, corner.__getitem__, q_cache)
         need = mk.any(axis=1) & ~mk[rows, chosen]
         if not need.any():
             break
@@ -407,7 +395,7 @@ def _bisect_pass(points, tets, face_tag, edge_tag, flag, emark, fields, closure_
 
 
 #: an element holding a marked edge at least this fraction of its longest edge is bisected at that edge
-#: (its longest marked one) if its children are as good as its longest edge's (``QUALITY_FLOOR_DEG``);
+#: (its longest marked one) if its children are as good as its longest edge's (``_refine_kernels.QUALITY_FLOOR_DEG``);
 #: otherwise its longest edge is marked (1.0: Rivara's closure, the default). 0.7 made the levels 1.6–2.5×
 #: smaller, but on an unseen four-spoke STL the adaptive run then took three levels where Rivara's took two,
 #: and the marks, concentrated at the same edges level after level, left 37 tetrahedra below 10° (2.4°)

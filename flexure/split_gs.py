@@ -40,7 +40,8 @@ def warm() -> None:
     from flexure.block_sparse import BlockMatrix
 
     for dtype in (np.float32, np.float64):
-        H = SplitSmoother(BlockMatrix.from_csr(sp.identity(6, format="csr") * 2.0, dtype), np.tile(np.eye(3) / 2.0, (2, 1, 1)))
+        Ab = BlockMatrix.from_csr(sp.identity(6, format="csr") * 2.0, dtype)
+        H = SplitSmoother(Ab, np.tile(np.eye(3) / 2.0, (2, 1, 1)))
         H.backward(H.forward_from_zero(np.ones((6, 1)))[0], np.ones((6, 1)))
         H.matvec(np.ones(6))
 
