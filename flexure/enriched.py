@@ -252,7 +252,7 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
     # SMOOTHER_STORAGE): fewer bytes read than the float64 CSR, the same rounding as K_WW and K_hW
     Ab = getattr(precond_h, "blocks", None)
     if not (enriched_assembly.available() and storage in ("block32", "block64") and Ab is not None
-            and getattr(Ab, "dtype", None) == (np.float32 if storage == "block32" else np.float64)):
+            and Ab.dtype == (np.float32 if storage == "block32" else np.float64)):
         Ab = None
     a_mv = Ab.matvec if Ab is not None else (lambda x: sparse_parallel.matvec(A, x))
     w_sgs = (W_PRECOND if w_precond is None else w_precond) == "sgs" and hasattr(Kww, "symmetric_gauss_seidel")

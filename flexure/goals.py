@@ -84,7 +84,8 @@ def solve_goals(design, mesh, x0_fields=None, x0_ref=None, rtol: float | None = 
     ``rtol`` the CG tolerance (default GOAL_RTOL). ``algebraic_limit``: the goals (θ, each gauge
     reading) are dual-corrected and their relative algebraic error (``algebraic_errors``; a gauge's
     relative to max(|ε_g|, mean |ε|)) is held below it, the torque column's CG first stopped at
-    TORQUE_RTOL_FACTOR × ``rtol``, then every column tightened ×1/100 from its iterate until it is (info: ``goal_algebraic_error``, ``goal_algebraic_limit``, ``cg_rtol``)."""
+    TORQUE_RTOL_FACTOR × ``rtol``, then every column tightened ×1/100 from its iterate until it is
+    (info: ``goal_algebraic_error``, ``goal_algebraic_limit``, ``cg_rtol``)."""
     from flexure import solve as fsolve
     from flexure.analysis import SMOOTHED_COARSE, _selections
     from flexure.bc import Problem, wrench_traction

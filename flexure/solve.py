@@ -209,7 +209,7 @@ def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False, sweeps: int = 1):
         Ab = BlockMatrix.from_csr(Ac, np.float32 if SMOOTHER_STORAGE == "block32" else np.float64)
         gs0, gs = multirhs.forward_gauss_seidel_residual_bsr, multirhs.block_gauss_seidel_bsr
         if SPLIT_SWEEPS and sweeps == 1:
-            return _pmg_split(Ab, Dinv, coarse, It, V)
+            return _pmg_split(Ab, Dinv, coarse, V)
 
     def apply(R):
         X, res = gs0(Ab, Dinv, R)
@@ -226,13 +226,12 @@ def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False, sweeps: int = 1):
     return apply, V
 
 
-def _pmg_split(Ab, Dinv, coarse, It, V):
+def _pmg_split(Ab, Dinv, coarse, V):
     """``_pmg_multi``'s cycle with flexure.split_gs's sweeps (two parts side by side) in its order of
     the rows; the coarse interpolation's rows renumbered with them."""
     from flexure.split_gs import SplitSmoother
 
     H = SplitSmoother(Ab, Dinv)
-    del Ab
     coarse_p = coarse.tocsr()[H.perm]
     It_p = coarse_p.T.tocsr()
 
