@@ -53,8 +53,8 @@ Why a large step (MIN_DROP 0.4). q is not quite the same on both levels: with E_
 Δq · r/(1 − r): 4× at r = 0.8. Over q ∈ [−0.3, 0.6] and |Δq| ≤ 0.1 (tests/test_saturation.py), (3) keeps
 its effectivity in [1.0, 2.6] for r ≤ 0.5, [0.92, 3.0] at r = 0.6, [0.82, 3.9] at r = 0.7; d falls with
 about the error, d_(ℓ+1)/d_ℓ = r (1 − q_(ℓ+1))/(1 − q_ℓ), so a fall of d by 40 % keeps r near or below 0.6.
-The enriched CG's accuracy (relative residual 2e-2 (flexure.enriched.RTOL) with the estimate dual-corrected by the
-P2 duals: d within 0.22 % of its converged value on the thick disc's levels) is then far below the difference.
+The enriched CG's accuracy (relative residual 5e-2 (flexure.enriched.RTOL) with the estimate dual-corrected by the
+P2 duals: every goal's d within 3.7 % of its converged value on nine meshes of six parts) is then far below the difference.
 
 Measured (2026-11-26, benchmarks/fem_effectivity.py against deep nested references): q̂ 0.35–0.52 on every
 goal of the re-entrant part, 0.1–0.4 on three_spoke_thin. On the re-entrant part q still drifts upwards
