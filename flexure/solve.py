@@ -49,7 +49,8 @@ MULTI_RHS = True
 PMG_SWEEPS = 1
 #: the P2 sweeps in flexure.split_gs's order, its two parts side by side (block storages, one sweep)
 SPLIT_SWEEPS = True
-#: largest system the P2 p-multigrid's coarse AMG solves directly. The CG iterations grew with the
+#: largest system the P2 p-multigrid's coarse AMG solves directly, in nodes (pyamg counts the 3 × 3 block
+#: rows: a last level of up to 18,000 unknowns; 13,263 on the thick disc's first mesh). The CG iterations grew with the
 #: number of AMG levels, not with h or the geometry: on the paper disc (smoothed coarse) 26–36
 #: iterations at 72k DOFs and 22–31 at 145k (2 levels), 39–46 at 317k (3 levels with 1000);
 #: with 6000 the 317k model keeps 2 levels and needs 22–30 (benchmarks/bench_fem.py --only ladder).
