@@ -124,6 +124,23 @@ def test_vcycle_on_all_columns_equals_pyamg_per_column(disc, smoothed):
     assert V.n_levels == len(ml.levels) and V.operator_complexity == pytest.approx(ml.operator_complexity())
 
 
+def test_last_level_lu_on_the_diagonal_solves_the_p1_system(disc):
+    """flexure.vcycle's last level factored with its pivots on the diagonal (COARSE_OPTIONS: the
+    coarse matrix is SPD): where the P1 system itself is the last level (max_coarse above its nodes),
+    the cycle is its exact solve, equal to a partially pivoted sparse solve."""
+    from flexure import vcycle
+
+    sy, _ = disc
+    A1 = (sy.coarse.T @ sy.A @ sy.coarse).tocsr()
+    ml = fsolve._sa_hierarchy(A1, sy.B_coarse, smoothed=False, max_coarse=A1.shape[0])
+    assert len(ml.levels) == 1 and vcycle.COARSE_OPTIONS["diag_pivot_thresh"] == 0.0
+    R = np.random.default_rng(5).standard_normal((A1.shape[0], 4))
+    X = vcycle.MultiVCycle(ml)(R)
+    ref = sp.linalg.spsolve(A1.tocsc(), R)
+    assert np.abs(X - ref).max() <= 1e-10 * np.abs(ref).max()
+    assert np.abs(A1 @ X - R).max() <= 1e-9 * np.abs(R).max()
+
+
 @pytest.mark.parametrize("k", [1, 5, 8])
 def test_forward_sweep_from_zero_with_residual_equals_sweep_then_product(disc, k):
     """multirhs.forward_gauss_seidel_residual: one pass over the lower triangle gives the forward
