@@ -6,7 +6,7 @@ import numba
 import numpy as np
 
 from flexure import threads
-from flexure._enriched_kernels import _add_block, _inv3
+from flexure._enriched_kernels import _inv3
 
 threads.select_layer()                 # before any parallel loop runs (flexure.threads: fork safety)
 
@@ -54,11 +54,12 @@ def _element(e, points, tets, dN, wq, lmb, mu, X, J, Jinv, g, P, A):
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def assemble(points, tets, dN, wq, lmb, mu, bptr, bcol, data, det_min, cptr, order, nchunk):
-    """Every element's stiffness added into ``data`` (the scalar CSR of the block pattern bptr, bcol:
-    flexure._enriched_kernels.scalar_csr), its smallest det J into det_min (m,). Colour by colour:
-    no two elements of a colour share a node, every entry sums its elements in the colour order
-    whatever the thread count."""
+def assemble(points, tets, dN, wq, lmb, mu, bptr, S, data, det_min, cptr, order, nchunk):
+    """Every element's stiffness added into ``data`` (the scalar CSR of the block pattern bptr:
+    flexure._enriched_kernels.scalar_csr) at its blocks' places S[e,a,b] (the index p of block
+    (tets[e,a], tets[e,b]): flexure._enriched_kernels.block_pattern_slots, no row searched), its
+    smallest det J into det_min (m,). Colour by colour: no two elements of a colour share a node,
+    every entry sums its elements in the colour order whatever the thread count."""
     nn = tets.shape[1]
     for col in range(len(cptr) - 1):
         lo, hi = cptr[col], cptr[col + 1]
@@ -73,8 +74,13 @@ def assemble(points, tets, dN, wq, lmb, mu, bptr, bcol, data, det_min, cptr, ord
                 e = order[k]
                 det_min[e] = _element(e, points, tets, dN, wq, lmb, mu, X, J, Jinv, g, P, A)
                 for a in range(nn):
+                    r = tets[e, a]
+                    nb = bptr[r + 1] - bptr[r]
                     for b in range(nn):
-                        _add_block(data, bptr, bcol, tets[e, a], tets[e, b], A, 3 * a, 3 * b, 1.0)
+                        base = 9 * bptr[r] + 3 * (S[e, a, b] - bptr[r])
+                        for i in range(3):
+                            for j in range(3):
+                                data[base + 3 * i * nb + j] += A[3 * a + i, 3 * b + j]
 
 
 @numba.njit(cache=True, nogil=True)

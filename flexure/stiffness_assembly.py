@@ -47,7 +47,7 @@ def stiffness_csr(mesh: Mesh, material, dN: np.ndarray, wq: np.ndarray):
     tets = np.ascontiguousarray(mesh.tets, dtype=np.int64)
     n = mesh.n_nodes
     nt = threads.use()
-    bptr, bcol = ek.block_pattern(tets, tets, n, n, nt)
+    bptr, bcol, S = ek.block_pattern_slots(tets, tets, n, n, nt)   # and each element block's place
     K = block_csr(bptr, bcol, n, n)
     det = np.empty(len(tets))
     cptr, order = ek.colour_elements(np.ascontiguousarray(tets[:, :4]), n)
@@ -55,7 +55,7 @@ def stiffness_csr(mesh: Mesh, material, dN: np.ndarray, wq: np.ndarray):
     with threads.dynamic():
         sk.assemble(np.ascontiguousarray(mesh.points, float), tets, np.ascontiguousarray(dN),
                     np.ascontiguousarray(wq, float), float(material.lame_lambda_Pa),
-                    float(material.shear_modulus_Pa), bptr, bcol, K.data, det, cptr, order,
+                    float(material.shear_modulus_Pa), bptr, S, K.data, det, cptr, order,
                     1 if nt == 1 else 8 * nt)
     bad = ~(det > 0)
     if np.any(bad):
