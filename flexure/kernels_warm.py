@@ -29,8 +29,11 @@ def warm() -> bool:
     prob.reduced_system(K)                       # flexure.reduce's loop (Tᵀ K T)
     C = enriched_assembly.assemble_enriched(m, mat, np.zeros((m.n_nodes, 3)),
                                             enriched.surplus_numbering(m, np.zeros(m.n_nodes, bool)))[2]
-    Kb, _, Cb, Dinv, _ = enriched_assembly.assemble_enriched_blocks(   # and the face term (bank_weiser)
+    Kb, _, Cb, Dinv, _ = enriched_assembly.assemble_enriched_blocks(
         m, mat, np.zeros((m.n_nodes, 3)), enriched.surplus_numbering(m, np.zeros(m.n_nodes, bool)))
+    from flexure.bank_weiser import face_rhs
+
+    face_rhs(m, mat, np.zeros((m.n_nodes, 3)))   # the local problems' face term (the levels' estimate)
     from flexure import dwr
 
     dwr.energy_indicators(m, mat, np.zeros((m.n_nodes, 3, 2)), np.zeros((m.n_elements, 6, 3)),
