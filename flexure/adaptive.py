@@ -220,8 +220,9 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
                 d = np.asarray(sol.info["goal_dual_correction"])
                 enr["theta"], enr["gauges"] = enr["theta"] - float(d[0]), enr["gauges"] - d[1:]
             enriched_s = time.perf_counter() - te
-            rss_level = rss.now_gb()          # the level's fields, matrix, hierarchy and enriched solve alive
+            rss_level = rss.now_gb()          # the level's fields alive (its peak: the P2 or the enriched solve's)
             sol.solver = sol.system = None     # not needed again (the last mesh's load cases: goal_cases): free them
+                                               # (released already by goal_errors where it could)
             vals = goal_values(design, sol)
             td = time.perf_counter()
             eta_v = indicators(design, mesh, sol, None if enr is None else enr.pop("weight"))
