@@ -299,8 +299,9 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
         return np.concatenate([zh, zw])
 
     x = np.zeros(len(rhs))
-    res = rhs.copy()
+    res = rhs                                    # CG vectors updated in place: fewer alive at the peak, same bits
     nb = np.linalg.norm(rhs)
+    del rhs, rh, rW
     its = 0
     if nb > 0:
         z = prec(res)
@@ -310,12 +311,15 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
             Ap = matvec(p)
             alpha = rz / (p @ Ap)
             x += alpha * p
-            res -= alpha * Ap
+            Ap *= alpha
+            res -= Ap                            # res − α Ap
+            del Ap, z
             if np.linalg.norm(res) <= rtol * nb:
                 break
             z = prec(res)
             rz_new = res @ z
-            p = z + (rz_new / rz) * p
+            p *= rz_new / rz
+            p += z                               # z + β p
             rz = rz_new
     eh, ew = x[:nq], np.zeros(len(keep))
     ew[keep] = x[nq:]

@@ -232,7 +232,7 @@ def _pmg_split(Ab, Dinv, coarse, V):
     the rows; the coarse interpolation's rows renumbered with them."""
     from flexure.split_gs import SplitSmoother
 
-    H = SplitSmoother(Ab, Dinv)
+    H = SplitSmoother(Ab, Dinv, consume=True)          # Ab's values moved into the parts (Ab not used after)
     coarse_p = coarse.tocsr()[H.perm]
     It_p = coarse_p.T.tocsr()
 
