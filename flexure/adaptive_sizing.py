@@ -42,12 +42,14 @@ Memory. The peak of a level is reached in its P2 solve (the full and the reduced
 the smoother's block copies built, the CG's columns) or in its enriched solve (V⁺ has about 3.2× the P2
 DOFs), all within a few % of each other: the enriched solve no longer holds the P2 system's scalar CSR
 (12 bytes an entry, a quarter of the old peak), which the smoother's float32 blocks replace in its A x
-(flexure.enriched.goal_errors ``release``), and the allocator's free heap pages are returned before each
-phase's largest allocations (flexure.rss, trim). Measured 2026-11-27 (RSS sampled every 2 ms; same levels,
-same bits): thick disc at 354 k P2 DOFs 4.04 → 2.82 kB a DOF above the base, STL thick disc at 383 k
-3.86 → 2.78; the thick disc at --rtol 0.01 reached 0.98 % at 758 k DOFs (2.36 GB, 160 s) where it
-had stopped on memory at 540 k with ± 1.18 % (2.35 GB, 109 s). The DWR indicators and the final six-case
-figures after the loop stay below it. So peak(N) = base + per · N with per = (peak − base)/N of the last
+(flexure.enriched.goal_errors ``release``), the smoother's parts take the block copy's own values
+(flexure.split_gs ``consume``), both CGs update their vectors in place, and the allocator's free heap
+pages are returned before each phase's largest allocations (flexure.rss, trim). Measured 2026-11-27 (RSS
+sampled every 2 ms; same levels, same bits): thick disc at 251 k / 354 k P2 DOFs 3.76 / 3.87 → 2.71 / 2.71
+kB a DOF above the base, STL thick disc at 281 k / 383 k 3.77 / 3.86 → 2.73 / 2.62; the thick disc at
+--rtol 0.01 reached ± 0.96 % at 779 k DOFs (2.35 GB, 151 s) where it had stopped on memory at 540 k with
+± 1.18 % (2.35 GB, 109 s). The DWR indicators and the final six-case figures after the loop stay
+below it. So peak(N) = base + per · N with per = (peak − base)/N of the last
 level (``peak_per_dof``; the previous level's where the last one did not raise the process's peak, so
 was only sampled), and the next level is predicted at base + MEMORY_MARGIN · per · N
 (``predicted_peak_gb``), base the resident memory before the first level with the allocator's free
