@@ -57,6 +57,72 @@ def split(bptr, bcol, data, perm, inv, part_of):
     return in_ptr, in_col, in_data, off_ptr, off_col, off_data
 
 
+@numba.njit(cache=True, nogil=True, parallel=True)
+def split_places(bptr, bcol, perm, inv, part_of):
+    """``split``'s layout without its values: → (in_ptr, in_col, off_ptr, off_col, src): new block q
+    (the in-part blocks in ``split``'s order first, then the off-part ones from n_in = in_ptr[-1] on)
+    is A's block src[q] (``gather_in_place`` then moves the values into that order in A's own array)."""
+    n = len(perm)
+    in_ptr = np.zeros(n + 1, np.int64)
+    off_ptr = np.zeros(n + 1, np.int64)
+    for r in numba.prange(n):
+        i = perm[r]
+        k = 0
+        for p in range(bptr[i], bptr[i + 1]):
+            k += part_of[inv[bcol[p]]] == part_of[r]
+        in_ptr[r + 1] = k
+        off_ptr[r + 1] = bptr[i + 1] - bptr[i] - k
+    for r in range(n):
+        in_ptr[r + 1] += in_ptr[r]
+        off_ptr[r + 1] += off_ptr[r]
+    n_in = in_ptr[n]
+    in_col = np.empty(n_in, np.int32)
+    off_col = np.empty(off_ptr[n], np.int32)
+    src = np.empty(n_in + off_ptr[n], np.int64)
+    for r in numba.prange(n):
+        i = perm[r]
+        a = in_ptr[r]
+        b = off_ptr[r]
+        for p in range(bptr[i], bptr[i + 1]):
+            c = inv[bcol[p]]
+            if part_of[c] == part_of[r]:
+                q = a
+                while q > in_ptr[r] and in_col[q - 1] > c:
+                    in_col[q] = in_col[q - 1]
+                    src[q] = src[q - 1]
+                    q -= 1
+                in_col[q] = c
+                src[q] = p
+                a += 1
+            else:
+                off_col[b] = c
+                src[n_in + b] = p
+                b += 1
+    return in_ptr, in_col, off_ptr, off_col, src
+
+
+@numba.njit(cache=True, nogil=True)
+def gather_in_place(data, src):
+    """data[q] ← data[src[q]] for every q at once (``src`` a permutation), cycle by cycle: the values
+    moved, not copied, so no second array of them is alive."""
+    n = len(src)
+    done = np.zeros(n, np.bool_)
+    tmp = np.empty(data.shape[1:], data.dtype)
+    for q0 in range(n):
+        if done[q0]:
+            continue
+        tmp[:] = data[q0]
+        q = q0
+        while True:
+            done[q] = True
+            s = src[q]
+            if s == q0:
+                data[q] = tmp
+                break
+            data[q] = data[s]
+            q = s
+
+
 @numba.njit(cache=True, nogil=True)
 def subtract_off(off_ptr, off_col, off_data, rows, r0, X, Y):
     """Y (rows 3 r0 … of the product, shifted to 0) −= the off-part blocks of the block ``rows``

@@ -213,14 +213,16 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             # CG tied to --rtol; the goals dual-corrected and their algebraic error held below a share of it
             sol = solve_goals(design, mesh, x0, ref0, selections=_nested_selections(mesh, bands),
                               rtol=cg_rtol_for(rtol), algebraic_limit=ALGEBRAIC_SHARE * rtol)
+            x0 = None                          # the CG's start, used: free it before the enriched solve
             te = time.perf_counter()
-            enr = goal_errors(design, mesh, sol)                 # J(u⁺) − J(u_h), V⁺ = P2 ⊕ cubic surplus
+            enr = goal_errors(design, mesh, sol, release=True)   # J(u⁺) − J(u_h), V⁺ = P2 ⊕ cubic surplus
             if enr is not None and "goal_dual_correction" in sol.info:   # against the reported, corrected goals
                 d = np.asarray(sol.info["goal_dual_correction"])
                 enr["theta"], enr["gauges"] = enr["theta"] - float(d[0]), enr["gauges"] - d[1:]
             enriched_s = time.perf_counter() - te
-            rss_level = rss.now_gb()          # the level's fields, matrix, hierarchy and enriched solve alive
+            rss_level = rss.now_gb()          # the level's fields alive (its peak: the P2 or the enriched solve's)
             sol.solver = sol.system = None     # not needed again (the last mesh's load cases: goal_cases): free them
+                                               # (released already by goal_errors where it could)
             vals = goal_values(design, sol)
             td = time.perf_counter()
             eta_v = indicators(design, mesh, sol, None if enr is None else enr.pop("weight"))
@@ -290,7 +292,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
                                                               geo_marked, gain=gain, limit=min(max_dofs, mem_cap))
             gain = rec["sizing"]["marks"]["gain"] or gain
             rec["safety_factor"] = _safety_factor(design, mesh, sol.U[:, :, 0])
-            ref0 = sol.q[-6:] if design.coupling == "rigid" else None
+            ref0 = sol.q[-6:].copy() if design.coupling == "rigid" else None    # not a view keeping all of q
             new, (x0, bands_new), rinfo = bisect(tm, marked, [sol.U, bands], rounds=ROUNDS, projector=projector)
             if rinfo.get("invalid_elements"):       # folded on the true surface past mending: this level is the answer
                 rec["invalid_elements"], stopped = int(rinfo["invalid_elements"]), "invalid_mesh"

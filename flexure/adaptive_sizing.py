@@ -38,9 +38,18 @@ stop is at a better level than one jump there (six_spoke_thick at 1 %: one jump 
 first step): the thick disc at 1 % (2026-11-27), once its first level's peak per DOF fell 14 %, jumped
 84 k → 528 k and stopped at ± 1.72 % (37.5 s); split, 84 k → 282 k → 529 k, ± 1.20 % (45.6 s).
 
-Memory. The peak of a level is dominated by its enriched solve (V⁺ has about 3.2× the P2 DOFs; the P2
-solve, the DWR indicators and the final six-case figures after the loop stay below it: measured per
-phase on the paper and thick discs), so peak(N) = base + per · N with per = (peak − base)/N of the last
+Memory. The peak of a level is reached in its P2 solve (the full and the reduced stiffness side by side,
+the smoother's block copies built, the CG's columns) or in its enriched solve (V⁺ has about 3.2× the P2
+DOFs), all within a few % of each other: the enriched solve no longer holds the P2 system's scalar CSR
+(12 bytes an entry, a quarter of the old peak), which the smoother's float32 blocks replace in its A x
+(flexure.enriched.goal_errors ``release``), the smoother's parts take the block copy's own values
+(flexure.split_gs ``consume``), both CGs update their vectors in place, and the allocator's free heap
+pages are returned before each phase's largest allocations (flexure.rss, trim). Measured 2026-11-27 (RSS
+sampled every 2 ms; same levels, same bits): thick disc at 251 k / 354 k P2 DOFs 3.76 / 3.87 → 2.71 / 2.71
+kB a DOF above the base, STL thick disc at 281 k / 383 k 3.77 / 3.86 → 2.73 / 2.62; the thick disc at
+--rtol 0.01 reached ± 0.96 % at 779 k DOFs (2.35 GB, 151 s) where it had stopped on memory at 540 k with
+± 1.18 % (2.35 GB, 109 s). The DWR indicators and the final six-case figures after the loop stay
+below it. So peak(N) = base + per · N with per = (peak − base)/N of the last
 level (``peak_per_dof``; the previous level's where the last one did not raise the process's peak, so
 was only sampled), and the next level is predicted at base + MEMORY_MARGIN · per · N
 (``predicted_peak_gb``), base the resident memory before the first level with the allocator's free
@@ -52,9 +61,8 @@ the level before. The same step repeated is not the same peak: the paper disc at
 0.91 GB budget, level 1 at the same 73.7 k DOFs, peaked at 0.67, 0.75, 0.75 and 0.79 GB in four runs
 (1.04× the 1.1 prediction at most), so MEMORY_MARGIN = 1.2; and in CI (fresh venv, two test workers, load)
 a level at 94.6 k DOFs peaked at 1.13× its 1.2 prediction: the prediction is not a guarantee yet (the spread's
-source — allocator reuse, numba compiling or threads inside a level — is not found; the test is an xfail). The peak
-is the enriched solve's in every level (the final six-case figures after the loop did not raise the
-process's peak in any of those runs).
+source — allocator reuse, numba compiling or threads inside a level — is not found; the test is an xfail). The
+final six-case figures after the loop did not raise the process's peak in any of those runs.
 
 Marks. Longest-edge bisection with closure adds about the same DOFs per marked element on a given
 mesh (measured on the paper disc at 48.7 k DOFs, 2 rounds: 70–80 DOFs per marked element from 2 % to

@@ -174,9 +174,34 @@ def _nbytes(M) -> int:
     return M.nbytes
 
 
+def p2_blocks(precond_h, storage: str | None = None):
+    """The P2 smoother's 3 × 3 blocks of A (``precond_h.blocks``: flexure.solve SMOOTHER_STORAGE) where they
+    hold the value type of ``storage`` (default STORAGE) and the compiled path runs: the enriched CG's
+    A x then reads them (fewer bytes than the float64 CSR, the same rounding as K_WW and K_hW); else None."""
+    from flexure import enriched_assembly
+
+    storage = STORAGE if storage is None else storage
+    Ab = getattr(precond_h, "blocks", None)
+    if not (enriched_assembly.available() and storage in ("block32", "block64") and Ab is not None
+            and Ab.dtype == (np.float32 if storage == "block32" else np.float64)):
+        return None
+    return Ab
+
+
+def p2_residual(system, q0: np.ndarray, theta_index: int | None = None) -> np.ndarray:
+    """The V_h block of the enriched system's right-hand side, b − A q0 (b the unit load on the reduced
+    dof ``theta_index``, else system.b), zero on the fixed rows."""
+    nq = system.A.shape[0]
+    b = system.b if theta_index is None else np.eye(1, nq, theta_index).ravel()
+    rh = b - system.A @ q0
+    rh[system.fixed_q] = 0.0
+    return rh
+
+
 def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarray, constrained: np.ndarray,
                    precond_h, rtol: float = RTOL, max_iter: int = MAX_ITER, theta_index: int | None = None,
-                   storage: str | None = None, w_precond: str | None = None, duals: np.ndarray | None = None):
+                   storage: str | None = None, w_precond: str | None = None, duals: np.ndarray | None = None,
+                   residual_h: np.ndarray | None = None):
     """The Galerkin error e⁺ = u⁺ − u_h in V⁺ = V_h ⊕ W of the load case whose P2 solution is the
     reduced q0 (nodal U0 (n,3)), solved as one system (module docstring)
 
@@ -191,7 +216,8 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
     (flexure.block_sparse) or "csr" (scalar CSR, float64); ``w_precond`` (default W_PRECOND) the W
     block's preconditioner: "sgs" (block storages) or "jacobi". ``duals`` (n_q, 1 + g): the P2 duals z̃ of θ
     and of each gauge (the goal solve's columns): the estimates are then dual-corrected
-    (``dual_corrected``)."""
+    (``dual_corrected``). ``residual_h``: the V_h block b − A q0 (``p2_residual``) computed by the
+    caller, which may then have freed ``system.A`` (None) where ``p2_blocks`` gives A x (``goal_errors``)."""
     import scipy.sparse as sp
 
     from flexure import dwr
@@ -201,7 +227,7 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
 
     t0 = time.perf_counter()
     A = system.A
-    nq = A.shape[0]
+    nq = len(system.b)
     mask = np.ones(nq)
     mask[system.fixed_q] = 0.0
     storage = STORAGE if storage is None else storage
@@ -254,15 +280,12 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
         k_mv = lambda x: sparse_parallel.matvec(Kww, x)  # noqa: E731
     # A x on the P2 smoother's 3 × 3 blocks where they hold the storage's value type (flexure.solve
     # SMOOTHER_STORAGE): fewer bytes read than the float64 CSR, the same rounding as K_WW and K_hW
-    Ab = getattr(precond_h, "blocks", None)
-    if not (enriched_assembly.available() and storage in ("block32", "block64") and Ab is not None
-            and Ab.dtype == (np.float32 if storage == "block32" else np.float64)):
-        Ab = None
+    Ab = p2_blocks(precond_h, storage)
+    if Ab is None and A is None:
+        raise ValueError("enriched_solve: system.A freed, but the P2 preconditioner has no blocks of this storage")
     a_mv = Ab.matvec if Ab is not None else (lambda x: sparse_parallel.matvec(A, x))
     w_sgs = (W_PRECOND if w_precond is None else w_precond) == "sgs" and hasattr(Kww, "symmetric_gauss_seidel")
-    b = np.zeros(nq) if theta_index is None else np.eye(1, nq, theta_index).ravel()
-    rh = (system.b if theta_index is None else b) - A @ q0
-    rh[system.fixed_q] = 0.0
+    rh = p2_residual(system, q0, theta_index) if residual_h is None else residual_h
     rhs = np.concatenate([rh, rW])
     t1 = time.perf_counter()
 
@@ -280,8 +303,9 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
         return np.concatenate([zh, zw])
 
     x = np.zeros(len(rhs))
-    res = rhs.copy()
+    res = rhs                                    # CG vectors updated in place: fewer alive at the peak, same bits
     nb = np.linalg.norm(rhs)
+    del rhs, rh, rW
     its = 0
     if nb > 0:
         z = prec(res)
@@ -291,12 +315,15 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
             Ap = matvec(p)
             alpha = rz / (p @ Ap)
             x += alpha * p
-            res -= alpha * Ap
+            Ap *= alpha
+            res -= Ap                            # res − α Ap
+            del Ap, z
             if np.linalg.norm(res) <= rtol * nb:
                 break
             z = prec(res)
             rz_new = res @ z
-            p = z + (rz_new / rz) * p
+            p *= rz_new / rz
+            p += z                               # z + β p
             rz = rz_new
     eh, ew = x[:nq], np.zeros(len(keep))
     ew[keep] = x[nq:]
@@ -326,12 +353,18 @@ def dual_corrected(d_theta: float, d_eps: np.ndarray, duals: np.ndarray, res_h: 
     return d_theta + float(c[0]), np.asarray(d_eps) + c[1:]
 
 
-def goal_errors(design, mesh, sol) -> dict | None:
+def goal_errors(design, mesh, sol, release: bool = False) -> dict | None:
     """J(u⁺) − J(u_h) of the goals of one level (flexure.goals.GoalSolution ``sol``, its system and
     prepared solver still held): the hub rotation θ and each gauge → {"theta", "gauges" (g,), "info",
     "weight"}: ``weight`` the surplus part e_W of the enriched error as element coefficients (edges
     (m,6,3), faces (m,4,3)), the DWR weight w ≈ u − I_h u (flexure.dwr, for the marking). None where
-    the enriched solve is not set up (the distributed coupling: its traction on W)."""
+    the enriched solve is not set up (the distributed coupling: its traction on W).
+
+    ``release``: the caller needs neither ``sol.solver`` nor ``sol.system`` again (an adaptive level):
+    both are dropped (set None) before the enriched system is assembled, where the P2 smoother's blocks
+    give the CG's A x (``p2_blocks``), and the allocator's free pages returned (flexure.rss): the scalar
+    CSR of A (12 bytes an entry, the level's largest P2 array), the rigid modes and the coarse
+    interpolation are not read by the enriched solve. The same arithmetic, the same bits."""
     if design.coupling != "rigid" or sol.system is None:
         return None
     system = sol.system
@@ -339,9 +372,19 @@ def goal_errors(design, mesh, sol) -> dict | None:
     if precond is None:
         dinv = 1.0 / system.A.diagonal()
         precond = lambda R: R * dinv[:, None]  # noqa: E731
+    theta_index = system.ref_slices[0].start + 5
+    rh = p2_residual(system, sol.q[:, 0], theta_index)
+    if release and p2_blocks(precond) is not None:
+        import dataclasses
+
+        from flexure import rss
+
+        sol.solver = sol.system = None
+        system = dataclasses.replace(system, A=None, B=None, coarse=None, B_coarse=None)
+        rss.now_gb(trim=True)
     d_eps, d_theta, info = enriched_solve(system, mesh, design.material, design.gauges, sol.U[:, :, 0],
-                                          sol.q[:, 0], sol.constrained, precond,
-                                          theta_index=system.ref_slices[0].start + 5, duals=sol.q)
+                                          sol.q[:, 0], sol.constrained, precond, theta_index=theta_index,
+                                          duals=sol.q, residual_h=rh)
     coef = info.pop("coef")
     return {"theta": d_theta, "gauges": np.asarray(d_eps), "info": info,
             "weight": (coef[:, :6], coef[:, 6:])}

@@ -62,7 +62,7 @@ def assemble_enriched_blocks(mesh: Mesh, material, u: np.ndarray, numbering, dty
     summed in float64), the numbering)."""
     from flexure import _block_kernels as bk
     from flexure import _enriched_kernels as ek
-    from flexure import threads
+    from flexure import rss, threads
     from flexure.block_sparse import BlockMatrix
     from flexure.fem import tet_shape
     from flexure.surplus import surplus_basis, tet_rule_degree5
@@ -82,12 +82,13 @@ def assemble_enriched_blocks(mesh: Mesh, material, u: np.ndarray, numbering, dty
     _, dB = surplus_basis(xi)
     r = np.zeros(3 * nk)
     D = np.zeros((nk, 3, 3))
+    colours = ek.colour_elements(np.ascontiguousarray(tets[:, :4]), mesh.n_nodes)
+    rss.now_gb(trim=True)       # the patterns' temporaries (free heap pages) returned before K and C are written
     with threads.dynamic():
         bk.assemble(np.ascontiguousarray(mesh.points, float), tets, np.ascontiguousarray(np.asarray(u, float).reshape(-1, 3)),
                     np.ascontiguousarray(rhs), Gk, np.ascontiguousarray(sign), np.ascontiguousarray(dN),
                     np.ascontiguousarray(dB), np.ascontiguousarray(wq), float(material.lame_lambda_Pa),
-                    float(material.shear_modulus_Pa), SK, K.data, SC, C.data, r, D,
-                    *ek.colour_elements(np.ascontiguousarray(tets[:, :4]), mesh.n_nodes), 1 if nt == 1 else 8 * nt)
+                    float(material.shear_modulus_Pa), SK, K.data, SC, C.data, r, D, *colours, 1 if nt == 1 else 8 * nt)
     return K, r, C, ek.inverse_blocks(D, 1 if nt == 1 else 8 * nt), (G, sign, free)
 
 

@@ -86,6 +86,7 @@ def solve_goals(design, mesh, x0_fields=None, x0_ref=None, rtol: float | None = 
     relative to max(|ε_g|, mean |ε|)) is held below it, the torque column's CG first stopped at
     TORQUE_RTOL_FACTOR × ``rtol``, then every column tightened ×1/100 from its iterate until it is
     (info: ``goal_algebraic_error``, ``goal_algebraic_limit``, ``cg_rtol``)."""
+    from flexure import rss
     from flexure import solve as fsolve
     from flexure.analysis import SMOOTHED_COARSE, _selections
     from flexure.bc import Problem, wrench_traction
@@ -123,6 +124,7 @@ def solve_goals(design, mesh, x0_fields=None, x0_ref=None, rtol: float | None = 
     B[:, 1:] = F.reshape(-1, g) if T is None else T.T @ F.reshape(-1, g)
     B[system.fixed_q] = 0.0
     del K, F                      # the reduced system holds its own matrix: free the full one before the solve
+    rss.now_gb(trim=True)         # ... and the assembly's free heap pages: the solver's set-up comes on top
     assemble_s = time.perf_counter() - t0
     x0 = None if x0_fields is None else problem.restrict(system, x0_fields, x0_ref)
     solver = fsolve.prepared(system, rtol or GOAL_RTOL, SMOOTHED_COARSE[design.mesher])

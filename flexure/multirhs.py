@@ -304,6 +304,7 @@ def pcg(A, B: np.ndarray, M, rtol: float, maxiter: int, X0: np.ndarray | None = 
     if not len(act):
         return X, its.tolist(), done
     R = R0[:, act].copy()
+    del R0                                    # the vectors updated in place: fewer alive at the peak, same bits
     Z = M(R)
     P = Z.copy()
     rz = np.einsum("ij,ij->j", R, Z)
@@ -311,7 +312,9 @@ def pcg(A, B: np.ndarray, M, rtol: float, maxiter: int, X0: np.ndarray | None = 
         AP = spmm(A, P)
         alpha = rz / np.einsum("ij,ij->j", P, AP)
         X[:, act] += P * alpha
-        R -= AP * alpha
+        AP *= alpha
+        R -= AP                               # R − AP α
+        del AP, Z
         its[act] += 1
         ok = np.sqrt(np.einsum("ij,ij->j", R, R)) <= stop[act]
         if ok.any():
@@ -322,7 +325,8 @@ def pcg(A, B: np.ndarray, M, rtol: float, maxiter: int, X0: np.ndarray | None = 
                 break
         Z = M(R)
         rz_new = np.einsum("ij,ij->j", R, Z)
-        P = Z + P * (rz_new / rz)
+        P *= rz_new / rz
+        P += Z                                # Z + P β
         rz = rz_new
     return X, its.tolist(), done
 

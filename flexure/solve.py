@@ -32,7 +32,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from userio.errors import InputError
-from flexure import blas
+from flexure import blas, rss
 from flexure.fem import stiffness_matrix
 from flexure.mesh import SLIVER_DIHEDRAL_DEG, element_shape_metrics
 
@@ -202,6 +202,7 @@ def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False, sweeps: int = 1):
     Ac = A.tocsr()
     Ac.sort_indices()
     Dinv, ml, _, It = _pmg_setup(Ac, coarse, B_coarse, smoothed)
+    rss.now_gb(trim=True)                   # the coarse set-up's free heap pages, before the smoother's copy
     Dinv = np.ascontiguousarray(Dinv)
     V = MultiVCycle(ml)                     # the coarse V-cycle on all columns at once
     if SMOOTHER_STORAGE == "csr":
@@ -232,7 +233,7 @@ def _pmg_split(Ab, Dinv, coarse, V):
     the rows; the coarse interpolation's rows renumbered with them."""
     from flexure.split_gs import SplitSmoother
 
-    H = SplitSmoother(Ab, Dinv)
+    H = SplitSmoother(Ab, Dinv, consume=True)          # Ab's values moved into the parts (Ab not used after)
     coarse_p = coarse.tocsr()[H.perm]
     It_p = coarse_p.T.tocsr()
 
@@ -422,6 +423,7 @@ def prepared(system, rtol: float = 1e-10, smoothed_coarse: bool = False):
         from flexure import multirhs
 
         M, ml = _pmg_multi(A, system.coarse, system.B_coarse, smoothed_coarse, PMG_SWEEPS)
+        rss.now_gb(trim=True)                # the set-up's free heap pages, before the CG's columns
         Ac = A.tocsr()
         setup_s = time.perf_counter() - t0
 

@@ -41,7 +41,7 @@ def warm() -> None:
 
     for dtype in (np.float32, np.float64):
         Ab = BlockMatrix.from_csr(sp.identity(6, format="csr") * 2.0, dtype)
-        H = SplitSmoother(Ab, np.tile(np.eye(3) / 2.0, (2, 1, 1)))
+        H = SplitSmoother(Ab, np.tile(np.eye(3) / 2.0, (2, 1, 1)), consume=True)     # flexure.solve's path
         H.backward(H.forward_from_zero(np.ones((6, 1)))[0], np.ones((6, 1)))
         H.matvec(np.ones(6))
 
@@ -76,9 +76,11 @@ def ordering(bptr: np.ndarray, bcol: np.ndarray) -> tuple[np.ndarray, np.ndarray
 class SplitSmoother:
     """Block Gauss–Seidel of a symmetric BlockMatrix ``Ab`` (Dinv its 3 × 3 diagonal blocks'
     inverses) in the order P₀, P₁, S, with P₀ and P₁ side by side: ``perm`` (dofs: new dof d is old dof
-    perm[d]), ``inv``; vectors passed to ``forward_from_zero`` and ``backward`` are in that order."""
+    perm[d]), ``inv``; vectors passed to ``forward_from_zero`` and ``backward`` are in that order.
+    ``consume``: the parts' blocks are ``Ab``'s own values moved into their order (its ``data`` then
+    dropped): no second copy of the matrix alive while they are built; the same values otherwise."""
 
-    def __init__(self, Ab, Dinv: np.ndarray):
+    def __init__(self, Ab, Dinv: np.ndarray, consume: bool = False):
         from flexure import _split_kernels as sk
         from flexure import threads
         from flexure.block_sparse import BlockMatrix
@@ -89,8 +91,15 @@ class SplitSmoother:
         inv_b[order] = np.arange(n)
         self.bounds = np.searchsorted(part, np.arange(4)).tolist()     # P₀, P₁, S as ranges of new rows
         threads.use()
-        in_ptr, in_col, in_data, self._off_ptr, self._off_col, self._off_data = sk.split(
-            Ab.bptr, Ab.bcol, Ab.data, order, inv_b, part)
+        if consume:
+            in_ptr, in_col, self._off_ptr, self._off_col, src = sk.split_places(Ab.bptr, Ab.bcol, order, inv_b, part)
+            sk.gather_in_place(Ab.data, src)
+            del src
+            in_data, self._off_data = Ab.data[:in_ptr[-1]], Ab.data[in_ptr[-1]:]
+            Ab.data = None
+        else:
+            in_ptr, in_col, in_data, self._off_ptr, self._off_col, self._off_data = sk.split(
+                Ab.bptr, Ab.bcol, Ab.data, order, inv_b, part)
         has_off = np.diff(self._off_ptr) > 0
         self._off_rows = [lo + np.flatnonzero(has_off[lo:hi]) for lo, hi in zip(self.bounds[:-1], self.bounds[1:])]
         self.blocks, self.D = [], []
@@ -102,7 +111,7 @@ class SplitSmoother:
         self.perm = (3 * order[:, None] + np.arange(3)).ravel()
         self.inv = np.empty_like(self.perm)
         self.inv[self.perm] = np.arange(len(self.perm))
-        self.dtype = Ab.data.dtype
+        self.dtype = in_data.dtype
 
     def _rows(self, i: int) -> slice:
         return slice(3 * self.bounds[i], 3 * self.bounds[i + 1])

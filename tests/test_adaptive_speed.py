@@ -65,6 +65,28 @@ def test_algebraic_limit_tightens_the_cg_until_met(mesh_and_design, monkeypatch)
     assert _solve_unconverged({"residual_norm": 1e-3}) and not _solve_unconverged({"residual_norm": 1e-8})
 
 
+def test_released_goal_errors_are_the_same_bits(mesh_and_design, monkeypatch):
+    """goal_errors with ``release`` (the adaptive level: the P2 solver and system dropped before the
+    enriched assembly, A x on the smoother's blocks, the residual b − A q₀ taken first) gives the same
+    bits as with both held, and leaves neither on the solution."""
+    from flexure import goals
+    from flexure import solve as fsolve
+    from flexure.enriched import goal_errors
+
+    design, mres = mesh_and_design
+    monkeypatch.setattr(fsolve, "DIRECT_MAX_DOFS", 100)
+    out = {}
+    for release in (False, True):
+        sol = goals.solve_goals(design, mres.mesh, rtol=1e-4, algebraic_limit=1e-2)
+        assert "p-multigrid" in sol.info["solver"]
+        out[release] = goal_errors(design, mres.mesh, sol, release=release)
+        assert (sol.system is None and sol.solver is None) == release
+    a, b = out[False], out[True]
+    assert a["theta"] == b["theta"] and np.array_equal(a["gauges"], b["gauges"])
+    assert all(np.array_equal(x, y) for x, y in zip(a["weight"], b["weight"]))
+    assert a["info"]["pcg_iterations"] == b["info"]["pcg_iterations"]
+
+
 def test_sizing_rules():
     # a-priori rate without a previous level; observed rates clipped; a rising estimate → RATE_MIN
     assert np.all(sizing.rates(None, {"dofs": 10, "rel": [0.1, 0.2]}) == sizing.RATE_PRIOR)

@@ -44,6 +44,24 @@ def test_the_parts_hold_the_whole_matrix_and_do_not_touch(disc):
     assert np.abs(H.matvec(x) - A @ x).max() <= 1e-12 * np.abs(A @ x).max()
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_the_consumed_matrix_gives_the_same_parts(disc, dtype):
+    """``consume`` (flexure.solve's path: the values moved into the parts' order inside the matrix's own
+    array) gives the same blocks, bit for bit, as the copy, and drops the matrix's values."""
+    _, A, _ = disc
+    H, Dinv = _parts(A, dtype)
+    Ab = BlockMatrix.from_csr(A, dtype)
+    Hc = split_gs.SplitSmoother(Ab, Dinv, consume=True)
+    assert Ab.data is None and Hc.bounds == H.bounds and np.array_equal(Hc.perm, H.perm)
+    for P, Q in zip(H.blocks, Hc.blocks):
+        assert np.array_equal(P.bptr, Q.bptr) and np.array_equal(P.bcol, Q.bcol)
+        assert Q.data.dtype == dtype and np.array_equal(P.data, Q.data)
+    for name in ("_off_ptr", "_off_col", "_off_data"):
+        assert np.array_equal(getattr(H, name), getattr(Hc, name))
+    B = np.random.default_rng(2).standard_normal((A.shape[0], 2))
+    assert np.array_equal(H.forward_from_zero(B)[0], Hc.forward_from_zero(B)[0])
+
+
 def test_a_sweep_is_block_gauss_seidel_in_the_new_order(disc):
     """The forward sweep from zero and the backward sweep equal x = (D + L)⁻¹ b and
     x + (D + U)⁻¹ (b − A x) of the renumbered matrix (L, U by 3 × 3 blocks), with the forward one's residual."""
