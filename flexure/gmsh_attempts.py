@@ -17,7 +17,8 @@ reads the results in its own order, so the attempts record and the mesh kept are
 ones, bit for bit (tests/test_stl_remesh.py); an attempt's error (InputError) is raised where the
 logic reads it. What it never asks for is killed when it is done. ``runner`` is sequential (in
 this process, nothing run ahead) with one strategy, with one idle core (flexure.threads.count:
-TORQUEBENCH_THREADS=1, or a machine busy with other work) and where ``fork`` is not available.
+TORQUEBENCH_THREADS=1, or a machine busy with other work) and where ``fork`` is not available
+(``workers``).
 """
 
 from __future__ import annotations
@@ -140,12 +141,14 @@ class Ahead:
 
 def workers(strategies: int) -> int:
     """Processes for the attempts: the idle cores (flexure.threads.count), at most one per
-    strategy; 1 (sequential) with one strategy or without ``fork``."""
+    strategy; 1 (sequential) with one strategy, without ``fork`` or in a daemonic process (a Dask
+    worker's, which may not have children)."""
     import multiprocessing
 
     from flexure import threads
 
-    if strategies < 2 or "fork" not in multiprocessing.get_all_start_methods() or sys.platform != "linux":
+    if (strategies < 2 or sys.platform != "linux" or "fork" not in multiprocessing.get_all_start_methods()
+            or multiprocessing.current_process().daemon):
         return 1
     return max(1, min(threads.count(), strategies))
 
