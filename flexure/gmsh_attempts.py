@@ -43,10 +43,10 @@ class Sequential:
 
 class Ahead:
     """Attempts in forked processes, at most ``workers`` run ahead of the one asked for (module
-    docstring); ``passes``: the most passes of one strategy the logic can ask for."""
+    docstring); ``budget``: the most attempts the logic makes (len(order) + QUALITY_PASSES)."""
 
-    def __init__(self, order: list, attempt, workers: int, passes: int):
-        self.order, self.attempt, self.workers, self.passes = list(order), attempt, int(workers), int(passes)
+    def __init__(self, order: list, attempt, workers: int, budget: int):
+        self.order, self.attempt, self.workers, self.budget = list(order), attempt, int(workers), int(budget)
         self.running: dict = {}                     # key → (process, connection)
         self.done: dict = {}                        # key → (ok, result or exception)
         self.known = {s: [np.zeros((0, 4))] for s in self.order}    # each pass's spots, once known
@@ -70,17 +70,26 @@ class Ahead:
         raise value
 
     def _fill(self) -> None:
-        """Start the likeliest next attempts not yet run while fewer than ``workers`` run."""
+        """Start the likeliest next attempts not yet run while fewer than ``workers`` run, of those
+        the logic can still ask for (``_before``)."""
         wanted = []
         for rank, s in enumerate(self.order):
-            for p, spots in enumerate(self.known[s][:self.passes]):
+            for p, spots in enumerate(self.known[s]):
                 key = self._key(s, spots)
-                if key not in self.running and key not in self.done:
+                if key not in self.running and key not in self.done and self._before(s, p) < self.budget:
                     wanted.append((p, rank, key, s, spots))
         for _, _, key, s, spots in sorted(wanted, key=lambda w: w[:2]):
             if len(self.running) >= self.workers:
                 break
             self._start(key, s, spots)
+
+    def _before(self, strategy: str, p: int) -> int:
+        """The fewest attempts the logic makes before pass ``p`` of ``strategy``: its own ``p``
+        earlier passes, and every strategy before it in the order (all the others from its third
+        pass on: the best one is tried again only when none is left untried), each once, or twice
+        once its first pass is known to have left slivers (its next pass follows at once)."""
+        others = self.order[:self.order.index(strategy)] if p < 2 else [s for s in self.order if s != strategy]
+        return p + sum(1 + (len(self.known[s]) > 1) for s in others)
 
     def _start(self, key, strategy, spots) -> None:
         import multiprocessing
@@ -153,9 +162,10 @@ def workers(strategies: int) -> int:
     return max(1, min(threads.count(), strategies))
 
 
-def runner(order: list, attempt, passes: int):
-    """``get(strategy, spots)`` / ``close()`` over ``attempt(strategy, spots)``: Ahead on idle
-    cores, else Sequential."""
+def runner(order: list, attempt, budget: int):
+    """``get(strategy, spots)`` / ``close()`` over ``attempt(strategy, spots)`` (its result's last
+    item: the spots of the strategy's next pass, or None); at most ``budget`` attempts asked for:
+    Ahead on idle cores, else Sequential."""
     n = workers(len(order))
     if n < 2:
         return Sequential(attempt)
@@ -167,4 +177,4 @@ def runner(order: list, attempt, passes: int):
         from flexure._closest_kernels import closest_on_triangles
 
         closest_on_triangles(np.zeros((1, 3)), np.eye(3)[None], np.array([0, 1]), np.array([0]))
-    return Ahead(order, attempt, n, passes)
+    return Ahead(order, attempt, n, budget)

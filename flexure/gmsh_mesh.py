@@ -266,7 +266,7 @@ def _session(build, field, where: str, order: int, curved: bool = False, check=N
     tries = dict.fromkeys(builds, 0)
     best, attempts, error, name = None, [], None, untried.pop(0)
     runner = gmsh_attempts.runner(list(builds), lambda s, p: _attempt(builds[s], field, where, order, curved, p, check),
-                                  1 + QUALITY_PASSES)
+                                  len(builds) + QUALITY_PASSES)
     try:
         for _ in range(len(builds) + QUALITY_PASSES):
             tries[name] += 1

@@ -138,14 +138,19 @@ def _same_meshes(a, b) -> bool:
             and all(np.array_equal(x, y) for x, y in zip(a._cache["entities"], b._cache["entities"])))
 
 
-def test_attempts_run_ahead_are_the_attempts_made_in_turn(monkeypatch):
+def test_attempts_run_ahead_are_the_attempts_made_in_turn(monkeypatch, tmp_path):
     """Passes whose slivers depend on the strategy and its spots (one strategy failing): run ahead in
-    2 processes (gmsh_attempts.Ahead), killed when not asked for, the attempts record and the mesh
-    kept are those made one after another; the runner is sequential on one thread."""
+    2 processes (gmsh_attempts.Ahead), the attempts record and the mesh kept are those made one
+    after another, and no pass is run that the logic could not ask for within its MAX_ATTEMPTS (a
+    third pass of C or D); the runner is sequential on one thread."""
     from userio.errors import InputError
     from flexure.mesh import box_mesh
 
+    log = tmp_path / "passes"
+
     def fake_pass(build, field, where, order, curved, spots):
+        with open(log, "a") as f:                              # from whichever process runs it
+            f.write(f"{build} {len(spots)}\n")
         if build == "R":
             raise InputError("re-parametrising the STL failed (Wrong topology)")
         m = box_mesh(2, 2, 2)
@@ -158,9 +163,12 @@ def test_attempts_run_ahead_are_the_attempts_made_in_turn(monkeypatch):
     meshes = {}
     for n in (1, 2):
         with threads.limited(n):
-            run = gmsh_attempts.runner([s for s, _ in strategies], None, 3)
+            run = gmsh_attempts.runner([s for s, _ in strategies], None, 5)
             assert isinstance(run, gmsh_attempts.Ahead if n == 2 else gmsh_attempts.Sequential)
             meshes[n] = gmsh_mesh._session(strategies, _field(1.0), "x", 1, check=lambda p, t, e: {"ok": len(t) > 0})
+        passes = log.read_text().splitlines()
+        log.unlink()
+        assert len(passes) == len(set(passes)) == stl_remesh.MAX_ATTEMPTS
     attempts = meshes[1]._cache["attempts"]
     assert len(attempts) == stl_remesh.MAX_ATTEMPTS and attempts[-1]["kept"] and attempts[-1]["n_below_min"] == 0
     assert _same_meshes(meshes[1], meshes[2])
