@@ -6,7 +6,8 @@ seconds, one at a time (the thick disc's STL: a failed one, then two of each of 
 20 s of its 60 s adaptive run). An attempt is a function of (strategy, spots) alone (a fresh gmsh
 session, deterministic), and a strategy's next spots come from its own previous pass only
 (gmsh_mesh._attempt's ``finer``). So while the decision logic waits for the attempt it asks for,
-the other cores run the attempts it may ask for next, most likely first:
+the idle cores (no other process running on them, looked at every RECHECK_S) run the attempts
+it may ask for next, most likely first:
 
     priority = (pass of the strategy, the strategy's place in the order)
 
@@ -28,6 +29,10 @@ import sys
 import numpy as np
 
 
+#: seconds between two looks for idle cores while an attempt runs
+RECHECK_S = 0.5
+
+
 class Sequential:
     """Each attempt run in this process when the logic asks for it (``attempt(strategy, spots)``)."""
 
@@ -45,8 +50,9 @@ class Ahead:
     """Attempts in forked processes, at most ``workers`` run ahead of the one asked for (module
     docstring); ``budget``: the most attempts the logic makes (len(order) + QUALITY_PASSES)."""
 
-    def __init__(self, order: list, attempt, workers: int, budget: int):
+    def __init__(self, order: list, attempt, workers: int, budget: int, fixed: bool = False):
         self.order, self.attempt, self.workers, self.budget = list(order), attempt, int(workers), int(budget)
+        self.fixed = fixed
         self.running: dict = {}                     # key → (process, connection)
         self.done: dict = {}                        # key → (ok, result or exception)
         self.known = {s: [np.zeros((0, 4))] for s in self.order}    # each pass's spots, once known
@@ -70,7 +76,8 @@ class Ahead:
         raise value
 
     def _fill(self) -> None:
-        """Start the likeliest next attempts not yet run while fewer than ``workers`` run, of those
+        """Start the likeliest next attempts not yet run while fewer than ``workers`` run and no
+        other process needs the core (unless ``fixed``: flexure.threads.limited, tests), of those
         the logic can still ask for (``_before``)."""
         wanted = []
         for rank, s in enumerate(self.order):
@@ -78,8 +85,13 @@ class Ahead:
                 key = self._key(s, spots)
                 if key not in self.running and key not in self.done and self._before(s, p) < self.budget:
                     wanted.append((p, rank, key, s, spots))
+        if not wanted:
+            return
+        from flexure import threads
+
+        limit = self.workers if self.fixed else min(self.workers, threads.idle_cores(len(self.running)))
         for _, _, key, s, spots in sorted(wanted, key=lambda w: w[:2]):
-            if len(self.running) >= self.workers:
+            if len(self.running) >= limit:
                 break
             self._start(key, s, spots)
 
@@ -118,11 +130,11 @@ class Ahead:
         self.running[key] = (process, receive)
 
     def _collect(self) -> None:
-        """Wait for a running attempt to end; record its result and, if it left slivers, its
-        strategy's next pass as known."""
+        """Wait for a running attempt to end (at most RECHECK_S: then ``_fill`` looks for idle
+        cores again); record its result and, if it left slivers, its strategy's next pass as known."""
         from multiprocessing.connection import wait
 
-        ready = wait([conn for _, conn in self.running.values()])
+        ready = wait([conn for _, conn in self.running.values()], timeout=RECHECK_S)
         for key in [k for k, (_, conn) in self.running.items() if conn in ready]:
             process, conn = self.running.pop(key)
             try:
@@ -177,4 +189,6 @@ def runner(order: list, attempt, budget: int):
         from flexure._closest_kernels import closest_on_triangles
 
         closest_on_triangles(np.zeros((1, 3)), np.eye(3)[None], np.array([0, 1]), np.array([0]))
-    return Ahead(order, attempt, n, budget)
+    from flexure import threads
+
+    return Ahead(order, attempt, n, budget, fixed=threads._override is not None)
