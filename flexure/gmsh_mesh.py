@@ -254,43 +254,45 @@ def _session(build, field, where: str, order: int, curved: bool = False, check=N
     QUALITY_PASSES attempts at most (one strategy: itself and QUALITY_PASSES finer passes); ``check(points, tets, entities) -> dict`` with "ok" (the
     geometry kept) rules an attempt out unless none passes. Every attempt is recorded in
     ``mesh._cache["attempts"]`` (strategy, min dihedral angle, count below MIN_DIHEDRAL_DEG, the
-    check's figures; the mesh returned "kept")."""
-    from flexure.mesh import Mesh, element_shape_metrics, to_quadratic
+    check's figures; the mesh returned "kept"). With several strategies and idle cores the attempts
+    this logic may ask for next run ahead in parallel processes (flexure.gmsh_attempts): the same
+    attempts, the same mesh."""
+    from flexure import gmsh_attempts
+    from flexure.mesh import Mesh, to_quadratic
 
     builds = dict(build) if isinstance(build, (list, tuple)) else {"mesh": build}
     untried = list(builds)
     spots = {name: np.zeros((0, 4)) for name in builds}
     tries = dict.fromkeys(builds, 0)
     best, attempts, error, name = None, [], None, untried.pop(0)
-    for _ in range(len(builds) + QUALITY_PASSES):
-        tries[name] += 1
-        try:
-            points, tets, geometric, entities = _one_pass(builds[name], field, where, order, curved, spots[name])
-        except InputError as exc:                   # this strategy failed: the next one may not
-            attempts.append({"strategy": name, "failed": str(exc)})
-            error = exc
-            if not untried:
-                break
-            name = untried.pop(0)
-            continue
-        worst = element_shape_metrics(points, tets)["dihedral_deg"].min(axis=1)
-        bad = worst < MIN_DIHEDRAL_DEG
-        geo = check(points, tets, entities) if check is not None else {"ok": True}
-        attempts.append({"strategy": name + (" + finer at its slivers" if len(spots[name]) else ""),
-                         "min_dihedral_deg": float(worst.min()), "n_below_min": int(bad.sum()),
-                         "n_tets": int(len(tets)), **geo})
-        if best is None or (geo["ok"], worst.min()) > (best[6]["ok"], best[0]):
-            best = (worst.min(), points, tets, geometric, entities, name, geo, len(attempts) - 1)
-        if not bad.any():
-            if geo["ok"] or not untried:
-                break
-            name = untried.pop(0)                   # geometry lost: another surface strategy
-            continue
-        x = points[tets[bad]] * MM                  # this strategy's next pass: finer around them
-        longest = np.linalg.norm(x[:, :, None] - x[:, None], axis=-1).max(axis=(1, 2))
-        spots[name] = np.vstack([spots[name], np.column_stack([x.mean(axis=1), SPOT_REFINEMENT * longest])])
-        # next: this strategy once more, finer around its slivers; then an untried one; then the best
-        name = name if tries[name] < 2 else (untried.pop(0) if untried else best[5])
+    runner = gmsh_attempts.runner(list(builds), lambda s, p: _attempt(builds[s], field, where, order, curved, p, check),
+                                  len(builds) + QUALITY_PASSES)
+    try:
+        for _ in range(len(builds) + QUALITY_PASSES):
+            tries[name] += 1
+            try:
+                points, tets, geometric, entities, record, finer = runner.get(name, spots[name])
+            except InputError as exc:                   # this strategy failed: the next one may not
+                attempts.append({"strategy": name, "failed": str(exc)})
+                error = exc
+                if not untried:
+                    break
+                name = untried.pop(0)
+                continue
+            attempts.append({"strategy": name + (" + finer at its slivers" if len(spots[name]) else ""), **record})
+            worst = record["min_dihedral_deg"]
+            if best is None or (record["ok"], worst) > (best[6]["ok"], best[0]):
+                best = (worst, points, tets, geometric, entities, name, record, len(attempts) - 1)
+            if finer is None:                           # no tetrahedron below MIN_DIHEDRAL_DEG
+                if record["ok"] or not untried:
+                    break
+                name = untried.pop(0)                   # geometry lost: another surface strategy
+                continue
+            spots[name] = finer                         # this strategy's next pass: finer around them
+            # next: this strategy once more, finer around its slivers; then an untried one; then the best
+            name = name if tries[name] < 2 else (untried.pop(0) if untried else best[5])
+    finally:
+        runner.close()
     if best is None:
         raise error if str(error).startswith(where) else InputError(f"{where}: {error}")
     _, points, tets, geometric, entities, _, _, kept = best
@@ -303,6 +305,27 @@ def _session(build, field, where: str, order: int, curved: bool = False, check=N
     mesh._cache["entities"] = entities          # gmsh's classification (flexure.project.classify)
     mesh._cache["attempts"] = attempts
     return mesh
+
+
+def _attempt(build, field, where: str, order: int, curved: bool, spots, check):
+    """One pass (``_one_pass``) judged → (points, corner tets, curved mid-edge nodes or None,
+    entities, its record (min dihedral angle, count below MIN_DIHEDRAL_DEG, tets, ``check``'s
+    figures or {"ok": True}), the spots of the strategy's next pass: ``spots`` and one per
+    tetrahedron below MIN_DIHEDRAL_DEG at its centre, h = SPOT_REFINEMENT × its longest edge (mm);
+    None without such a tetrahedron)."""
+    from flexure.mesh import element_shape_metrics
+
+    points, tets, geometric, entities = _one_pass(build, field, where, order, curved, spots)
+    worst = element_shape_metrics(points, tets)["dihedral_deg"].min(axis=1)
+    bad = worst < MIN_DIHEDRAL_DEG
+    geo = check(points, tets, entities) if check is not None else {"ok": True}
+    record = {"min_dihedral_deg": float(worst.min()), "n_below_min": int(bad.sum()), "n_tets": int(len(tets)), **geo}
+    finer = None
+    if bad.any():
+        x = points[tets[bad]] * MM
+        longest = np.linalg.norm(x[:, :, None] - x[:, None], axis=-1).max(axis=(1, 2))
+        finer = np.vstack([spots, np.column_stack([x.mean(axis=1), SPOT_REFINEMENT * longest])])
+    return points, tets, geometric, entities, record, finer
 
 
 def _one_pass(build, field, where: str, order: int, curved: bool, spots):

@@ -70,6 +70,12 @@ def _others_running() -> int:
     return max(0, total - max(own, 1))
 
 
+def idle_cores(own_children: int = 0) -> int:
+    """Cores no other process is running on now, this one's ``own_children`` running processes
+    not counted as others (flexure.gmsh_attempts runs attempts ahead on these only)."""
+    return max(0, CORES - max(0, _others_running() - own_children))
+
+
 def count() -> int:
     """The threads the parallel kernels use now: ``limited``'s, else THREADS, else the idle cores."""
     import numba

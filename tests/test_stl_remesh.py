@@ -7,7 +7,7 @@ worst angle. The parts are built here, none is shipped."""
 import numpy as np
 import pytest
 
-from flexure import gmsh_mesh, slivers, stl_remesh
+from flexure import gmsh_attempts, gmsh_mesh, slivers, stl_remesh, threads
 from flexure.geometry import Surface
 from flexure.mesh import element_shape_metrics
 from flexure.sizing import SizeField
@@ -98,7 +98,8 @@ def test_attempts_are_bounded_and_the_warning_names_them(monkeypatch):
 
     monkeypatch.setattr(gmsh_mesh, "_one_pass", fake_pass)
     strategies = [("re-parametrised", "R"), ("re-parametrised, cut", "C"), ("direct", "D")]
-    mesh = gmsh_mesh._session(strategies, _field(1.0), "x", 1, check=lambda *a: {"ok": True})
+    with threads.limited(1):                                   # the passes in this process, in turn
+        mesh = gmsh_mesh._session(strategies, _field(1.0), "x", 1, check=lambda *a: {"ok": True})
     attempts = mesh._cache["attempts"]
     assert len(calls) == len(attempts) == stl_remesh.MAX_ATTEMPTS
     assert [c[0] for c in calls] == ["R", "R", "C", "C", "D"] and calls[1][1] > 0   # finer at the slivers
@@ -121,11 +122,97 @@ def test_a_strategy_gmsh_cannot_build_gives_way_to_the_next(monkeypatch):
         return m.points, m.tets, None, (np.zeros((0, 3), int), np.zeros(0), np.zeros((0, 2), int), np.zeros(0))
 
     monkeypatch.setattr(gmsh_mesh, "_one_pass", fake_pass)
-    mesh = gmsh_mesh._session([("re-parametrised", "R"), ("direct", "D")], _field(1.0), "part.toml", 1)
-    attempts = mesh._cache["attempts"]
-    assert "failed" in attempts[0] and attempts[1]["strategy"] == "direct" and attempts[1]["kept"]
-    with pytest.raises(InputError, match="^part.toml: re-parametrising the STL failed"):
-        gmsh_mesh._session([("re-parametrised", "R")], _field(1.0), "part.toml", 1)
+    for n in (1, 2):                                           # in turn, and run ahead in 2 processes
+        with threads.limited(n):
+            mesh = gmsh_mesh._session([("re-parametrised", "R"), ("direct", "D")], _field(1.0), "part.toml", 1)
+            attempts = mesh._cache["attempts"]
+            assert "failed" in attempts[0] and attempts[1]["strategy"] == "direct" and attempts[1]["kept"]
+            with pytest.raises(InputError, match="^part.toml: re-parametrising the STL failed"):
+                gmsh_mesh._session([("re-parametrised", "R"), ("cut", "R")], _field(1.0), "part.toml", 1)
+
+
+def _same_meshes(a, b) -> bool:
+    """Bit for bit: nodes, elements, gmsh's boundary classification and the attempts record."""
+    return (a._cache["attempts"] == b._cache["attempts"] and np.array_equal(a.points, b.points)
+            and np.array_equal(a.tets, b.tets)
+            and all(np.array_equal(x, y) for x, y in zip(a._cache["entities"], b._cache["entities"])))
+
+
+def test_attempts_run_ahead_are_the_attempts_made_in_turn(monkeypatch, tmp_path):
+    """Passes whose slivers depend on the strategy and its spots (one strategy failing): run ahead in
+    2 processes (gmsh_attempts.Ahead), the attempts record and the mesh kept are those made one
+    after another, and no pass is run that the logic could not ask for within its MAX_ATTEMPTS (a
+    third pass of C or D); the runner is sequential on one thread."""
+    from userio.errors import InputError
+    from flexure.mesh import box_mesh
+
+    log = tmp_path / "passes"
+
+    def fake_pass(build, field, where, order, curved, spots):
+        with open(log, "a") as f:                              # from whichever process runs it
+            f.write(f"{build} {len(spots)}\n")
+        if build == "R":
+            raise InputError("re-parametrising the STL failed (Wrong topology)")
+        m = box_mesh(2, 2, 2)
+        pts = m.points.copy()                                  # flat for C; for D until a finer pass
+        pts[13] = [0.5, 0.5, 0.5 + 0.44 - (0.0 if build == "C" else 0.05) * len(spots)]
+        return pts, m.tets, None, (np.zeros((0, 3), int), np.zeros(0), np.zeros((0, 2), int), np.zeros(0))
+
+    monkeypatch.setattr(gmsh_mesh, "_one_pass", fake_pass)
+    strategies = [("re-parametrised", "R"), ("re-parametrised, cut", "C"), ("direct", "D")]
+    meshes = {}
+    for n in (1, 2):
+        with threads.limited(n):
+            run = gmsh_attempts.runner([s for s, _ in strategies], None, 5)
+            assert isinstance(run, gmsh_attempts.Ahead if n == 2 else gmsh_attempts.Sequential)
+            meshes[n] = gmsh_mesh._session(strategies, _field(1.0), "x", 1, check=lambda p, t, e: {"ok": len(t) > 0})
+        passes = log.read_text().splitlines()
+        log.unlink()
+        assert len(passes) == len(set(passes)) == stl_remesh.MAX_ATTEMPTS
+    attempts = meshes[1]._cache["attempts"]
+    assert len(attempts) == stl_remesh.MAX_ATTEMPTS and attempts[-1]["kept"] and attempts[-1]["n_below_min"] == 0
+    assert _same_meshes(meshes[1], meshes[2])
+
+
+def test_ctrl_c_while_attempts_run_ahead_is_raised_and_kills_them(monkeypatch):
+    """Ctrl-C while the logic waits for attempts run in processes: KeyboardInterrupt at once, no
+    attempt process left."""
+    import multiprocessing
+    import os
+    import signal
+    import threading
+    import time
+
+    def slow_pass(build, field, where, order, curved, spots):
+        time.sleep(60)
+
+    monkeypatch.setattr(gmsh_mesh, "_one_pass", slow_pass)
+    timer = threading.Timer(0.5, lambda: os.kill(os.getpid(), signal.SIGINT))
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)   # Python's, whatever ran before
+    t0 = time.perf_counter()
+    try:
+        with threads.limited(2), pytest.raises(KeyboardInterrupt):
+            timer.start()
+            gmsh_mesh._session([("a", "A"), ("b", "B")], _field(1.0), "x", 1)
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, before)
+    assert time.perf_counter() - t0 < 10 and not multiprocessing.active_children()
+
+
+def test_an_stl_meshed_ahead_in_processes_is_the_mesh_made_in_turn():
+    """gmsh itself (a tube with earcut caps; a geometry check that rejects every attempt, so that all
+    three strategies mesh and direct once more finer, one after another or run ahead in 2
+    processes): the same attempts and the same mesh, bit for bit."""
+    surf, field = _surface(thin_tube(6.0, 1.5, 3.0, res=8)), _field(3.0)
+    check = stl_remesh.geometry_check(surf, field.h_far)
+    meshes = {}
+    for n in (1, 2):
+        with threads.limited(n):
+            meshes[n] = gmsh_mesh._session(stl_remesh.strategies(surf, 40.0), field, "x", 1,
+                                           check=lambda *a: {**check(*a), "ok": False})
+    assert [a["strategy"] for a in meshes[1]._cache["attempts"]][2:4] == ["direct", "direct + finer at its slivers"]
+    assert _same_meshes(meshes[1], meshes[2])
 
 
 @pytest.mark.parametrize("compiled_loops", [True, False], ids=["numba", "numpy"])
