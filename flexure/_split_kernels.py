@@ -17,43 +17,14 @@ def split(bptr, bcol, data, perm, inv, part_of):
     lies in the row's own part (``part_of`` per new row; parts are ranges of new rows) and the
     others. → (in_ptr, in_col, in_data): the in-part blocks, columns ascending, still global new
     numbers; (off_ptr, off_col, off_data): the off-part ones, in A's order."""
-    n = len(perm)
-    in_ptr = np.zeros(n + 1, np.int64)
-    off_ptr = np.zeros(n + 1, np.int64)
-    for r in numba.prange(n):
-        i = perm[r]
-        k = 0
-        for p in range(bptr[i], bptr[i + 1]):
-            k += part_of[inv[bcol[p]]] == part_of[r]
-        in_ptr[r + 1] = k
-        off_ptr[r + 1] = bptr[i + 1] - bptr[i] - k
-    for r in range(n):
-        in_ptr[r + 1] += in_ptr[r]
-        off_ptr[r + 1] += off_ptr[r]
-    in_col = np.empty(in_ptr[n], np.int32)
-    in_data = np.empty((in_ptr[n], 3, 3), data.dtype)
-    off_col = np.empty(off_ptr[n], np.int32)
-    off_data = np.empty((off_ptr[n], 3, 3), data.dtype)
-    for r in numba.prange(n):
-        i = perm[r]
-        a = in_ptr[r]
-        b = off_ptr[r]
-        for p in range(bptr[i], bptr[i + 1]):
-            c = inv[bcol[p]]
-            if part_of[c] == part_of[r]:
-                # insertion into the row's sorted run [in_ptr[r], a)
-                q = a
-                while q > in_ptr[r] and in_col[q - 1] > c:
-                    in_col[q] = in_col[q - 1]
-                    in_data[q] = in_data[q - 1]
-                    q -= 1
-                in_col[q] = c
-                in_data[q] = data[p]
-                a += 1
-            else:
-                off_col[b] = c
-                off_data[b] = data[p]
-                b += 1
+    in_ptr, in_col, off_ptr, off_col, src = split_places(bptr, bcol, perm, inv, part_of)
+    n_in = in_ptr[len(perm)]
+    in_data = np.empty((n_in, 3, 3), data.dtype)
+    off_data = np.empty((len(src) - n_in, 3, 3), data.dtype)
+    for q in numba.prange(n_in):
+        in_data[q] = data[src[q]]
+    for q in numba.prange(len(src) - n_in):
+        off_data[q] = data[src[n_in + q]]
     return in_ptr, in_col, in_data, off_ptr, off_col, off_data
 
 
