@@ -125,7 +125,7 @@ def write(name: str) -> Path:
     p = PARTS[name]
     OUT.mkdir(parents=True, exist_ok=True)
     geo = OUT / f"{name}.{p['kind']}"
-    gmsh.initialize()
+    gmsh.initialize(interruptible=False)     # its default leaves SIGINT at SIG_DFL for good
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         p["build"](gmsh)

@@ -107,7 +107,7 @@ def test_gmsh_projector_on_a_cad_cylinder():
     a = rng.uniform(0, 2 * np.pi, 20)
     z = rng.uniform(0.5e-3, 4.5e-3, 20)
     pts = np.column_stack([2.1e-3 * np.cos(a), 2.1e-3 * np.sin(a), z])
-    gmsh.initialize()
+    gmsh.initialize(interruptible=False)     # gmsh's default leaves SIGINT at SIG_DFL after finalize
     try:
         build(gmsh)
         lateral = [t for _, t in gmsh.model.getEntities(2)
