@@ -196,4 +196,4 @@ def runner(order: list, attempt, budget: int):
         closest_on_triangles(np.zeros((1, 3)), np.eye(3)[None], np.array([0, 1]), np.array([0]))
     from flexure import threads
 
-    return Ahead(order, attempt, n, budget, fixed=threads._override is not None)
+    return Ahead(order, attempt, n, budget, fixed=threads.is_limited())

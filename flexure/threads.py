@@ -130,6 +130,11 @@ def dynamic(chunk: int = 1):
         yield
 
 
+def is_limited() -> bool:
+    """Whether ``limited`` fixes the thread count here (then no look at the idle cores)."""
+    return _override is not None
+
+
 @contextlib.contextmanager
 def limited(n: int):
     """Within the block the parallel kernels use ``n`` threads."""
