@@ -8,7 +8,7 @@ import numpy as np
 def warm() -> bool:
     """Compile (and cache) the FEM's parallel loops on a tiny mesh — the stiffness, the enriched
     assembly (CSR and 3 × 3 blocks), the sparse products, the block Gauss–Seidel, the coupling's condensation,
-    the STL's closest points and the curved elements' validity check — so that the first analysis does not pay numba's compile time
+    the element-nodal strains, the STL's closest points and the curved elements' validity check — so that the first analysis does not pay numba's compile time
     (measured 30 + 14 + 9 s at load 4: benchmarks/bench_fem_parallel.py --cold); False without numba."""
     from flexure import stiffness_assembly
 
@@ -35,6 +35,9 @@ def warm() -> bool:
 
     face_rhs(m, mat, np.zeros((m.n_nodes, 3)))   # the local problems' face term (the levels' estimate)
     from flexure import dwr
+    from flexure.post import element_nodal_strains
+
+    element_nodal_strains(m, np.zeros((m.n_nodes, 3)))     # the peak stresses' strains (flexure._strain_kernels)
 
     dwr.energy_indicators(m, mat, np.zeros((m.n_nodes, 3, 2)), np.zeros((m.n_elements, 6, 3)),
                           np.zeros((m.n_elements, 4, 3)))

@@ -102,11 +102,24 @@ def element_stresses(mesh: Mesh, u, material, at: str = "quadrature") -> np.ndar
 
 
 def element_nodal_strains(mesh: Mesh, u, chunk: int = 20000) -> np.ndarray:
-    """ε at every element's own nodes (m,nn,3,3): discontinuous across elements (peak stresses)."""
+    """ε at every element's own nodes (m,nn,3,3): discontinuous across elements (peak stresses);
+    in one compiled pass where numba runs (flexure._strain_kernels)."""
     u = _as_u(mesh, u)
     nn = mesh.tets.shape[1]
     _, dN = tet_shape(mesh.order, REF_NODES[:nn])
     out = np.empty((mesh.n_elements, nn, 3, 3))
+    from flexure import stiffness_assembly
+
+    if stiffness_assembly.available():
+        from flexure import _strain_kernels, fem, threads
+
+        det = np.empty(mesh.n_elements)
+        with threads.dynamic():
+            _strain_kernels.nodal_strains(mesh.points, np.ascontiguousarray(mesh.tets, np.int64),
+                                          np.ascontiguousarray(u), np.ascontiguousarray(dN), out, det,
+                                          stiffness_assembly.chunks())
+        fem._check_inverted(det, mesh.n_elements, 0)
+        return out
     for s in range(0, mesh.n_elements, chunk):
         t = mesh.tets[s:s + chunk]
         G, _ = physical_gradients(mesh.points[t], dN)

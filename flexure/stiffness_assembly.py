@@ -66,7 +66,8 @@ def stiffness_csr(mesh: Mesh, material, dN: np.ndarray, wq: np.ndarray):
 
 
 
-def _chunks() -> int:
+def chunks() -> int:
+    """How many ranges a parallel element loop splits into: 8 per thread (1 on one thread)."""
     from flexure import threads
 
     n = threads.use()
@@ -82,7 +83,7 @@ def jacobians(X: np.ndarray, dN: np.ndarray):
     X = np.ascontiguousarray(X, dtype=float)
     det = np.empty((len(X), dN.shape[0]))
     Jinv = np.empty((len(X), dN.shape[0], 3, 3))
-    n = _chunks()
+    n = chunks()
     with threads.dynamic():
         sk.jacobians(X, np.ascontiguousarray(dN, dtype=float), det, Jinv, n)
     return det, Jinv
@@ -96,7 +97,7 @@ def gradients(X: np.ndarray, dN: np.ndarray):
     X = np.ascontiguousarray(X, dtype=float)
     G = np.empty((len(X), dN.shape[0], dN.shape[1], 3))
     det = np.empty((len(X), dN.shape[0]))
-    n = _chunks()
+    n = chunks()
     with threads.dynamic():
         sk.gradients(X, np.ascontiguousarray(dN, dtype=float), G, det, n)
     return G, det

@@ -8,7 +8,8 @@ from userio.errors import InputError
 from flexure.fem import element_stiffness, rigid_body_modes, stiffness_matrix
 from flexure.material import ALUMINIUM_6061_T6, Material
 from flexure.mesh import Mesh, box_mesh, cylinder_mesh, quality, to_linear, to_quadratic, unique_edges
-from flexure.post import displacement_at, element_strains, max_shear_strain, nodal_strains, strain_at, von_mises
+from flexure.post import (displacement_at, element_nodal_strains, element_strains, max_shear_strain, nodal_strains,
+                          strain_at, von_mises)
 from flexure.solve import solve
 
 MAT = Material(70e9, 0.3, 250e6, "test")
@@ -128,6 +129,39 @@ def test_p2_reproduces_quadratic_field_pure_bending():
     eps = strain_at(m, s.u, pts)
     np.testing.assert_allclose(eps[:, 0, 0], -k * pts[:, 2], atol=1e-12)
     assert np.isfinite(e).all() and q.shape[1] == 10
+
+
+def test_element_nodal_strains_compiled_pass_equals_numpy_on_curved_elements(monkeypatch):
+    """The one-pass compiled strains at the elements' own nodes equal numpy's gradient arrays and
+    einsum on curved P2 elements, give a quadratic field's exact
+    strain on straight ones (a curved map makes it quartic in ξ), and name an inverted element."""
+    m = to_quadratic(distorted_box(3, seed=5))
+    pts = m.points.copy()
+    pts[m.tets[:, 4:].ravel()] += np.random.default_rng(7).uniform(-0.02, 0.02, (m.tets[:, 4:].size, 3)) / 3
+    m = Mesh(pts, m.tets)
+    u = np.random.default_rng(8).normal(size=(m.n_nodes, 3))
+    from flexure import stiffness_assembly
+
+    assert stiffness_assembly.available()            # numba is a dependency: the compiled pass runs
+    one = element_nodal_strains(m, u)
+    with monkeypatch.context() as mp:
+        mp.setattr(stiffness_assembly, "available", lambda: False)
+        ref = element_nodal_strains(m, u)
+    assert np.abs(one - ref).max() <= 1e-12 * np.abs(ref).max()
+    k, nu = 1e-3, 0.3                                # pure bending: ε_xx = −k z, ε_yy = ε_zz = ν k z
+    straight = to_quadratic(distorted_box(3, seed=5))
+    x, y, z = straight.points.T
+    u_ex = np.stack([-k * x * z, nu * k * y * z, 0.5 * k * (x ** 2 + nu * (z ** 2 - y ** 2))], axis=1)
+    e = element_nodal_strains(straight, u_ex)
+    zn = straight.points[straight.tets][:, :, 2]
+    np.testing.assert_allclose(e[:, :, 0, 0], -k * zn, atol=1e-14)
+    np.testing.assert_allclose(e[:, :, 1, 1], nu * k * zn, atol=1e-14)
+    np.testing.assert_allclose(e[:, :, 0, 1], 0.0, atol=1e-14)
+    bad = Mesh(m.points, m.tets.copy())
+    bad.tets[7, [1, 2]] = bad.tets[7, [2, 1]]
+    bad.tets[7, [4, 6, 8, 9]] = bad.tets[7, [6, 4, 9, 8]]
+    with pytest.raises(InputError, match="element 7 is inverted"):
+        element_nodal_strains(bad, u)
 
 
 def test_reactions_balance_and_coupling_statics():
