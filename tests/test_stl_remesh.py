@@ -142,7 +142,13 @@ def test_attempts_run_ahead_are_the_attempts_made_in_turn(monkeypatch, tmp_path)
     """Passes whose slivers depend on the strategy and its spots (one strategy failing): run ahead in
     2 processes (gmsh_attempts.Ahead), the attempts record and the mesh kept are those made one
     after another, and no pass is run that the logic could not ask for within its MAX_ATTEMPTS (a
-    third pass of C or D); the runner is sequential on one thread."""
+    third pass of C or D); the runner is sequential on one thread. The passes' times fix the order
+    in which the results come: a third pass of C is one the logic could ask for (if D's first pass
+    failed) until D's first pass is known to have left slivers, so D's first pass is fast and C's
+    are not; D's second pass is slow, so a third pass of C run ahead would start (and be logged)
+    while the logic still waits."""
+    import time
+
     from userio.errors import InputError
     from flexure.mesh import box_mesh
 
@@ -153,6 +159,7 @@ def test_attempts_run_ahead_are_the_attempts_made_in_turn(monkeypatch, tmp_path)
             f.write(f"{build} {len(spots)}\n")
         if build == "R":
             raise InputError("re-parametrising the STL failed (Wrong topology)")
+        time.sleep({"C": 0.6, "D": 1.5 if len(spots) else 0.0}.get(build, 0.0))
         m = box_mesh(2, 2, 2)
         pts = m.points.copy()                                  # flat for C; for D until a finer pass
         pts[13] = [0.5, 0.5, 0.5 + 0.44 - (0.0 if build == "C" else 0.05) * len(spots)]
