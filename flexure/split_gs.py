@@ -21,16 +21,10 @@ import numpy as np
 #: a row with more than DENSE × the median number of blocks goes to the separator
 DENSE = 8.0
 
-_POOL = None
-
-
 def _pool():
-    global _POOL
-    if _POOL is None:
-        from concurrent.futures import ThreadPoolExecutor
+    from flexure import threads
 
-        _POOL = ThreadPoolExecutor(max_workers=1, thread_name_prefix="p2-sweep")
-    return _POOL
+    return threads.helper()
 
 
 def warm() -> None:

@@ -130,6 +130,21 @@ def dynamic(chunk: int = 1):
         yield
 
 
+_HELPER = None
+
+
+def helper():
+    """One helper Python thread (a one-worker ``ThreadPoolExecutor``) for work that releases the GIL
+    beside the calling thread's: flexure.split_gs's second part, flexure.solve's coarse set-up. It
+    must not launch numba's parallel loops (``select_layer``: workqueue, one launching thread)."""
+    global _HELPER
+    if _HELPER is None or _HELPER[0] != os.getpid():    # a forked child has not its parent's thread
+        from concurrent.futures import ThreadPoolExecutor
+
+        _HELPER = (os.getpid(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="flexure-helper"))
+    return _HELPER[1]
+
+
 def is_limited() -> bool:
     """Whether ``limited`` fixes the thread count here (then no look at the idle cores)."""
     return _override is not None

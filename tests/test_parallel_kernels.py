@@ -157,3 +157,17 @@ def test_a_process_forked_after_a_parallel_kernel_can_run_them():
     assert _parallel_product() == 6000.0
     with mp.get_context("fork").Pool(1) as pool:
         assert pool.map(_parallel_product, [0], chunksize=1) == [6000.0]
+
+
+def _helper_runs(_):
+    return threads.helper().submit(lambda: 7).result(timeout=20)
+
+
+def test_the_helper_thread_runs_in_a_process_forked_after_it_started():
+    """flexure.threads.helper (the split smoother's second part, the P2 set-up's coarse V-cycle): a
+    forked child (torquebench.sweep) gets a helper of its own, not its parent's thread, absent there."""
+    import multiprocessing as mp
+
+    assert _helper_runs(0) == 7
+    with mp.get_context("fork").Pool(1) as pool:
+        assert pool.map(_helper_runs, [0], chunksize=1) == [7]
