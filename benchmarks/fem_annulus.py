@@ -139,7 +139,7 @@ def run(name: str, rtol: float, exact_bands: bool = False) -> dict:
                      "bridge_eff": eb / abs(b_true), "enriched_s": lv.get("enriched_s"),
                      "level_s": lv.get("level_s"), "solve_s": lv.get("solve_s"), "dwr_s": lv.get("dwr_s"),
                      "refine_s": lv.get("refine_s"), "geom": lv.get("geometry"),
-                     "eta_pct": (100 * np.array(lv["eta"]["gauges"]) / np.abs(exact)).tolist(),
+                     "eta_pct": None if lv["eta"] is None else (100 * np.array(lv["eta"]["gauges"]) / np.abs(exact)).tolist(),
                      "kappa": lv.get("kappa"),
                      "record": {k: lv.get(k) for k in ("level", "dofs", "theta", "torsional_stiffness_Nm_per_rad",
                                                        "gauge_strain_per_Nm", "gauge_strains", "enriched",
@@ -159,7 +159,7 @@ def show(r: dict) -> None:
               f"eff [{', '.join(f'{e:.2f}' for e in x['eff'])}] | k true {x['k_true_pct']:+.3f}% est {x['k_est_pct']:.3f}% "
               f"eff {x['k_eff']:.2f} | bridge true {x['bridge_true_pct']:+.3f}% est {x['bridge_est_pct']:.3f}% "
               f"eff {x['bridge_eff']:.2f} | {x['level_s']:.1f} s (solve {x['solve_s']:.1f}, "
-              f"enriched {x['enriched_s'] or 0:.1f}, dwr {x['dwr_s']:.1f}, "
+              f"enriched {x['enriched_s'] or 0:.1f}, dwr {x['dwr_s'] or 0:.1f}, "
               f"refine {x['refine_s'] or 0:.1f}) geom {x['geom']}", flush=True)
 
 

@@ -177,7 +177,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
     from flexure import goal_cases
     from flexure.analysis import _selections, analyze_mesh
     from flexure.enriched import goal_errors
-    from flexure.goals import ALGEBRAIC_SHARE, cg_rtol_for, indicators, solve_goals
+    from flexure.goals import ALGEBRAIC_SHARE, cg_rtol_for, solve_goals
     from flexure.meshing import MeshResult, mesh_report
     from flexure.mesh import quality
     from flexure.refine import bisect, snap
@@ -224,24 +224,22 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             sol.solver = sol.system = None     # not needed again (the last mesh's load cases: goal_cases): free them
                                                # (released already by goal_errors where it could)
             vals = goal_values(design, sol)
-            td = time.perf_counter()
-            eta_v = indicators(design, mesh, sol, None if enr is None else enr.pop("weight"))
-            dwr_s = time.perf_counter() - td
-            eta = eta_v.sum(axis=0)
+            weight = None if enr is None else enr.pop("weight")
             rec = {"level": lv, "dofs": int(mesh.n_dofs), "elements": int(mesh.n_elements),
                    "theta": vals["theta"], "torsional_stiffness_Nm_per_rad": 1.0 / vals["theta"],
                    "gauge_strain_per_Nm": vals["eps_ref"], "gauge_strains": vals["eps"].tolist(),
                    "q_unmeasured": q_unmeasured,
-                   "eta": {"theta": float(eta[0]), "gauges": eta[1:].tolist(),
-                           "eps_ref": float(vals["sign"] @ eta[1:] / 4.0)},
+                   "eta": None, "dwr_s": None,   # the DWR indicators: _dwr_indicators, only where they are used
                    "safety_factor": None,      # below: only where the run goes on (the last level's: the final figures')
-                   "cg_iterations": sol.info.get("iterations"), "solve_s": sol.info["total_s"], "dwr_s": dwr_s,
+                   "cg_iterations": sol.info.get("iterations"), "solve_s": sol.info["total_s"],
                    "goal_algebraic_error": sol.info.get("goal_algebraic_error"),
                    "enriched": None if enr is None else {
                        "theta": enr["theta"], "gauges": enr["gauges"].tolist(),
                        "eps_ref": float(vals["sign"] @ enr["gauges"] / 4.0), **enr["info"]},
                    "enriched_s": enriched_s,
                    "min_dihedral_deg": float(quality(mesh)["min_dihedral_deg"]), "pending_nodes": int(len(tm.pending[0]))}
+            # the calibrated estimate needs the indicators' sums now; the enriched one never (the marking does)
+            eta_v = _dwr_indicators(rec, design, mesh, sol, weight, vals["sign"]) if enr is None else None
             tg = time.perf_counter()
             geo_marked, rec["geometry"] = _geometry_marks(tm, projector, rtol, design, sol)
             rec["geometry"]["s"] = time.perf_counter() - tg
@@ -281,6 +279,10 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             if nxt == 0:                                       # a budget leaves no measurable step
                 stopped = "max_dofs" if max_dofs <= mem_cap else "memory"
                 break
+            if eta_v is None:                 # a level the run goes on from: its indicators mark the next
+                eta_v = _dwr_indicators(rec, design, mesh, sol, weight, vals["sign"])
+                rec["level_s"] += rec["dwr_s"]
+            weight = None
             weights = np.array([1.0 / max(abs(rec["theta"]), 1e-300)]
                                + [1.0 / s for s in _strain_scales(rec["gauge_strains"])])
             open_goals = np.array([rel["torsional_stiffness_Nm_per_rad"] > rtol]
@@ -320,6 +322,20 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
     res["mesh"]["initial_snap"] = snapped
     res["total_s"] = float(time.perf_counter() - t_start)
     return res, fields
+
+
+def _dwr_indicators(rec: dict, design, mesh, sol, weight, sign) -> np.ndarray:
+    """The goals' DWR vertex indicators (n, 1 + g) (flexure.goals.indicators, ``weight`` the enriched
+    solve's primal weight or None); their sums into ``rec["eta"]`` (θ, each gauge, the bridge's
+    Σ s_i η_i / 4) and their time into ``rec["dwr_s"]``."""
+    from flexure.goals import indicators
+
+    t0 = time.perf_counter()
+    eta_v = indicators(design, mesh, sol, weight)
+    eta = eta_v.sum(axis=0)
+    rec["eta"] = {"theta": float(eta[0]), "gauges": eta[1:].tolist(), "eps_ref": float(sign @ eta[1:] / 4.0)}
+    rec["dwr_s"] = time.perf_counter() - t0
+    return eta_v
 
 
 def _band_indicator(mesh, selections) -> np.ndarray:
