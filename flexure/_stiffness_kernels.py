@@ -11,6 +11,27 @@ from flexure._enriched_kernels import _inv3
 threads.select_layer()                 # before any parallel loop runs (flexure.threads: fork safety)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def point_gradients(X, dN, q, J, Jinv, g):
+    """∇N_a = J⁻ᵀ ∇_ξ N_a (nn,3) at point q of ``dN`` (q,nn,3) into g, J_ik = Σ_a X_ai ∂N_a/∂ξ_k into
+    J and J⁻¹ into Jinv, of the element with nodes X (nn,3); → det J."""
+    nn = dN.shape[1]
+    for i in range(3):
+        for k in range(3):
+            s = 0.0
+            for a in range(nn):
+                s += X[a, i] * dN[q, a, k]
+            J[i, k] = s
+    det = _inv3(J, Jinv)
+    for a in range(nn):
+        for i in range(3):
+            s = 0.0
+            for k in range(3):
+                s += dN[q, a, k] * Jinv[k, i]
+            g[a, i] = s
+    return det
+
+
 @numba.njit(cache=True, nogil=True)
 def _element(e, points, tets, dN, wq, lmb, mu, X, J, Jinv, g, P, A):
     """Element e's stiffness A (3nn,3nn), rows 3a + i: A_(a,i),(b,j) = λ P_ij + μ P_ji + μ δ_ij tr P,
@@ -22,20 +43,8 @@ def _element(e, points, tets, dN, wq, lmb, mu, X, J, Jinv, g, P, A):
     P[:, :] = 0.0
     dmin = np.inf
     for q in range(nq):
-        for i in range(3):
-            for k in range(3):
-                s = 0.0
-                for a in range(nn):
-                    s += X[a, i] * dN[q, a, k]
-                J[i, k] = s
-        det = _inv3(J, Jinv)
+        det = point_gradients(X, dN, q, J, Jinv, g)
         dmin = min(dmin, det)
-        for a in range(nn):
-            for i in range(3):
-                s = 0.0
-                for k in range(3):
-                    s += dN[q, a, k] * Jinv[k, i]
-                g[a, i] = s
         dv = wq[q] * det
         for a in range(nn):
             for i in range(3):

@@ -5,7 +5,7 @@ import numba
 import numpy as np
 
 from flexure import threads
-from flexure._enriched_kernels import _inv3
+from flexure._stiffness_kernels import point_gradients
 
 threads.select_layer()                 # before any parallel loop runs (flexure.threads: fork safety)
 
@@ -13,7 +13,7 @@ threads.select_layer()                 # before any parallel loop runs (flexure.
 @numba.njit(cache=True, nogil=True, parallel=True)
 def nodal_strains(points, tets, u, dN, out, det_min, nchunk):
     """ε (m,nn,3,3) at the points q of ``dN`` (q,nn,3) of every element into ``out``: H_cj = Σ_a u_ac
-    ∂N_a/∂x_j with ∇N = J⁻ᵀ ∇_ξ N (J_ik = Σ_a x_ai ∂N_a/∂ξ_k), ε = (H + Hᵀ)/2; the smallest det J_q of
+    ∂N_a/∂x_j (∇N: flexure._stiffness_kernels.point_gradients), ε = (H + Hᵀ)/2; the smallest det J_q of
     each element into ``det_min`` (m,). Elements in ``nchunk`` parallel ranges, each on its own."""
     m, nn = tets.shape
     for t in numba.prange(nchunk):
@@ -30,19 +30,7 @@ def nodal_strains(points, tets, u, dN, out, det_min, nchunk):
                     U[a, i] = u[tets[e, a], i]
             dmin = np.inf
             for q in range(dN.shape[0]):
-                for i in range(3):
-                    for k in range(3):
-                        s = 0.0
-                        for a in range(nn):
-                            s += X[a, i] * dN[q, a, k]
-                        J[i, k] = s
-                dmin = min(dmin, _inv3(J, Ji))
-                for a in range(nn):
-                    for i in range(3):
-                        s = 0.0
-                        for k in range(3):
-                            s += dN[q, a, k] * Ji[k, i]
-                        g[a, i] = s
+                dmin = min(dmin, point_gradients(X, dN, q, J, Ji, g))
                 for c in range(3):
                     for j in range(3):
                         s = 0.0
