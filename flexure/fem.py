@@ -74,7 +74,7 @@ def physical_gradients(X: np.ndarray, dN_ref: np.ndarray, first_element: int = 0
     nq = dN_ref.shape[0]
     if stiffness_assembly.available():                     # compiled: J at every point, one pass
         G, det = stiffness_assembly.gradients(X, dN_ref)
-        _check_inverted(det, e, first_element)
+        check_inverted(det, e, first_element)
         return G, det
     affine = nn == 4 or _is_affine(X)
     if affine:
@@ -84,7 +84,7 @@ def physical_gradients(X: np.ndarray, dN_ref: np.ndarray, first_element: int = 0
     else:
         J = np.einsum("eai,qak->eqik", X, dN_ref)
         det = np.linalg.det(J)
-    _check_inverted(det, e, first_element)
+    check_inverted(det, e, first_element)
     Jinv = np.linalg.inv(J)
     if affine:
         G = np.matmul(dN_ref.reshape(1, nq * nn, 3), Jinv).reshape(e, nq, nn, 3)
@@ -92,7 +92,9 @@ def physical_gradients(X: np.ndarray, dN_ref: np.ndarray, first_element: int = 0
     return np.einsum("qak,eqki->eqai", dN_ref, Jinv), det
 
 
-def _check_inverted(det: np.ndarray, e: int, first_element: int) -> None:
+def check_inverted(det: np.ndarray, e: int, first_element: int) -> None:
+    """InputError naming the first of ``e`` elements (numbered from ``first_element``) with a det J ≤ 0
+    among ``det`` (e, …) (inverted or degenerate)."""
     bad = ~(det > 0)
     if np.any(bad):
         idx = np.flatnonzero(bad.reshape(e, -1).any(axis=1))[0]

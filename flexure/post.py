@@ -118,7 +118,7 @@ def element_nodal_strains(mesh: Mesh, u, chunk: int = 20000) -> np.ndarray:
             _strain_kernels.nodal_strains(mesh.points, np.ascontiguousarray(mesh.tets, np.int64),
                                           np.ascontiguousarray(u), np.ascontiguousarray(dN), out, det,
                                           stiffness_assembly.chunks())
-        fem._check_inverted(det, mesh.n_elements, 0)
+        fem.check_inverted(det, mesh.n_elements, 0)
         return out
     for s in range(0, mesh.n_elements, chunk):
         t = mesh.tets[s:s + chunk]
