@@ -21,11 +21,6 @@ import numpy as np
 #: a row with more than DENSE × the median number of blocks goes to the separator
 DENSE = 8.0
 
-def _pool():
-    from flexure import threads
-
-    return threads.helper()
-
 
 def warm() -> None:
     """Compile (and cache) the renumbering and the off-part product on a tiny matrix."""
@@ -122,7 +117,7 @@ class SplitSmoother:
 
         if threads.count() < 2:
             return [work(0), work(1)]
-        second = _pool().submit(work, 1)
+        second = threads.helper().submit(work, 1)          # this process's helper thread
         first = work(0)
         return [first, second.result()]
 
