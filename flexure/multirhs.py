@@ -288,12 +288,14 @@ def block_gauss_seidel_blocks(A, Dinv: np.ndarray, X: np.ndarray, B: np.ndarray,
     _multirhs_fused.block_gs_any(A.indptr, A.indices, A.data, Dinv, X, np.ascontiguousarray(B), forward)
 
 
-def pcg(A, B: np.ndarray, M, rtol: float, maxiter: int, X0: np.ndarray | None = None):
+def pcg(A, B: np.ndarray, M, rtol: float, maxiter: int, X0: np.ndarray | None = None, goal_stop=None):
     """CG on the columns of B (n, k) together, preconditioner M(R) → Z for R (n, m) (the active
     columns), from the initial guess X0 (n, k) (zero by default; a coarser level's solution
     prolongated saves iterations). Stops each column at ‖b_j − A x_j‖ ≤ rtol_j ‖b_j‖ (``rtol`` one
-    number or one per column). Returns X (n, k), iterations per column, and whether each column
-    converged."""
+    number or one per column), or where ``goal_stop(X, R, rz, act)`` → bool (len(act),) says the
+    active columns ``act`` may stop (X the iterates (n, k), R their residuals, rz = diag(Rᵀ M R):
+    a goal-oriented test, flexure.goals). Returns X (n, k), iterations per column, and whether each
+    column stopped (by either test)."""
     n, k = B.shape
     X = np.zeros((n, k)) if X0 is None else np.array(X0, dtype=np.float64).reshape(n, k)
     its = np.zeros(k, dtype=np.int64)
@@ -325,6 +327,14 @@ def pcg(A, B: np.ndarray, M, rtol: float, maxiter: int, X0: np.ndarray | None = 
                 break
         Z = M(R)
         rz_new = np.einsum("ij,ij->j", R, Z)
+        if goal_stop is not None:
+            ok = np.asarray(goal_stop(X, R, rz_new, act), bool)
+            if ok.any():
+                done[act[ok]] = True
+                keep = ~ok
+                act, R, P, Z, rz, rz_new = act[keep], R[:, keep], P[:, keep], Z[:, keep], rz[keep], rz_new[keep]
+                if not len(act):
+                    break
         P *= rz_new / rz
         P += Z                                # Z + P β
         rz = rz_new

@@ -399,8 +399,10 @@ def solve_reduced(system, b: np.ndarray | None = None, method: str = "auto", rto
 @blas.single_threaded
 def prepared(system, rtol: float = 1e-10, smoothed_coarse: bool = False):
     """A solver for ``system`` that is set up once and reused for further right-hand sides:
-    → solve(B (n_q,) or (n_q, k), x0=None, rtol=None) → (q, info), ``rtol`` one number or one per
-    column (the P2 p-multigrid's CG stops each column at its own; the others use the smallest).
+    → solve(B (n_q,) or (n_q, k), x0=None, rtol=None, goal_stop=None) → (q, info), ``rtol`` one number
+    or one per column (the P2 p-multigrid's CG stops each column at its own; the others use the
+    smallest), ``goal_stop`` the P2 p-multigrid CG's goal-oriented stop (flexure.multirhs.pcg; the
+    direct and per-column solvers solve to their tolerance).
     The P2 p-multigrid (all columns together) keeps its hierarchy, a small system its LU factors;
     otherwise each call is ``solve_reduced``. An adaptive analysis solves its goals and, on its last mesh, the remaining
     load cases with one set-up."""
@@ -412,7 +414,7 @@ def prepared(system, rtol: float = 1e-10, smoothed_coarse: bool = False):
         setup_s = time.perf_counter() - t0
 
         @blas.single_threaded
-        def solve_direct(B, x0=None, rtol_=None):
+        def solve_direct(B, x0=None, rtol_=None, goal_stop=None):
             t = time.perf_counter()
             q = lu.solve(np.asarray(B, dtype=np.float64))
             return q, _residual_info(A, B, q, {"solver": "direct (SuperLU)", "dofs": int(n), "iterations": 1,
@@ -428,12 +430,12 @@ def prepared(system, rtol: float = 1e-10, smoothed_coarse: bool = False):
         setup_s = time.perf_counter() - t0
 
         @blas.single_threaded
-        def solve_pmg(B, x0=None, rtol_=None):
+        def solve_pmg(B, x0=None, rtol_=None, goal_stop=None):
             t = time.perf_counter()
             B = np.asarray(B, dtype=np.float64)
             cols = np.ascontiguousarray(B[:, None] if B.ndim == 1 else B)
             X0 = None if x0 is None else np.asarray(x0, dtype=np.float64).reshape(cols.shape)
-            q, its, _ = multirhs.pcg(Ac, cols, M, rtol if rtol_ is None else rtol_, 2000, X0)
+            q, its, _ = multirhs.pcg(Ac, cols, M, rtol if rtol_ is None else rtol_, 2000, X0, goal_stop)
             q = q[:, 0] if B.ndim == 1 else q
             return q, _residual_info(A, B, q, {
                 "solver": ("amg-cg (p-multigrid: P2 block Gauss-Seidel + pyamg "
@@ -444,7 +446,7 @@ def prepared(system, rtol: float = 1e-10, smoothed_coarse: bool = False):
         solve_pmg.precond = M                    # flexure.enriched: the P2 block of the enriched solve
         return solve_pmg
 
-    def solve_each(B, x0=None, rtol_=None):
+    def solve_each(B, x0=None, rtol_=None, goal_stop=None):
         return solve_reduced(system, B, rtol=rtol if rtol_ is None else float(np.min(rtol_)), condition_estimate=False,
                              smoothed_coarse=smoothed_coarse, x0=x0)
     return solve_each
