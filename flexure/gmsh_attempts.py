@@ -1,9 +1,9 @@
 """An STL's meshing attempts run ahead in parallel processes: the same attempts, the same mesh, sooner.
 
-gmsh_mesh._session tries an STL's surface strategies one after another, each once more finer
-around its slivers, until a mesh has none (flexure.stl_remesh): up to five gmsh sessions of a few
-seconds, one at a time (the thick disc's STL: a failed one, then two of each of two strategies,
-20 s of its 60 s adaptive run). An attempt is a function of (strategy, spots) alone (a fresh gmsh
+gmsh_mesh._session tries an STL's surface strategies one after another, every strategy's first
+pass, then those that left slivers once more finer around them, until a mesh has none
+(flexure.stl_remesh): up to five gmsh sessions of a few seconds, one at a time (the thick disc's
+STL: a failed one, then two of each of two strategies, 20 s of its 60 s adaptive run). An attempt is a function of (strategy, spots) alone (a fresh gmsh
 session, deterministic), and a strategy's next spots come from its own previous pass only
 (gmsh_mesh._attempt's ``finer``). So while the decision logic waits for the attempt it asks for,
 the idle cores (no other process running on them, looked at every RECHECK_S) run the attempts
@@ -20,8 +20,9 @@ logic reads it. Only what the logic can still ask for within its attempts is run
 (``Ahead._before``), and what it did not ask for is killed when it is done. The thick disc's STL
 (attempts of 0.8, 5.8, 5.8, 3.4, 3.3 CPU-s: a failure, two passes of one strategy, two of
 another): 11.6 CPU-s on its longest chain on two cores where one after another is 19.1 (measured
-per attempt on a loaded machine; on idle cores the wall time follows the chain); a six-spoke STL's
-two passes of one strategy gain nothing (the second needs the first's slivers). ``runner`` is
+per attempt on a loaded machine; on idle cores the wall time follows the chain); a six-spoke STL
+whose second strategy's first pass is clean takes it as it comes, beside the first's (4.4–5.9 s for
+the mesh where the first strategy's two passes, the second needing the first's slivers, took 9.7 s). ``runner`` is
 sequential (in this process, nothing run ahead) with one strategy, with one idle core
 (flexure.threads.count: TORQUEBENCH_THREADS=1, or a machine busy with other work) and where
 ``fork`` is not available (``workers``).
@@ -101,12 +102,14 @@ class Ahead:
             self._start(key, s, spots)
 
     def _before(self, strategy: str, p: int) -> int:
-        """The fewest attempts the logic makes before pass ``p`` of ``strategy``: its own ``p``
-        earlier passes, and every strategy before it in the order (all the others from its third
-        pass on: the best one is tried again only when none is left untried), each once, or twice
-        once its first pass is known to have left slivers (its next pass follows at once)."""
-        others = self.order[:self.order.index(strategy)] if p < 2 else [s for s in self.order if s != strategy]
-        return p + sum(1 + (len(self.known[s]) > 1) for s in others)
+        """The fewest attempts the logic makes before pass ``p`` of ``strategy`` (gmsh_mesh._session:
+        every strategy's first pass, then the fewest passes first): its own ``p`` earlier passes
+        and, for its first pass, one of each strategy before it in the order; for a later pass, of
+        every other strategy as many as it is known to make (its passes whose spots are known: each
+        but its last left slivers), up to ``p``."""
+        if p == 0:
+            return self.order.index(strategy)
+        return p + sum(min(p, len(self.known[s])) for s in self.order if s != strategy)
 
     def _start(self, key, strategy, spots) -> None:
         import multiprocessing

@@ -249,10 +249,14 @@ def _session(build, field, where: str, order: int, curved: bool = False, check=N
     is made again, finer around it (MIN_DIHEDRAL_DEG says how).
 
     ``build`` may also be a list of (name, build) strategies (an STL's surface treatments,
-    flexure.stl_remesh): while the mesh has such a tetrahedron, a strategy is tried once more finer
-    around them, then the next strategy, then the best one finer again: len(strategies) +
-    QUALITY_PASSES attempts at most (one strategy: itself and QUALITY_PASSES finer passes); ``check(points, tets, entities) -> dict`` with "ok" (the
-    geometry kept) rules an attempt out unless none passes. Every attempt is recorded in
+    flexure.stl_remesh): every strategy's first pass in turn until one has no such tetrahedron,
+    then the strategies that left some, finer around them, the fewest passes first and of those
+    the best mesh (``_next_strategy``): len(strategies) + QUALITY_PASSES attempts at most (one
+    strategy: itself and QUALITY_PASSES finer passes). A strategy whose first pass is clean is
+    taken before another's finer pass (six_spoke_thick's STL: direct left a flat tetrahedron,
+    re-parametrised none; 4.4 s for the mesh where direct's second pass made it 9.7 s).
+    ``check(points, tets, entities) -> dict`` with "ok" (the geometry kept) rules an attempt out
+    unless none passes. Every attempt is recorded in
     ``mesh._cache["attempts"]`` (strategy, min dihedral angle, count below MIN_DIHEDRAL_DEG, the
     check's figures; the mesh returned "kept"). With several strategies and idle cores the attempts
     this logic may ask for next run ahead in parallel processes (flexure.gmsh_attempts): the same
@@ -264,33 +268,32 @@ def _session(build, field, where: str, order: int, curved: bool = False, check=N
     untried = list(builds)
     spots = {name: np.zeros((0, 4)) for name in builds}
     tries = dict.fromkeys(builds, 0)
+    pending: dict = {}                                  # strategy → (ok, worst) of its last pass, which left slivers
     best, attempts, error, name = None, [], None, untried.pop(0)
     runner = gmsh_attempts.runner(list(builds), lambda s, p: _attempt(builds[s], field, where, order, curved, p, check),
                                   len(builds) + QUALITY_PASSES)
     try:
         for _ in range(len(builds) + QUALITY_PASSES):
             tries[name] += 1
+            pending.pop(name, None)
             try:
                 points, tets, geometric, entities, record, finer = runner.get(name, spots[name])
             except InputError as exc:                   # this strategy failed: the next one may not
                 attempts.append({"strategy": name, "failed": str(exc)})
                 error = exc
-                if not untried:
+            else:
+                attempts.append({"strategy": name + (" + finer at its slivers" if len(spots[name]) else ""), **record})
+                worst = record["min_dihedral_deg"]
+                if best is None or (record["ok"], worst) > (best[6]["ok"], best[0]):
+                    best = (worst, points, tets, geometric, entities, name, record, len(attempts) - 1)
+                if finer is None and record["ok"]:      # no tetrahedron below MIN_DIHEDRAL_DEG, geometry kept
                     break
-                name = untried.pop(0)
-                continue
-            attempts.append({"strategy": name + (" + finer at its slivers" if len(spots[name]) else ""), **record})
-            worst = record["min_dihedral_deg"]
-            if best is None or (record["ok"], worst) > (best[6]["ok"], best[0]):
-                best = (worst, points, tets, geometric, entities, name, record, len(attempts) - 1)
-            if finer is None:                           # no tetrahedron below MIN_DIHEDRAL_DEG
-                if record["ok"] or not untried:
-                    break
-                name = untried.pop(0)                   # geometry lost: another surface strategy
-                continue
-            spots[name] = finer                         # this strategy's next pass: finer around them
-            # next: this strategy once more, finer around its slivers; then an untried one; then the best
-            name = name if tries[name] < 2 else (untried.pop(0) if untried else best[5])
+                if finer is not None:                   # this strategy's next pass: finer around them
+                    spots[name] = finer
+                    pending[name] = (record["ok"], worst)
+            name = _next_strategy(untried, pending, tries, list(builds))
+            if name is None:
+                break
     finally:
         runner.close()
     if best is None:
@@ -305,6 +308,17 @@ def _session(build, field, where: str, order: int, curved: bool = False, check=N
     mesh._cache["entities"] = entities          # gmsh's classification (flexure.project.classify)
     mesh._cache["attempts"] = attempts
     return mesh
+
+
+def _next_strategy(untried: list, pending: dict, tries: dict, order: list):
+    """The next attempt's strategy (``_session``): the first untried one; else, of those whose last
+    pass left slivers (``pending``: strategy → (geometry kept, worst dihedral angle)), the one with the
+    fewest passes, then the best mesh, then the first in ``order``; None when neither is left."""
+    if untried:
+        return untried.pop(0)
+    if not pending:
+        return None
+    return min(pending, key=lambda s: (tries[s], not pending[s][0], -pending[s][1], order.index(s)))
 
 
 def _attempt(build, field, where: str, order: int, curved: bool, spots, check):

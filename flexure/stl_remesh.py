@@ -20,8 +20,9 @@ around them). Three surface strategies:
 
 An STL with needle triangles (an angle below NEEDLE_DEG) tries the re-parametrised ones first, one
 without tries direct first. While the volume mesh has a tetrahedron below
-gmsh_mesh.MIN_DIHEDRAL_DEG: the same strategy once more, finer around those (gmsh_mesh._session's
-spots), then the next strategy: at most MAX_ATTEMPTS = 5 volume meshes (on idle cores those that
+gmsh_mesh.MIN_DIHEDRAL_DEG: the next strategy, then, once every strategy has made one, those that
+left such tetrahedra once more, finer around them (gmsh_mesh._session's spots): at most
+MAX_ATTEMPTS = 5 volume meshes (on idle cores those that
 may be asked for next run ahead in parallel processes, flexure.gmsh_attempts: the same meshes).
 Every attempt's geometry is checked against the STL (``geometry_check``): volume within
 VOLUME_TOL and every boundary vertex of either surface within SURFACE_TOL_REL × h_far of the
