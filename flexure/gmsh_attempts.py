@@ -3,10 +3,10 @@
 gmsh_mesh._session tries an STL's surface strategies one after another, every strategy's first
 pass, then those that left slivers once more finer around them, until a mesh has none
 (flexure.stl_remesh): up to five gmsh sessions of a few seconds, one at a time (the thick disc's
-STL: a failed one, then two of each of two strategies, 20 s of its 60 s adaptive run). An attempt is a function of (strategy, spots) alone (a fresh gmsh
-session, deterministic), and a strategy's next spots come from its own previous pass only
-(gmsh_mesh._attempt's ``finer``). So while the decision logic waits for the attempt it asks for,
-the idle cores (no other process running on them, looked at every RECHECK_S) run the attempts
+STL: a failed one, then two of each of two strategies, 20 s of its 60 s adaptive run). An attempt
+is a function of (strategy, spots) alone (a fresh gmsh session, deterministic), and a strategy's
+next spots come from its own previous pass only (gmsh_mesh._attempt's ``finer``). So while the
+decision logic waits for the attempt it asks for, the idle cores (no other process running on them, looked at every RECHECK_S) run the attempts
 it may ask for next, most likely first:
 
     priority = (pass of the strategy, the strategy's place in the order)
@@ -22,10 +22,10 @@ logic reads it. Only what the logic can still ask for within its attempts is run
 another): 11.6 CPU-s on its longest chain on two cores where one after another is 19.1 (measured
 per attempt on a loaded machine; on idle cores the wall time follows the chain); a six-spoke STL
 whose second strategy's first pass is clean takes it as it comes, beside the first's (4.4–5.9 s for
-the mesh where the first strategy's two passes, the second needing the first's slivers, took 9.7 s). ``runner`` is
-sequential (in this process, nothing run ahead) with one strategy, with one idle core
-(flexure.threads.count: TORQUEBENCH_THREADS=1, or a machine busy with other work) and where
-``fork`` is not available (``workers``).
+the mesh where the first strategy's two passes, the second needing the first's slivers, took
+9.7 s). ``runner`` is sequential (in this process, nothing run ahead) with one strategy, with one
+idle core (flexure.threads.count: TORQUEBENCH_THREADS=1, or a machine busy with other work) and
+where ``fork`` is not available (``workers``).
 """
 
 from __future__ import annotations

@@ -135,8 +135,8 @@ _HELPER = None
 
 def helper():
     """One helper Python thread (a one-worker ``ThreadPoolExecutor``) for work that releases the GIL
-    beside the calling thread's: flexure.split_gs's second part, flexure.solve's coarse set-up. It
-    must not launch numba's parallel loops (``select_layer``: workqueue, one launching thread)."""
+    beside the calling thread's (flexure.split_gs's second part). It must not launch numba's
+    parallel loops (``select_layer``: workqueue, one launching thread)."""
     global _HELPER
     if _HELPER is None or _HELPER[0] != os.getpid():    # a forked child has not its parent's thread
         from concurrent.futures import ThreadPoolExecutor

@@ -164,8 +164,8 @@ def _helper_runs(_):
 
 
 def test_the_helper_thread_runs_in_a_process_forked_after_it_started():
-    """flexure.threads.helper (the split smoother's second part, the P2 set-up's coarse V-cycle): a
-    forked child (torquebench.sweep) gets a helper of its own, not its parent's thread, absent there."""
+    """flexure.threads.helper (the split smoother's second part): a forked child (torquebench.sweep)
+    gets a helper of its own, not its parent's thread, absent there."""
     import multiprocessing as mp
 
     assert _helper_runs(0) == 7
