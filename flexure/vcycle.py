@@ -32,6 +32,11 @@ COARSE_ORDERING = "MMD_AT_PLUS_A"
 #: the diagonal (the same 2.6 M entries, solutions equal to 3e-14); on aggregation-coarsened last levels
 #: (8.2 k and 14 k unknowns) 1.2× both (2026-11-27, load 3, best of 5 of SuperLU alone)
 COARSE_OPTIONS = {"diag_pivot_thresh": 0.0, "options": {"SymmetricMode": True}}
+#: the last level's factor in float32 (SuperLU's single-precision path): half the factor's bytes and
+#: ~0.6× its time; its solves are ~5e-5 relative off the float64 ones (six_spoke_thick at 811 k P2 DOFs,
+#: 15.9 k coarse unknowns: the factor 1.66 → 1.01 s, L + U 17.7 M entries), far inside the V-cycle's
+#: own error reduction. float64: pyamg's coarse solve to round-off (tests)
+COARSE_DTYPE = np.float32
 
 
 def _blocks(A) -> int:
@@ -53,7 +58,7 @@ class MultiVCycle:
     block Gauss–Seidel, forward before and backward after) on all columns; ``levels`` and
     ``operator_complexity`` describe the hierarchy (``ml`` itself is not kept)."""
 
-    def __init__(self, ml):
+    def __init__(self, ml, coarse_dtype=None):
         from pyamg.util.utils import get_block_diag
 
         self.n_levels = len(ml.levels)
@@ -70,11 +75,13 @@ class MultiVCycle:
         keep = np.flatnonzero(np.diff(Ac.indptr) != 0)          # zero rows/columns (pyamg's splu does the same)
         self._keep = keep
         self._n_last = Ac.shape[0]
-        self._lu = spla.splu(Ac[keep][:, keep].tocsc(), permc_spec=COARSE_ORDERING, **COARSE_OPTIONS)
+        self._dtype = np.dtype(COARSE_DTYPE if coarse_dtype is None else coarse_dtype)
+        self._lu = spla.splu(Ac[keep][:, keep].astype(self._dtype).tocsc(), permc_spec=COARSE_ORDERING,
+                             **COARSE_OPTIONS)
 
     def _coarse(self, B: np.ndarray) -> np.ndarray:
         X = np.zeros((self._n_last, B.shape[1]))
-        X[self._keep] = self._lu.solve(np.asfortranarray(B[self._keep]))
+        X[self._keep] = self._lu.solve(np.asfortranarray(B[self._keep], dtype=self._dtype))
         return X
 
     def __call__(self, B: np.ndarray) -> np.ndarray:
