@@ -177,14 +177,13 @@ def symmetric_gauss_seidel(bptr, bcol, data, Dinv, cptr, order, r, z):
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def csr_to_blocks(indptr, indices, data, nb, data_out, nchunk=1):
-    """The 3 × 3 block pattern (bptr, bcol int32 ascending) of a scalar CSR (n = 3 nb rows, any
-    sorted or unsorted indices), its values into a new array of ``data_out``'s type (zeros where a
-    block's entry is not stored) → (bptr, bcol, values (n_blocks, 3, 3)). Block rows in ``nchunk``
+def csr_block_pattern(indptr, indices, nb, nbc, nchunk=1):
+    """The 3 × 3 block pattern of a scalar CSR (3 nb rows, 3 nbc columns; any sorted or unsorted
+    indices) → (bptr int64, bcol int32, each block row's columns ascending). Block rows in ``nchunk``
     ranges, one marker array each (each row on its own: the same result for every nchunk)."""
     bptr = np.zeros(nb + 1, np.int64)
     for t in numba.prange(nchunk):
-        mark = np.full(nb, -1, np.int64)
+        mark = np.full(nbc, -1, np.int64)
         for i in range(nb * t // nchunk, nb * (t + 1) // nchunk):
             c = 0
             for a in range(3):
@@ -198,10 +197,8 @@ def csr_to_blocks(indptr, indices, data, nb, data_out, nchunk=1):
     for i in range(nb):
         bptr[i + 1] += bptr[i]
     bcol = np.empty(bptr[nb], np.int32)
-    vals = np.zeros((bptr[nb], 3, 3), data_out.dtype)
     for t in numba.prange(nchunk):
-        mark = np.full(nb, -1, np.int64)
-        slot = np.empty(nb, np.int64)
+        mark = np.full(nbc, -1, np.int64)
         for i in range(nb * t // nchunk, nb * (t + 1) // nchunk):
             q = bptr[i]
             for a in range(3):
@@ -213,13 +210,33 @@ def csr_to_blocks(indptr, indices, data, nb, data_out, nchunk=1):
                         bcol[q] = j
                         q += 1
             bcol[bptr[i]:bptr[i + 1]].sort()
+    return bptr, bcol
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def csr_block_values(indptr, indices, data, bptr, bcol, nbc, place, vals, nchunk=1):
+    """A scalar CSR's entries added into the blocks of its pattern (bptr, bcol): block p's entries
+    into vals[place[p]] (``place`` a renumbering of the blocks; empty: vals[p]); ``vals`` (n_blocks,
+    3, 3) zeros of the storage type (an entry stored twice is summed in it)."""
+    nb = len(bptr) - 1
+    for t in numba.prange(nchunk):
+        slot = np.empty(nbc, np.int64)
+        for i in range(nb * t // nchunk, nb * (t + 1) // nchunk):
             for p in range(bptr[i], bptr[i + 1]):
-                slot[bcol[p]] = p
+                slot[bcol[p]] = place[p] if len(place) else p
             for a in range(3):
                 r = 3 * i + a
                 for p in range(indptr[r], indptr[r + 1]):
                     j = indices[p]
                     vals[slot[j // 3], a, j % 3] += data[p]
+
+
+def csr_to_blocks(indptr, indices, data, nb, nbc, data_out, nchunk=1):
+    """The 3 × 3 blocks of a scalar CSR (3 nb × 3 nbc) with values of ``data_out``'s type (zeros
+    where a block's entry is not stored) → (bptr, bcol, values (n_blocks, 3, 3))."""
+    bptr, bcol = csr_block_pattern(indptr, indices, nb, nbc, nchunk)
+    vals = np.zeros((len(bcol), 3, 3), data_out.dtype)
+    csr_block_values(indptr, indices, data, bptr, bcol, nbc, np.empty(0, np.int64), vals, nchunk)
     return bptr, bcol, vals
 
 

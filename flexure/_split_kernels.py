@@ -32,7 +32,7 @@ def split(bptr, bcol, data, perm, inv, part_of):
 def split_places(bptr, bcol, perm, inv, part_of):
     """``split``'s layout without its values: → (in_ptr, in_col, off_ptr, off_col, src): new block q
     (the in-part blocks in ``split``'s order first, then the off-part ones from n_in = in_ptr[-1] on)
-    is A's block src[q] (``gather_in_place`` then moves the values into that order in A's own array)."""
+    is A's block src[q] (flexure.split_gs.SplitSmoother.from_csr adds each block's entries there)."""
     n = len(perm)
     in_ptr = np.zeros(n + 1, np.int64)
     off_ptr = np.zeros(n + 1, np.int64)
@@ -72,26 +72,13 @@ def split_places(bptr, bcol, perm, inv, part_of):
     return in_ptr, in_col, off_ptr, off_col, src
 
 
-@numba.njit(cache=True, nogil=True)
-def gather_in_place(data, src):
-    """data[q] ← data[src[q]] for every q at once (``src`` a permutation), cycle by cycle: the values
-    moved, not copied, so no second array of them is alive."""
-    n = len(src)
-    done = np.zeros(n, np.bool_)
-    tmp = np.empty(data.shape[1:], data.dtype)
-    for q0 in range(n):
-        if done[q0]:
-            continue
-        tmp[:] = data[q0]
-        q = q0
-        while True:
-            done[q] = True
-            s = src[q]
-            if s == q0:
-                data[q] = tmp
-                break
-            data[q] = data[s]
-            q = s
+@numba.njit(cache=True, nogil=True, parallel=True)
+def inverse_permutation(src):
+    """place (int64) with place[src[q]] = q: where each of A's blocks goes among the parts."""
+    place = np.empty(len(src), np.int64)
+    for q in numba.prange(len(src)):
+        place[src[q]] = q
+    return place
 
 
 @numba.njit(cache=True, nogil=True)

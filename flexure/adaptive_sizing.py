@@ -42,8 +42,8 @@ Memory. The peak of a level is reached in its P2 solve (the full and the reduced
 the smoother's block copies built, the CG's columns) or in its enriched solve (V⁺ has about 3.2× the P2
 DOFs), all within a few % of each other: the enriched solve no longer holds the P2 system's scalar CSR
 (12 bytes an entry, a quarter of the old peak), which the smoother's float32 blocks replace in its A x
-(flexure.enriched.goal_errors ``release``), the smoother's parts take the block copy's own values
-(flexure.split_gs ``consume``), both CGs update their vectors in place, and the allocator's free heap
+(flexure.enriched.goal_errors ``release``), the smoother's parts are filled from the CSR in their own order
+(flexure.split_gs ``from_csr``: no block copy in A's order), both CGs update their vectors in place, and the allocator's free heap
 pages are returned before each phase's largest allocations (flexure.rss, trim). Measured 2026-11-27 (RSS
 sampled every 2 ms; same levels, same bits): thick disc at 251 k / 354 k P2 DOFs 3.76 / 3.87 → 2.71 / 2.71
 kB a DOF above the base, STL thick disc at 281 k / 383 k 3.77 / 3.86 → 2.73 / 2.62; the thick disc at

@@ -97,8 +97,8 @@ class BlockMatrix:
         from flexure import threads
 
         nt = threads.use()
-        bptr, bcol, vals = bk.csr_to_blocks(A.indptr, A.indices, A.data, A.shape[0] // 3, np.zeros(1, dtype),
-                                            1 if nt == 1 else 8 * nt)
+        bptr, bcol, vals = bk.csr_to_blocks(A.indptr, A.indices, A.data, A.shape[0] // 3, A.shape[1] // 3,
+                                            np.zeros(1, dtype), 1 if nt == 1 else 8 * nt)
         return cls(bptr, bcol, vals, A.shape[1] // 3)
 
     def tocsr(self):

@@ -208,10 +208,11 @@ def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False, sweeps: int = 1):
     if SMOOTHER_STORAGE == "csr":
         Ab, gs0, gs = Ac, multirhs.forward_gauss_seidel_residual, multirhs.block_gauss_seidel
     else:                                   # 3 × 3 blocks: fewer bytes read per sweep
-        Ab = BlockMatrix.from_csr(Ac, np.float32 if SMOOTHER_STORAGE == "block32" else np.float64)
-        gs0, gs = multirhs.forward_gauss_seidel_residual_bsr, multirhs.block_gauss_seidel_bsr
+        dtype = np.float32 if SMOOTHER_STORAGE == "block32" else np.float64
         if SPLIT_SWEEPS and sweeps == 1:
-            return _pmg_split(Ab, Dinv, coarse, V)
+            return _pmg_split(Ac, Dinv, coarse, V, dtype)
+        Ab = BlockMatrix.from_csr(Ac, dtype)
+        gs0, gs = multirhs.forward_gauss_seidel_residual_bsr, multirhs.block_gauss_seidel_bsr
 
     def apply(R):
         X, res = gs0(Ab, Dinv, R)
@@ -228,12 +229,13 @@ def _pmg_multi(A, coarse, B_coarse, smoothed: bool = False, sweeps: int = 1):
     return apply, V
 
 
-def _pmg_split(Ab, Dinv, coarse, V):
+def _pmg_split(A, Dinv, coarse, V, dtype):
     """``_pmg_multi``'s cycle with flexure.split_gs's sweeps (two parts side by side) in its order of
-    the rows; the coarse interpolation's rows renumbered with them."""
+    the rows, on 3 × 3 blocks of ``dtype`` built from the CSR A; the coarse interpolation's rows
+    renumbered with them."""
     from flexure.split_gs import SplitSmoother
 
-    H = SplitSmoother(Ab, Dinv, consume=True)          # Ab's values moved into the parts (Ab not used after)
+    H = SplitSmoother.from_csr(A, Dinv, dtype)
     coarse_p = coarse.tocsr()[H.perm]
     It_p = coarse_p.T.tocsr()
 

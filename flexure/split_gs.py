@@ -26,11 +26,9 @@ def warm() -> None:
     """Compile (and cache) the renumbering and the off-part product on a tiny matrix."""
     import scipy.sparse as sp
 
-    from flexure.block_sparse import BlockMatrix
-
     for dtype in (np.float32, np.float64):
-        Ab = BlockMatrix.from_csr(sp.identity(6, format="csr") * 2.0, dtype)
-        H = SplitSmoother(Ab, np.tile(np.eye(3) / 2.0, (2, 1, 1)), consume=True)     # flexure.solve's path
+        A = sp.identity(6, format="csr") * 2.0
+        H = SplitSmoother.from_csr(A, np.tile(np.eye(3) / 2.0, (2, 1, 1)), dtype)     # flexure.solve's path
         H.backward(H.forward_from_zero(np.ones((6, 1)))[0], np.ones((6, 1)))
         H.matvec(np.ones(6))
 
@@ -66,30 +64,57 @@ class SplitSmoother:
     """Block Gauss–Seidel of a symmetric BlockMatrix ``Ab`` (Dinv its 3 × 3 diagonal blocks'
     inverses) in the order P₀, P₁, S, with P₀ and P₁ side by side: ``perm`` (dofs: new dof d is old dof
     perm[d]), ``inv``; vectors passed to ``forward_from_zero`` and ``backward`` are in that order.
-    ``consume``: the parts' blocks are ``Ab``'s own values moved into their order (its ``data`` then
-    dropped): no second copy of the matrix alive while they are built; the same values otherwise."""
+    ``from_csr`` builds the same parts from a scalar CSR without the block copy in A's order."""
 
-    def __init__(self, Ab, Dinv: np.ndarray, consume: bool = False):
+    def __init__(self, Ab, Dinv: np.ndarray):
         from flexure import _split_kernels as sk
         from flexure import threads
+
+        order, part, inv_b = self._order(Ab.bptr, Ab.bcol)
+        threads.use()
+        in_ptr, in_col, in_data, off_ptr, off_col, off_data = sk.split(Ab.bptr, Ab.bcol, Ab.data, order, inv_b, part)
+        self._parts(order, part, Dinv, in_ptr, in_col, in_data, off_ptr, off_col, off_data)
+
+    @classmethod
+    def from_csr(cls, A, Dinv: np.ndarray, dtype=np.float32) -> "SplitSmoother":
+        """The parts of the scalar CSR A (symmetric, 3 n × 3 n) with blocks of ``dtype``: its block
+        pattern, the order, then each block's entries added straight into its place among the parts
+        (flexure.solve's path): the same blocks, bit for bit, as ``SplitSmoother(BlockMatrix.from_csr(A,
+        dtype), Dinv)``, and no block copy of A in its own order alive beside them."""
+        from flexure import _block_kernels as bk
+        from flexure import _split_kernels as sk
+        from flexure import threads
+
+        self = cls.__new__(cls)
+        nt = threads.use()
+        chunks = 1 if nt == 1 else 8 * nt
+        nb = A.shape[0] // 3
+        bptr, bcol = bk.csr_block_pattern(A.indptr, A.indices, nb, nb, chunks)
+        order, part, inv_b = self._order(bptr, bcol)
+        in_ptr, in_col, off_ptr, off_col, src = sk.split_places(bptr, bcol, order, inv_b, part)
+        place = sk.inverse_permutation(src)
+        del src
+        vals = np.zeros((len(place), 3, 3), dtype)
+        with threads.dynamic():
+            bk.csr_block_values(A.indptr, A.indices, A.data, bptr, bcol, nb, place, vals, chunks)
+        del place, bcol
+        n_in = in_ptr[-1]
+        self._parts(order, part, Dinv, in_ptr, in_col, vals[:n_in], off_ptr, off_col, vals[n_in:])
+        return self
+
+    @staticmethod
+    def _order(bptr, bcol):
+        order, part = ordering(bptr, bcol)
+        inv_b = np.empty(len(order), np.int64)
+        inv_b[order] = np.arange(len(order))
+        return order, part, inv_b
+
+    def _parts(self, order, part, Dinv, in_ptr, in_col, in_data, off_ptr, off_col, off_data) -> None:
         from flexure.block_sparse import BlockMatrix
 
-        n = len(Ab.bptr) - 1
-        order, part = ordering(Ab.bptr, Ab.bcol)
-        inv_b = np.empty(n, np.int64)
-        inv_b[order] = np.arange(n)
         self.bounds = np.searchsorted(part, np.arange(4)).tolist()     # P₀, P₁, S as ranges of new rows
-        threads.use()
-        if consume:
-            in_ptr, in_col, self._off_ptr, self._off_col, src = sk.split_places(Ab.bptr, Ab.bcol, order, inv_b, part)
-            sk.gather_in_place(Ab.data, src)
-            del src
-            in_data, self._off_data = Ab.data[:in_ptr[-1]], Ab.data[in_ptr[-1]:]
-            Ab.data = None
-        else:
-            in_ptr, in_col, in_data, self._off_ptr, self._off_col, self._off_data = sk.split(
-                Ab.bptr, Ab.bcol, Ab.data, order, inv_b, part)
-        has_off = np.diff(self._off_ptr) > 0
+        self._off_ptr, self._off_col, self._off_data = off_ptr, off_col, off_data
+        has_off = np.diff(off_ptr) > 0
         self._off_rows = [lo + np.flatnonzero(has_off[lo:hi]) for lo, hi in zip(self.bounds[:-1], self.bounds[1:])]
         self.blocks, self.D = [], []
         for lo, hi in zip(self.bounds[:-1], self.bounds[1:]):

@@ -188,7 +188,7 @@ def test_blocks_from_a_csr_the_same_in_any_chunks():
 
     mesh, _ = _curved_box()
     K = fem.stiffness_matrix(mesh, AL)
-    one = bk.csr_to_blocks(K.indptr, K.indices, K.data, K.shape[0] // 3, np.zeros(1, np.float32), 1)
+    one = bk.csr_to_blocks(K.indptr, K.indices, K.data, K.shape[0] // 3, K.shape[1] // 3, np.zeros(1, np.float32), 1)
     for n in (3, 16):
-        got = bk.csr_to_blocks(K.indptr, K.indices, K.data, K.shape[0] // 3, np.zeros(1, np.float32), n)
+        got = bk.csr_to_blocks(K.indptr, K.indices, K.data, K.shape[0] // 3, K.shape[1] // 3, np.zeros(1, np.float32), n)
         assert all(np.array_equal(a, b) for a, b in zip(one, got))

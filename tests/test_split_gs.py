@@ -45,14 +45,13 @@ def test_the_parts_hold_the_whole_matrix_and_do_not_touch(disc):
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
-def test_the_consumed_matrix_gives_the_same_parts(disc, dtype):
-    """``consume`` (flexure.solve's path: the values moved into the parts' order inside the matrix's own
-    array) gives the same blocks, bit for bit, as the copy, and drops the matrix's values."""
+def test_the_parts_from_the_csr_are_the_block_copys(disc, dtype):
+    """``from_csr`` (flexure.solve's path: each block's entries added straight into its place among the
+    parts) gives the same blocks, bit for bit, as the parts of the block copy in A's order."""
     _, A, _ = disc
     H, Dinv = _parts(A, dtype)
-    Ab = BlockMatrix.from_csr(A, dtype)
-    Hc = split_gs.SplitSmoother(Ab, Dinv, consume=True)
-    assert Ab.data is None and Hc.bounds == H.bounds and np.array_equal(Hc.perm, H.perm)
+    Hc = split_gs.SplitSmoother.from_csr(A, Dinv, dtype)
+    assert Hc.bounds == H.bounds and np.array_equal(Hc.perm, H.perm)
     for P, Q in zip(H.blocks, Hc.blocks):
         assert np.array_equal(P.bptr, Q.bptr) and np.array_equal(P.bcol, Q.bcol)
         assert Q.data.dtype == dtype and np.array_equal(P.data, Q.data)
@@ -60,6 +59,16 @@ def test_the_consumed_matrix_gives_the_same_parts(disc, dtype):
         assert np.array_equal(getattr(H, name), getattr(Hc, name))
     B = np.random.default_rng(2).standard_normal((A.shape[0], 2))
     assert np.array_equal(H.forward_from_zero(B)[0], Hc.forward_from_zero(B)[0])
+
+
+def test_blocks_of_a_wide_csr():
+    """A scalar CSR with more block columns than block rows (the enriched coupling's shape): its blocks
+    hold every entry (the column markers span the columns, not the rows)."""
+    import scipy.sparse as sp
+
+    W = sp.random(9, 30, density=0.3, format="csr", random_state=np.random.default_rng(4))
+    Ab = BlockMatrix.from_csr(W, np.float64)
+    assert Ab.shape == (9, 30) and abs(Ab.tocsr() - W).max() == 0.0
 
 
 def test_a_sweep_is_block_gauss_seidel_in_the_new_order(disc):
@@ -83,9 +92,15 @@ def test_a_sweep_is_block_gauss_seidel_in_the_new_order(disc):
 
 
 def test_the_cycle_is_symmetric_and_the_threads_do_not_change_its_bits(disc, monkeypatch):
-    """yᵀ M x = xᵀ M y to round-off (float64 blocks), and 1 or 2 threads give the same bits."""
+    """yᵀ M x = xᵀ M y to round-off (float64 blocks, float64 coarse factor), and 1 or 2 threads give
+    the same bits; with the default float32 coarse factor (flexure.vcycle.COARSE_DTYPE) symmetric to
+    its single precision."""
+    from flexure import vcycle
+
     sy, A, _ = disc
     monkeypatch.setattr(fsolve, "SMOOTHER_STORAGE", "block64")
+    M32, _ = fsolve._pmg_multi(A, sy.coarse, sy.B_coarse, False, 1)
+    monkeypatch.setattr(vcycle, "COARSE_DTYPE", np.float64)
     M, _ = fsolve._pmg_multi(A, sy.coarse, sy.B_coarse, False, 1)
     assert isinstance(M.blocks, split_gs.SplitSmoother)
     rng = np.random.default_rng(2)
@@ -97,6 +112,8 @@ def test_the_cycle_is_symmetric_and_the_threads_do_not_change_its_bits(disc, mon
     assert np.array_equal(Mx1, Mx2)
     assert abs(float(y[:, 0] @ Mx1[:, 0]) - float(x[:, 0] @ My[:, 0])) <= 1e-12 * abs(float(y[:, 0] @ Mx1[:, 0]))
     assert float(x[:, 0] @ Mx1[:, 0]) > 0
+    yMx, xMy = float(y[:, 0] @ M32(x)[:, 0]), float(x[:, 0] @ M32(y)[:, 0])
+    assert abs(yMx - xMy) <= 1e-5 * abs(yMx)
 
 
 def test_the_cg_iterations_stay(disc, monkeypatch):
