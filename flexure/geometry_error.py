@@ -33,11 +33,7 @@ from flexure.mesh import TET_FACES, Mesh
 
 def boundary_faces(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
     """(elements (k,), local faces (k,)) of every boundary face (face f opposite local vertex f)."""
-    m = mesh.n_elements
-    key = np.sort(mesh.tets[:, TET_FACES].astype(np.int64), axis=2).reshape(-1, 3)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    once = np.flatnonzero(cnt[inv.ravel()] == 1)
-    return once // 4, once % 4
+    return mesh.boundary_face_owners()
 
 
 def _face_rule():

@@ -106,7 +106,14 @@ class Mesh:
             once = cnt[inv.ravel()] == 1
             self._cache["bfaces"] = faces[once]
             self._cache["bface_tets"] = np.repeat(np.arange(m), 4)[once]
+            self._cache["bface_local"] = np.tile(np.arange(4), m)[once]
         return self._cache["bfaces"]
+
+    def boundary_face_owners(self) -> tuple[np.ndarray, np.ndarray]:
+        """(element (k,), local face (k,)) of each of ``boundary_faces`` (local face f is opposite
+        local vertex f)."""
+        self.boundary_faces()
+        return self._cache["bface_tets"], self._cache["bface_local"]
 
     def boundary_nodes(self) -> np.ndarray:
         """Sorted indices of nodes on the boundary surface."""
