@@ -180,6 +180,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
     from flexure.goals import ALGEBRAIC_SHARE, cg_rtol_for, solve_goals
     from flexure.meshing import MeshResult, mesh_report
     from flexure.mesh import quality
+    from flexure.node_order import renumbered
     from flexure.refine import bisect, snap
 
     rtol = DEFAULT_RTOL if rtol is None else rtol
@@ -201,6 +202,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
         mres = start_mesh(design, size, initial_h_factor, max_elements)
         tm, projector = geometry(design, mres)
         snapped = snap(tm, projector, getattr(projector, "snap_vertices", False)) if projector is not None else {}
+        tm = renumbered(tm)[0]                 # nodes in space-filling-curve order (flexure.node_order)
         bands = _band_indicator(tm.mesh, _selections(design, tm.mesh))
         q_unmeasured = saturation.unmeasured_ratio(reentrant.has_sharp_reentrant_edge(tm.mesh))   # flexure.saturation (4)
         mesh_s = time.perf_counter() - t0
@@ -296,6 +298,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             rec["safety_factor"] = _safety_factor(design, mesh, sol.U[:, :, 0])
             ref0 = sol.q[-6:].copy() if design.coupling == "rigid" else None    # not a view keeping all of q
             new, (x0, bands_new), rinfo = bisect(tm, marked, [sol.U, bands], rounds=ROUNDS, projector=projector)
+            new, (x0, bands_new), _ = renumbered(new, (x0, bands_new))
             if rinfo.get("invalid_elements"):       # folded on the true surface past mending: this level is the answer
                 rec["invalid_elements"], stopped = int(rinfo["invalid_elements"]), "invalid_mesh"
                 break
