@@ -418,9 +418,9 @@ def _with_geometry(rec: dict) -> dict:
 
 def _safety_factor(design, mesh, u_unit) -> float:
     """σ_y / max von Mises at the rated torque (element-nodal stresses, as analysis.analyze)."""
-    from flexure.post import element_nodal_strains, stress_from_strain, von_mises
+    from flexure.post import element_nodal_strains, stress_measures
 
-    vm = von_mises(stress_from_strain(element_nodal_strains(mesh, u_unit * design.rated_torque_Nm), design.material))
+    vm = stress_measures(element_nodal_strains(mesh, u_unit * design.rated_torque_Nm), design.material)[0]
     return float(design.material.yield_Pa / vm.max())
 
 

@@ -33,7 +33,7 @@ from flexure.design import Design, load_design
 from userio.errors import InputError
 from flexure.gauges import bridge_strains, read_footprint
 from flexure.mesh import TET_EDGES
-from flexure.post import element_nodal_strains, max_shear_strain, nodal_average, stress_from_strain, von_mises
+from flexure.post import element_nodal_strains, nodal_average, stress_measures
 
 CASES = ("Mz", "Fx", "Fy", "Fz", "Mx", "My")
 CROSSTALK_KEYS = {"Fx": "Fx_per_N", "Fy": "Fy_per_N", "Fz": "Fz_per_N", "Mx": "Mx_per_Nm", "My": "My_per_Nm"}
@@ -331,9 +331,8 @@ def analyze_mesh(design: Design, mres, mesh_s: float = 0.0, progress: bool = Fal
 
     u_rated = u0 * T
     eps_nodes = element_nodal_strains(mesh, u_rated)
-    vm_elem = von_mises(stress_from_strain(eps_nodes, design.material))
+    vm_elem, gmax = stress_measures(eps_nodes, design.material)
     max_vm = float(vm_elem.max())
-    gmax = max_shear_strain(eps_nodes)
 
     cfg = _sensor_config(design)
     eps_min_noise = min_detectable_strain(cfg, method="noise")

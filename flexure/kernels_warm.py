@@ -35,9 +35,10 @@ def warm() -> bool:
 
     face_rhs(m, mat, np.zeros((m.n_nodes, 3)))   # the local problems' face term (the levels' estimate)
     from flexure import dwr
-    from flexure.post import element_nodal_strains
+    from flexure.post import element_nodal_strains, stress_measures
 
-    element_nodal_strains(m, np.zeros((m.n_nodes, 3)))     # the peak stresses' strains (flexure._strain_kernels)
+    eps = element_nodal_strains(m, np.zeros((m.n_nodes, 3)))     # the peak stresses' strains (flexure._strain_kernels)
+    stress_measures(eps, mat)                                    # and their von Mises and max shear
 
     dwr.energy_indicators(m, mat, np.zeros((m.n_nodes, 3, 2)), np.zeros((m.n_elements, 6, 3)),
                           np.zeros((m.n_elements, 4, 3)))

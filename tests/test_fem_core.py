@@ -231,6 +231,26 @@ def test_max_shear_strain_is_half_the_principal_spread():
     assert got[-3] == pytest.approx(1.5e-4, rel=1e-7) and got[-2] == pytest.approx(1e-4, rel=1e-7)
 
 
+def test_stress_measures_in_one_pass_equal_the_numpy_forms():
+    """post.stress_measures (one compiled pass: von Mises from the strain's deviator, 2μ √(3/2 d:d), and
+    the closed-form max shear) equals von_mises(stress_from_strain(ε)) and max_shear_strain(ε) on
+    element-nodal shaped tensors (m, nn, 3, 3), the isotropic and pure-shear cases included."""
+    from flexure.post import stress_from_strain, stress_measures
+
+    rng = np.random.default_rng(11)
+    M = rng.standard_normal((300, 10, 3, 3)) * 1e-4
+    E = 0.5 * (M + np.swapaxes(M, -1, -2))
+    E[0, 0] = np.eye(3) * 3e-4
+    E[0, 1] = [[0, 5e-5, 0], [5e-5, 0, 0], [0, 0, 0]]
+    vm, gmax = stress_measures(E, MAT)
+    assert vm.shape == gmax.shape == (300, 10)
+    ref_vm = von_mises(stress_from_strain(E, MAT))
+    assert np.abs(vm - ref_vm).max() <= 1e-12 * ref_vm.max()
+    assert np.abs(gmax - max_shear_strain(E)).max() <= 1e-12 * np.abs(E).max()
+    assert vm[0, 0] <= 1e-9 * ref_vm.max() and gmax[0, 1] == pytest.approx(5e-5, rel=1e-12)
+    assert vm[0, 1] == pytest.approx(2 * MAT.shear_modulus_Pa * np.sqrt(3) * 5e-5, rel=1e-12)
+
+
 def test_material_default_and_von_mises():
     assert ALUMINIUM_6061_T6.E_Pa == 68.9e9 and ALUMINIUM_6061_T6.nu == 0.33
     assert ALUMINIUM_6061_T6.yield_Pa == 276e6
