@@ -318,7 +318,7 @@ def moment_traction_indicators(mesh: Mesh, faces: np.ndarray, ref, ce: np.ndarra
     st = TRI_QUAD[0]
     Lface = np.column_stack([1.0 - st.sum(axis=1), st])                     # (q,3) on the face's corners
     bf = mesh.boundary_faces()[:, :3].astype(np.int64)
-    owner_all = mesh._cache["bface_tets"]
+    owner_all = mesh.boundary_face_owners()[0]
     key = lambda f: np.sort(f, axis=1) @ np.array([1, 1 << 21, 1 << 42], dtype=np.int64)  # noqa: E731
     kb, kf = key(bf), key(np.asarray(faces)[:, :3].astype(np.int64))
     order = np.argsort(kb)

@@ -133,7 +133,7 @@ def footprint_pieces(gauge: Gauge, mesh, inset_m: float | None = None, polygons:
     coordinates)]), or None if the pieces do not cover the grid (|Σw − 1| > tol)."""
     c, a, b, n = gauge.frame()
     faces = mesh.boundary_faces()[:, :3]
-    owners = mesh._cache["bface_tets"]
+    owners = mesh.boundary_face_owners()[0]
     x = mesh.points[faces]                                     # (f,3,3)
     L, W = gauge.length_m, gauge.width_m
     scale = max(L, W)

@@ -31,11 +31,6 @@ from flexure.fem import TRI_QUAD, tet_shape
 from flexure.mesh import TET_FACES, Mesh
 
 
-def boundary_faces(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
-    """(elements (k,), local faces (k,)) of every boundary face (face f opposite local vertex f)."""
-    return mesh.boundary_face_owners()
-
-
 def _face_rule():
     """Per local face f: the tet reference points ξ (4, q, 3) of the triangle rule's points, their
     weights (q,) (reference triangle area ½), and the tangents dξ/ds, dξ/dt (4, 2, 3)."""
@@ -101,7 +96,7 @@ def shape_derivative(mesh: Mesh, material, u: np.ndarray, duals: np.ndarray, con
     from flexure.mesh import TET_FACES_P2
 
     if elems is None:
-        elems, faces = boundary_faces(mesh)
+        elems, faces = mesh.boundary_face_owners()
     lam, mu = material.lame_lambda_Pa, material.shear_modulus_Pa
     duals = duals.reshape(len(u), 3, -1)
     out = np.zeros(duals.shape[2])
@@ -137,7 +132,7 @@ def goal_geometry_errors(mesh: Mesh, projector, material, U: np.ndarray, constra
     field, then the gauges' duals; the hub rotation θ is the compliance, its own dual):
     → ({"theta", "gauges" (g,), "eps_ref": the bridge's Σ s_i δε_i / 4, "offsets": |V_n| at the face points (m)},
     the boundary faces' elements (k,), each face's term (k, 1 + g), for the marking)."""
-    elems, faces = boundary_faces(mesh)
+    elems, faces = mesh.boundary_face_owners()
     u = U[:, :, 0]
     d, terms, off = shape_derivative(mesh, material, u, U, constrained, projector=projector, elems=elems,
                                      faces=faces, per_face=True)
