@@ -35,7 +35,9 @@ COARSE_OPTIONS = {"diag_pivot_thresh": 0.0, "options": {"SymmetricMode": True}}
 #: the last level's factor in float32 (SuperLU's single-precision path): half the factor's bytes and
 #: ~0.6× its time; its solves are ~5e-5 relative off the float64 ones (six_spoke_thick at 811 k P2 DOFs,
 #: 15.9 k coarse unknowns: the factor 1.66 → 1.01 s, L + U 17.7 M entries), far inside the V-cycle's
-#: own error reduction. float64: pyamg's coarse solve to round-off (tests)
+#: own error reduction. float64: pyamg's coarse solve to round-off (tests). The factor is computed on a
+#: thread of its own (``MultiVCycle``), beside the smoother's set-up that follows it (flexure.solve
+#: ``_pmg_split``)
 COARSE_DTYPE = np.float32
 
 
@@ -59,10 +61,24 @@ class MultiVCycle:
     ``operator_complexity`` describe the hierarchy (``ml`` itself is not kept)."""
 
     def __init__(self, ml, coarse_dtype=None):
+        import threading
+
         from pyamg.util.utils import get_block_diag
 
         self.n_levels = len(ml.levels)
         self.operator_complexity = float(ml.operator_complexity())
+        Ac = sp.csc_matrix(ml.levels[-1].A, dtype=np.float64)
+        Ac.eliminate_zeros()
+        keep = np.flatnonzero(np.diff(Ac.indptr) != 0)          # zero rows/columns (pyamg's splu does the same)
+        self._keep = keep
+        self._n_last = Ac.shape[0]
+        self._dtype = np.dtype(COARSE_DTYPE if coarse_dtype is None else coarse_dtype)
+        # the last level's factor on a thread of its own while the levels above and the caller's set-up
+        # go on (SuperLU holds no GIL): joined at the first coarse solve (``_coarse``)
+        self._lu, self._lu_error = None, None
+        self._factor = threading.Thread(target=self._factorize, daemon=True,
+                                        args=(Ac[keep][:, keep].astype(self._dtype).tocsc(),))
+        self._factor.start()
         self._levels = []
         for lv in ml.levels[:-1]:
             bs = _blocks(lv.A)
@@ -70,16 +86,18 @@ class MultiVCycle:
                     else (1.0 / lv.A.diagonal()).reshape(-1, 1, 1))
             self._levels.append((_csr(lv.A), np.ascontiguousarray(Dinv, dtype=np.float64),
                                  _csr(lv.P), _csr(lv.R)))
-        Ac = sp.csc_matrix(ml.levels[-1].A, dtype=np.float64)
-        Ac.eliminate_zeros()
-        keep = np.flatnonzero(np.diff(Ac.indptr) != 0)          # zero rows/columns (pyamg's splu does the same)
-        self._keep = keep
-        self._n_last = Ac.shape[0]
-        self._dtype = np.dtype(COARSE_DTYPE if coarse_dtype is None else coarse_dtype)
-        self._lu = spla.splu(Ac[keep][:, keep].astype(self._dtype).tocsc(), permc_spec=COARSE_ORDERING,
-                             **COARSE_OPTIONS)
+
+    def _factorize(self, Ac) -> None:
+        try:
+            self._lu = spla.splu(Ac, permc_spec=COARSE_ORDERING, **COARSE_OPTIONS)
+        except BaseException as exc:              # noqa: BLE001 (raised where the factor is first used)
+            self._lu_error = exc
 
     def _coarse(self, B: np.ndarray) -> np.ndarray:
+        if self._lu is None:
+            self._factor.join()
+            if self._lu_error is not None:
+                raise self._lu_error
         X = np.zeros((self._n_last, B.shape[1]))
         X[self._keep] = self._lu.solve(np.asfortranarray(B[self._keep], dtype=self._dtype))
         return X

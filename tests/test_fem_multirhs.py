@@ -159,6 +159,28 @@ def test_last_level_factor_in_float32_is_a_float64_solve_to_its_precision(disc):
     assert 1e-9 < err <= 1e-4
 
 
+def test_last_level_factor_on_its_thread_raises_where_it_is_first_used(disc, monkeypatch):
+    """The last level is factored on a thread beside the caller's set-up (vcycle.MultiVCycle): a
+    factorisation that fails (a singular coarse matrix) raises its own error at the first cycle, in
+    the caller's thread; one that succeeds gives the same bits as many times as the cycle is built."""
+    from flexure import vcycle
+
+    sy, _ = disc
+    A1 = (sy.coarse.T @ sy.A @ sy.coarse).tocsr()
+    ml = fsolve._sa_hierarchy(A1, sy.B_coarse, smoothed=False, max_coarse=200)
+    R = np.random.default_rng(7).standard_normal((A1.shape[0], 2))
+    first = vcycle.MultiVCycle(ml)(R)
+    assert np.array_equal(first, vcycle.MultiVCycle(ml)(R))
+
+    def singular(*args, **kwargs):
+        raise RuntimeError("Factor is exactly singular")
+
+    monkeypatch.setattr(vcycle.spla, "splu", singular)
+    V = vcycle.MultiVCycle(ml)
+    with pytest.raises(RuntimeError, match="exactly singular"):
+        V(R)
+
+
 @pytest.mark.parametrize("k", [1, 5, 8])
 def test_forward_sweep_from_zero_with_residual_equals_sweep_then_product(disc, k):
     """multirhs.forward_gauss_seidel_residual: one pass over the lower triangle gives the forward
