@@ -76,8 +76,8 @@ class MultiVCycle:
         # the last level's factor on a thread of its own while the levels above and the caller's set-up
         # go on (SuperLU holds no GIL): joined at the first coarse solve (``_coarse``)
         self._lu, self._lu_error = None, None
-        self._factor = threading.Thread(target=self._factorize, daemon=True,
-                                        args=(Ac[keep][:, keep].astype(self._dtype).tocsc(),))
+        self._Ac = Ac[keep][:, keep].astype(self._dtype).tocsc()
+        self._factor = threading.Thread(target=self._factorize, daemon=True)
         self._factor.start()
         self._levels = []
         for lv in ml.levels[:-1]:
@@ -87,9 +87,10 @@ class MultiVCycle:
             self._levels.append((_csr(lv.A), np.ascontiguousarray(Dinv, dtype=np.float64),
                                  _csr(lv.P), _csr(lv.R)))
 
-    def _factorize(self, Ac) -> None:
+    def _factorize(self) -> None:
         try:
-            self._lu = spla.splu(Ac, permc_spec=COARSE_ORDERING, **COARSE_OPTIONS)
+            self._lu = spla.splu(self._Ac, permc_spec=COARSE_ORDERING, **COARSE_OPTIONS)
+            self._Ac = None
         except BaseException as exc:              # noqa: BLE001 (raised where the factor is first used)
             self._lu_error = exc
 
@@ -98,6 +99,10 @@ class MultiVCycle:
             self._factor.join()
             if self._lu_error is not None:
                 raise self._lu_error
+            if self._lu is None:                  # a forked child: the thread did not come along
+                self._factorize()
+                if self._lu_error is not None:
+                    raise self._lu_error
         X = np.zeros((self._n_last, B.shape[1]))
         X[self._keep] = self._lu.solve(np.asfortranarray(B[self._keep], dtype=self._dtype))
         return X

@@ -175,6 +175,18 @@ def test_last_level_factor_on_its_thread_raises_where_it_is_first_used(disc, mon
     def singular(*args, **kwargs):
         raise RuntimeError("Factor is exactly singular")
 
+    # a thread that did not factor (a forked child's copy of a cycle built before the fork): the first
+    # cycle factors in the caller's thread, the same bits
+    real, calls = vcycle.MultiVCycle._factorize, []
+
+    def first_call_lost(self):
+        calls.append(1)
+        if len(calls) > 1:
+            real(self)
+
+    monkeypatch.setattr(vcycle.MultiVCycle, "_factorize", first_call_lost)
+    assert np.array_equal(vcycle.MultiVCycle(ml)(R), first) and len(calls) == 2
+    monkeypatch.setattr(vcycle.MultiVCycle, "_factorize", real)
     monkeypatch.setattr(vcycle.spla, "splu", singular)
     V = vcycle.MultiVCycle(ml)
     with pytest.raises(RuntimeError, match="exactly singular"):
