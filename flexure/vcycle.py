@@ -65,6 +65,8 @@ class MultiVCycle:
 
         from pyamg.util.utils import get_block_diag
 
+        from flexure import threads
+
         self.n_levels = len(ml.levels)
         self.operator_complexity = float(ml.operator_complexity())
         Ac = sp.csc_matrix(ml.levels[-1].A, dtype=np.float64)
@@ -74,11 +76,16 @@ class MultiVCycle:
         self._n_last = Ac.shape[0]
         self._dtype = np.dtype(COARSE_DTYPE if coarse_dtype is None else coarse_dtype)
         # the last level's factor on a thread of its own while the levels above and the caller's set-up
-        # go on (SuperLU holds no GIL): joined at the first coarse solve (``_coarse``)
+        # go on (SuperLU holds no GIL): joined at the first coarse solve (``_coarse``); here, where the
+        # kernels are held to one thread (flexure.threads: TORQUEBENCH_THREADS=1, a busy machine)
         self._lu, self._lu_error = None, None
         self._Ac = Ac[keep][:, keep].astype(self._dtype).tocsc()
-        self._factor = threading.Thread(target=self._factorize, daemon=True)
-        self._factor.start()
+        self._factor = None
+        if threads.count() > 1:
+            self._factor = threading.Thread(target=self._factorize, daemon=True)
+            self._factor.start()
+        else:
+            self._factorize()
         self._levels = []
         for lv in ml.levels[:-1]:
             bs = _blocks(lv.A)
@@ -96,7 +103,8 @@ class MultiVCycle:
 
     def _coarse(self, B: np.ndarray) -> np.ndarray:
         if self._lu is None:
-            self._factor.join()
+            if self._factor is not None:
+                self._factor.join()
             if self._lu_error is not None:
                 raise self._lu_error
             if self._lu is None:                  # a forked child: the thread did not come along

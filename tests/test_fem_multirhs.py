@@ -160,23 +160,21 @@ def test_last_level_factor_in_float32_is_a_float64_solve_to_its_precision(disc):
 
 
 def test_last_level_factor_on_its_thread_raises_where_it_is_first_used(disc, monkeypatch):
-    """The last level is factored on a thread beside the caller's set-up (vcycle.MultiVCycle): a
-    factorisation that fails (a singular coarse matrix) raises its own error at the first cycle, in
-    the caller's thread; one that succeeds gives the same bits as many times as the cycle is built."""
-    from flexure import vcycle
+    """The last level is factored on a thread beside the caller's set-up (vcycle.MultiVCycle, where the
+    kernels may use two threads; in the caller's where they are held to one): the same bits either way
+    and as many times as the cycle is built; a factorisation that fails (a singular coarse matrix)
+    raises its own error at the first cycle, in the caller's thread; a thread that did not factor (a
+    forked child's copy of a cycle built before the fork) leaves it to the first cycle."""
+    from flexure import threads, vcycle
 
     sy, _ = disc
     A1 = (sy.coarse.T @ sy.A @ sy.coarse).tocsr()
     ml = fsolve._sa_hierarchy(A1, sy.B_coarse, smoothed=False, max_coarse=200)
     R = np.random.default_rng(7).standard_normal((A1.shape[0], 2))
-    first = vcycle.MultiVCycle(ml)(R)
-    assert np.array_equal(first, vcycle.MultiVCycle(ml)(R))
-
-    def singular(*args, **kwargs):
-        raise RuntimeError("Factor is exactly singular")
-
-    # a thread that did not factor (a forked child's copy of a cycle built before the fork): the first
-    # cycle factors in the caller's thread, the same bits
+    with threads.limited(1):
+        V1 = vcycle.MultiVCycle(ml)
+        assert V1._lu is not None and V1._factor is None
+        first = V1(R)
     real, calls = vcycle.MultiVCycle._factorize, []
 
     def first_call_lost(self):
@@ -184,13 +182,22 @@ def test_last_level_factor_on_its_thread_raises_where_it_is_first_used(disc, mon
         if len(calls) > 1:
             real(self)
 
-    monkeypatch.setattr(vcycle.MultiVCycle, "_factorize", first_call_lost)
-    assert np.array_equal(vcycle.MultiVCycle(ml)(R), first) and len(calls) == 2
-    monkeypatch.setattr(vcycle.MultiVCycle, "_factorize", real)
-    monkeypatch.setattr(vcycle.spla, "splu", singular)
-    V = vcycle.MultiVCycle(ml)
-    with pytest.raises(RuntimeError, match="exactly singular"):
-        V(R)
+    def singular(*args, **kwargs):
+        raise RuntimeError("Factor is exactly singular")
+
+    with threads.limited(2):
+        V2 = vcycle.MultiVCycle(ml)
+        import numba
+
+        assert (V2._factor is not None) == (numba.config.NUMBA_NUM_THREADS > 1)   # a one-core machine: no thread
+        assert np.array_equal(V2(R), first) and np.array_equal(vcycle.MultiVCycle(ml)(R), first)
+        monkeypatch.setattr(vcycle.MultiVCycle, "_factorize", first_call_lost)
+        assert np.array_equal(vcycle.MultiVCycle(ml)(R), first) and len(calls) == 2
+        monkeypatch.setattr(vcycle.MultiVCycle, "_factorize", real)
+        monkeypatch.setattr(vcycle.spla, "splu", singular)
+        V = vcycle.MultiVCycle(ml)
+        with pytest.raises(RuntimeError, match="exactly singular"):
+            V(R)
 
 
 @pytest.mark.parametrize("k", [1, 5, 8])
