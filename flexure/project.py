@@ -17,6 +17,7 @@ import itertools
 
 import numpy as np
 
+from flexure import threads        # the KD-tree queries' workers (the same results on any number)
 from flexure.mesh import TET_EDGES, TET_FACES, Mesh
 from flexure.refine import TaggedMesh, edge_codes
 
@@ -206,7 +207,7 @@ class StlProjector:
         if len(points) == 0:
             return points.copy()
         c = min(self.candidates, self.tree.n)
-        ds, idx = self.tree.query(points, k=c, workers=_workers())
+        ds, idx = self.tree.query(points, k=c, workers=threads.count())
         ds, idx = ds.reshape(len(points), c), idx.reshape(len(points), c)
         cp, d = self._closest(points, self.owner[idx])
         if not certified:
@@ -239,11 +240,11 @@ class StlProjector:
         if tree is None or len(points) == 0:
             return self.project(points)
         c = min(8, len(seg))
-        _, idx = tree.query(points, k=c, workers=_workers())
+        _, idx = tree.query(points, k=c, workers=threads.count())
         idx = idx.reshape(len(points), c)
         cp, d = _closest_on_segments(points, seg[idx])
         # certified: every segment whose midpoint is within d + half was a candidate; else all of those
-        near = tree.query_ball_point(points, d + half, workers=_workers())
+        near = tree.query_ball_point(points, d + half, workers=threads.count())
         lengths = np.fromiter(map(len, near), np.int64, len(near))
         rows = np.repeat(np.arange(len(points)), lengths)
         found = np.fromiter(itertools.chain.from_iterable(near), np.int64, int(lengths.sum()))
@@ -282,18 +283,10 @@ class StlProjector:
         return cp, d
 
 
-def _workers() -> int:
-    """The KD-tree queries' threads: the parallel kernels' (flexure.threads.count; the same results
-    on any number: the points are split among them)."""
-    from flexure import threads
-
-    return threads.count()
-
-
 def _owners_in_balls(tree, owner: np.ndarray, centres: np.ndarray, radii: np.ndarray):
     """The distinct triangles (``owner`` of the samples) within ``radii`` of each of ``centres``,
     as (row, triangle) pairs sorted by row: one ball query for all."""
-    near = tree.query_ball_point(centres, radii, workers=_workers())
+    near = tree.query_ball_point(centres, radii, workers=threads.count())
     lengths = np.fromiter(map(len, near), np.int64, len(near))
     samples = np.fromiter(itertools.chain.from_iterable(near), np.int64, int(lengths.sum()))
     n_tri = np.int64(owner.max() + 1)

@@ -105,12 +105,10 @@ class MultiVCycle:
         if self._lu is None:
             if self._factor is not None:
                 self._factor.join()
+            if self._lu is None and self._lu_error is None:    # a forked child: the thread did not come along
+                self._factorize()
             if self._lu_error is not None:
                 raise self._lu_error
-            if self._lu is None:                  # a forked child: the thread did not come along
-                self._factorize()
-                if self._lu_error is not None:
-                    raise self._lu_error
         X = np.zeros((self._n_last, B.shape[1]))
         X[self._keep] = self._lu.solve(np.asfortranarray(B[self._keep], dtype=self._dtype))
         return X
