@@ -94,6 +94,8 @@ ENRICHED_FACTOR = saturation.FLAT
 MAX_LEVELS = 14
 MAX_DOFS = 2_000_000
 MAX_MEMORY_GB = 3.0
+#: no time budget (``max_seconds`` None): a cap no level reaches
+MAX_DOFS_UNBOUNDED = 2**62
 #: the bridge's arm signs (bridge.wheatstone "full_bending": ε1 − ε2 + ε3 − ε4)
 ARM_SIGN = {1: 1.0, 2: -1.0, 3: 1.0, 4: -1.0}
 METHOD = ("goal-oriented (dual-weighted residual) estimate on nested adaptively refined meshes "
@@ -170,10 +172,13 @@ def calibrate(eta_prev: float, eta: float, J_prev: float, J: float, kappa_prev: 
 @blas.single_threaded
 def analyze_adaptive(design, size: str | None = None, rtol: float | None = None, max_dofs: int = MAX_DOFS,
                      max_memory_gb: float = MAX_MEMORY_GB, progress: bool = False,
-                     max_elements: float | None = None, initial_h_factor: float = INITIAL_H_FACTOR):
+                     max_elements: float | None = None, initial_h_factor: float = INITIAL_H_FACTOR,
+                     max_seconds: float | None = None):
     """Adaptive analysis (module docstring) → (results as ``analysis.analyze`` gives them on the
     final mesh, with ``<figure>_error_estimate``/``_error_method``, the levels and what stopped
-    the refinement; Fields). ``initial_h_factor``: the first mesh's coarsening of the size field."""
+    the refinement; Fields). ``initial_h_factor``: the first mesh's coarsening of the size field;
+    ``max_seconds``: a wall-time budget for the analysis from its meshing on (flexure.adaptive_sizing,
+    "Time": the next level within what is left of it; the first level is always solved)."""
     from flexure import goal_cases
     from flexure.analysis import _selections, analyze_mesh
     from flexure.enriched import goal_errors
@@ -188,6 +193,8 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
         raise InputError(f"--rtol: must be in (0, 1), got {rtol!r}")
     if (design.order or 2) != 2:
         raise InputError("adaptive refinement needs order 2 (10-node tetrahedra); use the levels estimate for P1")
+    if max_seconds is not None and not (math.isfinite(max_seconds) and max_seconds > 0):
+        raise InputError(f"--max-seconds: must be a positive number of seconds, got {max_seconds!r}")
     t_start = time.perf_counter()
     t0 = time.perf_counter()
     bar = _bar(progress)
@@ -271,15 +278,23 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
                                       rise)
             mem_per = sizing.peak_per_dof(mesh.n_dofs, base_gb, level_peak, mem_per, rec["peak_rss_gb"] > peak_before)
             mem_cap = sizing.memory_dofs(base_gb, mem_per, max_memory_gb)
-            cap = min(max_dofs, mem_cap)
-            nxt = sizing.next_dofs(mesh.n_dofs, want, cap, grow, split=not split_done, prior=prev_rel is None)
+            # the refinement that made this level, or on the first one the prior (flexure.adaptive_sizing, "Time")
+            into = (hist[-2].get("refine_s") or 0.0) if lv else sizing.REFINE_S_PER_DOF * rec["dofs"]
+            per_s = sizing.seconds_per_dof(rec["dofs"], rec["level_s"] + into)
+            time_cap = MAX_DOFS_UNBOUNDED if max_seconds is None else \
+                sizing.time_dofs(max_seconds - (time.perf_counter() - t_start), per_s)
+            caps = {"max_dofs": max_dofs, "memory": mem_cap, "time": time_cap}
+            cap = min(caps.values())
+            nxt = sizing.next_dofs(mesh.n_dofs, want, cap, grow, split=not split_done, prior=prev_rel is None,
+                                   spent=None if max_seconds is None else time_cap)
             split_done = split_done or cap < want or 0 < nxt < min(want, cap)     # one split per run
             rec["sizing"] = {"target_dofs": int(want), "memory_cap_dofs": int(mem_cap), "base_rss_gb": base_gb,
                             "level_peak_gb": level_peak, "peak_per_dof_gb": mem_per, "next_dofs": int(nxt),
-                            "factor_rise": rise}
+                            "factor_rise": rise, "seconds_per_dof": per_s,
+                            "time_cap_dofs": None if max_seconds is None else int(time_cap)}
             prev_rel = goals_rel
-            if nxt == 0:                                       # a budget leaves no measurable step
-                stopped = "max_dofs" if max_dofs <= mem_cap else "memory"
+            if nxt == 0:                                       # a budget leaves no measurable step: the smallest
+                stopped = min(caps, key=lambda k: (caps[k], list(caps).index(k)))
                 break
             if eta_v is None:                 # a level the run goes on from: its indicators mark the next
                 eta_v = _dwr_indicators(rec, design, mesh, sol, weight, vals["sign"])
@@ -293,7 +308,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             tr = time.perf_counter()
             from flexure.dwr import element_indicators
             marked, rec["sizing"]["marks"] = sizing.marks_for(tm, element_indicators(mesh, eta_v) @ w, nxt, ROUNDS,
-                                                              geo_marked, gain=gain, limit=min(max_dofs, mem_cap))
+                                                              geo_marked, gain=gain, limit=cap)
             gain = rec["sizing"]["marks"]["gain"] or gain
             rec["safety_factor"] = _safety_factor(design, mesh, sol.U[:, :, 0])
             ref0 = sol.q[-6:].copy() if design.coupling == "rigid" else None    # not a view keeping all of q
@@ -321,7 +336,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
     res, fields = analyze_mesh(design, fin, mesh_s, progress=False, cases=goal_cases.from_goals(sol),
                                selections=_nested_selections(mesh, bands))
     hist[-1]["safety_factor"] = float(design.material.yield_Pa / res["max_von_mises_Pa"])   # the same u, mesh
-    _attach(res, hist, design, rtol, stopped, max_dofs, max_memory_gb)
+    _attach(res, hist, design, rtol, stopped, max_dofs, max_memory_gb, max_seconds)
     res["mesh"]["initial_snap"] = snapped
     res["total_s"] = float(time.perf_counter() - t_start)
     return res, fields
@@ -550,7 +565,8 @@ def _worst(rel: dict) -> float:
     return max([rel["torsional_stiffness_Nm_per_rad"], rel["gauge_strain_per_Nm"], *rel["arms"]])
 
 
-def _attach(res: dict, hist: list, design, rtol: float, stopped: str, max_dofs: int, max_memory_gb: float) -> None:
+def _attach(res: dict, hist: list, design, rtol: float, stopped: str, max_dofs: int, max_memory_gb: float,
+            max_seconds: float | None = None) -> None:
     """Error keys beside the figures of ``res`` (the final level), the levels, the stop."""
     last = hist[-1]
     est = last["estimate"]
@@ -592,12 +608,14 @@ def _attach(res: dict, hist: list, design, rtol: float, stopped: str, max_dofs: 
     res["discretization_levels"] = hist
     res["error_method"] = "adaptive"
     res["rtol"] = rtol
+    res["max_seconds"] = max_seconds
     res["stopped_by"] = stopped
     worst = _worst(_relative(last))
     if stopped != "rtol":
         why = {"max_dofs": f"the next level would exceed --max-dofs {max_dofs}",
                "memory": f"the next level would exceed the memory budget {max_memory_gb:g} GB",
                "max_levels": f"{MAX_LEVELS} levels",
+               "time": f"the time budget {max_seconds or 0:g} s (a measurable next level was predicted to end past it)",
                "invalid_mesh": f"the next refinement, whose {last.get('invalid_elements')} elements the projection onto "
                                "the true surface left flat or inverted"}[stopped]
         res["warnings"] = list(res["warnings"]) + [

@@ -64,6 +64,31 @@ a level at 94.6 k DOFs peaked at 1.13× its 1.2 prediction: the prediction is no
 source — allocator reuse, numba compiling or threads inside a level — is not found; the test is an xfail). The
 final six-case figures after the loop did not raise the process's peak in any of those runs.
 
+Time. A wall-time budget (``max_seconds``, --max-seconds) is a third cap beside the DOF and memory
+budgets, handled as they are (``next_dofs``: the step to the cap where no measurable step fits after
+it; none where no measurable step fits at all, and the run stops, "time"). A level's time is about
+proportional to its DOFs: its P2 goal solve, enriched solve, indicators and the bisection that made
+it, per DOF, changed little from level to level in the thick parts' runs (six_spoke_thick at 1 %,
+2026-11-27: 37, 41 and 36 µs a DOF at 76 k, 472 k and 807 k, the first without a refinement), so the
+last level's seconds per DOF (``seconds_per_dof``) × TIME_MARGIN predicts the next one, and the cap is
+what is left of the budget over it (``time_dofs``); the final six-case figures after the loop (under
+1 µs a DOF) stay inside the margin. The first level has no refinement of its own to count: it is
+allowed REFINE_S_PER_DOF, the largest measured (the STL thick disc's bisection and projection 99 k →
+873 k DOFs: 6.8 s, 7.8 µs a DOF of the new level; without it that run, predicted from the first level's
+38 µs a DOF, ended at 63.5 s of a 60 s budget). The first level is always solved: a budget below the
+meshing and the first level's solve ends with that level's answer, said so.
+
+Unlike the memory and DOF caps, the time budget is used up by every level (``next_dofs``'s ``spent``):
+a target that leaves no time for a measurable step after it is not taken; the step goes to what the
+budget holds instead. Measured (2026-11-27, 2 cores, --rtol 0.01, the analysis's own time), against
+the same budget without that rule (each level sized as under the memory cap, the split made): the thick
+disc under 45 s 84 k → 820 k, ± 1.52 % in 40.3 s (against 84 k → 491 k, ± 1.78 % in 28.6 s, where
+the step after it no longer fitted); the STL thick disc under 60 s ± 1.48 % (against ± 1.64 % in
+40.8 s); the five-spoke STEP part under 60 s ± 1.35 % in 44.2 s (± 1.56 % in 37.0 s); six_spoke_thick
+under 60 s 76 k → 750 k, ± 1.16 % in 50.4 s, where the same budget without it happened to fit 76 k →
+472 k → 670 k and reached ± 0.86 % in 52.3 s (its first level predicted 1.25 M DOFs of time, against
+0.99 M in the run with the rule: what that level predicts moves by ± 20 % from run to run).
+
 Marks. Longest-edge bisection with closure adds about the same DOFs per marked element on a given
 mesh (measured on the paper disc at 48.7 k DOFs, 2 rounds: 70–80 DOFs per marked element from 2 % to
 25 % of the elements marked). So one topology-only trial bisection (no fields, no projection) of the
@@ -155,7 +180,8 @@ def target_dofs(n_dofs: int, rel: np.ndarray, rate: np.ndarray, rtol: float, min
 LANDING = 1.1
 
 
-def next_dofs(n_dofs: int, want: int, cap: int, min_grow: float, split: bool = True, prior: bool = False) -> int:
+def next_dofs(n_dofs: int, want: int, cap: int, min_grow: float, split: bool = True, prior: bool = False,
+              spent: int | None = None) -> int:
     """The next level's DOFs under a budget ``cap`` (the DOF and memory budgets' smaller): ``want``
     while a measurable step (× min_grow) still fits after it; else the step is the last one and
     goes to the cap, the level most likely to reach rtol — unless ``want`` rests on the a-priori rate
@@ -166,14 +192,21 @@ def next_dofs(n_dofs: int, want: int, cap: int, min_grow: float, split: bool = T
     sequence reaches a smaller error at the cap in two steps than in one (the second marks with the
     indicators of a finer mesh); m = √(N · cap) within [cap/(LANDING min_grow²), cap/(LANDING min_grow)],
     so that from m, landed up to LANDING above it, the measurable last step to the cap still fits, and
-    only where that leaves m a measurable step above N. 0 where no measurable step fits."""
+    only where that leaves m a measurable step above N. 0 where no measurable step fits.
+
+    ``spent``: a cap that the steps use up (the time budget's, ``time_dofs``: after a level of m DOFs,
+    about spent − m is left). A measurable step after ``want`` then needs min(cap, spent − want) ≥ min_grow
+    · want, and an intermediate step m only where spent − m still holds the cap's level: a split that
+    spends the last level's time is not made (the five-spoke STEP part at --rtol 0.01 under 60 s, split
+    275 k → 466 k: the step to the cap no longer fitted, and the run stopped at ± 1.56 % after 37 s)."""
     if cap < min_grow * n_dofs:
         return 0
-    if want <= cap and (cap >= min_grow * want or not (prior and split)):
-        return int(cap) if cap < min_grow * want else int(want)
+    after = cap if spent is None else min(cap, spent - want)
+    if want <= cap and (after >= min_grow * want or not (prior and split)):
+        return int(cap) if after < min_grow * want else int(want)
     lo, hi = cap / (LANDING * min_grow ** 2), cap / (LANDING * min_grow)
     m = min(max(math.sqrt(n_dofs * cap), lo), hi)
-    if split and m >= min_grow * n_dofs:
+    if split and m >= min_grow * n_dofs and (spent is None or spent - m >= cap):
         return int(m)
     return int(cap)
 
@@ -195,6 +228,22 @@ def predicted_peak_gb(n_dofs: int, base_gb: float, per_dof_gb: float) -> float:
 def memory_dofs(base_gb: float, per_dof_gb: float, budget_gb: float) -> int:
     """The most DOFs whose predicted peak (``predicted_peak_gb``) stays within ``budget_gb``."""
     return int(max(budget_gb - base_gb, 0.0) / (MEMORY_MARGIN * per_dof_gb))
+
+
+#: the predicted time's margin over the last level's seconds per DOF (module docstring, "Time")
+TIME_MARGIN = 1.2
+#: the first level's allowance for the refinement into the next one, seconds per DOF (module docstring, "Time")
+REFINE_S_PER_DOF = 8e-6
+
+
+def seconds_per_dof(n_dofs: int, level_s: float) -> float:
+    """A level's wall time per DOF: its solves, estimate and marking with the refinement that made it."""
+    return max(level_s, 1e-9) / max(n_dofs, 1)
+
+
+def time_dofs(remaining_s: float, per_dof_s: float) -> int:
+    """The most DOFs a next level may have to end within ``remaining_s`` (module docstring, "Time")."""
+    return int(max(remaining_s, 0.0) / (TIME_MARGIN * per_dof_s))
 
 
 def marks_for(tm, comb: np.ndarray, target: int, rounds: int, forced=(), tries: int = 3,

@@ -300,13 +300,16 @@ DEFAULT_METHOD = "adaptive"
 
 def analyze_design(design, size: str | None = None, order: int | None = None, rtol: float | None = None,
                    method: str | None = None, max_dofs: int | None = None, max_memory_gb: float | None = None,
-                   progress: bool = False, max_elements: float | None = None):
+                   progress: bool = False, max_elements: float | None = None, max_seconds: float | None = None):
     """The analysis with its discretisation error estimates, by ``method`` (default DEFAULT_METHOD):
     "adaptive" (goal-oriented estimates on nested, locally refined meshes, flexure.adaptive) or
     "levels" (this module's Richardson over gmsh mesh levels, the cross-check). P1 (order 1) always
-    uses the levels (the refinement works on P2 meshes), and says so. → (results, Fields)."""
+    uses the levels (the refinement works on P2 meshes), and says so; ``max_seconds`` (the adaptive
+    refinement's time budget) is refused there. → (results, Fields)."""
     method = method or DEFAULT_METHOD
     eff_order = order or design.order
+    if max_seconds is not None and (method != "adaptive" or eff_order != 2):
+        raise InputError("--max-seconds: a budget of the adaptive refinement (order 2); the levels have none")
     if method == "adaptive" and eff_order != 2:
         res, fields = analyze_with_error(design, size, order, rtol, max_dofs=max_dofs or MAX_DOFS,
                                          progress=progress, max_elements=max_elements)
@@ -318,7 +321,7 @@ def analyze_design(design, size: str | None = None, order: int | None = None, rt
 
         return adaptive.analyze_adaptive(design, size, rtol=rtol, max_dofs=max_dofs or adaptive.MAX_DOFS,
                                          max_memory_gb=max_memory_gb or adaptive.MAX_MEMORY_GB,
-                                         progress=progress, max_elements=max_elements)
+                                         progress=progress, max_elements=max_elements, max_seconds=max_seconds)
     if method != "levels":
         raise InputError(f"error method must be 'adaptive' or 'levels', got {method!r}")
     res, fields = analyze_with_error(design, size, order, rtol, max_dofs=max_dofs or MAX_DOFS, progress=progress,

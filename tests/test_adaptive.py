@@ -127,13 +127,27 @@ def test_a_refinement_left_folded_stops_at_the_last_valid_level(tmp_path, monkey
 
 @pytest.mark.parametrize("budget,stop,needle", [
     pytest.param({"max_dofs": 8_000}, "max_dofs", "--max-dofs 8000", marks=pytest.mark.slow),
-    ({"max_memory_gb": 0.2}, "memory", "memory budget 0.2 GB")])
+    ({"max_memory_gb": 0.2}, "memory", "memory budget 0.2 GB"),
+    ({"max_seconds": 1e-3}, "time", "time budget 0.001 s")])
 def test_a_budget_stops_the_refinement_and_says_which(tmp_path, budget, stop, needle):
     d = annulus(tmp_path, sections=24)
     res, _ = analyze_adaptive(d, rtol=1e-5, initial_h_factor=2.5, **budget)
     assert res["stopped_by"] == stop
     assert any("--rtol 1e-05 not reached" in w and needle in w for w in res["warnings"])
     assert all(math.isfinite(res[f"{k}_error_estimate"]) for k in ("gauge_strain_per_Nm", "torsional_stiffness_Nm_per_rad"))
+
+
+def test_a_time_budget_that_is_not_reached_changes_nothing(small_run):
+    """A budget far above the run's time: the same levels, figures and estimates as without one; the
+    seconds per DOF and the time cap recorded where a next level was sized."""
+    d, (res, _) = small_run
+    res_t, _ = analyze_adaptive(d, rtol=0.004, max_memory_gb=8.0, max_seconds=1e6)
+    assert res_t["stopped_by"] == res["stopped_by"] == "rtol" and res_t["max_seconds"] == 1e6
+    assert [lv["dofs"] for lv in res_t["discretization_levels"]] == [lv["dofs"] for lv in res["discretization_levels"]]
+    for k in ("torsional_stiffness_Nm_per_rad", "gauge_strain_per_Nm"):
+        assert res_t[k] == res[k] and res_t[f"{k}_error_estimate"] == res[f"{k}_error_estimate"]
+    sized = [lv["sizing"] for lv in res_t["discretization_levels"] if lv.get("sizing")]
+    assert sized and all(s["seconds_per_dof"] > 0 and s["time_cap_dofs"] > s["next_dofs"] for s in sized)
 
 
 def test_order_1_falls_back_to_the_levels_and_says_so(tmp_path, monkeypatch):

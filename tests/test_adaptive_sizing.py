@@ -129,3 +129,27 @@ def test_marks_hit_the_target_and_never_exceed_the_limit():
     assert len(info2["trials"]) == 2                               # one trial from the measured gain
     _, capped = sz.marks_for(tm, comb, int(1.8 * n0), rounds=2, limit=int(1.4 * n0))
     assert n0 < capped["predicted_dofs"] <= 1.4 * n0
+
+
+def test_time_cap_is_what_is_left_over_the_last_levels_seconds_per_dof_with_its_margin():
+    per = sz.seconds_per_dof(400_000, 16.0)                     # 40 µs a DOF
+    assert per == pytest.approx(4e-5)
+    assert sz.time_dofs(30.0, per) == int(30.0 / (sz.TIME_MARGIN * 4e-5))
+    assert sz.time_dofs(-5.0, per) == 0                          # past the budget: no next level
+    # as a cap of next_dofs: a target beyond it steps to it where no measurable step fits after it
+    cap = sz.time_dofs(30.0, per)
+    assert sz.next_dofs(400_000, 2_000_000, cap, 1.33, split=False) == cap
+    assert sz.next_dofs(400_000, 2_000_000, sz.time_dofs(5.0, per), 1.33) == 0
+
+
+def test_a_time_cap_is_spent_by_the_steps():
+    """The time budget is used up by each level (``spent``): a target leaving no time for a measurable step
+    after it goes to the cap at once, and no intermediate step is made that would spend the last level's time."""
+    g = 1.33
+    assert sz.next_dofs(84_000, 500_000, 850_000, g) == 500_000                       # memory cap: room after it
+    assert sz.next_dofs(84_000, 500_000, 850_000, g, spent=5_000_000) == 500_000      # time ample: the same
+    assert sz.next_dofs(84_000, 500_000, 850_000, g, spent=969_000) == 850_000        # 469 k left: the last step
+    assert sz.next_dofs(300_000, 2_000_000, 850_000, g, split=True) == 504_975         # memory cap: split
+    assert sz.next_dofs(300_000, 2_000_000, 850_000, g, split=True, spent=5_000_000) == 504_975
+    assert sz.next_dofs(300_000, 2_000_000, 850_000, g, split=True, spent=1_200_000) == 850_000
+

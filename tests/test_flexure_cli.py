@@ -98,7 +98,12 @@ def test_rtol_stopped_by_a_refused_finer_level_keeps_the_levels_solved(capsys, m
 
 @pytest.mark.parametrize("argv, where", [(["--rtol", "0"], "--rtol"), (["--rtol", "2"], "--rtol"),
                                          (["--rtol", "0.01", "--single-level"], "--rtol"),
-                                         (["--max-dofs", "10"], "--max-dofs")])
+                                         (["--max-dofs", "10"], "--max-dofs"),
+                                         (["--max-seconds", "0"], "--max-seconds"),
+                                         (["--max-seconds", "nan"], "--max-seconds"),
+                                         (["--max-seconds", "30", "--error-method", "levels"], "--max-seconds"),
+                                         (["--max-seconds", "30", "--sweep", "spoke_width_mm=3,4"], "--max-seconds"),
+                                         (["--max-seconds", "30"], "--max-seconds")])      # order 1: the levels
 def test_bad_rtol_options_exit_2(capsys, argv, where):
     code, out, err = _run(capsys, "--order", "1", *argv)
     assert code == 2 and out == "" and err.strip().count("\n") == 0 and where in err

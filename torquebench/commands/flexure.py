@@ -13,6 +13,7 @@ and with ``--png`` the trade-off plot instead of the field picture.
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 
@@ -57,6 +58,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--max-memory-gb", type=float, default=None, metavar="GB",
                         help="memory budget of the adaptive refinement: stop before a level is predicted to "
                              "need more than GB of resident memory (default: 3.0)")
+    parser.add_argument("--max-seconds", type=float, default=None, metavar="S",
+                        help="time budget of the adaptive refinement: its last level is the one predicted to end "
+                             "within S seconds of wall time from the meshing on, and the run says so where --rtol "
+                             "is not reached by then (default: none)")
     parser.add_argument("--max-elements", type=float, default=None, metavar="N",
                         help="refuse, before meshing, a mesh estimated above N tetrahedra (default: 500,000, "
                              "about 6 GB for P2 by its estimate; it usually binds before --max-dofs)")
@@ -83,6 +88,13 @@ def _check_outputs(args, design_path: Path, design=None):
         raise InputError(f"--max-dofs: must be ≥ 1000, got {args.max_dofs}")
     if args.max_memory_gb is not None and not args.max_memory_gb > 0.1:
         raise InputError(f"--max-memory-gb: must be > 0.1, got {args.max_memory_gb:g}")
+    if args.max_seconds is not None and not (math.isfinite(args.max_seconds) and args.max_seconds > 0):
+        raise InputError(f"--max-seconds: must be a positive number of seconds, got {args.max_seconds:g}")
+    if args.max_seconds is not None and args.sweep:
+        raise InputError("--max-seconds: a budget of one design's refinement; drop --sweep")
+    if args.max_seconds is not None and (args.error_method != "adaptive" or args.single_level):
+        raise InputError("--max-seconds: a budget of the adaptive refinement; drop it, or --error-method levels "
+                         "and --single-level")
     if args.max_elements is not None and not args.max_elements >= 100:
         raise InputError(f"--max-elements: must be ≥ 100, got {args.max_elements:g}")
     if args.sweep and args.vtu is not None:
@@ -232,7 +244,8 @@ def _one(args, design, progress) -> int:
         from flexure.convergence import analyze_design
         res, fields = analyze_design(design, args.size, args.order, rtol=args.rtol, method=args.error_method,
                                      max_dofs=args.max_dofs, max_memory_gb=args.max_memory_gb,
-                                     progress=progress and not args.json, max_elements=args.max_elements)
+                                     progress=progress and not args.json, max_elements=args.max_elements,
+                                     max_seconds=args.max_seconds)
     if args.vtu is not None:
         from flexure.render import write_vtu
         res["vtu"] = str(write_vtu(fields, args.vtu))
