@@ -99,10 +99,10 @@ MAX_DOFS_UNBOUNDED = 2**62
 #: the bridge's arm signs (bridge.wheatstone "full_bending": ε1 − ε2 + ε3 − ε4)
 ARM_SIGN = {1: 1.0, 2: -1.0, 3: 1.0, 4: -1.0}
 METHOD = ("goal-oriented (dual-weighted residual) estimate on nested adaptively refined meshes "
-          "({levels} levels, {dofs} dofs): the raw DWR estimate {raw} divided by its effectivity measured "
+          "({levels}, {dofs} dofs): the raw DWR estimate {raw} divided by its effectivity measured "
           "over the last refinement step ({kappa}) and × {safety}; a bound-like figure, not 1σ")
 
-METHOD_ENRICHED = ("goal-oriented estimate on nested adaptively refined meshes ({levels} levels, {dofs} dofs): "
+METHOD_ENRICHED = ("goal-oriented estimate on nested adaptively refined meshes ({levels}, {dofs} dofs): "
                    "max({factor:g}, 1.5/(1 − q̂)) × |J(u⁺) − J(u_h)|, u⁺ the solution in the enriched space P2 ⊕ "
                    "cubic surplus on the last mesh (one global solve, flexure.enriched), q̂ the ratio of the enriched "
                    "to the P2 error measured between the last two nested levels (flexure.saturation; where it is not "
@@ -516,6 +516,10 @@ def _enriched_estimates(rec: dict, prev: dict | None = None, q_seen: dict | None
             "kappa": q, "kappa_how": how}
 
 
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" + ("" if n == 1 else "s")
+
+
 def _goal_keys(n: int) -> list[str]:
     return ["theta", "eps_ref"] + [f"g{i}" for i in range(n - 2)]
 
@@ -575,9 +579,9 @@ def _attach(res: dict, hist: list, design, rtol: float, stopped: str, max_dofs: 
 
     def method(key_eta: str, key_kappa: str, J: float) -> str:
         if last.get("enriched"):
-            return METHOD_ENRICHED.format(levels=n, dofs=last["dofs"], factor=ENRICHED_FACTOR)
+            return METHOD_ENRICHED.format(levels=_count(n, 'level'), dofs=last["dofs"], factor=ENRICHED_FACTOR)
         raw = abs(last["eta"][key_eta] if key_eta != "gauges" else 0.0) / max(abs(J), 1e-300)
-        return METHOD.format(levels=n, dofs=last["dofs"], raw=f"{raw:.2%}",
+        return METHOD.format(levels=_count(n, 'level'), dofs=last["dofs"], raw=f"{raw:.2%}",
                              kappa=f"κ = {kap[key_kappa]:.2f}, {last['kappa_how'][key_kappa]}", safety=SAFETY)
 
     e_k = est["torsional_stiffness_Nm_per_rad"]
@@ -590,7 +594,7 @@ def _attach(res: dict, hist: list, design, rtol: float, stopped: str, max_dofs: 
     res["gauge_strain_per_Nm_error_method"] = method("eps_ref", "eps_ref", last["gauge_strain_per_Nm"]) if \
         last.get("enriched") else (
         "its arms' adaptive estimates combined by the triangle inequality, Σ|s_i| e_i / 4 (s_i the bridge's arm "
-        f"signs; each arm: {METHOD.format(levels=n, dofs=last['dofs'], raw='η', kappa='κ per arm', safety=SAFETY)})")
+        f"signs; each arm: {METHOD.format(levels=_count(n, 'level'), dofs=last['dofs'], raw='η', kappa='κ per arm', safety=SAFETY)})")
     res["sensitivity_mV_per_V_per_Nm_error_estimate"] = float(rel_s * abs(res["sensitivity_mV_per_V_per_Nm"]))
     res["sensitivity_mV_per_V_per_Nm_error_method"] = ("the bridge strain's relative estimate (the sensitivity "
                                                        "is proportional to it)")

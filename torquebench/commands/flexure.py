@@ -145,7 +145,7 @@ def _print_design(res: dict) -> None:
         arms = res.get("gauge_strains_per_Nm_error_estimate", {})
         per = ", ".join(f"{k} ± {100 * v / abs(res['gauge_strains_per_Nm'][k]):.2g} %" for k, v in arms.items()
                         if res["gauge_strains_per_Nm"].get(k))
-        print(f"refinement: {len(res['discretization_levels'])} nested levels, stopped by {res['stopped_by']} "
+        print(f"refinement: {len(res['discretization_levels'])} nested level{'' if len(res['discretization_levels']) == 1 else 's'}, stopped by {res['stopped_by']} "
               f"(--rtol {res['rtol']:g}); each gauge: {per}")
     print(f"minimum detectable torque: {res['min_detectable_torque_Nm'] * 1e3:.3g} mN·m (1σ noise), "
           f"{res['min_detectable_torque_enob_Nm'] * 1e3:.3g} mN·m (ENOB resolution)")
