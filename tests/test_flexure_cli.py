@@ -103,6 +103,11 @@ def test_rtol_stopped_by_a_refused_finer_level_keeps_the_levels_solved(capsys, m
                                          (["--max-seconds", "nan"], "--max-seconds"),
                                          (["--max-seconds", "30", "--error-method", "levels"], "--max-seconds"),
                                          (["--max-seconds", "30", "--sweep", "spoke_width_mm=3,4"], "--max-seconds"),
+                                         (["--rtol", "0.01", "--sweep", "spoke_width_mm=3,4"], "--rtol"),
+                                         (["--max-dofs", "50000", "--sweep", "spoke_width_mm=3,4"], "--max-dofs"),
+                                         (["--max-memory-gb", "2", "--sweep", "spoke_width_mm=3,4"], "--max-memory-gb"),
+                                         (["--error-method", "levels", "--sweep", "spoke_width_mm=3,4"],
+                                          "--error-method"),
                                          (["--max-seconds", "30"], "--max-seconds")])      # order 1: the levels
 def test_bad_rtol_options_exit_2(capsys, argv, where):
     code, out, err = _run(capsys, "--order", "1", *argv)

@@ -90,8 +90,13 @@ def _check_outputs(args, design_path: Path, design=None):
         raise InputError(f"--max-memory-gb: must be > 0.1, got {args.max_memory_gb:g}")
     if args.max_seconds is not None and not (math.isfinite(args.max_seconds) and args.max_seconds > 0):
         raise InputError(f"--max-seconds: must be a positive number of seconds, got {args.max_seconds:g}")
-    if args.max_seconds is not None and args.sweep:
-        raise InputError("--max-seconds: a budget of one design's refinement; drop --sweep")
+    if args.sweep:                # its rows carry a two-level indicator (flexure.analysis.sweep): no refinement
+        given = [flag for flag, value in (("--rtol", args.rtol), ("--max-dofs", args.max_dofs),
+                                          ("--max-memory-gb", args.max_memory_gb), ("--max-seconds", args.max_seconds))
+                 if value is not None] + (["--error-method"] if args.error_method != "adaptive" else [])
+        if given:
+            raise InputError(f"{given[0]}: a setting of one design's refinement, which a sweep does not run (each "
+                             "row carries a two-level error indicator); drop it or --sweep")
     if args.max_seconds is not None and (args.error_method != "adaptive" or args.single_level):
         raise InputError("--max-seconds: a budget of the adaptive refinement; drop it, or --error-method levels "
                          "and --single-level")
