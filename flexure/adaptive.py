@@ -263,6 +263,9 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             rec["predicted_peak_gb"] = predicted_gb        # by the level before (None on the first)
             # this level's peak: the process's if the level raised it, else the largest sampled RSS
             level_peak = max(rss_level, rss.now_gb(), rec["peak_rss_gb"] if rec["peak_rss_gb"] > peak_before else 0.0)
+            if enr is not None and not rec["enriched"].get("converged", True):   # no estimate to mark or stop by
+                stopped = "unconverged"
+                break
             if worst <= rtol and lv + 1 >= MIN_LEVELS:
                 stopped = "rtol"
                 break
@@ -609,6 +612,12 @@ def _attach(res: dict, hist: list, design, rtol: float, stopped: str, max_dofs: 
     else:
         res["safety_factor_error_estimate"] = math.nan
         res["safety_factor_error_method"] = "not estimated (one level)"
+    if stopped == "unconverged":
+        for k in ("torsional_stiffness_Nm_per_rad", "gauge_strain_per_Nm", "sensitivity_mV_per_V_per_Nm",
+                  "safety_factor"):
+            res[f"{k}_error_estimate"] = math.nan
+            res[f"{k}_error_method"] = "withheld: the enriched solve of the estimate did not converge"
+        res["gauge_strains_per_Nm_error_estimate"] = {k: math.nan for k in res["gauge_strains_per_Nm_error_estimate"]}
     res["discretization_levels"] = hist
     res["error_method"] = "adaptive"
     res["rtol"] = rtol
@@ -620,7 +629,11 @@ def _attach(res: dict, hist: list, design, rtol: float, stopped: str, max_dofs: 
                "memory": f"the next level would exceed the memory budget {max_memory_gb:g} GB",
                "max_levels": f"{MAX_LEVELS} levels",
                "time": f"the time budget {max_seconds or 0:g} s (a measurable next level was predicted to end past it)",
+               "unconverged": "the error estimate's enriched solve, which did not converge in "
+                              f"{(last.get('enriched') or {}).get('pcg_iterations')} iterations (a near-incompressible "
+                              f"material, ν = {design.material.nu:g}?): the figures' ± are withheld",
                "invalid_mesh": f"the next refinement, whose {last.get('invalid_elements')} elements the projection onto "
                                "the true surface left flat or inverted"}[stopped]
-        res["warnings"] = list(res["warnings"]) + [
-            f"--rtol {rtol:g} not reached: worst error estimate {worst:.2%} at {last['dofs']} dofs; stopped by {why}"]
+        where = (f"no error estimate at {last['dofs']} dofs" if stopped == "unconverged"
+                 else f"worst error estimate {worst:.2%} at {last['dofs']} dofs")
+        res["warnings"] = list(res["warnings"]) + [f"--rtol {rtol:g} not reached: {where}; stopped by {why}"]

@@ -49,6 +49,11 @@ from flexure.mesh import TET_EDGES, TET_FACES, TET_FACES_P2, Mesh
 #: within 4.9 %; 1e-1 took 14–18 and left one gauge's small d 18 % off (three_spoke_thin, 35 k)
 RTOL = 5e-2
 MAX_ITER = 2000
+#: the adaptive levels' cap on the enriched CG (``goal_errors``): it takes 14–24 iterations at RTOL on every
+#: part measured; one still short of RTOL here is on a system its preconditioner does not reach (a
+#: near-incompressible material: the paper disc at ν = 0.4999, 48.7 k P2 DOFs, stopped at MAX_ITER after 45 s),
+#: and its estimate is flagged (info "converged" False: flexure.adaptive stops and withholds the ±)
+LEVEL_MAX_ITER = 200
 #: K_WW and K_hW as 3 × 3 blocks of float32 values (flexure.block_sparse; products summed in float64):
 #: 40 bytes a block against 108 in the scalar float64 CSR. Its rounding (relative 6e-8 an entry) is far
 #: below the CG's 1e-2: d moved by ≤ 1.3e-4 (relative, θ and gauges, 2026-11-27, first adaptive meshes at
@@ -334,7 +339,9 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
     d_theta = float(eh[theta_index]) if theta_index is not None else math.nan
     if duals is not None:
         d_theta, d_eps = dual_corrected(d_theta, d_eps, duals, res[:nq])
-    info = {"enriched_dofs": int(nq + keep.sum()), "pcg_iterations": int(its), "setup_s": t1 - t0,
+    converged = bool(nb == 0 or np.linalg.norm(res) <= rtol * nb)
+    info = {"enriched_dofs": int(nq + keep.sum()), "pcg_iterations": int(its), "converged": converged,
+            "setup_s": t1 - t0,
             "matrix_bytes": int(sum(_nbytes(M) for M in (Kww, C if enriched_assembly.available() else Cq))),
             "solve_s": time.perf_counter() - t1, "coef": coef}
     return d_eps, d_theta, info
@@ -384,7 +391,7 @@ def goal_errors(design, mesh, sol, release: bool = False) -> dict | None:
         rss.now_gb(trim=True)
     d_eps, d_theta, info = enriched_solve(system, mesh, design.material, design.gauges, sol.U[:, :, 0],
                                           sol.q[:, 0], sol.constrained, precond, theta_index=theta_index,
-                                          duals=sol.q, residual_h=rh)
+                                          duals=sol.q, residual_h=rh, max_iter=LEVEL_MAX_ITER)
     coef = info.pop("coef")
     return {"theta": d_theta, "gauges": np.asarray(d_eps), "info": info,
             "weight": (coef[:, :6], coef[:, 6:])}

@@ -137,6 +137,22 @@ def test_a_budget_stops_the_refinement_and_says_which(tmp_path, budget, stop, ne
     assert all(math.isfinite(res[f"{k}_error_estimate"]) for k in ("gauge_strain_per_Nm", "torsional_stiffness_Nm_per_rad"))
 
 
+def test_an_estimate_whose_enriched_solve_did_not_converge_is_withheld_and_stops_the_run(tmp_path, monkeypatch):
+    """The enriched CG short of its tolerance at its cap (as on a near-incompressible material): the run stops
+    on that level, says why, and gives the figures without a ± (NaN), never the unconverged iterate's."""
+    from flexure import enriched
+
+    monkeypatch.setattr(enriched, "LEVEL_MAX_ITER", 1)
+    res, _ = analyze_adaptive(annulus(tmp_path, sections=24), rtol=1e-3, initial_h_factor=2.5)
+    assert res["stopped_by"] == "unconverged" and len(res["discretization_levels"]) == 1
+    assert res["discretization_levels"][0]["enriched"]["converged"] is False
+    assert any("no error estimate" in w and "did not converge in 1 iterations" in w for w in res["warnings"])
+    for k in ("torsional_stiffness_Nm_per_rad", "gauge_strain_per_Nm", "sensitivity_mV_per_V_per_Nm"):
+        assert math.isfinite(res[k]) and math.isnan(res[f"{k}_error_estimate"])
+        assert "withheld" in res[f"{k}_error_method"]
+    assert all(math.isnan(v) for v in res["gauge_strains_per_Nm_error_estimate"].values())
+
+
 def test_a_time_budget_that_is_not_reached_changes_nothing(small_run):
     """A budget far above the run's time: the same levels, figures and estimates as without one; the
     seconds per DOF and the time cap recorded where a next level was sized."""

@@ -149,7 +149,7 @@ def _print_design(res: dict) -> None:
     if res.get("error_method") == "adaptive":
         arms = res.get("gauge_strains_per_Nm_error_estimate", {})
         per = ", ".join(f"{k} ± {100 * v / abs(res['gauge_strains_per_Nm'][k]):.2g} %" for k, v in arms.items()
-                        if res["gauge_strains_per_Nm"].get(k))
+                        if res["gauge_strains_per_Nm"].get(k) and v == v) or "withheld"
         print(f"refinement: {len(res['discretization_levels'])} nested level{'' if len(res['discretization_levels']) == 1 else 's'}, stopped by {res['stopped_by']} "
               f"(--rtol {res['rtol']:g}); each gauge: {per}")
     print(f"minimum detectable torque: {res['min_detectable_torque_Nm'] * 1e3:.3g} mN·m (1σ noise), "
