@@ -257,7 +257,8 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             rel = _relative(rec)
             worst = _worst(rel)
             bar.update(1)
-            bar.set_description(f"flexure: level {lv} {mesh.n_dofs} dofs, worst error ±{worst:.2%}")
+            bar.set_description(f"flexure: level {lv} {mesh.n_dofs} dofs, worst error ±{worst:.2%}"
+                                + (f", {time.perf_counter() - t_start:.0f} s of {max_seconds:g} s" if max_seconds else ""))
             rec["level_s"] = time.perf_counter() - tl
             rec["peak_rss_gb"] = rss.peak_gb()
             rec["predicted_peak_gb"] = predicted_gb        # by the level before (None on the first)

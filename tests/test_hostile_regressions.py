@@ -79,6 +79,23 @@ def test_cache_info_warns_when_the_cache_cannot_be_written(tmp_path, capsys, mon
     assert words in json.loads(capsys.readouterr().out)["warnings"][0]
 
 
+def test_cache_info_counts_no_entry_removed_since_it_was_listed(tmp_path, capsys, monkeypatch):
+    """The hostile pass's `cache info` beside concurrent runs on one cache: an entry listed in the manifest
+    and removed before its size was read (a `cache clear`, a corrupt entry dropped) ended in exit 2."""
+    import json
+
+    from torquebench.cache import Cache
+
+    cache = Cache(tmp_path / "cache")
+    cache.put("a" * 64, 1.0)
+    cache.put("b" * 64, 2.0)
+    listed = Cache.keys
+    monkeypatch.setattr(Cache, "keys", lambda self: (listed(self), (self.dir / f"{'a' * 64}.pkl").unlink())[0])
+    assert main(["cache", "info", "--cache-dir", str(tmp_path / "cache"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["entries"] == 1 and out["size_bytes"] == (tmp_path / "cache" / f"{'b' * 64}.pkl").stat().st_size
+
+
 @pytest.mark.parametrize("value", [None, {"converged": False}])
 def test_a_calibration_without_a_convergence_record_is_warned(tmp_path, capsys, value):
     """`apply` of a hash-valid calibration whose diagnostics were removed answered silently."""

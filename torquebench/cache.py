@@ -113,8 +113,13 @@ class Cache:
     def info(self) -> dict:
         keys = self.keys() if self.dir.is_dir() else []
         others = len([f for f in self.dir.glob("*.pkl") if f.stem not in set(keys)]) if self.dir.is_dir() else 0
-        return {"directory": str(self.dir), "entries": len(keys),
-                "size_bytes": int(sum(self._path(k).stat().st_size for k in keys)),
+        sizes = []
+        for k in keys:               # an entry removed since it was listed (a concurrent clear or run) is not counted
+            try:
+                sizes.append(self._path(k).stat().st_size)
+            except FileNotFoundError:
+                pass
+        return {"directory": str(self.dir), "entries": len(sizes), "size_bytes": int(sum(sizes)),
                 "other_files": others}
 
     def clear(self) -> int:
