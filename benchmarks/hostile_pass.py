@@ -20,7 +20,8 @@ Outcomes (first that applies):
   data_loss   a file that existed before changed or vanished (except a named output replaced with
               --force), or a file appeared outside the case's work directory
   unclear     exit 2 with more or less than one line on stderr, or "not found" for a path that
-              exists; an interrupt that does not end with exit 130 and one line
+              exists; an interrupt that does not end with exit 130 and one line (after the run's own
+              progress lines)
   silent      nonsense input answered with exit 0 and no "warning" anywhere in the output
   refused_valid  a control case that did not exit 0
   ok          anything else (exit 2 with one line; exit 0 with a warning; a control that worked)

@@ -47,8 +47,11 @@ def gen_paths(rng) -> list[Case]:
             argv = ["simulate", "scene.toml", "--out", "sim.csv"]
         else:
             p, s2, kind = alias(rng, "robot.toml")
-            setup, argv = s2, ["simulate", "scene.toml", "--out", p.replace(".toml", ".csv") if rng.random() < 0.3 else p]
-        cases.append(Case("paths", f"simulate {choice}", argv + (["--force"] if force else []), setup, "error", force))
+            if rng.random() < 0.3:          # the alias's directory, a new name: a legitimate output (and sidecars)
+                p, choice = p.replace(".toml", ".csv"), "log beside an aliased input"
+            setup, argv = s2, ["simulate", "scene.toml", "--out", p]
+        expect = "ok" if choice == "log beside an aliased input" else "error"
+        cases.append(Case("paths", f"simulate {choice}", argv + (["--force"] if force else []), setup, expect, force))
     # calibrate / apply over inputs
     for _ in range(12):
         target = rng.choice(["session.csv", "cal.json", "readings.csv", "notes.md"])

@@ -166,8 +166,9 @@ def classify(rec, case, work) -> str:
         return "traceback"
     if rec["changed"]:
         return "data_loss"
-    if case.expect == "interrupt":
-        if code == 130 and len(lines) <= 1:
+    if case.expect == "interrupt":      # one line about the interrupt, after any progress lines of the run
+        if code == 130 and (len(lines) <= 1 or ("interrupted" in lines[-1]
+                                                 and sum("interrupted" in ln for ln in lines) == 1)):
             return "ok"
         if code == 0:
             return "ok"                 # finished before the signal
