@@ -94,8 +94,6 @@ ENRICHED_FACTOR = saturation.FLAT
 MAX_LEVELS = 14
 MAX_DOFS = 2_000_000
 MAX_MEMORY_GB = 3.0
-#: no time budget (``max_seconds`` None): a cap no level reaches
-MAX_DOFS_UNBOUNDED = 2**62
 #: the bridge's arm signs (bridge.wheatstone "full_bending": ε1 − ε2 + ε3 − ε4)
 ARM_SIGN = {1: 1.0, 2: -1.0, 3: 1.0, 4: -1.0}
 METHOD = ("goal-oriented (dual-weighted residual) estimate on nested adaptively refined meshes "
@@ -285,12 +283,12 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             # the refinement that made this level, or on the first one the prior (flexure.adaptive_sizing, "Time")
             into = (hist[-2].get("refine_s") or 0.0) if lv else sizing.REFINE_S_PER_DOF * rec["dofs"]
             per_s = sizing.seconds_per_dof(rec["dofs"], rec["level_s"] + into)
-            time_cap = MAX_DOFS_UNBOUNDED if max_seconds is None else \
+            time_cap = math.inf if max_seconds is None else \
                 sizing.time_dofs(max_seconds - (time.perf_counter() - t_start), per_s)
             caps = {"max_dofs": max_dofs, "memory": mem_cap, "time": time_cap}
             cap = min(caps.values())
             nxt = sizing.next_dofs(mesh.n_dofs, want, cap, grow, split=not split_done, prior=prev_rel is None,
-                                   spent=None if max_seconds is None else time_cap)
+                                   spent=time_cap)
             split_done = split_done or cap < want or 0 < nxt < min(want, cap)     # one split per run
             rec["sizing"] = {"target_dofs": int(want), "memory_cap_dofs": int(mem_cap), "base_rss_gb": base_gb,
                             "level_peak_gb": level_peak, "peak_per_dof_gb": mem_per, "next_dofs": int(nxt),
@@ -298,7 +296,7 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
                             "time_cap_dofs": None if max_seconds is None else int(time_cap)}
             prev_rel = goals_rel
             if nxt == 0:                                       # a budget leaves no measurable step: the smallest
-                stopped = min(caps, key=lambda k: (caps[k], list(caps).index(k)))
+                stopped = min(caps, key=caps.get)             # (the first of equal ones)
                 break
             if eta_v is None:                 # a level the run goes on from: its indicators mark the next
                 eta_v = _dwr_indicators(rec, design, mesh, sol, weight, vals["sign"])

@@ -181,7 +181,7 @@ LANDING = 1.1
 
 
 def next_dofs(n_dofs: int, want: int, cap: int, min_grow: float, split: bool = True, prior: bool = False,
-              spent: int | None = None) -> int:
+              spent: float = math.inf) -> int:
     """The next level's DOFs under a budget ``cap`` (the DOF and memory budgets' smaller): ``want``
     while a measurable step (× min_grow) still fits after it; else the step is the last one and
     goes to the cap, the level most likely to reach rtol — unless ``want`` rests on the a-priori rate
@@ -194,19 +194,19 @@ def next_dofs(n_dofs: int, want: int, cap: int, min_grow: float, split: bool = T
     so that from m, landed up to LANDING above it, the measurable last step to the cap still fits, and
     only where that leaves m a measurable step above N. 0 where no measurable step fits.
 
-    ``spent``: a cap that the steps use up (the time budget's, ``time_dofs``: after a level of m DOFs,
+    ``spent``: a cap that the steps use up (the time budget's, ``time_dofs``; inf without one: after a level of m DOFs,
     about spent − m is left). A measurable step after ``want`` then needs min(cap, spent − want) ≥ min_grow
     · want, and an intermediate step m only where spent − m still holds the cap's level: a split that
     spends the last level's time is not made (the five-spoke STEP part at --rtol 0.01 under 60 s, split
     275 k → 466 k: the step to the cap no longer fitted, and the run stopped at ± 1.56 % after 37 s)."""
     if cap < min_grow * n_dofs:
         return 0
-    after = cap if spent is None else min(cap, spent - want)
+    after = min(cap, spent - want)
     if want <= cap and (after >= min_grow * want or not (prior and split)):
         return int(cap) if after < min_grow * want else int(want)
     lo, hi = cap / (LANDING * min_grow ** 2), cap / (LANDING * min_grow)
     m = min(max(math.sqrt(n_dofs * cap), lo), hi)
-    if split and m >= min_grow * n_dofs and (spent is None or spent - m >= cap):
+    if split and m >= min_grow * n_dofs and spent - m >= cap:
         return int(m)
     return int(cap)
 
