@@ -15,8 +15,11 @@ around them). Three surface strategies:
     direct                classify the STL's triangles, patches cut to be parametrisable (gmsh's t13)
     re-parametrised       first re-triangulate the STL's patches uncut at the field's size (gmsh
                           parametrises each whole), which leaves well-shaped triangles, then re-mesh
-                          *those* the same way: whatever gmsh cuts internally now runs along them
-    re-parametrised, cut  the same, the second classification cut into parametrisable patches
+                          *those* patches as they were classified (``patch_topology``: their curves
+                          rebuilt from where they meet): whatever gmsh cuts internally now runs
+                          along well-shaped triangles
+    re-parametrised, cut  the same, the re-triangulation classified anew, cut into parametrisable
+                          patches
 
 An STL with needle triangles (an angle below NEEDLE_DEG) tries the re-parametrised ones first, one
 without tries direct first. While the volume mesh has a tetrahedron below
@@ -34,6 +37,17 @@ attempt at each level, 13.2°, 14.8°, 15.3° (65–81 s per level, where the th
 own triangles took 86–146 s), volume within 0.05 %, surface within 0.1 mm; 3-, 4-, 5- and 6-spoke
 discs 14.5–18.7° where direct left 0.2–3.3°; a 0.8 mm walled tube 16.2° (direct 3.1°). The cut
 variant (second classification cut) left 3.9–9.7° on the discs, the reason it is not the first.
+
+Why the re-triangulation is not classified again (2026-11-28). Classifying it anew by its folds
+found other patches than the first classification had (the thick disc's STL: 31 where there were
+30; without curvature spots 66), and on both the thick disc's STL and a five-spoke designer disc with
+bolt holes gmsh refused the result ("Wrong topology of boundary mesh for parametrization"): the
+strategy failed, and the designer disc was left with the STL's own needles (0.04°, 288 tetrahedra
+below 10°; its adaptive run's enriched solve then did not converge and it had no error bar). Kept as
+classified, the thick disc's STL meshes clean in one pass (13.0°, 4.3 s for the start mesh where five
+attempts took 10–15 s and kept 9.6°) and the designer disc's first pass gives 8.3°. The curves are
+built here, not by gmsh's ``createTopology``, which numbers them in memory order: its meshes changed
+from run to run (8.8–9.8° on the same input).
 """
 
 from __future__ import annotations
@@ -82,17 +96,103 @@ def _closed_volume(gmsh) -> None:
     gmsh.model.geo.synchronize()
 
 
-def _surface_triangles(gmsh):
-    """The current model's surface mesh → (points, triangles) in gmsh's units, conforming."""
+def _surface_patches(gmsh):
+    """The current model's surface mesh → (points in gmsh's units, [triangles of each surface entity]),
+    conforming: one node numbering for all, the patches as gmsh classified them."""
     tags, coords, _ = gmsh.model.mesh.getNodes()
     index = np.zeros(int(tags.max()) + 1, np.int64)
     index[tags.astype(np.int64)] = np.arange(len(tags))
-    tri = np.vstack([index[np.asarray(gmsh.model.mesh.getElementsByType(2, t)[1], np.int64)].reshape(-1, 3)
-                     for _, t in gmsh.model.getEntities(2)])
-    used = np.unique(tri)
+    patches = [index[np.asarray(gmsh.model.mesh.getElementsByType(2, t)[1], np.int64)].reshape(-1, 3)
+               for _, t in gmsh.model.getEntities(2)]
+    used = np.unique(np.concatenate(patches))
     remap = np.full(len(tags), -1)
     remap[used] = np.arange(len(used))
-    return np.asarray(coords, float).reshape(-1, 3)[used], remap[tri]
+    return np.asarray(coords, float).reshape(-1, 3)[used], [remap[p] for p in patches]
+
+
+def patch_topology(patches: list) -> tuple[list, list, list]:
+    """The curves where the patches of a closed triangulated surface meet, and their end points:
+    (curves, points, each patch's curve indices). A curve is a chain of edges shared by the same
+    two patches, ended where the chain meets another (a vertex on three or more patches' edges, or
+    where the pair changes); a closed chain without such a vertex starts and ends at its smallest
+    node. curves: node sequences (closed: first == last); points: node indices. Deterministic: the
+    order follows the node numbers, not memory."""
+    owner, edges = [], []
+    for k, tri in enumerate(patches):
+        e = np.sort(np.asarray(tri, np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        u, c = np.unique(e, axis=0, return_counts=True)
+        edges.append(u[c == 1])                                  # the patch's boundary edges
+        owner.append(np.full(int((c == 1).sum()), k))
+    e, o = np.vstack(edges), np.concatenate(owner)
+    order = np.lexsort((o, e[:, 1], e[:, 0]))
+    e, o = e[order], o[order]
+    pair = {}                                                    # edge → (patch a, patch b)
+    for (i, j), k in zip(map(tuple, e), o):
+        pair.setdefault((int(i), int(j)), []).append(int(k))
+    pair = {ed: tuple(ks) for ed, ks in pair.items()}
+    nbr: dict = {}
+    for (i, j) in pair:
+        nbr.setdefault(i, []).append(j)
+        nbr.setdefault(j, []).append(i)
+    def same(i, j, m):
+        return pair[(min(i, j), max(i, j))] == pair[(min(j, m), max(j, m))]
+    corner = {v for v, ns in nbr.items() if len(ns) != 2 or not same(ns[0], v, ns[1])}
+    seen, curves = set(), []
+    def walk(start, nxt):
+        chain = [start, nxt]
+        seen.add((min(start, nxt), max(start, nxt)))
+        while chain[-1] not in corner and chain[-1] != start:
+            v = chain[-1]
+            m = [w for w in nbr[v] if (min(v, w), max(v, w)) not in seen]
+            if not m:
+                break
+            seen.add((min(v, m[0]), max(v, m[0])))
+            chain.append(m[0])
+        return chain
+    for v in sorted(corner):
+        for w in sorted(nbr[v]):
+            if (min(v, w), max(v, w)) not in seen:
+                curves.append(walk(v, w))
+    for v in sorted(nbr):                                        # closed chains: no corner on them
+        for w in sorted(nbr[v]):
+            if (min(v, w), max(v, w)) not in seen:
+                curves.append(walk(v, w))
+    points = sorted({c[0] for c in curves} | {c[-1] for c in curves})
+    of_patch = [[] for _ in patches]
+    for n, c in enumerate(curves):
+        for k in pair[(min(c[0], c[1]), max(c[0], c[1]))]:
+            of_patch[k].append(n)
+    return curves, points, of_patch
+
+
+def _add_patches(gmsh, points_mm: np.ndarray, patches: list) -> None:
+    """Each patch its own discrete surface, bounded by the discrete curves where it meets the others
+    (``patch_topology``): the classification kept as it is, not guessed again from the folds."""
+    curves, corners, of_patch = patch_topology(patches)
+    dim = np.full(len(points_mm), 2)
+    for c in curves:
+        dim[c[1:-1]] = 1
+    dim[corners] = 0
+    x = np.asarray(points_mm, float)
+    ptag = {}
+    for v in corners:
+        ptag[v] = gmsh.model.addDiscreteEntity(0)
+        gmsh.model.mesh.addNodes(0, ptag[v], [v + 1], x[v])
+        gmsh.model.mesh.addElementsByType(ptag[v], 15, [], [v + 1])
+    ctags = []
+    for c in curves:
+        tag = gmsh.model.addDiscreteEntity(1, -1, [ptag[c[0]], ptag[c[-1]]])
+        inner = np.asarray(c[1:-1], np.int64)
+        gmsh.model.mesh.addNodes(1, tag, inner + 1, x[inner].ravel())
+        seg = np.column_stack([c[:-1], c[1:]]) + 1
+        gmsh.model.mesh.addElementsByType(tag, 1, [], seg.ravel())
+        ctags.append(tag)
+    for tri, cs in zip(patches, of_patch):
+        tag = gmsh.model.addDiscreteEntity(2, -1, [ctags[n] for n in cs])
+        inner = np.unique(np.asarray(tri, np.int64))
+        inner = inner[dim[inner] == 2]
+        gmsh.model.mesh.addNodes(2, tag, inner + 1, x[inner].ravel())
+        gmsh.model.mesh.addElementsByType(tag, 2, [], (np.asarray(tri) + 1).ravel())
 
 
 def _strategy(what: str):
@@ -128,8 +228,9 @@ def build_direct(surface, angle_deg: float):
 
 def build_reparametrised(surface, angle_deg: float, cut: bool = False):
     """Re-triangulate the STL's patches, uncut, at the size field's size (gmsh_mesh._one_pass sets
-    it on the current model before the build), then re-mesh *that* triangulation the same way
-    (``cut``: its patches cut to be parametrisable, as ``build_direct``)."""
+    it on the current model before the build), then re-mesh those patches as classified
+    (``_add_patches``; ``cut``: the triangulation classified anew, cut into parametrisable patches,
+    as ``build_direct``)."""
 
     @_strategy("re-parametrising the STL")
     def build(gmsh):
@@ -137,11 +238,14 @@ def build_reparametrised(surface, angle_deg: float, cut: bool = False):
         gmsh.model.mesh.classifySurfaces(np.deg2rad(angle_deg), True, False, np.pi)
         gmsh.model.mesh.createGeometry()
         gmsh.model.mesh.generate(2)
-        pts, tri = _surface_triangles(gmsh)
+        pts, patches = _surface_patches(gmsh)
         gmsh.model.remove()
         gmsh.model.add("stl")
-        _add_discrete(gmsh, pts, tri)
-        gmsh.model.mesh.classifySurfaces(np.deg2rad(angle_deg), True, cut, np.pi)
+        if cut:
+            _add_discrete(gmsh, pts, np.vstack(patches))
+            gmsh.model.mesh.classifySurfaces(np.deg2rad(angle_deg), True, True, np.pi)
+        else:
+            _add_patches(gmsh, pts, patches)
         gmsh.model.mesh.createGeometry()
         _closed_volume(gmsh)
 

@@ -346,3 +346,87 @@ def test_designer_parts_mesh_without_slivers(part, h_mm):
     mesh = stl_remesh.mesh_surface(surf, field)
     _check_kept(surf, mesh, field)
 
+
+
+def test_patch_topology_of_a_box_and_a_prism():
+    """The curves where patches meet and their end points (stl_remesh.patch_topology): a box's six
+    faces meet along 12 edges at 8 corners, four curves a face; a prism's two caps meet its side
+    along two closed curves (first node == last), each ended at its smallest node; the same
+    answer whatever order the patches' triangles come in."""
+    import trimesh
+
+    box = trimesh.creation.box((1.0, 1.0, 1.0))
+    normal = np.round(box.face_normals).astype(int)
+    faces = [box.faces[(normal == n).all(axis=1)] for n in np.unique(normal, axis=0)]
+    curves, points, of_patch = stl_remesh.patch_topology(faces)
+    assert len(curves) == 12 and len(points) == 8 and all(len(c) == 2 for c in curves)
+    assert sorted(len(c) for c in of_patch) == [4] * 6
+
+    prism = trimesh.creation.cylinder(radius=1.0, height=1.0, sections=12)
+    nz = prism.face_normals[:, 2]
+    parts = [prism.faces[nz > 0.5], prism.faces[nz < -0.5], prism.faces[np.abs(nz) <= 0.5]]
+    curves, points, of_patch = stl_remesh.patch_topology(parts)
+    assert len(curves) == 2 and len(points) == 2
+    assert all(c[0] == c[-1] == min(c) and len(c) == 13 for c in curves)
+    assert sorted(map(sorted, of_patch)) == [[0], [0, 1], [1]]
+    rng = np.random.default_rng(0)
+    shuffled = [p[rng.permutation(len(p))][:, [1, 2, 0]] for p in parts]
+    assert stl_remesh.patch_topology(shuffled)[:2] == (curves, points)
+
+
+def _designer_disc_field(tmp_path, monkeypatch):
+    """A five-spoke designer disc with bolt holes (extrude_polygon: needle caps), its STL and the
+    size field of its adaptive start mesh (graded to its gauges, its bores' curvature spots)."""
+    import math
+    import trimesh
+    from shapely import affinity
+    from shapely.geometry import Point, box
+    from shapely.ops import unary_union
+    from flexure.adaptive import start_mesh
+    from flexure.design import load_design
+
+    arms = [affinity.rotate(box(4.0, -1.6, 20.0, 1.6), 72 * k, origin=(0, 0)) for k in range(5)]
+    poly = unary_union([Point(0, 0).buffer(23, 64).difference(Point(0, 0).buffer(18.5, 64)),
+                        Point(0, 0).buffer(7.5, 48), *arms]).difference(Point(0, 0).buffer(2.8, 32))
+    for k in range(6):
+        a = math.pi * k / 3 + 0.3
+        poly = poly.difference(Point(20.75 * math.cos(a), 20.75 * math.sin(a)).buffer(1.0, 16))
+    trimesh.creation.extrude_polygon(poly, 4.5).export(tmp_path / "disc.stl")
+    gauges = "".join(f"[[gauges.gauge]]\ncentre_mm = [{12 * math.cos(a):.6f}, {12 * math.sin(a):.6f}, 4.5]\n"
+                     f"axis = [{math.cos(a + s * math.pi / 4):.9f}, {math.sin(a + s * math.pi / 4):.9f}, 0.0]\n"
+                     f"arm = {i + 1}\n"
+                     for i, (a, s) in enumerate((math.radians(72 * i), 1 - 2 * (i % 2)) for i in range(4)))
+    (tmp_path / "disc.toml").write_text(
+        'name = "disc"\n[geometry]\nkind = "stl"\nfile = "disc.stl"\n[gauges]\ngrid_length_mm = 1.0\n'
+        f"grid_width_mm = 0.8\n{gauges}[loads]\nrated_torque_Nm = 3.0\nload_radius_max_mm = 2.82\n"
+        'fixed_radius_min_mm = 18.55\n[mesh]\nsize = "coarse"\norder = 2\n')
+    seen = {}
+
+    def capture(surface, field, order=1, where="mesh", angle_deg=40.0, curvature=False):
+        seen.update(surface=surface, field=field, curvature=curvature)
+        raise KeyboardInterrupt                                   # the field is all this needs
+
+    monkeypatch.setattr(stl_remesh, "mesh_surface", capture)
+    with pytest.raises(KeyboardInterrupt):
+        start_mesh(load_design(tmp_path / "disc.toml"))
+    assert seen["curvature"]
+    spots = stl_remesh.curvature_spots(seen["surface"], seen["field"].curvature_elements, seen["field"].h_far)
+    from dataclasses import replace
+    return seen["surface"], replace(seen["field"], curvature_elements=0.0, spots=spots)
+
+
+def test_reparametrised_surface_keeps_its_first_classification(tmp_path, monkeypatch):
+    """The re-triangulated patches are re-meshed as they were classified (stl_remesh.patch_topology),
+    not classified again from their folds: on this disc a second classification by angle split a patch
+    and gmsh refused it ("Wrong topology of boundary mesh for parametrization"), so only the STL's own
+    needles were left (0.04°, 288 tetrahedra below 10°, measured). Now the pass meshes, far above
+    that, keeps the geometry, and is the same mesh twice (gmsh's own createTopology numbered its
+    curves by memory address: 8.8–9.8° from run to run)."""
+    surf, field = _designer_disc_field(tmp_path, monkeypatch)
+    build = stl_remesh.build_reparametrised(surf, 40.0)
+    runs = [gmsh_mesh._one_pass(build, field, "x", 1, False, np.zeros((0, 4))) for _ in range(2)]
+    (pts, tets, _, entities), (pts2, tets2, _, _) = runs
+    assert np.array_equal(pts, pts2) and np.array_equal(tets, tets2)
+    assert _min_dihedral(pts, tets) > 5.0
+    geo = stl_remesh.geometry_check(surf, field.h_far)(pts, tets, entities)
+    assert geo["ok"], geo
