@@ -173,12 +173,34 @@ def _inside_projection(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
     return (u >= 0) & (v >= 0) & (u + v <= 1)
 
 
+def shells(faces: np.ndarray) -> np.ndarray:
+    """The connected piece of the surface each face belongs to (faces joined across shared edges)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    f = np.asarray(faces, np.int64)
+    e = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    order = np.lexsort((e[:, 1], e[:, 0]))
+    same = (e[order][1:] == e[order][:-1]).all(axis=1)            # consecutive copies of one edge
+    a, b = order[:-1][same] // 3, order[1:][same] // 3
+    g = coo_matrix((np.ones(len(a)), (a, b)), shape=(len(f), len(f)))
+    return connected_components(g, directed=False)[1]
+
+
 def check_solid(points: np.ndarray, faces: np.ndarray, where: str) -> None:
-    """InputError if the closed surface crosses itself or has a wall thinner than THIN_FRACTION."""
+    """InputError if the closed surface crosses itself, is several pieces (separate bodies, or a body
+    and a void in it) or has a wall thinner than THIN_FRACTION."""
     n, at = self_intersections(points, faces)
     if n:
         raise InputError(f"{where}: surface intersects itself ({n} crossing triangle pairs, the first near "
                          f"{np.round(at * 1e3, 3).tolist()} mm); repair the solid in your CAD tool")
+    label = shells(faces)
+    if label.max() > 0:
+        k = int(label.max()) + 1
+        x = points[np.asarray(faces)[label == int(np.argsort(-np.bincount(label), kind="stable")[1])]].reshape(-1, 3)
+        raise InputError(f"{where}: the surface is {k} separate pieces (the second largest spans "
+                         f"{np.round(x.min(0) * 1e3, 3).tolist()} to {np.round(x.max(0) * 1e3, 3).tolist()} mm): "
+                         "a flexure is one solid without voids; export it as one body")
     scale = float(np.ptp(points, axis=0).max())
     t, at = thin_walls(points, faces, THIN_FRACTION * scale)
     if at is not None:

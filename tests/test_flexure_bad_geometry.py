@@ -97,6 +97,23 @@ def test_self_intersecting_stl_exit_2(capsys, tmp_path, no_meshing):
     assert "x.stl" in err and "intersects itself" in err
 
 
+def test_separate_bodies_and_a_void_exit_2(capsys, tmp_path, no_meshing):
+    """Two disjoint boxes (gmsh had meshed neither: "mesh: gmsh produced no tetrahedra", the file
+    unnamed), and a box with a closed void inside: one line naming the file and the second piece."""
+    gauges = [{"centre_mm": [5.0, 5.0, 5.0], "axis": [1.0, 0, 0], "arm": a} for a in (1, 2, 3, 4)]
+    two = _boxes((0, 0, 0, 20, 20, 5), (30, 0, 0, 40, 10, 5))
+    outer = _boxes((0, 0, 0, 20, 20, 5))
+    void = _boxes((5, 5, 1, 15, 15, 4))
+    hollow = Surface(np.vstack([outer.points, void.points]),
+                     np.vstack([outer.faces, void.faces[:, ::-1] + len(outer.points)]))   # void wound inward
+    for name, s, span in (("two.stl", two, "[30.0, 0.0, 0.0] to [40.0, 10.0, 5.0] mm"),
+                          ("hollow.stl", hollow, "[5.0, 5.0, 1.0] to [15.0, 15.0, 4.0] mm")):
+        _export(s, tmp_path / name)
+        code, out, err = _cli(capsys, _design(tmp_path, name, gauges))
+        assert code == 2 and out == "" and err.count("\n") == 1, err
+        assert name in err and "2 separate pieces" in err and span in err
+
+
 def test_zero_thickness_fin_exit_2(capsys, tmp_path, no_meshing):
     from shapely.geometry import box
 
