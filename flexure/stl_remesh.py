@@ -126,6 +126,10 @@ def patch_topology(patches: list) -> tuple[list, list, list]:
     e, o = np.vstack(edges), np.concatenate(owner)
     order = np.lexsort((o, e[:, 1], e[:, 0]))
     e, o = e[order], o[order]
+
+    def key(i, j):
+        return (i, j) if i < j else (j, i)
+
     pair = {}                                                    # edge → (patch a, patch b)
     for (i, j), k in zip(map(tuple, e), o):
         pair.setdefault((int(i), int(j)), []).append(int(k))
@@ -134,33 +138,26 @@ def patch_topology(patches: list) -> tuple[list, list, list]:
     for (i, j) in pair:
         nbr.setdefault(i, []).append(j)
         nbr.setdefault(j, []).append(i)
-    def same(i, j, m):
-        return pair[(min(i, j), max(i, j))] == pair[(min(j, m), max(j, m))]
-    corner = {v for v, ns in nbr.items() if len(ns) != 2 or not same(ns[0], v, ns[1])}
+    corner = {v for v, ns in nbr.items() if len(ns) != 2 or pair[key(ns[0], v)] != pair[key(v, ns[1])]}
     seen, curves = set(), []
-    def walk(start, nxt):
-        chain = [start, nxt]
-        seen.add((min(start, nxt), max(start, nxt)))
-        while chain[-1] not in corner and chain[-1] != start:
-            v = chain[-1]
-            m = [w for w in nbr[v] if (min(v, w), max(v, w)) not in seen]
-            if not m:
-                break
-            seen.add((min(v, m[0]), max(v, m[0])))
-            chain.append(m[0])
-        return chain
-    for v in sorted(corner):
+    for v in sorted(corner) + sorted(nbr):                       # from the corners, then the closed chains
         for w in sorted(nbr[v]):
-            if (min(v, w), max(v, w)) not in seen:
-                curves.append(walk(v, w))
-    for v in sorted(nbr):                                        # closed chains: no corner on them
-        for w in sorted(nbr[v]):
-            if (min(v, w), max(v, w)) not in seen:
-                curves.append(walk(v, w))
+            if key(v, w) in seen:
+                continue
+            chain = [v, w]
+            seen.add(key(v, w))
+            while chain[-1] not in corner and chain[-1] != v:
+                u = chain[-1]
+                ahead = [x for x in nbr[u] if key(u, x) not in seen]
+                if not ahead:
+                    break
+                seen.add(key(u, ahead[0]))
+                chain.append(ahead[0])
+            curves.append(chain)
     points = sorted({c[0] for c in curves} | {c[-1] for c in curves})
     of_patch = [[] for _ in patches]
     for n, c in enumerate(curves):
-        for k in pair[(min(c[0], c[1]), max(c[0], c[1]))]:
+        for k in pair[key(c[0], c[1])]:
             of_patch[k].append(n)
     return curves, points, of_patch
 
