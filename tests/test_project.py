@@ -75,3 +75,50 @@ def test_compiled_element_validity_matches_the_numpy_check():
     for a, b in zip(got[True], got[False]):
         assert np.array_equal(a, b)
     assert 0 < got[True][0].sum() < len(el) and not got[True][2].any()
+
+
+def test_samples_cover_needles_and_small_facets_within_their_gap():
+    """Every point of a triangle is within ``gap`` of one of its own samples (project.samples: the
+    ball query's certificate rests on it): random points in needles 50 long and 0.05 wide, in facets
+    far below the spacing and in ordinary ones; a needle gets a few samples across, not a grid."""
+    from scipy.spatial import cKDTree
+
+    from flexure.project import samples
+
+    rng = np.random.default_rng(11)
+    needles = np.array([[[0, 0, 0], [50, 0.05, 0], [49.5, -0.02, 0.01]]], float) + rng.normal(size=(40, 1, 3))
+    tiny = rng.normal(size=(40, 1, 3)) + 0.01 * rng.normal(size=(40, 3, 3))
+    plain = rng.normal(size=(40, 1, 3)) * 10 + rng.normal(size=(40, 3, 3)) * 2
+    tri = np.concatenate([needles, tiny, plain])
+    pts, owner, gap = samples(tri, 0.3)
+    assert gap <= 0.3 * 1.5 + 1e-12
+    w = rng.dirichlet(np.ones(3), size=(len(tri), 200))
+    x = np.einsum("tsa,tai->tsi", w, tri)
+    worst = max(cKDTree(pts[owner == t]).query(x[t])[0].max() for t in range(len(tri)))
+    assert worst <= gap
+    per = np.bincount(owner, minlength=len(tri))
+    assert per[:40].max() < 4 * (50 / 0.3 + 1) and per[40:80].max() == 3      # rows of 2–3, corners only
+
+
+def test_projection_on_an_extruded_needle_stl_equals_brute_force():
+    """A disc with bolt holes extruded the way trimesh's docs show (earcut caps of needle facets,
+    small facets on the holes' walls): the certified projection is the closest point over every facet."""
+    import trimesh
+    from shapely.geometry import Point
+
+    from flexure.geometry import Surface
+    from flexure.project import StlProjector
+
+    poly = Point(0, 0).buffer(26, 64).difference(Point(0, 0).buffer(20, 64))
+    for k in range(6):
+        poly = poly.difference(Point(23 * np.cos(k), 23 * np.sin(k)).buffer(0.8, 12))
+    m = trimesh.creation.extrude_polygon(poly, 5.0)
+    tri = np.asarray(m.vertices)[m.faces] * 1e-3
+    proj = StlProjector(Surface(np.asarray(m.vertices) * 1e-3, np.asarray(m.faces)))
+    rng = np.random.default_rng(4)
+    pts = tri[rng.integers(len(tri), size=300)].mean(axis=1) + rng.normal(scale=4e-4, size=(300, 3))
+    # brute force in mm: trimesh's closest point has absolute tolerances that miss by µm in metres
+    brute = 1e-3 * np.array([np.linalg.norm(trimesh.triangles.closest_point(tri * 1e3, np.repeat(p[None] * 1e3, len(tri), 0))
+                                            - p * 1e3, axis=1).min() for p in pts])
+    got = np.linalg.norm(proj.project(pts) - pts, axis=1)
+    assert got == pytest.approx(brute, rel=1e-9, abs=1e-15)
