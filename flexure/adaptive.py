@@ -139,11 +139,14 @@ def start_mesh(design, size: str | None = None, initial_h_factor: float = INITIA
                max_elements: float | None = None):
     """The first mesh (meshing.MeshResult): the design's size field × ``initial_h_factor``, curved
     faces resolved as at CURVATURE_SHARE × it, an STL's too (stl_remesh.mesh_surface ``curvature``:
-    its nodes can then all be put on the STL, refine.snap)."""
+    its nodes can then all be put on the STL, refine.snap); made again finer only for a tetrahedron
+    below gmsh_mesh.ADAPTIVE_START_DEG."""
+    from flexure import gmsh_mesh
     from flexure.analysis import build_mesh
 
-    return build_mesh(design, size, 2, initial_h_factor, max_elements,
-                      curvature_h_factor=CURVATURE_SHARE * initial_h_factor, stl_curvature=True)
+    with gmsh_mesh.finer_below(gmsh_mesh.ADAPTIVE_START_DEG):
+        return build_mesh(design, size, 2, initial_h_factor, max_elements,
+                          curvature_h_factor=CURVATURE_SHARE * initial_h_factor, stl_curvature=True)
 
 
 def goal_values(design, sol) -> dict:

@@ -154,7 +154,7 @@ class Ahead:
             conn.close()
             process.join()
             ok, value = self.done[key]
-            if ok and value[-1] is not None:
+            if ok and value[-1] is not None and key[0] in self.known:     # (a fallback is not run ahead)
                 chain = self.known[key[0]]
                 if any(self._key(key[0], s) == key for s in chain[-1:]):
                     chain.append(value[-1])

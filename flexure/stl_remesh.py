@@ -21,8 +21,14 @@ around them). Three surface strategies:
     re-parametrised, cut  the same, the re-triangulation classified anew, cut into parametrisable
                           patches
 
-An STL with needle triangles (an angle below NEEDLE_DEG) tries the re-parametrised ones first, one
-without tries direct first. While the volume mesh has a tetrahedron below
+An STL with needle triangles (an angle below NEEDLE_DEG) tries the re-parametrised ones first, and
+direct only where neither made a mesh keeping the geometry (``fallbacks``): on every needle STL
+measured, direct's first pass was the worst of the three (2026-11-28, the adaptive start mesh; min
+dihedral angle of direct / re-parametrised: thick disc 7.9° / 13.0°, six_spoke_thick 0.0° / 13.1°, a
+five-spoke disc with bolt holes 0.04° / 8.3°, a rim with eight bolt holes 0.08° / 5.3°, the designer
+discs of tests/test_stl_remesh.py with 3, 4 and 6 spokes 3.3° / 12.8°, 0.7° / 15.8°, 1.3° / 14.5°),
+and its passes cost the bolt-hole discs 8 s of CPU each for a mesh never kept. An STL without
+needles tries direct first. While the volume mesh has a tetrahedron below
 gmsh_mesh.MIN_DIHEDRAL_DEG: the next strategy, then, once every strategy has made one, those that
 left such tetrahedra once more, finer around them (gmsh_mesh._session's spots): at most
 MAX_ATTEMPTS = 5 volume meshes (on idle cores those that
@@ -249,13 +255,23 @@ def build_reparametrised(surface, angle_deg: float, cut: bool = False):
     return build
 
 
+def has_needles(surface) -> bool:
+    """Whether an STL has a triangle with an angle below NEEDLE_DEG."""
+    return bool((triangle_min_angles_deg(surface.points, surface.faces) < NEEDLE_DEG).any())
+
+
 def strategies(surface, angle_deg: float) -> list:
     """[(name, build)] in the order tried (module docstring)."""
     direct = ("direct", build_direct(surface, angle_deg))
     reparam = [("re-parametrised", build_reparametrised(surface, angle_deg)),
                ("re-parametrised, cut", build_reparametrised(surface, angle_deg, cut=True))]
-    needles = bool((triangle_min_angles_deg(surface.points, surface.faces) < NEEDLE_DEG).any())
-    return reparam + [direct] if needles else [direct] + reparam
+    return reparam + [direct] if has_needles(surface) else [direct] + reparam
+
+
+def fallbacks(surface) -> tuple:
+    """The strategies tried only where the others made no mesh keeping the geometry (module docstring):
+    direct on an STL with needles."""
+    return ("direct",) if has_needles(surface) else ()
 
 
 def geometry_check(surface, h_far_m: float):
@@ -331,4 +347,4 @@ def mesh_surface(surface, field, order: int = 1, where: str = "mesh", angle_deg:
     if spots is not None and len(spots):
         field = replace(field, spots=spots)
     return gmsh_mesh._session(strategies(surface, angle_deg), field, where, order,
-                              check=geometry_check(surface, field.h_far))
+                              check=geometry_check(surface, field.h_far), fallback=fallbacks(surface))
