@@ -458,3 +458,44 @@ def test_designer_disc_default_run_has_its_error_bar(tmp_path):
     scale = sum(abs(v) for v in strains.values()) / len(strains)
     assert all(math.isfinite(errors[a]) and 0 < errors[a] <= DEFAULT_RTOL * max(abs(strains[a]), scale)
                for a in strains)
+
+
+def test_direct_waits_on_a_needle_stl_and_the_adaptive_start_goes_back_only_below_5_degrees(monkeypatch):
+    """A fallback strategy (direct on an STL with needles, stl_remesh.fallbacks) is not tried while another
+    made a mesh that keeps the geometry, and is where none did; inside ``finer_below(5)`` (the adaptive
+    start mesh) a pass whose worst tetrahedron is 7.8° is kept as it is, one of 3.7° goes back finer."""
+    from userio.errors import InputError
+    from flexure.mesh import box_mesh
+
+    calls, worst_z = [], {"R": 0.88}
+
+    def fake_pass(build, field, where, order, curved, spots):
+        calls.append(build)
+        if build == "C":
+            raise InputError("re-parametrising the STL failed (Wrong topology)")
+        m = box_mesh(2, 2, 2)
+        pts = m.points.copy()
+        pts[13] = [0.5, 0.5, worst_z.get(build, 0.5)]                   # R: 7.8° (0.94: 3.7°); D: none below 10°
+        return pts, m.tets, None, (np.zeros((0, 3), int), np.zeros(0), np.zeros((0, 2), int), np.zeros(0))
+
+    monkeypatch.setattr(gmsh_mesh, "_one_pass", fake_pass)
+    order = [("re-parametrised", "R"), ("re-parametrised, cut", "C"), ("direct", "D")]
+    with threads.limited(1):
+        kept = lambda *a: {"ok": True}                                                    # noqa: E731
+        mesh = gmsh_mesh._session(order, _field(1.0), "x", 1, check=kept, fallback=("direct",))
+        assert calls == ["R", "C", "R", "R"] and mesh._cache["attempts"][0]["kept"]        # R and its finer passes
+        calls.clear()
+        gmsh_mesh._session(order, _field(1.0), "x", 1, check=lambda *a: {"ok": False}, fallback=("direct",))
+        assert "D" in calls                                                               # no mesh kept the geometry
+        calls.clear()
+        gmsh_mesh._session(order, _field(1.0), "x", 1, check=kept)                        # no fallback: R, C, D
+        assert calls[:3] == ["R", "C", "D"]
+        calls.clear()
+        with gmsh_mesh.finer_below(5.0):
+            mesh = gmsh_mesh._session(order, _field(1.0), "x", 1, check=kept, fallback=("direct",))
+            assert calls == ["R"] and mesh._cache["attempts"][0]["n_below_min"] > 0
+            calls.clear()
+            worst_z["R"] = 0.94
+            gmsh_mesh._session(order, _field(1.0), "x", 1, check=kept, fallback=("direct",))
+            assert calls == ["R", "C", "R", "R"]
+    assert gmsh_mesh._FINER_BELOW == [gmsh_mesh.MIN_DIHEDRAL_DEG]
