@@ -18,6 +18,9 @@ def test_rates_read_the_raw_differences_not_the_factor_change():
     assert sz.rates(prev, cur)[0] == pytest.approx(1.0)
     assert sz.rates({k: v for k, v in prev.items() if k != "raw"}, cur)[0] == pytest.approx(np.log(0.04 / 0.026) / np.log(2))
     assert sz.rates(None, cur)[0] == sz.RATE_PRIOR
+    rose = {"dofs": 100_000, "rel": [0.035, 0.01]}                  # the first goal's estimate rose: no rate
+    r = sz.rates({"dofs": 50_000, "rel": [0.019, 0.04]}, rose)
+    assert r[0] == sz.RATE_PRIOR and r[1] == sz.RATE_MAX
 
 
 def test_target_reaches_rtol_at_the_rate_and_the_first_step_allows_for_the_factor_rise():
