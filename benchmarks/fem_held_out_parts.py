@@ -1,0 +1,148 @@
+"""Parts the adaptive FEM was checked on after its estimates and sizing were set (seventeenth and
+eighteenth sessions), written to tests/data/fem_unseen/held_out/ with their design TOMLs:
+
+    python benchmarks/fem_held_out_parts.py [NAME ...]
+
+STEP parts drawn with gmsh's OpenCASCADE kernel (benchmarks/fem_unseen_parts.py's spoke disc), and
+designer STLs drawn the way trimesh's docs show (``trimesh.creation.extrude_polygon``: earcut caps
+of needle facets 50 mm long):
+
+* four_thick.step: 7 mm thick, bore 3, hub 8, rim 20–25, four 3.5 mm spokes with sharp roots;
+* tri_beam_thin.step: 2.2 mm thin, a 10 mm square hub, three 3 mm beams, a round frame 17–21 mm;
+* five_needle.stl: 4.5 mm, rim 18.5–23, hub 7.5, five 3.2 mm spokes, bore 2.8, six 2 mm bolt holes in
+  the rim (1.25 mm walls each side);
+* holes8.stl: 6 mm, rim 22.8–26, hub 8, four 4.4 mm spokes, bore 3, eight 1.6 mm bolt holes in the rim
+  (0.8 mm walls);
+* sd3.stl, sd4.stl, sd6.stl: the spoke discs of tests/test_stl_remesh.py with 3, 4 and 6 spokes.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "tests" / "data" / "fem_unseen" / "held_out"
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import fem_unseen_parts as fu  # noqa: E402
+
+
+def _gauges_same(z: float, where) -> str:
+    """Gauges at (radius mm, angle °, axis offset °) on the top face z, arms 1–4 in turn."""
+    out = []
+    for arm, (radius, ang, off) in enumerate(where, start=1):
+        a, ax = math.radians(ang), math.radians(ang + off)
+        out.append(f"[[gauges.gauge]]\ncentre_mm = [{radius * math.cos(a):.6f}, {radius * math.sin(a):.6f}, {z:.6f}]\n"
+                   f"axis = [{math.cos(ax):.9f}, {math.sin(ax):.9f}, 0.0]\narm = {arm}")
+    return "\n".join(out)
+
+
+def _extruded(poly, t: float, path: Path) -> None:
+    import trimesh
+
+    trimesh.creation.extrude_polygon(poly, t).export(path)
+
+
+def _rim_disc(r_out, r_rim, r_hub, r_bore, spokes, holes, t, res=64):
+    """Rim r_rim–r_out, hub, spokes [(x0, half width, x1, angle °)], bolt holes [(r, angle rad, radius, sides)]."""
+    import shapely.affinity as sa
+    import shapely.geometry as sg
+    from shapely.ops import unary_union
+
+    rim = sg.Point(0, 0).buffer(r_out, res).difference(sg.Point(0, 0).buffer(r_rim, res))
+    arms = [sa.rotate(sg.box(x0, -w, x1, w), a, origin=(0, 0)) for x0, w, x1, a in spokes]
+    poly = unary_union([rim, sg.Point(0, 0).buffer(r_hub, 48), *arms]).difference(sg.Point(0, 0).buffer(r_bore, 32))
+    for r, a, rh, sides in holes:
+        poly = poly.difference(sg.Point(r * math.cos(a), r * math.sin(a)).buffer(rh, sides))
+    return poly
+
+
+def _spoke_disc_stl(outer, rim, hub, bore, width, spokes, res=48):
+    """tests/test_stl_remesh.py's spoke_disc (mm)."""
+    import shapely.affinity as sa
+    import shapely.geometry as sg
+    from shapely.ops import unary_union
+
+    ring = sg.Point(0, 0).buffer(outer, res).difference(sg.Point(0, 0).buffer(rim, res))
+    hub_ = sg.Point(0, 0).buffer(hub, res).difference(sg.Point(0, 0).buffer(bore, res // 2))
+    arms = [sa.rotate(sg.box(hub - 0.5, -width / 2, rim + 0.5, width / 2), a, origin=(0, 0))
+            for a in [k * 360.0 / spokes for k in range(spokes)]]
+    return unary_union([ring, hub_, *arms])
+
+
+def _tri_beam(gmsh):
+    occ, t = gmsh.model.occ, 2.2
+    ring = occ.cut([(3, occ.addCylinder(0, 0, 0, 0, 0, t, 21))], [(3, occ.addCylinder(0, 0, 0, 0, 0, t, 17))])[0]
+    hub = (3, occ.addBox(-5, -5, 0, 10, 10, t))
+    beams = []
+    for k in range(3):
+        b = occ.addBox(3, -1.5, 0, 16, 3, t)
+        occ.rotate([(3, b)], 0, 0, 0, 0, 0, 1, k * 2 * math.pi / 3)
+        beams.append((3, b))
+    body = occ.fuse(ring, [hub] + beams)[0]
+    occ.cut(body, [(3, occ.addCylinder(0, 0, 0, 0, 0, t, 2.0))])
+    occ.synchronize()
+
+
+PARTS = {
+    "four_thick": dict(kind="step", about="thick four-spoke STEP, sharp roots",
+                       build=lambda g: fu._spoke_disc(g, 7.0, 3.0, 8.0, 20.0, 25.0, 4, 3.5), L=1.0, W=1.0, T=4.0,
+                       load_r=3.02, fixed_r=24.95, gauges=lambda: fu._gauges(7.0, ((13, 0), (13, 90), (13, 180), (13, 270)))),
+    "tri_beam_thin": dict(kind="step", about="thin three-beam square-hub STEP", build=_tri_beam, L=1.2, W=0.8, T=1.5,
+                          load_r=2.02, fixed_r=17.05,
+                          gauges=lambda: fu._gauges(2.2, ((9.5, 0.0), (12.5, 0.0), (9.5, 120.0), (12.5, 120.0)))),
+    "five_needle": dict(kind="stl", about="designer STL (trimesh extrude, needle caps), five spokes, bolt holes",
+                        poly=lambda: _rim_disc(23, 18.5, 7.5, 2.8, [(4.0, 1.6, 20.0, 72 * k) for k in range(5)],
+                                               [(20.75, 2 * math.pi * k / 6 + 0.3, 1.0, 16) for k in range(6)], 4.5),
+                        t=4.5, L=1.0, W=0.8, T=3.0, load_r=2.82, fixed_r=18.55,
+                        gauges=lambda: fu._gauges(4.5, ((12.0, 0.0), (12.0, 72.0), (12.0, 144.0), (12.0, 216.0)))),
+    "holes8": dict(kind="stl", about="designer STL, four spokes, eight 1.6 mm bolt holes in a 3.2 mm rim",
+                   poly=lambda: _rim_disc(26, 22.8, 8, 3.0, [(6, 2.2, 23.5, 90 * k + 45) for k in range(4)],
+                                          [(24.4, 2 * math.pi * k / 8, 0.8, 12) for k in range(8)], 6.0),
+                   t=6.0, L=1.0, W=0.8, T=5.0, load_r=3.02, fixed_r=22.85,
+                   gauges=lambda: _gauges_same(6.0, [(15.0, a, 45) for a in (45, 135, 225, 315)])),
+    "sd4": dict(kind="stl", about="designer STL spoke disc, 4 spokes", poly=lambda: _spoke_disc_stl(30, 25, 9, 3, 4, 4),
+                t=5.0, L=1.0, W=0.8, T=4.0, load_r=3.02, fixed_r=25.05,
+                gauges=lambda: _gauges_same(5.0, [(17.0, a, 45) for a in (0, 90, 180, 270)])),
+    "sd3": dict(kind="stl", about="designer STL spoke disc, 3 spokes", poly=lambda: _spoke_disc_stl(22, 18, 7, 2.5, 3, 3),
+                t=4.0, L=1.0, W=0.8, T=2.0, load_r=2.52, fixed_r=18.05,
+                gauges=lambda: _gauges_same(4.0, [(12.5, 0, 45), (12.5, 120, 45), (12.5, 240, 45), (14.5, 0, -45)])),
+    "sd6": dict(kind="stl", about="designer STL spoke disc, 6 spokes",
+                poly=lambda: _spoke_disc_stl(25, 21, 8, 3, 3, 6, res=32), t=3.0, L=1.0, W=0.8, T=2.0,
+                load_r=3.02, fixed_r=21.05, gauges=lambda: _gauges_same(3.0, [(14.5, a, 45) for a in (0, 60, 120, 180)])),
+}
+
+
+def write(name: str) -> Path:
+    p = PARTS[name]
+    OUT.mkdir(parents=True, exist_ok=True)
+    geo = OUT / f"{name}.{p['kind']}"
+    if p["kind"] == "step":
+        import gmsh
+
+        gmsh.initialize(interruptible=False)
+        try:
+            gmsh.option.setNumber("General.Terminal", 0)
+            p["build"](gmsh)
+            gmsh.write(str(geo))
+        finally:
+            gmsh.finalize()
+    else:
+        _extruded(p["poly"](), p["t"], geo)
+    toml = OUT / f"{name}.toml"
+    toml.write_text(fu.HEADER.replace("fem_unseen_parts.py", "fem_held_out_parts.py").format(
+        about=p["about"], name=name, kind=p["kind"], file=geo.name, L=p["L"], W=p["W"], gauges=p["gauges"](),
+        T=p["T"], load_r=p["load_r"], fixed_r=p["fixed_r"]))
+    return toml
+
+
+def main(argv: list[str]) -> int:
+    for name in argv or PARTS:
+        print(write(name))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
