@@ -131,18 +131,8 @@ def write(name: str) -> Path:
             gmsh.finalize()
     else:
         _extruded(p["poly"](), p["t"], geo)
-    toml = OUT / f"{name}.toml"
-    toml.write_text(fu.HEADER.replace("fem_unseen_parts.py", "fem_held_out_parts.py").format(
-        about=p["about"], name=name, kind=p["kind"], file=geo.name, L=p["L"], W=p["W"], gauges=p["gauges"](),
-        T=p["T"], load_r=p["load_r"], fixed_r=p["fixed_r"]))
-    return toml
-
-
-def main(argv: list[str]) -> int:
-    for name in argv or PARTS:
-        print(write(name))
-    return 0
+    return fu.write_toml(OUT, name, p, geo.name, "fem_held_out_parts.py")
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    sys.exit(fu.main(sys.argv[1:], PARTS, write))

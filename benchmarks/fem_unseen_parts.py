@@ -139,15 +139,21 @@ def write(name: str) -> Path:
             gmsh.write(str(geo))
     finally:
         gmsh.finalize()
-    toml = OUT / f"{name}.toml"
-    toml.write_text(HEADER.format(about=p["about"], name=name, kind=p["kind"], file=geo.name, L=p["L"], W=p["W"],
-                                  gauges=p["gauges"](), T=p["T"], load_r=p["load_r"], fixed_r=p["fixed_r"]))
+    return write_toml(OUT, name, p, geo.name)
+
+
+def write_toml(out: Path, name: str, p: dict, file: str, maker: str = "fem_unseen_parts.py") -> Path:
+    """The design TOML of part ``name`` (its dict ``p``: about, kind, L, W, gauges(), T, load_r, fixed_r)."""
+    toml = out / f"{name}.toml"
+    toml.write_text(HEADER.replace("fem_unseen_parts.py", maker).format(
+        about=p["about"], name=name, kind=p["kind"], file=file, L=p["L"], W=p["W"], gauges=p["gauges"](), T=p["T"],
+        load_r=p["load_r"], fixed_r=p["fixed_r"]))
     return toml
 
 
-def main(argv: list[str]) -> int:
-    for name in argv or PARTS:
-        print(write(name))
+def main(argv: list[str], parts: dict | None = None, write_part=None) -> int:
+    for name in argv or (parts or PARTS):
+        print((write_part or write)(name))
     return 0
 
 
