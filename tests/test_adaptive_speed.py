@@ -88,10 +88,12 @@ def test_released_goal_errors_are_the_same_bits(mesh_and_design, monkeypatch):
 
 
 def test_sizing_rules():
-    # a-priori rate without a previous level; observed rates clipped; a rising estimate → RATE_MIN
+    # a-priori rate without a previous level; observed rates clipped; an estimate that rose or stood still
+    # measured no rate → RATE_PRIOR (flexure.adaptive_sizing "Rate"); a slow one → RATE_MIN
     assert np.all(sizing.rates(None, {"dofs": 10, "rel": [0.1, 0.2]}) == sizing.RATE_PRIOR)
-    r = sizing.rates({"dofs": 1000, "rel": [0.04, 0.01, 0.01, 0.1]}, {"dofs": 4000, "rel": [0.02, 0.02, 0.01, 1e-5]})
-    assert r == pytest.approx([0.5, sizing.RATE_MIN, sizing.RATE_MIN, sizing.RATE_MAX])
+    r = sizing.rates({"dofs": 1000, "rel": [0.04, 0.01, 0.01, 0.1, 0.011]},
+                     {"dofs": 4000, "rel": [0.02, 0.02, 0.01, 1e-5, 0.01]})
+    assert r == pytest.approx([0.5, sizing.RATE_PRIOR, sizing.RATE_PRIOR, sizing.RATE_MAX, sizing.RATE_MIN])
     # N (e/rtol)^(1/r) for the worst open goal; the growth clipped to [min_grow, MAX_GROWTH]
     assert sizing.target_dofs(1000, [0.04, 0.005], np.array([1.0, 1.0]), 0.02, 1.2) == 2000
     assert sizing.target_dofs(1000, [0.0201, 0.005], np.array([1.0, 1.0]), 0.02, 1.5) == 1500
