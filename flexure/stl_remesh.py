@@ -22,7 +22,7 @@ around them). Three surface strategies:
                           patches
 
 An STL with needle triangles (an angle below NEEDLE_DEG) tries the re-parametrised ones first, and
-direct only where neither made a mesh keeping the geometry (``fallbacks``): on every needle STL
+direct only where neither made a mesh keeping the geometry (``mesh_surface``'s fallback): on every needle STL
 measured, direct's first pass was the worst of the three (2026-11-28, the adaptive start mesh; min
 dihedral angle of direct / re-parametrised: thick disc 7.9° / 13.0°, six_spoke_thick 0.0° / 13.1°, a
 five-spoke disc with bolt holes 0.04° / 8.3°, a rim with eight bolt holes 0.08° / 5.3°, the designer
@@ -260,18 +260,13 @@ def has_needles(surface) -> bool:
     return bool((triangle_min_angles_deg(surface.points, surface.faces) < NEEDLE_DEG).any())
 
 
-def strategies(surface, angle_deg: float) -> list:
-    """[(name, build)] in the order tried (module docstring)."""
+def strategies(surface, angle_deg: float, needles: bool | None = None) -> list:
+    """[(name, build)] in the order tried (module docstring); ``needles``: ``has_needles(surface)``
+    where the caller has it."""
     direct = ("direct", build_direct(surface, angle_deg))
     reparam = [("re-parametrised", build_reparametrised(surface, angle_deg)),
                ("re-parametrised, cut", build_reparametrised(surface, angle_deg, cut=True))]
-    return reparam + [direct] if has_needles(surface) else [direct] + reparam
-
-
-def fallbacks(surface) -> tuple:
-    """The strategies tried only where the others made no mesh keeping the geometry (module docstring):
-    direct on an STL with needles."""
-    return ("direct",) if has_needles(surface) else ()
+    return reparam + [direct] if (has_needles(surface) if needles is None else needles) else [direct] + reparam
 
 
 def geometry_check(surface, h_far_m: float):
@@ -346,5 +341,6 @@ def mesh_surface(surface, field, order: int = 1, where: str = "mesh", angle_deg:
     field = replace(field, curvature_elements=0.0)
     if spots is not None and len(spots):
         field = replace(field, spots=spots)
-    return gmsh_mesh._session(strategies(surface, angle_deg), field, where, order,
-                              check=geometry_check(surface, field.h_far), fallback=fallbacks(surface))
+    needles = has_needles(surface)           # direct then a fallback, tried only without a kept mesh
+    return gmsh_mesh._session(strategies(surface, angle_deg, needles), field, where, order,
+                              check=geometry_check(surface, field.h_far), fallback=("direct",) if needles else ())

@@ -461,7 +461,7 @@ def test_designer_disc_default_run_has_its_error_bar(tmp_path):
 
 
 def test_direct_waits_on_a_needle_stl_and_the_adaptive_start_goes_back_only_below_5_degrees(monkeypatch):
-    """A fallback strategy (direct on an STL with needles, stl_remesh.fallbacks) is not tried while another
+    """A fallback strategy (direct on an STL with needles, stl_remesh.mesh_surface) is not tried while another
     made a mesh that keeps the geometry, and is where none did; inside ``finer_below(5)`` (the adaptive
     start mesh) a pass whose worst tetrahedron is 7.8° is kept as it is, one of 3.7° goes back finer."""
     from userio.errors import InputError
