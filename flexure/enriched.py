@@ -60,12 +60,18 @@ LEVEL_MAX_ITER = 200
 #: h-factor 1: paper_disc 134 k P2 dofs, thick_disc 229 k, reentrant 138 k, cross_frame 142 k) in the
 #: same PCG iterations; converged (rtol 1e-12) by ~1e-7 (tests/test_block_sparse.py)
 STORAGE = "block32"
-#: the W block of the preconditioner: "sgs", one multicolour symmetric block Gauss–Seidel sweep pair on
-#: K_WW (flexure.block_sparse; as good as K_WW⁻¹ itself: paper_disc 28.5 k P2 dofs 37 → 25 PCG
-#: iterations, K_WW⁻¹ exactly 24), or "jacobi" (its 3 × 3 diagonal blocks: the default until RTOL is
-#: re-checked with "sgs", whose iterate at 1e-2 is 7 % off the converged d of paper_disc's smallest gauge d (134 k P2 dofs;
-#: jacobi 4 % in 29 iterations; sgs at 5e-3: 2.7 % in 21)
-W_PRECOND = "jacobi"
+#: the preconditioner's W block and how it meets V_h: "multiplicative" (the default), one symmetric block
+#: Gauss–Seidel pass W → V_h → W over the two blocks (``multiplicative_preconditioner``), damped 3 × 3 block
+#: Jacobi on W and the P2 cycle on V_h; "jacobi", the two blocks apart (block-diagonal: P2 cycle, 3 × 3 block
+#: Jacobi); "sgs", the two blocks apart with one multicolour symmetric block Gauss–Seidel sweep pair on K_WW
+#: (flexure.block_sparse; on paper_disc 28.5 k P2 dofs 37 → 25 PCG iterations, K_WW⁻¹ exactly 24: the W block
+#: was not what held the CG back). The coupling K_hW was (γ not small for the gauges, module docstring): the
+#: multiplicative pass takes 9–11 iterations where the block-diagonal one took 18–20 (thick disc at
+#: --rtol 0.01, 2026-11-28: its adaptive levels of 84 k, 490 k and 750 k P2 dofs, ω from 0.35 to 0.7 alike),
+#: its CG 25–30 % faster for one more pass over K_hW and K_WW an iteration
+W_PRECOND = "multiplicative"
+#: power iterations for λ_max(D⁻¹ K_WW), which sets the W block's damping ω = 1/λ̂ (``jacobi_lambda_max``)
+POWER_ITERS = 12
 
 
 def surplus_numbering(mesh: Mesh, constrained: np.ndarray):
@@ -213,13 +219,14 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
         [A     C  ] [e_h]   [b − A q0]
         [Cᵀ  K_WW ] [e_W] = [r_W     ]
 
-    by CG preconditioned block-diagonally: ``precond_h`` (R (n_q,1) → Z: the P2 solver's
-    p-multigrid cycle) on the V_h block, 3 × 3 block Jacobi on W (spectrally equivalent to K_WW,
-    h-independent). The first block row also takes up the P2 solve's algebraic error. → (J(u⁺) −
+    by preconditioned CG: ``precond_h`` (R (n_q,1) → Z: the P2 solver's p-multigrid cycle) on the V_h
+    block, damped 3 × 3 block Jacobi on W (spectrally equivalent to K_WW, h-independent), the two joined
+    by one symmetric block Gauss–Seidel pass (``w_precond`` "multiplicative", W_PRECOND) or apart
+    ("jacobi", "sgs"). The first block row also takes up the P2 solve's algebraic error. → (J(u⁺) −
     J(u_h) of each gauge (g,), of the reduced dof ``theta_index`` (the hub rotation; NaN if None),
     info). ``storage`` (default STORAGE) of K_WW and K_hW in the compiled path: "block32", "block64"
-    (flexure.block_sparse) or "csr" (scalar CSR, float64); ``w_precond`` (default W_PRECOND) the W
-    block's preconditioner: "sgs" (block storages) or "jacobi". ``duals`` (n_q, 1 + g): the P2 duals z̃ of θ
+    (flexure.block_sparse) or "csr" (scalar CSR, float64); ``w_precond`` (default W_PRECOND): "multiplicative",
+    "jacobi" or "sgs" (block storages). ``duals`` (n_q, 1 + g): the P2 duals z̃ of θ
     and of each gauge (the goal solve's columns): the estimates are then dual-corrected
     (``dual_corrected``). ``residual_h``: the V_h block b − A q0 (``p2_residual``) computed by the
     caller, which may then have freed ``system.A`` (None) where ``p2_blocks`` gives A x (``goal_errors``)."""
@@ -289,7 +296,8 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
     if Ab is None and A is None:
         raise ValueError("enriched_solve: system.A freed, but the P2 preconditioner has no blocks of this storage")
     a_mv = Ab.matvec if Ab is not None else (lambda x: sparse_parallel.matvec(A, x))
-    w_sgs = (W_PRECOND if w_precond is None else w_precond) == "sgs" and hasattr(Kww, "symmetric_gauss_seidel")
+    w_mode = W_PRECOND if w_precond is None else w_precond
+    w_sgs = w_mode == "sgs" and hasattr(Kww, "symmetric_gauss_seidel")
     rh = p2_residual(system, q0, theta_index) if residual_h is None else residual_h
     rhs = np.concatenate([rh, rW])
     t1 = time.perf_counter()
@@ -299,13 +307,18 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
         cw, ct = couplings(xh, xw)
         return np.concatenate([a_mv(xh) + cw, ct + k_mv(xw)])
 
-    def prec(r):
-        zh = np.asarray(precond_h(np.ascontiguousarray(r[:nq, None])))[:, 0]
-        if w_sgs:
-            zw = Kww.symmetric_gauss_seidel(Dinv, r[nq:])
-        else:
-            zw = np.einsum("kij,kj->ki", Dinv, r[nq:].reshape(-1, 3)).ravel()
-        return np.concatenate([zh, zw])
+    def p_h(rh):
+        return np.asarray(precond_h(np.ascontiguousarray(rh[:, None])))[:, 0]
+
+    def jacobi(rw):
+        return np.einsum("kij,kj->ki", Dinv, rw.reshape(-1, 3)).ravel()
+
+    if w_mode == "multiplicative":
+        prec = multiplicative_preconditioner(nq, p_h, jacobi, coupling, coupling_t, k_mv,
+                                             1.0 / jacobi_lambda_max(k_mv, jacobi, len(rW)))
+    else:
+        def prec(r):
+            return np.concatenate([p_h(r[:nq]), Kww.symmetric_gauss_seidel(Dinv, r[nq:]) if w_sgs else jacobi(r[nq:])])
 
     x = np.zeros(len(rhs))
     res = rhs                                    # CG vectors updated in place: fewer alive at the peak, same bits
@@ -345,6 +358,37 @@ def enriched_solve(system, mesh, material, gauges, U0: np.ndarray, q0: np.ndarra
             "matrix_bytes": int(sum(_nbytes(M) for M in (Kww, C if enriched_assembly.available() else Cq))),
             "solve_s": time.perf_counter() - t1, "coef": coef}
     return d_eps, d_theta, info
+
+
+def jacobi_lambda_max(k_mv, jacobi, n: int, iters: int = POWER_ITERS) -> float:
+    """λ̂ ≈ λ_max(D⁻¹ K_WW) by power iteration from a fixed random start (``jacobi`` x ↦ D⁻¹ x, ``k_mv``
+    x ↦ K_WW x); from below, but within 2× after a few steps, which is all the damping needs."""
+    x = np.random.default_rng(0).standard_normal(n)
+    lam = 1.0
+    for _ in range(iters):
+        y = jacobi(k_mv(x))
+        ny = np.linalg.norm(y)
+        if not ny > 0:
+            break
+        lam, x = ny / np.linalg.norm(x), y / ny
+    return float(lam) if math.isfinite(lam) and lam > 0 else 1.0
+
+
+def multiplicative_preconditioner(nq: int, p_h, jacobi, coupling, coupling_t, k_mv, omega: float):
+    """r ↦ z, one symmetric block Gauss–Seidel pass over the enriched system [[A, C], [Cᵀ, K_WW]]:
+
+        z_W = ω D⁻¹ r_W,   z_h = P_h (r_h − C z_W),   z_W ← z_W + ω D⁻¹ (r_W − Cᵀ z_h − K_WW z_W),
+
+    D the 3 × 3 diagonal blocks of K_WW, P_h the P2 cycle (``p_h``). Symmetric; positive definite where
+    the damped Jacobi step is a convergent smoother, 2 D/ω − K_WW > 0, i.e. ω < 2/λ_max(D⁻¹ K_WW): ω = 1/λ̂
+    (``jacobi_lambda_max``) keeps that with λ̂ up to 2× below λ_max."""
+    def prec(r):
+        rh, rw = r[:nq], r[nq:]
+        zw = omega * jacobi(rw)
+        zh = p_h(rh - coupling(zw))
+        zw += omega * jacobi(rw - coupling_t(zh) - k_mv(zw))
+        return np.concatenate([zh, zw])
+    return prec
 
 
 def dual_corrected(d_theta: float, d_eps: np.ndarray, duals: np.ndarray, res_h: np.ndarray):
