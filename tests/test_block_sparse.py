@@ -66,14 +66,9 @@ def test_enriched_solve_same_estimate_with_every_storage(rtol, rel):
     from float64 blocks equal the CSR path's to the CG's round-off; from float32 blocks within the
     float32 rounding of the operator (converged CG) or well inside the estimate's accuracy (the
     adaptive run's RTOL)."""
-    from test_enriched import _bar
+    from test_enriched import _bar_unit_rotation
 
-    mesh, pr, sy, lu, g, cons = _bar()
-    i_th = sy.ref_slices[0].start + 5
-    B = np.zeros(sy.A.shape[0])
-    B[i_th] = 1.0
-    q = lu.solve(B)
-    U = pr.expand(sy, q)
+    mesh, pr, sy, lu, g, cons, i_th, q, U = _bar_unit_rotation()
     out = {}
     for st in ("csr", "block64", "block32"):
         d_eps, d_th, info = enriched.enriched_solve(sy, mesh, AL, [g], U, q, cons, lambda R: lu.solve(R),
@@ -133,14 +128,9 @@ def test_enriched_solve_with_sgs_same_estimate():
     """The bar of tests/test_enriched.py: the W block's symmetric Gauss–Seidel changes the CG's path,
     not its limit: converged θ⁺ − θ_h and gauge estimate equal the block-Jacobi ones, in no more
     iterations."""
-    from test_enriched import _bar
+    from test_enriched import _bar_unit_rotation
 
-    mesh, pr, sy, lu, g, cons = _bar()
-    i_th = sy.ref_slices[0].start + 5
-    B = np.zeros(sy.A.shape[0])
-    B[i_th] = 1.0
-    q = lu.solve(B)
-    U = pr.expand(sy, q)
+    mesh, pr, sy, lu, g, cons, i_th, q, U = _bar_unit_rotation()
     out = {}
     for wp in ("jacobi", "sgs"):
         out[wp] = enriched.enriched_solve(sy, mesh, AL, [g], U, q, cons, lambda R: lu.solve(R), rtol=1e-12,

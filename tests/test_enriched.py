@@ -88,6 +88,17 @@ def _bar():
     return mesh, pr, sy, spla.splu(sy.A.tocsc()), g, cons
 
 
+def _bar_unit_rotation():
+    """``_bar`` and its P2 solution under a unit load on the hub rotation θ: (… of ``_bar``, θ's reduced
+    index, the reduced solution q, the nodal U)."""
+    mesh, pr, sy, lu, g, cons = _bar()
+    i_th = sy.ref_slices[0].start + 5
+    B = np.zeros(sy.A.shape[0])
+    B[i_th] = 1.0
+    q = lu.solve(B)
+    return mesh, pr, sy, lu, g, cons, i_th, q, pr.expand(sy, q)
+
+
 def test_enriched_solve_against_a_direct_solve_and_the_dual_identity():
     """enriched_solve's block-preconditioned CG gives the direct solution of the whole enriched
     system: θ⁺ − θ_h and the gauge's J(u⁺) − J(u_h), which also equals R*(z_h)(e_W) through the
@@ -214,12 +225,7 @@ def test_multiplicative_preconditioner_is_spd_below_its_damping_limit_and_beats_
 def test_multiplicative_enriched_solve_converges_to_the_same_estimate_in_fewer_iterations():
     """The bar: the default (multiplicative) and the block-diagonal preconditioner give the same converged
     θ⁺ − θ_h and gauge d; to the adaptive levels' RTOL the multiplicative one in fewer iterations."""
-    mesh, pr, sy, lu, g, cons = _bar()
-    i_th = sy.ref_slices[0].start + 5
-    B = np.zeros(sy.A.shape[0])
-    B[i_th] = 1.0
-    q = lu.solve(B)
-    U = pr.expand(sy, q)
+    mesh, pr, sy, lu, g, cons, i_th, q, U = _bar_unit_rotation()
     out = {(wp, rtol): enriched.enriched_solve(sy, mesh, AL, [g], U, q, cons, lambda R: lu.solve(R), rtol=rtol,
                                                theta_index=i_th, storage="block64", w_precond=wp)
            for wp in ("jacobi", "multiplicative") for rtol in (1e-12, enriched.RTOL)}

@@ -55,14 +55,9 @@ def test_enriched_solve_is_the_same_with_the_compiled_assembly(monkeypatch):
     and from the numpy form agree to the CG's round-off (the compiled path's scalar CSR storage: the
     float32 blocks in tests/test_block_sparse.py)."""
     from estimator import compiled
-    from test_enriched import _bar
+    from test_enriched import _bar_unit_rotation
 
-    mesh, pr, sy, lu, g, cons = _bar()
-    i_th = sy.ref_slices[0].start + 5
-    B = np.zeros(sy.A.shape[0])
-    B[i_th] = 1.0
-    q = lu.solve(B)
-    U = pr.expand(sy, q)
+    mesh, pr, sy, lu, g, cons, i_th, q, U = _bar_unit_rotation()
     out = []
     for on in (True, False):
         monkeypatch.setattr(compiled, "ENABLED", on)
