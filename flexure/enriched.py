@@ -68,7 +68,8 @@ STORAGE = "block32"
 #: was not what held the CG back). The coupling K_hW was (γ not small for the gauges, module docstring): the
 #: multiplicative pass takes 9–11 iterations where the block-diagonal one took 18–20 (thick disc at
 #: --rtol 0.01, 2026-11-28: its adaptive levels of 84 k, 490 k and 750 k P2 dofs, ω from 0.35 to 0.7 alike),
-#: its CG 25–30 % faster for one more pass over K_hW and K_WW an iteration
+#: its CG 10–30 % faster there (5–25 % over seven parts' default runs) for one more pass over K_hW and K_WW
+#: an iteration
 W_PRECOND = "multiplicative"
 #: power iterations for λ_max(D⁻¹ K_WW), which sets the W block's damping ω = 1/λ̂ (``jacobi_lambda_max``)
 POWER_ITERS = 12
