@@ -272,11 +272,10 @@ def reentrant_edges(surface: Surface, min_angle_deg: float = EDGE_ANGLE_DEG) -> 
     """The sharp re-entrant (concave) edges of a closed, outward-oriented triangulation: (k, 2, 3)
     segments where two faces meet at a fold of more than ``min_angle_deg`` with the material on
     the reflex side (a notch, a sharp spoke root), where the elastic field is singular."""
-    import trimesh
+    from flexure.reentrant import fold_angles_deg
 
-    tm = trimesh.Trimesh(surface.points, surface.faces, process=False)
-    sharp = (tm.face_adjacency_angles > np.deg2rad(min_angle_deg)) & ~tm.face_adjacency_convex
-    return surface.points[tm.face_adjacency_edges[sharp]]
+    edges, omega = fold_angles_deg(surface.points, surface.faces)
+    return np.asarray(surface.points)[edges[omega > 180.0 + min_angle_deg]]
 
 
 def mesh_design_surface(surface_or_poly, thickness: float | None, size: str, gauge_centres: np.ndarray,

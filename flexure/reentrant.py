@@ -17,19 +17,18 @@ import numpy as np
 SHARP_DEG = 240.0
 
 
-def max_interior_angle_deg(mesh) -> float:
-    """The largest interior dihedral angle ω (degrees) of the solid over its boundary's edges (module
-    docstring); 180 for a mesh whose boundary has no concave edge; edges not shared by exactly two
-    boundary faces are skipped."""
-    faces = mesh.boundary_faces()[:, :3].astype(np.int64)
-    x = mesh.points
+def fold_angles_deg(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The interior dihedral angle ω (degrees) of a closed, outward-oriented triangulation (points
+    (n,3), faces (k,3)) at each edge shared by exactly two faces (module docstring) → (edges (m,2)
+    node pairs, ω (m,)); edges of one face or of three and more are skipped."""
+    faces = np.asarray(faces)[:, :3].astype(np.int64)
+    x = np.asarray(points, float)
     n = np.cross(x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]])
     n /= np.linalg.norm(n, axis=1, keepdims=True)
-    k = len(faces)
     a = faces[:, [0, 1, 2]].ravel()
     b = faces[:, [1, 2, 0]].ravel()
     c = faces[:, [2, 0, 1]].ravel()                 # the face's vertex off the edge (a, b)
-    f = np.repeat(np.arange(k), 3)
+    f = np.repeat(np.arange(len(faces)), 3)
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     order = np.lexsort((hi, lo))
     lo, hi, c, f = lo[order], hi[order], c[order], f[order]
@@ -40,14 +39,18 @@ def max_interior_angle_deg(mesh) -> float:
     run3[1:] |= same[1:] & same[:-1]
     run3[:-1] |= same[1:] & same[:-1]
     first = first[~run3[first]]
-    if len(first) == 0:
-        return 180.0
     f1, f2, c2 = f[first], f[first + 1], c[first + 1]
     cos = np.clip(np.einsum("ij,ij->i", n[f1], n[f2]), -1.0, 1.0)
     phi = np.degrees(np.arccos(cos))
     concave = np.einsum("ij,ij->i", x[c2] - x[lo[first]], n[f1]) > 1e-12 * np.ptp(x, axis=0).max()
-    omega = np.where(concave, 180.0 + phi, 180.0 - phi)
-    return float(omega.max())
+    return np.stack([lo[first], hi[first]], axis=1), np.where(concave, 180.0 + phi, 180.0 - phi)
+
+
+def max_interior_angle_deg(mesh) -> float:
+    """The largest interior dihedral angle ω (degrees) of the solid over its boundary's edges
+    (``fold_angles_deg``; below 180 where every edge is convex); 180 where no edge has two faces."""
+    _, omega = fold_angles_deg(mesh.points, mesh.boundary_faces())
+    return float(omega.max()) if len(omega) else 180.0
 
 
 def has_sharp_reentrant_edge(mesh) -> bool:

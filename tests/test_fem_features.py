@@ -30,6 +30,39 @@ def test_an_l_shaped_block_has_one_reentrant_edge_and_a_box_none():
     assert len(reentrant_edges(extrude(box, 2e-3))) == 0
 
 
+@pytest.mark.parametrize("stl", ["fem_reference/thick_disc.stl", "fem_unseen/six_spoke_thick.stl",
+                                 "fem_unseen/held_out/five_needle.stl"])
+def test_reentrant_edges_are_trimeshs_concave_folds(stl):
+    """The sharp re-entrant edges from our fold angles (flexure.reentrant.fold_angles_deg: ω > 180° +
+    40°) are exactly the concave face adjacencies trimesh finds folded by more than 40°, on STLs of
+    thick, needle-spoked and bolted discs (a second implementation's answer)."""
+    import trimesh
+
+    from flexure.meshing import EDGE_ANGLE_DEG
+    from flexure.reentrant import fold_angles_deg
+
+    m = trimesh.load(DATA.parent / stl, process=True)
+    sharp = (m.face_adjacency_angles > np.deg2rad(EDGE_ANGLE_DEG)) & ~m.face_adjacency_convex
+    theirs = {tuple(sorted(e)) for e in m.face_adjacency_edges[sharp].tolist()}
+    edges, omega = fold_angles_deg(m.vertices, m.faces)
+    ours = {tuple(e) for e in edges[omega > 180.0 + EDGE_ANGLE_DEG].tolist()}
+    assert len(ours) >= 8 and ours == theirs
+
+
+def test_gauge_checks_closest_points_are_trimeshs():
+    """The gauge check's closest point on a triangle (compiled, flexure._closest_kernels) is trimesh's
+    to 1e-12 for points in every Voronoi region of random triangles: near and far, above the face,
+    past its edges and its vertices."""
+    from trimesh.triangles import closest_point
+
+    from flexure.surface_check import _closest_point
+
+    rng = np.random.default_rng(7)
+    tri = rng.normal(size=(3000, 3, 3))
+    pts = rng.normal(size=(3000, 3)) * rng.choice([0.1, 1.0, 10.0], size=(3000, 1))
+    assert np.allclose(_closest_point(tri, pts), closest_point(tri, pts), rtol=0, atol=1e-12)
+
+
 def test_p2_mid_edge_nodes_of_a_clamped_outer_face_are_clamped():
     """The STEP part held at its outer face (r ≥ 24.975 mm of a 25 mm rim) on a coarse level
     (h × 2): every node of every boundary face whose vertices are clamped is clamped, though a
