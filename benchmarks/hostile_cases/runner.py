@@ -10,6 +10,7 @@ import shutil
 import signal
 import stat
 import subprocess
+import threading
 import time
 from pathlib import Path
 
@@ -68,17 +69,21 @@ def rss_of_group(pgid: int) -> int:
     return total
 
 
+_SETUP_LOCK = threading.Lock()
+
+
 def run_case(case: Case, base: Path, fixture: Path, timeout: float, max_rss: float, index: int) -> dict:
     croot = base / f"case{index:04d}"
     work = croot / "a" / "b" / "work"
     work.parent.mkdir(parents=True)
     shutil.copytree(fixture, work, symlinks=True)
-    cwd_before = os.getcwd()
-    try:
-        if case.setup is not None:
-            case.setup(work)
-    finally:
-        os.chdir(cwd_before)
+    with _SETUP_LOCK:                # a setup may chdir: the working directory is the process's, not a thread's
+        cwd_before = os.getcwd()
+        try:
+            if case.setup is not None:
+                case.setup(work)
+        finally:
+            os.chdir(cwd_before)
     before = snapshot(croot)
     env = case_env(work, case.env)
     start = time.perf_counter()
