@@ -14,7 +14,7 @@ enriched solution's value, where the levels carry it: ``reference``),
 used only where 0 < ρ < 1 (monotone convergence); the allowance is |Q∞ − Q_L| (the
 extrapolation's whole size), or, where ρ is not in (0, 1), the last change |Q_L − Q_(L−1)|
 around Q_L. Designs: the five reference parts (tests/data/fem_reference) and the unseen parts
-(tests/data/fem_unseen, made by benchmarks/fem_unseen_parts.py).
+(tests/data/fem_unseen, made by benchmarks/fem_unseen_parts.py; held_out/, by fem_held_out_parts.py).
 """
 
 from __future__ import annotations
@@ -36,9 +36,11 @@ UNSEEN = ROOT / "tests" / "data" / "fem_unseen"
 
 
 def design_path(name: str) -> Path:
+    """A reference part's design, else an unseen part's (tests/data/fem_unseen, then its held_out/)."""
     if name in DESIGNS:
         return DESIGNS[name]
-    return UNSEEN / f"{name}.toml"
+    p = UNSEEN / f"{name}.toml"
+    return p if p.exists() else UNSEEN / "held_out" / f"{name}.toml"
 
 
 def deep(name: str, rtol: float = 2e-3, max_dofs: int = 700_000, max_memory_gb: float = 8.0,
