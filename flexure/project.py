@@ -259,27 +259,12 @@ class StlProjector:
 
     def _closest_csr(self, points, indptr, tris):
         """Closest points (k,3) and distances (k,) of ``points`` on the triangles
-        ``tris[indptr[i]:indptr[i+1]]`` of each (flexure._closest_kernels; trimesh's without numba)."""
-        from estimator import compiled
+        ``tris[indptr[i]:indptr[i+1]]`` of each (flexure.closest), computed in units of the median edge."""
+        from flexure.closest import closest_on_candidates
 
         u = self.unit
-        if compiled.available():
-            from flexure._closest_kernels import closest_on_triangles
-
-            cp, d = closest_on_triangles(points / u, self.tri_unit, indptr, tris)
-            return u * cp, u * d
-        from trimesh.triangles import closest_point
-
-        cp, d = np.empty_like(points), np.empty(len(points))
-        for width in np.unique(np.diff(indptr)):       # rows of one length at a time
-            rows = np.flatnonzero(np.diff(indptr) == width)
-            cand = tris[indptr[rows][:, None] + np.arange(width)]
-            q = u * closest_point(self.tri_unit[cand.ravel()], np.repeat(points[rows], width, axis=0) / u)
-            q = q.reshape(len(rows), width, 3)
-            dist = np.linalg.norm(q - points[rows, None], axis=2)
-            j = dist.argmin(axis=1)
-            cp[rows], d[rows] = q[np.arange(len(rows)), j], dist[np.arange(len(rows)), j]
-        return cp, d
+        cp, d = closest_on_candidates(points / u, self.tri_unit, indptr, tris)
+        return u * cp, u * d
 
 
 #: the most samples the uniform spacing asks for (an STL's area / s²; the ``spacing`` × median edge,

@@ -209,28 +209,12 @@ def check_solid(points: np.ndarray, faces: np.ndarray, where: str) -> None:
                          f"{scale * 1e3:g} mm size); thicken or remove it")
 
 
-def _closest_point(tri: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """The closest point (n,3) of each points[i] on the triangle tri[i] (n,3,3): the compiled kernel
-    (flexure._closest_kernels: no import of trimesh on a path that needs nothing else of it), else
-    trimesh's ``closest_point``."""
-    from estimator import compiled
-
-    if compiled.available():
-        from flexure._closest_kernels import closest_on_triangles
-
-        n = len(points)
-        one = np.arange(n + 1)
-        return closest_on_triangles(np.ascontiguousarray(points, float), np.ascontiguousarray(tri, float),
-                                    one, one[:-1])[0]
-    from trimesh.triangles import closest_point
-
-    return closest_point(tri, points)
-
-
 def _nearest(points: np.ndarray, tri: np.ndarray, origin: np.ndarray, scale: float):
     """For each point (k,3): distance to the surface, index of the nearest triangle, closest point.
-    (trimesh's closest_point has absolute tolerances: it is called in units of ``scale`` about
-    ``origin``, the gauge's size and centre.)"""
+    (flexure.closest; trimesh's closest_point, without numba, has absolute tolerances: it is called in
+    units of ``scale`` about ``origin``, the gauge's size and centre.)"""
+    from flexure.closest import closest_points
+
     points, tri = (points - origin) / scale, (tri - origin) / scale
     dist = np.empty(len(points))
     idx = np.empty(len(points), dtype=np.int64)
@@ -239,7 +223,7 @@ def _nearest(points: np.ndarray, tri: np.ndarray, origin: np.ndarray, scale: flo
     for k, p in enumerate(points):
         box = np.linalg.norm(np.maximum(0.0, np.maximum(lo - p, p - hi)), axis=1)   # ≤ distance
         cand = np.flatnonzero(box <= (box + np.linalg.norm(hi - lo, axis=1)).min())  # ≥ distance
-        c = _closest_point(tri[cand], np.repeat(p[None], len(cand), axis=0))
+        c = closest_points(tri[cand], np.repeat(p[None], len(cand), axis=0))
         d = np.linalg.norm(c - p, axis=1)
         b = int(np.argmin(d))
         dist[k], idx[k], close[k] = d[b], cand[b], c[b]
@@ -297,8 +281,10 @@ def winding_number(p: np.ndarray, tri: np.ndarray) -> float:
 
 def _touching(p: np.ndarray, tri: np.ndarray, radius: float, scale: float) -> np.ndarray:
     """Indices of the triangles within ``radius`` of the point p (computed in units of ``scale``)."""
+    from flexure.closest import closest_points
+
     p, tri, radius = np.zeros(3), (tri - p) / scale, radius / scale
     lo, hi = tri.min(axis=1), tri.max(axis=1)
     cand = np.flatnonzero(np.all((lo - radius <= p) & (p <= hi + radius), axis=1))
-    c = _closest_point(tri[cand], np.repeat(p[None], len(cand), axis=0))
+    c = closest_points(tri[cand], np.repeat(p[None], len(cand), axis=0))
     return cand[np.linalg.norm(c - p, axis=1) <= radius]

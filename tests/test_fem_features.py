@@ -49,20 +49,6 @@ def test_reentrant_edges_are_trimeshs_concave_folds(stl):
     assert len(ours) >= 8 and ours == theirs
 
 
-def test_gauge_checks_closest_points_are_trimeshs():
-    """The gauge check's closest point on a triangle (compiled, flexure._closest_kernels) is trimesh's
-    to 1e-12 for points in every Voronoi region of random triangles: near and far, above the face,
-    past its edges and its vertices."""
-    from trimesh.triangles import closest_point
-
-    from flexure.surface_check import _closest_point
-
-    rng = np.random.default_rng(7)
-    tri = rng.normal(size=(3000, 3, 3))
-    pts = rng.normal(size=(3000, 3)) * rng.choice([0.1, 1.0, 10.0], size=(3000, 1))
-    assert np.allclose(_closest_point(tri, pts), closest_point(tri, pts), rtol=0, atol=1e-12)
-
-
 def test_p2_mid_edge_nodes_of_a_clamped_outer_face_are_clamped():
     """The STEP part held at its outer face (r ≥ 24.975 mm of a 25 mm rim) on a coarse level
     (h × 2): every node of every boundary face whose vertices are clamped is clamped, though a

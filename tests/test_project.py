@@ -24,6 +24,33 @@ def test_closest_point_kernel_matches_trimesh_on_every_voronoi_region():
     assert np.allclose(d, np.linalg.norm(ref - pts, axis=1), rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.parametrize("on", [True, False])
+def test_closest_on_candidates_is_the_nearest_of_each_rows_triangles(on, monkeypatch):
+    """flexure.closest, compiled or not (trimesh's row width by row width): each point's closest point
+    on its candidates (rows of 1–5 triangles) is the nearest of trimesh's per triangle, and the
+    one-triangle form (the gauge check's) is trimesh's itself."""
+    from trimesh.triangles import closest_point
+
+    from estimator import compiled
+    from flexure.closest import closest_on_candidates, closest_points
+
+    monkeypatch.setattr(compiled, "ENABLED", on)
+    rng = np.random.default_rng(11)
+    tri = rng.normal(size=(200, 3, 3))
+    pts = rng.normal(size=(60, 3)) * rng.choice([0.1, 1.0, 10.0], size=(60, 1))
+    width = rng.integers(1, 6, size=60)
+    indptr = np.r_[0, np.cumsum(width)]
+    indices = rng.integers(0, 200, size=indptr[-1])
+    cp, d = closest_on_candidates(pts, tri, indptr, indices)
+    for i in range(60):
+        cand = indices[indptr[i]:indptr[i + 1]]
+        q = closest_point(tri[cand], np.repeat(pts[i:i + 1], len(cand), axis=0))
+        dist = np.linalg.norm(q - pts[i], axis=1)
+        assert np.isclose(d[i], dist.min(), rtol=1e-12, atol=1e-12)
+        assert np.allclose(cp[i], q[dist.argmin()], rtol=0, atol=1e-9)
+    assert np.allclose(closest_points(tri[:60], pts), closest_point(tri[:60], pts), rtol=0, atol=1e-12)
+
+
 def test_certified_projection_equals_brute_force_with_and_without_numba():
     """Points near a coarse facetted cylinder (long thin facets: the nearest samples often belong to
     a farther facet, so the certifying ball search decides) go to the brute-force closest point over
