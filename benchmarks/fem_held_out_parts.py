@@ -14,6 +14,16 @@ of needle facets 50 mm long):
 * holes8.stl: 6 mm, rim 22.8–26, hub 8, four 4.4 mm spokes, bore 3, eight 1.6 mm bolt holes in the rim
   (0.8 mm walls);
 * sd3.stl, sd4.stl, sd6.stl: the spoke discs of tests/test_stl_remesh.py with 3, 4 and 6 spokes.
+
+A third batch, made after the gauge set's floor was chosen (flexure.saturation.arm_floor, twenty-first
+session) and used only to check it and the run times:
+
+* big_six.step: 80 mm across, 3 mm thin, six 5 mm spokes, 2 × 1.5 mm gauges, 10 N·m;
+* side4.step: 6 mm, four 4 mm spokes, bending gauges on the spokes' side faces (normal ±y, axis radial);
+* fillet3.step: 8 mm thick, three 4 mm spokes, 1 mm fillets at the rim, a chevron pair on each of two spokes;
+* thin_cross.stl: 1.5 mm thin, a round hub, four 2.5 mm beams, a square frame with four bolt holes
+  (gmsh's triangulation: an earcut extrusion of it leaves T-junctions, which the STL check rejects);
+* hex_bore.stl: a designer STL (trimesh extrude), hexagonal bore coupled up to its corners, five spokes.
 """
 
 from __future__ import annotations
@@ -86,6 +96,37 @@ def _tri_beam(gmsh):
     occ.synchronize()
 
 
+def _side_gauges(z: float, x: float, half_width: float) -> str:
+    """Radial gauges on the side faces of the spokes along ±x, at x and half-height z: the faces that bending
+    stretches alike for arms 1 and 3 (normals +y at +x, −y at −x) and compresses for 2 and 4."""
+    rows = []
+    for arm, (cx, cy) in enumerate([(x, half_width), (x, -half_width), (-x, -half_width), (-x, half_width)], start=1):
+        rows.append(f"[[gauges.gauge]]\ncentre_mm = [{cx:.6f}, {cy:.6f}, {z:.6f}]\naxis = [1.0, 0.0, 0.0]\n"
+                    f"normal = [0.0, {math.copysign(1.0, cy):.1f}, 0.0]\narm = {arm}")
+    return "\n".join(rows)
+
+
+def _thin_cross(gmsh):
+    occ, t = gmsh.model.occ, 1.5
+    frame = occ.cut([(3, occ.addBox(-22, -22, 0, 44, 44, t))], [(3, occ.addBox(-18, -18, 0, 36, 36, t))])[0]
+    parts = [(3, occ.addCylinder(0, 0, 0, 0, 0, t, 6))]
+    for k in range(4):
+        b = occ.addBox(5, -1.25, 0, 14, 2.5, t)
+        occ.rotate([(3, b)], 0, 0, 0, 0, 0, 1, k * math.pi / 2)
+        parts.append((3, b))
+    body = occ.fuse(frame, parts)[0]
+    bore = [(3, occ.addCylinder(0, 0, 0, 0, 0, t, 2.5))]
+    occ.cut(body, bore + [(3, occ.addCylinder(20 * sx, 20 * sy, 0, 0, 0, t, 1.2)) for sx in (-1, 1) for sy in (-1, 1)])
+    occ.synchronize()
+
+
+def _hex_bore():
+    import shapely.geometry as sg
+
+    hexagon = sg.Polygon([(3.5 * math.cos(math.pi / 3 * k), 3.5 * math.sin(math.pi / 3 * k)) for k in range(6)])
+    return _rim_disc(26, 21, 9, 0.1, [(6, 1.75, 23.0, 72 * k + 36) for k in range(5)], [], 5.0).difference(hexagon)
+
+
 PARTS = {
     "four_thick": dict(kind="step", about="thick four-spoke STEP, sharp roots",
                        build=lambda g: fu._spoke_disc(g, 7.0, 3.0, 8.0, 20.0, 25.0, 4, 3.5), L=1.0, W=1.0, T=4.0,
@@ -112,6 +153,20 @@ PARTS = {
     "sd6": dict(kind="stl", about="designer STL spoke disc, 6 spokes",
                 poly=lambda: _spoke_disc_stl(25, 21, 8, 3, 3, 6, res=32), t=3.0, L=1.0, W=0.8, T=2.0,
                 load_r=3.02, fixed_r=21.05, gauges=lambda: _gauges_same(3.0, [(14.5, a, 45) for a in (0, 60, 120, 180)])),
+    "big_six": dict(kind="step", about="large thin six-spoke STEP (80 mm)", L=2.0, W=1.5, T=10.0, load_r=4.02,
+                    build=lambda g: fu._spoke_disc(g, 3.0, 4.0, 10.0, 34.0, 40.0, 6, 5.0), fixed_r=39.95,
+                    gauges=lambda: fu._gauges(3.0, ((22, 0), (22, 60), (22, 120), (22, 180)))),
+    "side4": dict(kind="step", about="four-spoke STEP, bending gauges on the spokes' side faces", L=2.0, W=1.0, T=4.0,
+                  build=lambda g: fu._spoke_disc(g, 6.0, 3.0, 8.0, 20.0, 25.0, 4, 4.0), load_r=3.02, fixed_r=24.95,
+                  gauges=lambda: _side_gauges(3.0, 10.5, 2.0)),
+    "fillet3": dict(kind="step", about="thick three-spoke STEP, rim fillets", L=1.0, W=1.0, T=4.0, load_r=3.02,
+                    build=lambda g: fu._spoke_disc(g, 8.0, 3.0, 7.0, 17.0, 22.0, 3, 4.0, rim_fillet=1.0), fixed_r=21.95,
+                    gauges=lambda: fu._gauges(8.0, ((11, 0), (13, 0), (11, 120), (13, 120)))),
+    "thin_cross": dict(kind="stl", about="thin cross with a holed square frame, an STL of gmsh's triangulation",
+                       build=_thin_cross, L=1.0, W=0.8, T=1.0, load_r=2.52, fixed_r=21.95,
+                       gauges=lambda: fu._gauges(1.5, ((11, 0), (11, 90), (11, 180), (11, 270)))),
+    "hex_bore": dict(kind="stl", about="designer STL, hex bore, five spokes", poly=_hex_bore, t=5.0, L=1.0, W=0.8,
+                     T=4.0, load_r=3.52, fixed_r=21.05, gauges=lambda: fu._gauges(5.0, ((14, 36), (14, 108), (14, 180), (14, 252)))),
 }
 
 
@@ -119,13 +174,17 @@ def write(name: str) -> Path:
     p = PARTS[name]
     OUT.mkdir(parents=True, exist_ok=True)
     geo = OUT / f"{name}.{p['kind']}"
-    if p["kind"] == "step":
+    if "build" in p:
         import gmsh
 
         gmsh.initialize(interruptible=False)
         try:
             gmsh.option.setNumber("General.Terminal", 0)
             p["build"](gmsh)
+            if p["kind"] == "stl":                  # gmsh's triangulation, as fem_unseen_parts.py's STL
+                for k, v in (("Mesh.MeshSizeMax", 1.5), ("Mesh.MeshSizeFromCurvature", 16), ("Mesh.Binary", 1)):
+                    gmsh.option.setNumber(k, v)
+                gmsh.model.mesh.generate(2)
             gmsh.write(str(geo))
         finally:
             gmsh.finalize()
