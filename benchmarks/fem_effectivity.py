@@ -20,7 +20,7 @@ are judged fairly; the last ones are those the reference extrapolates from.
 
 ``summary``: every level of the deep runs (default: all of tests/data/fem_reference/adaptive) and the last
 level of each RUNS entry, replayed under each estimate (``MODES``: 2|d| as main 383f4e5; q̂ measured, 2|d|
-where not, the bridge from its own d, as main 36a66ca; now): the effectivity's min/median/max over the goals
+where not, the bridge from its own d, as main 36a66ca; no floor on the arms, as main 6e60bf3; now): the effectivity's min/median/max over the goals
 whose reference resolves their error (allowance < half the true error), the count in [1, 3], and the
 goals whose whole allowance range is below 1 or above 3.
 """
@@ -89,17 +89,18 @@ def before_mode():
     saturation.Q_PRIOR = 0.0
 
 
-#: mode → (saturation ratio measured, q where not measured, bridge not below its arms')
-MODES = {"2|d| (383f4e5)": (False, 0.0, False), "q̂, 2|d| unmeasured (36a66ca)": (True, 0.0, False),
-         "now": (True, None, True)}
+#: mode → (saturation ratio measured, q where not measured, bridge not below its arms', the arms' floor)
+MODES = {"2|d| (383f4e5)": (False, 0.0, False, False), "q̂, 2|d| unmeasured (36a66ca)": (True, 0.0, False, False),
+         "no arm floor (6e60bf3)": (True, None, True, False), "now": (True, None, True, True)}
 
 
 def replay_mode(levels: list[dict], mode: str, signs) -> list[dict]:
     """The levels' estimates recomputed from their J and d under one of ``MODES``."""
     from flexure import adaptive, saturation
 
-    measured, q0, bridge = MODES[mode]
-    saved = saturation.saturation_ratio, saturation.Q_PRIOR
+    measured, q0, bridge, floor = MODES[mode]
+    saved = saturation.saturation_ratio, saturation.Q_PRIOR, saturation.ARM_FLOOR
+    saturation.ARM_FLOOR = saturation.ARM_FLOOR if floor else 0.0
     if not measured:
         saturation.saturation_ratio = lambda *a, **k: (math.nan, "not measured")
     if q0 is not None:
@@ -112,7 +113,7 @@ def replay_mode(levels: list[dict], mode: str, signs) -> list[dict]:
             out.append({**x, **adaptive._enriched_estimates(x, prev, seen, signs if bridge else None)})
             prev = x
     finally:
-        saturation.saturation_ratio, saturation.Q_PRIOR = saved
+        saturation.saturation_ratio, saturation.Q_PRIOR, saturation.ARM_FLOOR = saved
     return out
 
 

@@ -90,3 +90,17 @@ def test_weak_saturation_is_capped_and_said():
 
 def test_not_finite_is_not_a_measurement():
     assert math.isnan(saturation_ratio(1.0, math.nan, 1.0, 1e-4, 0.0)[0])
+
+
+def test_an_arm_whose_difference_collapses_is_held_at_the_sets_floor():
+    """Four arms with P2 errors of one size; on one the enriched error stays at the set's pollution size
+    (|E⁺| ≈ q S, not q |E_i|), so its d is a twentieth of its error: (3) alone misses it (effectivity
+    0.1); held at ARM_FLOOR × the median of the set it brackets, and the other arms are untouched."""
+    E = np.array([1.0e-3, -0.9e-3, 1.1e-3, 0.5e-3])
+    d = np.array([0.8e-3, -0.7e-3, 0.9e-3, 0.025e-3])                 # arm 4: E⁺ = 0.475e-3 ≈ 0.45 S
+    e = np.array([sat.saturation_estimate(x, 0.2) for x in d])
+    assert e[3] / abs(E[3]) < 0.2
+    held = sat.arm_floor(e)
+    assert 1.0 <= held[3] / abs(E[3]) <= 3.0
+    np.testing.assert_array_equal(held[:3], e[:3])
+    assert sat.arm_floor(e[:1])[0] == e[0] and sat.arm_floor([]).size == 0
