@@ -75,7 +75,7 @@ than for each arm, |J_i − J⁺_i| ≲ q S (S the set's error size): an arm who
 the others' (its contributions cancelling, or crossing zero between levels) can see its d_i fall well
 below (1 − q)|E_i|, and (3) with it (0.02 of its error on one arm of five_needle). Its estimate is then
 held at ARM_FLOOR of the median of the arms' estimates (``arm_floor``), before the bridge combines them
-(``bridge_estimate``). Chosen on the sixteen parts' levels and runs (2026-11-28, ``fem_effectivity.py
+(``bridge_estimate``). Chosen on the eleven parts with deep references, their levels and runs (2026-11-28, ``fem_effectivity.py
 summary``, goals judged / wholly below 1 / wholly above 3 over the reference's allowance): none 305 in
 [1, 3] of 345 / 14 / 13; ¼: 304 / 14 / 13; ½: 311 / 8 / 16; ¾: 304 / 5 / 23. Then checked on five parts
 made after it (benchmarks/fem_held_out_parts.py's third batch, 147 judged): none 134 in [1, 3] / 5 / 2;
