@@ -100,7 +100,7 @@ def replay_mode(levels: list[dict], mode: str, signs) -> list[dict]:
 
     measured, q0, bridge, floor = MODES[mode]
     saved = saturation.saturation_ratio, saturation.Q_PRIOR, saturation.ARM_FLOOR
-    saturation.ARM_FLOOR = saturation.ARM_FLOOR if floor else 0.0
+    saturation.ARM_FLOOR = saturation.ARM_FLOOR and floor
     if not measured:
         saturation.saturation_ratio = lambda *a, **k: (math.nan, "not measured")
     if q0 is not None:

@@ -41,9 +41,9 @@ singular exponent ½, e = 2.7 |J(u⁺) − J(u_h)|, on others the flat 2 |J(u⁺
 (flexure.saturation: the derivations, and where q̂ is not a measurement). The bridge strain is its own
 linear goal, its estimate f_ref |d_ref| + Σ |s_i d_i| |f_i − f_ref| / 4 (f the factors max(2, 1.5/(1 − q̂)) of
 the bridge and of each arm, saturation.bridge_estimate): a single q̂ of the bridge's d undercounts where
-the arms saturate differently and their errors partly cancel. Each arm's estimate is at least half the
-median of the arms' (saturation.arm_floor: saturation holds for the gauge set, not for an arm whose own
-error is small next to the others').
+the arms saturate differently and their errors partly cancel. Each arm's estimate is at least the gauge
+set's q times the median of the arms' (saturation.arm_floor: saturation holds for the gauge set, not for an
+arm whose own error is small next to the others').
 On an STL, d = J(u⁺) − J(u_h) includes the geometric error δJ above; a CAD/STEP part's P2 boundary is
 isoparametric on the exact surface and gets no geometric term.
 The distributed coupling (its traction on W not assembled yet) keeps the calibrated DWR estimate:
@@ -108,7 +108,7 @@ METHOD_ENRICHED = ("goal-oriented estimate on nested adaptively refined meshes (
                    "to the P2 error measured between the last two nested levels (flexure.saturation; where it is not "
                    "measured, as on one level, q̂ = 4/9 on a part with a sharp re-entrant edge: 2.7×); brackets the error within "
                    "[1, 3]× where q̂ is the ratio on the last level within [⅔, 2] of (1 − q) (unmeasured: "
-                   "q ∈ [−0.11, 0.63]); the bridge's plus what its arms' different q̂ may add; each arm's at least half the median of the arms'; a bound-like "
+                   "q ∈ [−0.11, 0.63]); the bridge's plus what its arms' different q̂ may add; each arm's at least the gauge set's q × the arms' median; a bound-like "
                    "figure, not 1σ; on an STL, J(u⁺) includes the P2 boundary's geometric error against the facets "
                    "(flexure.geometry_error)")
 
@@ -513,9 +513,9 @@ def _enriched_estimates(rec: dict, prev: dict | None = None, q_seen: dict | None
         if g.measured:
             q_seen[key] = g.q
     arms = [est[f"g{i}"] for i in range(len(vals) - 2)]
-    floored = arm_floor(arms)
+    floored = arm_floor(arms, [q[f"g{i}"] for i in range(len(arms))], rec.get("q_unmeasured"))
     for i in np.flatnonzero(floored > np.asarray(arms)):
-        how[f"g{i}"] += "; held at the gauge set's floor (saturation.arm_floor)"
+        how[f"g{i}"] += "; held at the gauge set's floor, its q × the arms' median (saturation.arm_floor)"
     arms = floored.tolist()
     if signs is not None:
         comb = bridge_estimate(np.asarray(signs, float), diffs[2:], np.array(arms), diffs[1], est["eps_ref"])

@@ -312,7 +312,7 @@ def test_enriched_estimate_measures_the_saturation_ratio_between_levels():
     ones q E_ℓ with q = 0.5 (re-entrant: V⁺ only halves the error). Level 0 reports 2.7|d| = 2.7(1 − q)|E|
     (q unmeasured: a re-entrant edge's 4/9); level 1 measures q̂ = 0.5 per goal and reports
     max(2, 1.5/(1 − q̂))|d| = 1.5 |E|; an arm whose enriched difference changed sign keeps 2.7|d|, here
-    (its error near zero) held at half the median of the arms' (saturation.arm_floor)."""
+    (its error near zero) held at the gauge set's q (½) × the median of the arms' (saturation.arm_floor)."""
     q, J = 0.5, np.array([1e-3, 1e-5, 1e-5, -1e-5, 1e-5, -1e-5])      # θ, bridge, arms (exact)
     E0 = np.array([2e-5, 1e-7, 3e-7, -2e-7, 1e-7, -2e-7])
     E1 = 0.4 * E0

@@ -93,14 +93,21 @@ def test_not_finite_is_not_a_measurement():
 
 
 def test_an_arm_whose_difference_collapses_is_held_at_the_sets_floor():
-    """Four arms with P2 errors of one size; on one the enriched error stays at the set's pollution size
-    (|E⁺| ≈ q S, not q |E_i|), so its d is a twentieth of its error: (3) alone misses it (effectivity
-    0.1); held at ARM_FLOOR × the median of the set it brackets, and the other arms are untouched."""
+    """Four arms with P2 errors of one size on a part with a sharp re-entrant edge (set q 0.45); on one the
+    enriched error stays at the set's pollution size (|E⁺| ≈ q S, not q |E_i|), so its d is a twentieth of its
+    error: (3) alone misses it (effectivity < 0.2); held at the set's q × the median of the arms' estimates it
+    brackets, and the other arms are untouched. On a part without one (q_unmeasured Q_SMOOTH, measured q
+    0.05) the floor is Q_SMOOTH × the median: an arm whose error is genuinely a quarter of the others' keeps
+    its own estimate."""
     E = np.array([1.0e-3, -0.9e-3, 1.1e-3, 0.5e-3])
     d = np.array([0.8e-3, -0.7e-3, 0.9e-3, 0.025e-3])                 # arm 4: E⁺ = 0.475e-3 ≈ 0.45 S
     e = np.array([sat.saturation_estimate(x, 0.2) for x in d])
     assert e[3] / abs(E[3]) < 0.2
-    held = sat.arm_floor(e)
+    held = sat.arm_floor(e, [0.45] * 4, sat.Q_PRIOR)
     assert 1.0 <= held[3] / abs(E[3]) <= 3.0
     np.testing.assert_array_equal(held[:3], e[:3])
-    assert sat.arm_floor(e[:1])[0] == e[0] and sat.arm_floor([]).size == 0
+    smooth = 2.0 * 0.95 * np.abs(E) * np.array([1.0, 1.0, 1.0, 0.5])     # 2|d|, q 0.05; arm 4's error 0.25e-3
+    kept = sat.arm_floor(smooth, [0.05] * 4, sat.Q_SMOOTH)
+    np.testing.assert_array_equal(kept, smooth)
+    assert smooth[3] < 0.5 * np.median(smooth)                       # a floor of ½ would have lifted it
+    assert sat.arm_floor(e[:1], [0.9])[0] == e[0] and sat.arm_floor([], []).size == 0
