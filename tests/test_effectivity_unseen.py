@@ -1,6 +1,7 @@
-"""The adaptive estimate's effectivity on an unseen exact-geometry part (tests/data/fem_unseen/
-three_spoke_thin.step) against its stored converged reference (tests/data/fem_reference/adaptive/
-three_spoke_thin.json: a deep nested adaptive run to 701 k DOFs, benchmarks/fem_adaptive.py)."""
+"""The adaptive estimate's effectivity on unseen exact-geometry parts against their stored converged
+references (tests/data/fem_reference/adaptive/NAME.json: deep nested adaptive runs, benchmarks/fem_adaptive.py):
+three_spoke_thin.step (to 701 k DOFs), and held_out/side4.step (to 1.97 M DOFs), the third held-out batch's part
+whose gauges sit on the spokes' side faces."""
 
 import json
 from pathlib import Path
@@ -25,7 +26,26 @@ def test_default_run_brackets_every_goal_within_3x_on_three_spoke_thin():
     from flexure.design import load_design
 
     res, _ = analyze_adaptive(load_design(DATA / "fem_unseen" / "three_spoke_thin.toml"))
-    ref = json.loads((DATA / "fem_reference" / "adaptive" / "three_spoke_thin.json").read_text())["references"]
+    assert not _outside_1_3(res, "three_spoke_thin")
+
+
+@pytest.mark.slow
+def test_default_run_brackets_every_goal_within_3x_with_gauges_on_side_faces():
+    """side4 (gauges on vertical faces, normals ±y, radial axes): at the default --rtol every goal's
+    e/|J − J∞| in [1, 3] over the reference's whole allowance (recorded 2026-11-28: stiffness [1.44, 1.64],
+    bridge [1.36, 1.49], arms 1.27–1.54)."""
+    from flexure.adaptive import analyze_adaptive
+    from flexure.design import load_design
+
+    res, _ = analyze_adaptive(load_design(DATA / "fem_unseen" / "held_out" / "side4.toml"))
+    assert res["stopped_by"] == "rtol"
+    assert not _outside_1_3(res, "side4")
+
+
+def _outside_1_3(res: dict, name: str) -> dict:
+    """{goal: (lo, hi)} of the last level's goals whose effectivity range over the reference's allowance is not
+    within [1, 3]."""
+    ref = json.loads((DATA / "fem_reference" / "adaptive" / f"{name}.json").read_text())["references"]
     last = res["discretization_levels"][-1]
     goals = {"torsional_stiffness_Nm_per_rad": (last["torsional_stiffness_Nm_per_rad"],
                                                 last["estimate"]["torsional_stiffness_Nm_per_rad"]),
@@ -38,4 +58,4 @@ def test_default_run_brackets_every_goal_within_3x_on_three_spoke_thin():
         lo, hi = e / (E + a), (e / (E - a) if E > a else float("inf"))
         if not (lo >= 1.0 and hi <= 3.0):
             bad[goal] = (round(lo, 2), round(hi, 2))
-    assert not bad, bad
+    return bad
