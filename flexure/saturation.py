@@ -81,8 +81,9 @@ Measured 2026-11-28 (``fem_effectivity.py summary``; in [1, 3] of the judged / w
 3 over the reference's allowance): eleven parts with deep references, 305 of 345 / 14 / 13 without the
 floor, 309 / 9 / 15 with it; five parts drawn before the floor existed (benchmarks/fem_held_out_parts.py's
 third batch; its numbers were in view when the floor was chosen: not a blind check), 134 of 147 / 5 / 2 →
-138 / 1 / 6. The first form, a fixed ½ × the median (311 / 8 / 16 and 139 / 1 / 8), lifted an arm of the exact-geometry annulus, whose error is about a quarter of the
-others' (q 0.01–0.12 there), to 3.8× its error (tests/test_adaptive.py's exact torsion field).
+138 / 1 / 6. The first form, a fixed ½ × the median (311 / 8 / 16 and 139 / 1 / 8), lifted an arm of the
+exact-geometry annulus, whose error is about a quarter of the others' (q 0.01–0.12 there), to 3.8× its error
+(tests/test_adaptive.py's exact torsion field).
 """
 
 from __future__ import annotations
