@@ -25,6 +25,16 @@ and the estimates as they were, not the floor independently:
 * thin_cross.stl: 1.5 mm thin, a round hub, four 2.5 mm beams, a square frame with four bolt holes
   (gmsh's triangulation: an earcut extrusion of it leaves T-junctions, which the STL check rejects);
 * hex_bore.stl: a designer STL (trimesh extrude), hexagonal bore coupled up to its corners, five spokes.
+
+A fourth batch (twenty-second session), drawn and run on main 340e7ed before any change of that session:
+
+* step_hub.step: a stepped part, an 8 mm hub (the bore's full height) under 4 mm spokes and rim, four 4 mm spokes;
+* taper5.stl: a designer STL, five spokes tapering 5 → 2.5 mm from hub to rim;
+* chunky3.step: small and thick, 10 mm thick and 30 mm across, three 3 mm spokes, a third gauge pair's arm 4 off
+  the others' radius;
+* wide8.step: thin (3 mm), eight 2 mm spokes, a 16 mm bore coupled at its wall, rim 26–30 mm;
+* edge4.stl: gmsh's triangulation of a 3 mm four-spoke disc, radial gauges 0.9 mm off the spokes' centre lines
+  (in-plane bending: arms 1, 3 stretched, 2, 4 compressed).
 """
 
 from __future__ import annotations
@@ -107,6 +117,40 @@ def _side_gauges(z: float, x: float, half_width: float) -> str:
     return "\n".join(rows)
 
 
+def _step_hub(gmsh):
+    occ = gmsh.model.occ
+    t, th = 4.0, 8.0
+    ring = occ.cut([(3, occ.addCylinder(0, 0, 0, 0, 0, t, 25))], [(3, occ.addCylinder(0, 0, 0, 0, 0, t, 20))])[0]
+    parts = [(3, occ.addCylinder(0, 0, 0, 0, 0, th, 8))]
+    for k in range(4):
+        b = occ.addBox(4, -2, 0, 18.5, 4, t)
+        occ.rotate([(3, b)], 0, 0, 0, 0, 0, 1, k * math.pi / 2)
+        parts.append((3, b))
+    body = occ.fuse(ring, parts)[0]
+    occ.cut(body, [(3, occ.addCylinder(0, 0, 0, 0, 0, th, 3))])
+    occ.synchronize()
+
+
+def _taper5():
+    import shapely.geometry as sg
+    from shapely.ops import unary_union
+
+    rim = sg.Point(0, 0).buffer(23, 64).difference(sg.Point(0, 0).buffer(19, 64))
+    arms = []
+    for k in range(5):
+        c, s = math.cos(2 * math.pi * k / 5), math.sin(2 * math.pi * k / 5)
+        arms.append(sg.Polygon([(x * c - y * s, x * s + y * c) for x, y in [(6, -2.5), (20, -1.25), (20, 1.25), (6, 2.5)]]))
+    return unary_union([rim, sg.Point(0, 0).buffer(7, 48), *arms]).difference(sg.Point(0, 0).buffer(2.5, 32))
+
+
+def _edge_gauges(z: float) -> str:
+    """Radial gauges on the top face z of the spokes along ±x, 0.9 mm each side of their centre lines."""
+    rows = []
+    for arm, (x, y) in enumerate([(12.0, 0.9), (12.0, -0.9), (-12.0, -0.9), (-12.0, 0.9)], start=1):
+        rows.append(f"[[gauges.gauge]]\ncentre_mm = [{x:.6f}, {y:.6f}, {z:.6f}]\naxis = [1.0, 0.0, 0.0]\narm = {arm}")
+    return "\n".join(rows)
+
+
 def _thin_cross(gmsh):
     occ, t = gmsh.model.occ, 1.5
     frame = occ.cut([(3, occ.addBox(-22, -22, 0, 44, 44, t))], [(3, occ.addBox(-18, -18, 0, 36, 36, t))])[0]
@@ -168,6 +212,20 @@ PARTS = {
                        gauges=lambda: fu._gauges(1.5, ((11, 0), (11, 90), (11, 180), (11, 270)))),
     "hex_bore": dict(kind="stl", about="designer STL, hex bore, five spokes", poly=_hex_bore, t=5.0, L=1.0, W=0.8,
                      T=4.0, load_r=3.52, fixed_r=21.05, gauges=lambda: fu._gauges(5.0, ((14, 36), (14, 108), (14, 180), (14, 252)))),
+    "step_hub": dict(kind="step", about="stepped STEP: an 8 mm hub, 4 mm spokes and rim, four 4 mm spokes", build=_step_hub,
+                     L=1.0, W=1.0, T=4.0, load_r=3.02, fixed_r=24.95,
+                     gauges=lambda: fu._gauges(4.0, ((14, 0), (14, 90), (14, 180), (14, 270)))),
+    "taper5": dict(kind="stl", about="designer STL, five tapered spokes", poly=_taper5, t=4.0, L=1.0, W=0.8, T=3.0,
+                   load_r=2.52, fixed_r=19.05, gauges=lambda: fu._gauges(4.0, ((13, 0), (13, 72), (13, 144), (13, 216)))),
+    "chunky3": dict(kind="step", about="small thick three-spoke STEP (10 mm thick, 30 mm across)",
+                    build=lambda g: fu._spoke_disc(g, 10.0, 2.0, 5.0, 12.0, 15.0, 3, 3.0), L=1.0, W=1.0, T=6.0,
+                    load_r=2.02, fixed_r=14.95, gauges=lambda: fu._gauges(10.0, ((8.5, 0), (8.5, 120), (8.5, 240), (9.5, 0)))),
+    "wide8": dict(kind="step", about="thin eight-spoke STEP with a 16 mm bore", L=1.0, W=0.8, T=6.0, load_r=8.02,
+                  build=lambda g: fu._spoke_disc(g, 3.0, 8.0, 12.0, 26.0, 30.0, 8, 2.0), fixed_r=29.95,
+                  gauges=lambda: fu._gauges(3.0, ((19, 0), (19, 45), (19, 90), (19, 135)))),
+    "edge4": dict(kind="stl", about="gmsh STL, four spokes, radial gauges off the spokes' centre lines",
+                  build=lambda g: fu._spoke_disc(g, 3.0, 2.0, 6.0, 18.0, 22.0, 4, 3.0), L=1.0, W=0.6, T=2.0,
+                  load_r=2.02, fixed_r=21.95, gauges=lambda: _edge_gauges(3.0)),
 }
 
 
