@@ -281,8 +281,8 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
                          "raw": sizing.raw_relative(rec, rel, _with_geometry(rec) if rec.get("enriched") else None)}
             grow = sizing.min_growth(MIN_DROP)
             rise = sizing.FACTOR_RISE if rec.get("enriched") and prev_rel is None else 1.0
-            want = sizing.target_dofs(mesh.n_dofs, goals_rel["rel"], sizing.rates(prev_rel, goals_rel), rtol, grow,
-                                      rise)
+            step = (mesh.n_dofs, goals_rel["rel"], sizing.rates(prev_rel, goals_rel), rtol, grow, rise)
+            want, hope = sizing.target_dofs(*step), sizing.hopeful_target(*step)
             mem_per = sizing.peak_per_dof(mesh.n_dofs, base_gb, level_peak, mem_per, rec["peak_rss_gb"] > peak_before)
             mem_cap = sizing.memory_dofs(base_gb, mem_per, max_memory_gb)
             # the refinement that made this level, or on the first one the prior (flexure.adaptive_sizing, "Time")
@@ -293,11 +293,11 @@ def analyze_adaptive(design, size: str | None = None, rtol: float | None = None,
             caps = {"max_dofs": max_dofs, "memory": mem_cap, "time": time_cap}
             cap = min(caps.values())
             nxt = sizing.next_dofs(mesh.n_dofs, want, cap, grow, split=not split_done, prior=prev_rel is None,
-                                   spent=time_cap)
+                                   spent=time_cap, hope=hope)
             split_done = split_done or cap < want or 0 < nxt < min(want, cap)     # one split per run
-            rec["sizing"] = {"target_dofs": int(want), "memory_cap_dofs": int(mem_cap), "base_rss_gb": base_gb,
-                            "level_peak_gb": level_peak, "peak_per_dof_gb": mem_per, "next_dofs": int(nxt),
-                            "factor_rise": rise, "seconds_per_dof": per_s,
+            rec["sizing"] = {"target_dofs": int(want), "hopeful_target_dofs": int(hope), "memory_cap_dofs": int(mem_cap),
+                            "base_rss_gb": base_gb, "level_peak_gb": level_peak, "peak_per_dof_gb": mem_per,
+                            "next_dofs": int(nxt), "factor_rise": rise, "seconds_per_dof": per_s,
                             "time_cap_dofs": None if max_seconds is None else int(time_cap)}
             prev_rel = goals_rel
             if nxt == 0:                                       # a budget leaves no measurable step: the smallest

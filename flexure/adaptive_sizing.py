@@ -41,6 +41,17 @@ stop is at a better level than one jump there (six_spoke_thick at 1 %: one jump 
 ± 1.15 % before the enriched system got lighter). So is a last step sized on the a-priori rate alone (the
 first step): the thick disc at 1 % (2026-11-27), once its first level's peak per DOF fell 14 %, jumped
 84 k → 528 k and stopped at ± 1.72 % (37.5 s); split, 84 k → 282 k → 529 k, ± 1.20 % (45.6 s).
+The split is made only where rtol is beyond the cap at rates of at least RATE_PRIOR too (``hopeful_target``):
+the first measured rate comes from a coarse, pre-asymptotic level and is low on most parts (the second step's rate
+above the first's on 12 of the 14 recorded 1 % runs with three levels or more, median 0.93 against 0.71), so a
+target beyond the cap at it alone is often not: an eight-spoke thin STEP at 1 % (held out, twenty-second session)
+measured 0.67 over its first step, wanted 1.19 M DOFs at 359 k, split to 555 k and reached ± 0.72 % at the cap
+(843 k) in 74 s, where the rate was 1.1–1.3 from 359 k on. Measured (2026-11-28, CLI, 2 cores, each pair run
+back to back): of 26 parts at 1 % the rule changes three, wide8 68.3 → 47.1 s (± 0.72 → 0.92 %) and hex_bore
+55.1 → 42.4 s (± 0.80 → 0.95 %), both reaching rtol; chunky3 (10 mm thick, 30 mm across) 49.3 s at ± 0.87 %
+→ 35.9 s stopped by memory at ± 1.05 % (its true error 0.69 %: the factor from q̂ over the whole jump, 0.42,
+against the split's last, smaller step's). The rule trades that for the time: with the split the three took
+49–74 s.
 
 Memory. The peak of a level is reached in its P2 solve (the full and the reduced stiffness side by side,
 the smoother's block copies built, the CG's columns) or in its enriched solve (V⁺ has about 3.2× the P2
@@ -180,12 +191,19 @@ def target_dofs(n_dofs: int, rel: np.ndarray, rate: np.ndarray, rtol: float, min
     return int(min(max(need, min_grow * n_dofs), MAX_GROWTH * n_dofs))
 
 
+def hopeful_target(n_dofs: int, rel: np.ndarray, rate: np.ndarray, rtol: float, min_grow: float,
+                   rise: float = 1.0) -> int:
+    """``target_dofs`` at rates of at least RATE_PRIOR: a measured rate below it is often the coarse level's
+    pre-asymptotic one (module docstring, "Last step")."""
+    return target_dofs(n_dofs, rel, np.maximum(rate, RATE_PRIOR), rtol, min_grow, rise)
+
+
 #: the landing slack of a step (marks_for lands within 10 % of its target)
 LANDING = 1.1
 
 
 def next_dofs(n_dofs: int, want: int, cap: int, min_grow: float, split: bool = True, prior: bool = False,
-              spent: float = math.inf) -> int:
+              spent: float = math.inf, hope: int | None = None) -> int:
     """The next level's DOFs under a budget ``cap`` (the DOF and memory budgets' smaller): ``want``
     while a measurable step (× min_grow) still fits after it; else the step is the last one and
     goes to the cap, the level most likely to reach rtol — unless ``want`` rests on the a-priori rate
@@ -196,7 +214,9 @@ def next_dofs(n_dofs: int, want: int, cap: int, min_grow: float, split: bool = T
     sequence reaches a smaller error at the cap in two steps than in one (the second marks with the
     indicators of a finer mesh); m = √(N · cap) within [cap/(LANDING min_grow²), cap/(LANDING min_grow)],
     so that from m, landed up to LANDING above it, the measurable last step to the cap still fits, and
-    only where that leaves m a measurable step above N. 0 where no measurable step fits.
+    only where that leaves m a measurable step above N. 0 where no measurable step fits. ``hope``: the
+    target at rates of at least RATE_PRIOR (``hopeful_target``); where it is within the cap, rtol may well be
+    reachable there and the step goes to the cap, not split (module docstring, "Last step").
 
     ``spent``: a cap that the steps use up (the time budget's, ``time_dofs``; inf without one: after a level of m DOFs,
     about spent − m is left). A measurable step after ``want`` then needs min(cap, spent − want) ≥ min_grow
@@ -210,7 +230,7 @@ def next_dofs(n_dofs: int, want: int, cap: int, min_grow: float, split: bool = T
         return int(cap) if after < min_grow * want else int(want)
     lo, hi = cap / (LANDING * min_grow ** 2), cap / (LANDING * min_grow)
     m = min(max(math.sqrt(n_dofs * cap), lo), hi)
-    if split and m >= min_grow * n_dofs and spent - m >= cap:
+    if split and (prior or hope is None or hope > cap) and m >= min_grow * n_dofs and spent - m >= cap:
         return int(m)
     return int(cap)
 

@@ -54,6 +54,20 @@ def test_next_dofs_never_leaves_a_level_stranded_below_the_cap():
         assert 130 <= nxt <= 1000
 
 
+def test_a_target_beyond_the_cap_only_at_a_slow_measured_rate_steps_to_the_cap():
+    """Beyond the cap at the measured rate (0.67: 359 k DOFs at ± 2 % want 1.19 M for 1 %) but not at the
+    a-priori rate (718 k): the cap, not the split; beyond it at both, the split as before; never the first step."""
+    g, n, cap = 1.33, 359_000, 844_000
+    rel, rate = [0.02, 0.004], np.array([0.67, 0.5])
+    want, hope = sz.target_dofs(n, rel, rate, 0.01, g), sz.hopeful_target(n, rel, rate, 0.01, g)
+    assert want > cap >= hope == pytest.approx(2 * n, abs=1)
+    assert sz.next_dofs(n, want, cap, g, hope=hope) == cap
+    split = sz.next_dofs(n, want, cap, g)
+    assert g * n <= split < cap and sz.next_dofs(n, want, cap, g, hope=int(1.2 * cap)) == split
+    assert sz.next_dofs(100, 900, 1000, g, prior=True, hope=900) < 1000      # the first step: split as before
+    assert sz.hopeful_target(n, rel, np.array([1.2, 1.2]), 0.01, g) == sz.target_dofs(n, rel, np.array([1.2, 1.2]), 0.01, g)
+
+
 def test_memory_model_is_linear_with_its_margin_and_keeps_the_last_measured_level():
     per = sz.peak_per_dof(100_000, 0.3, 0.9)
     assert per == pytest.approx(6e-6)
