@@ -117,16 +117,22 @@ def _side_gauges(z: float, x: float, half_width: float) -> str:
     return "\n".join(rows)
 
 
+def _fused_beams(occ, outer, hub, box, t: float, n: int = 4):
+    """``outer`` fused with ``hub`` and n beams, box (x0, y0, length, width) of height t turned by 360°/n each."""
+    x0, y0, length, width = box
+    parts = [hub]
+    for k in range(n):
+        b = occ.addBox(x0, y0, 0, length, width, t)
+        occ.rotate([(3, b)], 0, 0, 0, 0, 0, 1, k * 2 * math.pi / n)
+        parts.append((3, b))
+    return occ.fuse(outer, parts)[0]
+
+
 def _step_hub(gmsh):
     occ = gmsh.model.occ
     t, th = 4.0, 8.0
     ring = occ.cut([(3, occ.addCylinder(0, 0, 0, 0, 0, t, 25))], [(3, occ.addCylinder(0, 0, 0, 0, 0, t, 20))])[0]
-    parts = [(3, occ.addCylinder(0, 0, 0, 0, 0, th, 8))]
-    for k in range(4):
-        b = occ.addBox(4, -2, 0, 18.5, 4, t)
-        occ.rotate([(3, b)], 0, 0, 0, 0, 0, 1, k * math.pi / 2)
-        parts.append((3, b))
-    body = occ.fuse(ring, parts)[0]
+    body = _fused_beams(occ, ring, (3, occ.addCylinder(0, 0, 0, 0, 0, th, 8)), (4, -2, 18.5, 4), t)
     occ.cut(body, [(3, occ.addCylinder(0, 0, 0, 0, 0, th, 3))])
     occ.synchronize()
 
@@ -154,12 +160,7 @@ def _edge_gauges(z: float) -> str:
 def _thin_cross(gmsh):
     occ, t = gmsh.model.occ, 1.5
     frame = occ.cut([(3, occ.addBox(-22, -22, 0, 44, 44, t))], [(3, occ.addBox(-18, -18, 0, 36, 36, t))])[0]
-    parts = [(3, occ.addCylinder(0, 0, 0, 0, 0, t, 6))]
-    for k in range(4):
-        b = occ.addBox(5, -1.25, 0, 14, 2.5, t)
-        occ.rotate([(3, b)], 0, 0, 0, 0, 0, 1, k * math.pi / 2)
-        parts.append((3, b))
-    body = occ.fuse(frame, parts)[0]
+    body = _fused_beams(occ, frame, (3, occ.addCylinder(0, 0, 0, 0, 0, t, 6)), (5, -1.25, 14, 2.5), t)
     bore = [(3, occ.addCylinder(0, 0, 0, 0, 0, t, 2.5))]
     occ.cut(body, bore + [(3, occ.addCylinder(20 * sx, 20 * sy, 0, 0, 0, t, 1.2)) for sx in (-1, 1) for sy in (-1, 1)])
     occ.synchronize()
