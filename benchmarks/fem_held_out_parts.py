@@ -30,8 +30,8 @@ A fourth batch (twenty-second session), drawn and run on main 340e7ed before any
 
 * step_hub.step: a stepped part, an 8 mm hub (the bore's full height) under 4 mm spokes and rim, four 4 mm spokes;
 * taper5.stl: a designer STL, five spokes tapering 5 → 2.5 mm from hub to rim;
-* chunky3.step: small and thick, 10 mm thick and 30 mm across, three 3 mm spokes, a third gauge pair's arm 4 off
-  the others' radius;
+* chunky3.step: small and thick, 10 mm thick and 30 mm across, three 3 mm spokes, arms 1–3 at 8.5 mm on the three
+  spokes, arm 4 at 9.5 mm on arm 1's;
 * wide8.step: thin (3 mm), eight 2 mm spokes, a 16 mm bore coupled at its wall, rim 26–30 mm;
 * edge4.stl: gmsh's triangulation of a 3 mm four-spoke disc, radial gauges 0.9 mm off the spokes' centre lines
   (in-plane bending: arms 1, 3 stretched, 2, 4 compressed).
