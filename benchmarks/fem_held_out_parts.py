@@ -35,6 +35,12 @@ A fourth batch (twenty-second session), drawn and run on main 340e7ed before any
 * wide8.step: thin (3 mm), eight 2 mm spokes, a 16 mm bore coupled at its wall, rim 26–30 mm;
 * edge4.stl: gmsh's triangulation of a 3 mm four-spoke disc, radial gauges 0.9 mm off the spokes' centre lines
   (in-plane bending: arms 1, 3 stretched, 2, 4 compressed).
+
+A fifth batch (twenty-third session), drawn by a seeded generator instead of by hand (``_random_discs``, seed
+RANDOM_SEED) and run on main dea8a0f before anything else that session: rnd0 … rnd7, spoke discs with every
+dimension drawn from a range (outer radius 15–40 mm, rim 2–6 mm, hub 0.2–0.35 of the outer radius, bore 0.3–0.7
+of the hub, 3–8 spokes 1.5 mm to 0.7 of the hub's share of the circumference wide, 2–10 mm thick, a rim fillet
+on a third of them, ±45° gauges at mid-spoke, 2–10 N·m), STEP and STL (gmsh's triangulation) in turn.
 """
 
 from __future__ import annotations
@@ -228,6 +234,44 @@ PARTS = {
                   build=lambda g: fu._spoke_disc(g, 3.0, 2.0, 6.0, 18.0, 22.0, 4, 3.0), L=1.0, W=0.6, T=2.0,
                   load_r=2.02, fixed_r=21.95, gauges=lambda: _edge_gauges(3.0)),
 }
+
+#: the fifth batch's generator seed (``_random_discs``)
+RANDOM_SEED = 2311
+
+
+def _random_discs(seed: int = RANDOM_SEED, n: int = 8) -> dict:
+    """``n`` spoke discs (module docstring, fifth batch) drawn by ``random.Random(seed)``: PARTS entries rnd0 …"""
+    import random
+
+    rng = random.Random(seed)
+    parts = {}
+    for i in range(n):
+        r_out = rng.uniform(15, 40)
+        rim = rng.uniform(2, 6)
+        r_rim_in = r_out - rim
+        r_hub = rng.uniform(0.2, 0.35) * r_out
+        r_bore = rng.uniform(0.3, 0.7) * r_hub
+        spokes = rng.randint(3, 8)
+        width = rng.uniform(1.5, max(1.6, min(6.0, 0.7 * 2 * math.pi * r_hub / spokes)))
+        t = rng.uniform(2, 10)
+        fillet = rng.choice([0.0, 0.0, min(1.0, 0.3 * width)])
+        L = round(min(2.0, max(0.8, 0.6 * width)), 2)
+        r_g = 0.5 * (r_hub + r_rim_in)           # mid-spoke; with three spokes arm 4 further out on the first
+        on = [0, 1, 2, 3] if spokes >= 4 else [0, 1, 2, 0]
+        where = [(r_g if k < 3 or spokes >= 4 else r_g + 0.25 * (r_rim_in - r_hub), 360.0 * s / spokes)
+                 for k, s in enumerate(on)]
+        dims = (t, r_bore, r_hub, r_rim_in, r_out, spokes, width)
+        parts[f"rnd{i}"] = dict(
+            kind="step" if i % 2 == 0 else "stl",
+            about=f"random spoke disc {i} (seed {seed}): t {t:.1f}, r_out {r_out:.1f}, rim {rim:.1f}, hub {r_hub:.1f}, "
+                  f"bore {r_bore:.1f}, n {spokes}, width {width:.2f}, fillet {fillet:.2f}",
+            build=lambda g, d=dims, f=fillet: fu._spoke_disc(g, *d, rim_fillet=f), L=L, W=round(0.8 * L, 2),
+            T=round(rng.uniform(2, 10), 1), load_r=round(r_bore + 0.02, 3), fixed_r=round(r_out - 0.05, 3),
+            gauges=lambda z=t, w=where: fu._gauges(z, w))
+    return parts
+
+
+PARTS.update(_random_discs())
 
 
 def write(name: str) -> Path:
