@@ -96,8 +96,8 @@ def test_random_batch_estimates_bracket_their_errors(name):
     the final estimates, replayed with the code as it is, against the deep nested references (to 0.55–1.95 M
     DOFs). Every stiffness estimate brackets with a point effectivity in [1, 3] (recorded 1.19–1.96), and no
     goal's effectivity range over the reference's allowance lies wholly below 1. Not asserted, as measured: 10
-    of the 96 final estimates lie wholly above 3, all arms or bridges whose true error is a few hundredths of
-    a % (reports/fem_adaptive.md, twenty-third session)."""
+    of the 96 final estimates lie wholly above 3, all arms or bridges whose true error is 0.003–0.16 %
+    (reports/fem_adaptive.md, twenty-third session)."""
     ref = json.loads((DATA / "fem_reference" / "adaptive" / f"{name}.json").read_text())["references"]
     finals = list(_recorded_finals(name))
     assert {rtol for rtol, _ in finals} == {0.02, 0.01}
