@@ -46,20 +46,32 @@ def test_default_run_brackets_every_goal_within_3x_on_held_out_gauge_layouts(nam
     assert not _outside_1_3(res, name)
 
 
+def _references(name: str) -> dict:
+    return json.loads((DATA / "fem_reference" / "adaptive" / f"{name}.json").read_text())["references"]
+
+
+def _goals(level: dict) -> dict:
+    """{goal: (J, e)} of a level: the stiffness, the bridge strain and each gauge, with their estimates."""
+    est = level["estimate"]
+    return {"torsional_stiffness_Nm_per_rad": (level["torsional_stiffness_Nm_per_rad"],
+                                               est["torsional_stiffness_Nm_per_rad"]),
+            "gauge_strain_per_Nm": (level["gauge_strain_per_Nm"], est["gauge_strain_per_Nm"]),
+            **{f"gauge{i}": (v, e) for i, (v, e) in enumerate(zip(level["gauge_strains"], est["gauge_strains"]))}}
+
+
+def _range(J: float, e: float, ref: dict) -> tuple[float, float]:
+    """The effectivity range e/(E + a) … e/(E − a) of estimate e over the reference J∞ ± a, E = |J − J∞|."""
+    E, a = abs(J - ref["value"]), ref["allowance"]
+    return e / (E + a), (e / (E - a) if E > a else float("inf"))
+
+
 def _outside_1_3(res: dict, name: str) -> dict:
     """{goal: (lo, hi)} of the last level's goals whose effectivity range over the reference's allowance is not
     within [1, 3]."""
-    ref = json.loads((DATA / "fem_reference" / "adaptive" / f"{name}.json").read_text())["references"]
-    last = res["discretization_levels"][-1]
-    goals = {"torsional_stiffness_Nm_per_rad": (last["torsional_stiffness_Nm_per_rad"],
-                                                last["estimate"]["torsional_stiffness_Nm_per_rad"]),
-             "gauge_strain_per_Nm": (last["gauge_strain_per_Nm"], last["estimate"]["gauge_strain_per_Nm"]),
-             **{f"gauge{i}": (v, e) for i, (v, e) in enumerate(zip(last["gauge_strains"],
-                                                                 last["estimate"]["gauge_strains"]))}}
+    ref = _references(name)
     bad = {}
-    for goal, (J, e) in goals.items():
-        E, a = abs(J - ref[goal]["value"]), ref[goal]["allowance"]
-        lo, hi = e / (E + a), (e / (E - a) if E > a else float("inf"))
+    for goal, (J, e) in _goals(res["discretization_levels"][-1]).items():
+        lo, hi = _range(J, e, ref[goal])
         if not (lo >= 1.0 and hi <= 3.0):
             bad[goal] = (round(lo, 2), round(hi, 2))
     return bad
@@ -81,12 +93,7 @@ def _recorded_finals(name: str):
         for x in r["levels"]:
             last = {**x, **adaptive._enriched_estimates(x, prev, seen, signs)}
             prev = x
-        est = last["estimate"]
-        yield r["rtol"], {"torsional_stiffness_Nm_per_rad": (last["torsional_stiffness_Nm_per_rad"],
-                                                             est["torsional_stiffness_Nm_per_rad"]),
-                          "gauge_strain_per_Nm": (last["gauge_strain_per_Nm"], est["gauge_strain_per_Nm"]),
-                          **{f"gauge{i}": (v, e) for i, (v, e) in enumerate(zip(last["gauge_strains"],
-                                                                              est["gauge_strains"]))}}
+        yield r["rtol"], _goals(last)
 
 
 @pytest.mark.parametrize("name", RANDOM)
@@ -98,16 +105,14 @@ def test_random_batch_estimates_bracket_their_errors(name):
     goal's effectivity range over the reference's allowance lies wholly below 1. Not asserted, as measured: 10
     of the 96 final estimates lie wholly above 3, all arms or bridges whose true error is 0.003–0.16 %
     (reports/fem_adaptive.md, twenty-third session)."""
-    ref = json.loads((DATA / "fem_reference" / "adaptive" / f"{name}.json").read_text())["references"]
+    ref = _references(name)
     finals = list(_recorded_finals(name))
     assert {rtol for rtol, _ in finals} == {0.02, 0.01}
     for rtol, goals in finals:
         for goal, (J, e) in goals.items():
-            E, a = abs(J - ref[goal]["value"]), ref[goal]["allowance"]
-            hi = e / (E - a) if E > a else float("inf")
-            assert hi >= 1.0, (rtol, goal, e, E, a)
+            assert _range(J, e, ref[goal])[1] >= 1.0, (rtol, goal, e, J, ref[goal])
             if goal == "torsional_stiffness_Nm_per_rad":
-                assert 1.0 <= e / E <= 3.0, (rtol, e / E)
+                assert 1.0 <= e / abs(J - ref[goal]["value"]) <= 3.0, (rtol, goal)
 
 
 def test_random_batch_is_what_the_seeded_generator_draws(tmp_path):
