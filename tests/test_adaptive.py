@@ -240,14 +240,9 @@ def test_gauge_estimates_bracket_the_exact_torsion_strain(round_annulus_run):
 
 
 def _fem_annulus():
-    import importlib.util
-    from pathlib import Path
+    from benchmark_module import benchmark_module
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "fem_annulus.py"
-    spec = importlib.util.spec_from_file_location("fem_annulus", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return benchmark_module("fem_annulus", "fem_annulus")
 
 
 @pytest.mark.slow

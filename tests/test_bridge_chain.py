@@ -151,11 +151,8 @@ def test_bad_chain_input():
 
 
 def test_benchmark_script_runs_small():
-    import importlib.util
-    from pathlib import Path
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_bridge.py"
-    spec = importlib.util.spec_from_file_location("bench_bridge", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    from benchmark_module import benchmark_module
+
+    mod = benchmark_module("bench_bridge", "bench_bridge")
     out = mod.main(["--n", "1000", "--repeat", "1", "--json"])
     assert out["n"] == 1000 and out["paper_full_bridge_measure_samples_per_s"] > 0

@@ -118,17 +118,9 @@ def test_random_batch_estimates_bracket_their_errors(name):
 def test_random_batch_is_what_the_seeded_generator_draws(tmp_path):
     """The fifth batch's designs (tests/data/fem_unseen/held_out/rnd*.toml) are the seeded draw of
     benchmarks/fem_held_out_parts.py, written again from the seed: the batch is not hand-picked after the fact."""
-    import importlib.util
-    import sys
+    from benchmark_module import benchmark_module
 
-    bench = DATA.parents[1] / "benchmarks"
-    sys.path.insert(0, str(bench))
-    try:
-        spec = importlib.util.spec_from_file_location("_held_out", bench / "fem_held_out_parts.py")
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-    finally:
-        sys.path.remove(str(bench))
+    mod = benchmark_module("fem_held_out_parts")
     parts = mod._random_discs(mod.RANDOM_SEED, len(RANDOM))
     assert sorted(parts) == RANDOM
     for name, p in parts.items():

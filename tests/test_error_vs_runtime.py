@@ -128,13 +128,9 @@ def test_fem_section_quick_has_the_contract_and_p1_error_falls_with_refinement(t
 
 
 def test_splicing_the_fem_section_leaves_the_other_sections_alone(tmp_path):
-    import importlib.util
-    from pathlib import Path
+    from benchmark_module import benchmark_module
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_accuracy.py"
-    spec = importlib.util.spec_from_file_location("_bench_accuracy", path)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = benchmark_module("bench_accuracy")
     md = tmp_path / "error_vs_runtime.md"
     md.write_text("# E\n\n## A\n\nkeep A\n_(section built in 1.0 s)_\n\n## Flexure FEM (old)\n\nstale\n"
                   "_(section built in 9.0 s)_\n\n## Z\n\nkeep Z\n")

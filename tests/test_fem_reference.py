@@ -91,11 +91,9 @@ def test_levels_are_what_the_code_computes(name, path):
     """The stored levels are today's: the coarsest level of the STEP part (a CAD solid with
     fillets) and of the thick disc (sharp re-entrant spoke roots, graded) recomputed equal the
     stored ones (the other designs share these code paths)."""
-    import importlib.util
+    from benchmark_module import benchmark_module
 
-    spec = importlib.util.spec_from_file_location("_fem_reference", DATA.parents[2] / "benchmarks" / "fem_reference.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = benchmark_module("fem_reference")
     stored = STORED["levels"][name][0]
     now = mod.project_level(load_design(path), stored["h_factor"])
     for key in ("dofs", "gauge_strain_per_Nm", "torsional_stiffness_Nm_per_rad"):
